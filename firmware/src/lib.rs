@@ -1,0 +1,8 @@
+//! Rig logic of the oscillating tribometer.
+//!
+//! `no_std`, no heap, `f32` maths through `micromath`. Nothing in here names a pin, a DMA channel or
+//! an interrupt: hardware sits behind the small traits of [`hal`], bound to embassy-stm32 by the board
+//! binary (`firmware/board`) and to the physics simulator by the host's virtual rig.
+#![cfg_attr(not(test), no_std)]
+
+pub use tribo_wire as wire;

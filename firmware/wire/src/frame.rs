@@ -1,0 +1,260 @@
+//! Framing: `COBS( seq:u32le ‖ postcard(msg) ‖ crc32le(seq ‖ postcard(msg)) ) ‖ 0x00`.
+//!
+//! The zero byte closes every frame and appears nowhere else, so a receiver that starts in the middle
+//! of a stream, or meets garbage, loses at most the frame it is in. The CRC catches what COBS cannot
+//! (bit flips, spliced frames); the sequence number lets the host see a lost frame and ask again.
+
+use crate::crc32::{crc32, Crc32};
+use core::marker::PhantomData;
+use serde::{de::DeserializeOwned, Serialize};
+
+/// Largest postcard body of any message (a full [`crate::SampleBlock`] is about 680 bytes).
+pub const MAX_BODY: usize = 1024;
+/// Largest frame before stuffing: sequence number, body, CRC.
+pub const MAX_RAW: usize = 4 + MAX_BODY + 4;
+/// Largest frame on the wire: stuffed, plus the closing zero.
+pub const MAX_FRAME: usize = MAX_RAW + MAX_RAW / 254 + 2;
+
+/// A decoded frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame<M> {
+    pub seq: u32,
+    pub msg: M,
+}
+
+/// Why a message could not be framed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EncodeError {
+    /// The message does not fit in [`MAX_BODY`] bytes, or the output buffer is too small.
+    TooLarge,
+}
+
+/// Why bytes between two zeros were not a frame. The decoder has already dropped them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FrameError {
+    /// More than [`MAX_FRAME`] bytes without a zero: the rest up to the next zero was skipped.
+    Overflow,
+    /// The COBS stuffing is broken.
+    Cobs,
+    /// Too short to hold a sequence number and a CRC.
+    Short,
+    /// The CRC does not match: corrupted in transit.
+    Crc,
+    /// CRC good but the body is not a message of this protocol (another version?).
+    Decode,
+}
+
+impl core::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            FrameError::Overflow => "frame too long (no delimiter): skipped to the next frame",
+            FrameError::Cobs => "broken byte stuffing (COBS)",
+            FrameError::Short => "frame too short",
+            FrameError::Crc => "CRC mismatch: frame corrupted in transit",
+            FrameError::Decode => "CRC good but not a message of this protocol version",
+        })
+    }
+}
+
+#[cfg(any(test, feature = "std"))]
+impl std::error::Error for FrameError {}
+
+/// COBS-encodes `src` into `dst` (no closing zero). Returns the length written, or `None` when `dst`
+/// is too small.
+pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
+    let mut code_at = 0usize;
+    let mut out = 1usize;
+    let mut code = 1u8;
+    *dst.get_mut(code_at)? = 0;
+    for &b in src {
+        if b == 0 {
+            *dst.get_mut(code_at)? = code;
+            code_at = out;
+            *dst.get_mut(code_at)? = 0;
+            out += 1;
+            code = 1;
+        } else {
+            *dst.get_mut(out)? = b;
+            out += 1;
+            code += 1;
+            if code == 0xFF {
+                *dst.get_mut(code_at)? = code;
+                code_at = out;
+                *dst.get_mut(code_at)? = 0;
+                out += 1;
+                code = 1;
+            }
+        }
+    }
+    *dst.get_mut(code_at)? = code;
+    Some(out)
+}
+
+/// Decodes COBS in place (the input holds no zero byte). Returns the decoded length.
+pub fn cobs_decode_in_place(buf: &mut [u8]) -> Option<usize> {
+    let (mut read, mut write) = (0usize, 0usize);
+    while read < buf.len() {
+        let code = buf[read] as usize;
+        if code == 0 || read + code > buf.len() {
+            return None;
+        }
+        read += 1;
+        for _ in 1..code {
+            buf[write] = buf[read];
+            write += 1;
+            read += 1;
+        }
+        if code != 0xFF && read < buf.len() {
+            buf[write] = 0;
+            write += 1;
+        }
+    }
+    Some(write)
+}
+
+/// Frames messages. Holds the scratch buffer so that encoding needs no heap and little stack.
+pub struct Encoder {
+    raw: [u8; MAX_RAW],
+}
+
+impl Default for Encoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Encoder {
+    pub const fn new() -> Self {
+        Encoder { raw: [0; MAX_RAW] }
+    }
+
+    /// Frames `msg` with sequence number `seq` into `out`, closing zero included. Returns the bytes
+    /// to send.
+    pub fn encode<'o, M: Serialize>(
+        &mut self,
+        seq: u32,
+        msg: &M,
+        out: &'o mut [u8],
+    ) -> Result<&'o [u8], EncodeError> {
+        self.raw[..4].copy_from_slice(&seq.to_le_bytes());
+        let body = postcard::to_slice(msg, &mut self.raw[4..4 + MAX_BODY])
+            .map_err(|_| EncodeError::TooLarge)?
+            .len();
+        let crc = crc32(&self.raw[..4 + body]);
+        self.raw[4 + body..8 + body].copy_from_slice(&crc.to_le_bytes());
+        let n = cobs_encode(&self.raw[..8 + body], out).ok_or(EncodeError::TooLarge)?;
+        *out.get_mut(n).ok_or(EncodeError::TooLarge)? = 0;
+        Ok(&out[..=n])
+    }
+}
+
+/// Frames one message into a new vector (host convenience).
+#[cfg(any(test, feature = "std"))]
+pub fn encode_vec<M: Serialize>(seq: u32, msg: &M) -> Result<Vec<u8>, EncodeError> {
+    let mut enc = Box::new(Encoder::new());
+    let mut out = vec![0u8; MAX_FRAME];
+    let n = enc.encode(seq, msg, &mut out)?.len();
+    out.truncate(n);
+    Ok(out)
+}
+
+/// Turns a byte stream back into frames of `M`, one byte at a time, with a fixed buffer.
+///
+/// Never panics, whatever the bytes: garbage, truncated frames and flipped bits each give one
+/// [`FrameError`], and the next frame after a zero byte decodes normally.
+pub struct Decoder<M> {
+    buf: [u8; MAX_FRAME],
+    len: usize,
+    overflowed: bool,
+    _msg: PhantomData<fn() -> M>,
+}
+
+impl<M: DeserializeOwned> Default for Decoder<M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<M: DeserializeOwned> Decoder<M> {
+    pub const fn new() -> Self {
+        Decoder { buf: [0; MAX_FRAME], len: 0, overflowed: false, _msg: PhantomData }
+    }
+
+    /// Bytes of an unfinished frame held so far.
+    pub fn pending(&self) -> usize {
+        self.len
+    }
+
+    /// Forgets any partial frame (e.g. after the link was reopened).
+    pub fn reset(&mut self) {
+        self.len = 0;
+        self.overflowed = false;
+    }
+
+    /// Feeds one byte. Returns a frame or an error when `byte` closes one; `None` otherwise (including
+    /// for empty frames, i.e. repeated zeros, which senders may use to flush a receiver).
+    pub fn push(&mut self, byte: u8) -> Option<Result<Frame<M>, FrameError>> {
+        if byte != 0 {
+            if self.len < self.buf.len() {
+                self.buf[self.len] = byte;
+                self.len += 1;
+            } else {
+                self.overflowed = true;
+            }
+            return None;
+        }
+        let (len, overflowed) = (self.len, self.overflowed);
+        self.reset();
+        if overflowed {
+            return Some(Err(FrameError::Overflow));
+        }
+        if len == 0 {
+            return None;
+        }
+        Some(decode_stuffed(&mut self.buf[..len]))
+    }
+
+    /// Feeds a slice, calling `on_frame` for each frame or error it completes.
+    pub fn feed(&mut self, bytes: &[u8], mut on_frame: impl FnMut(Result<Frame<M>, FrameError>)) {
+        for &b in bytes {
+            if let Some(r) = self.push(b) {
+                on_frame(r);
+            }
+        }
+    }
+}
+
+fn decode_stuffed<M: DeserializeOwned>(stuffed: &mut [u8]) -> Result<Frame<M>, FrameError> {
+    let n = cobs_decode_in_place(stuffed).ok_or(FrameError::Cobs)?;
+    let raw = &stuffed[..n];
+    if raw.len() < 8 {
+        return Err(FrameError::Short);
+    }
+    let (data, crc) = raw.split_at(raw.len() - 4);
+    let mut c = Crc32::new();
+    c.update(data);
+    if c.finish().to_le_bytes() != crc {
+        return Err(FrameError::Crc);
+    }
+    let seq = u32::from_le_bytes([data[0], data[1], data[2], data[3]]);
+    match postcard::take_from_bytes::<M>(&data[4..]) {
+        Ok((msg, rest)) if rest.is_empty() => Ok(Frame { seq, msg }),
+        _ => Err(FrameError::Decode),
+    }
+}
+
+/// Decodes one complete frame held in a slice (closing zero optional).
+pub fn decode_one<M: DeserializeOwned>(frame: &[u8]) -> Result<Frame<M>, FrameError> {
+    let frame = frame.strip_suffix(&[0]).unwrap_or(frame);
+    if frame.len() > MAX_FRAME {
+        return Err(FrameError::Overflow);
+    }
+    if frame.contains(&0) {
+        return Err(FrameError::Cobs);
+    }
+    let mut buf = [0u8; MAX_FRAME];
+    buf[..frame.len()].copy_from_slice(frame);
+    decode_stuffed(&mut buf[..frame.len()])
+}

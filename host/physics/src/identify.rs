@@ -1,0 +1,659 @@
+//! Identification of a friction law from a record (thesis ch. 3.5).
+//!
+//! The thesis way: simulate the response of a candidate law, compare its Mark & Crandall envelope
+//! with that of the measurement, and adjust the constants by Levenberg–Marquardt. Starting points
+//! come from the fast estimators: the exact half-cycle decrement regression (Coulomb + viscous)
+//! and the averaging-law regression of `dA/dτ` on powers of `A` (any polynomial order).
+
+use crate::envelope::{classify_shape, mark_crandall, peaks, Shape};
+use crate::integrate::{simulate, Method};
+use crate::law::{mu_from_averaging, FrictionLaw, LuGre};
+use crate::model::{Model, Rig};
+use crate::record::Record;
+use std::fmt::Write as _;
+use std::str::FromStr;
+
+/// Which law to fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LawSpec {
+    /// `μ0 sgn(y')`.
+    Coulomb,
+    /// `μ1 y'`.
+    Viscous,
+    /// `μ0 sgn(y') + μ1 y'`.
+    CoulombViscous,
+    /// `(μ0 + μ2 y'²) sgn(y') + μ1 y'`.
+    Quadratic,
+    /// Pseudo-polynomial of order N (N + 1 constants μ0…μN).
+    Poly(usize),
+    /// LuGre: fitted `μ_c`, `μ_s`, `σ2`, with bristle stiffness/damping and Stribeck velocity fixed
+    /// (see [`LUGRE_FIXED`]); `mu` reports `[μ_c, σ2]` (its Coulomb–viscous equivalent).
+    LuGre,
+}
+
+/// Fixed LuGre constants used by [`LawSpec::LuGre`] fits: `(σ0, σ1, v_s, a)`, dimensionless.
+pub const LUGRE_FIXED: (f64, f64, f64, f64) = (200.0, 2.0, 1.0, 2.0);
+
+impl FromStr for LawSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Ok(match s.trim().to_ascii_lowercase().as_str() {
+            "coulomb" | "constant" => LawSpec::Coulomb,
+            "viscous" => LawSpec::Viscous,
+            "coulomb-viscous" | "cv" | "linear" => LawSpec::CoulombViscous,
+            "quadratic" => LawSpec::Quadratic,
+            "lugre" => LawSpec::LuGre,
+            other => {
+                if let Some(n) = other.strip_prefix("poly:") {
+                    let n: usize = n
+                        .parse()
+                        .map_err(|_| format!("bad polynomial order in {other:?}"))?;
+                    if n > 8 {
+                        return Err(format!("polynomial order {n} too high (max 8)"));
+                    }
+                    LawSpec::Poly(n)
+                } else {
+                    return Err(format!(
+                        "unknown law {other:?}: use coulomb, viscous, coulomb-viscous, quadratic, poly:N or lugre"
+                    ));
+                }
+            }
+        })
+    }
+}
+
+impl LawSpec {
+    /// Canonical name (as accepted by `FromStr`).
+    pub fn name(&self) -> String {
+        match self {
+            LawSpec::Coulomb => "coulomb".into(),
+            LawSpec::Viscous => "viscous".into(),
+            LawSpec::CoulombViscous => "coulomb-viscous".into(),
+            LawSpec::Quadratic => "quadratic".into(),
+            LawSpec::Poly(n) => format!("poly:{n}"),
+            LawSpec::LuGre => "lugre".into(),
+        }
+    }
+
+    /// Indices `j` of the fitted `μ_j` (polynomial laws).
+    pub fn powers(&self) -> Vec<usize> {
+        match self {
+            LawSpec::Coulomb => vec![0],
+            LawSpec::Viscous => vec![1],
+            LawSpec::CoulombViscous | LawSpec::LuGre => vec![0, 1],
+            LawSpec::Quadratic => vec![0, 1, 2],
+            LawSpec::Poly(n) => (0..=*n).collect(),
+        }
+    }
+
+    /// Number of fitted parameters.
+    pub fn n_params(&self) -> usize {
+        match self {
+            LawSpec::LuGre => 3,
+            _ => self.powers().len(),
+        }
+    }
+
+    /// The law for parameter vector `p`.
+    pub fn law(&self, p: &[f64]) -> FrictionLaw {
+        match self {
+            LawSpec::LuGre => {
+                let (s0, s1, vs, a) = LUGRE_FIXED;
+                FrictionLaw::LuGre(LuGre {
+                    sigma0: s0,
+                    sigma1: s1,
+                    sigma2: p[2],
+                    mu_c: p[0].abs().max(1e-9),
+                    mu_s: p[1].abs().max(1e-9),
+                    v_s: vs,
+                    a,
+                })
+            }
+            _ => FrictionLaw::Polynomial { mu: self.mu(p) },
+        }
+    }
+
+    /// `μ_j` in order of `j` for parameter vector `p` (zeros for powers not fitted).
+    pub fn mu(&self, p: &[f64]) -> Vec<f64> {
+        match self {
+            LawSpec::LuGre => vec![p[0], p[2]],
+            _ => {
+                let pw = self.powers();
+                let mut mu = vec![0.0; pw.last().map_or(0, |m| m + 1)];
+                for (i, &j) in pw.iter().enumerate() {
+                    mu[j] = p[i];
+                }
+                mu
+            }
+        }
+    }
+}
+
+/// Fit options.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitOptions {
+    /// Integrator used inside the fit.
+    pub method: Method,
+    /// Envelope points compared (the record is decimated to at most this many).
+    pub max_points: usize,
+    /// Levenberg–Marquardt iteration limit.
+    pub max_iter: usize,
+    /// Convergence: relative parameter step and relative cost decrease.
+    pub tol: f64,
+    /// Known apparatus damping μ_a kept fixed in the model (0 = fit total damping).
+    pub apparatus_mu1: f64,
+    /// Starting point (parameters of the law); `None` = fast estimators.
+    pub start: Option<Vec<f64>>,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            method: Method::Dopri45 {
+                rtol: 1e-10,
+                atol: 1e-11,
+                h_max: 0.5,
+            },
+            max_points: 2000,
+            max_iter: 60,
+            tol: 1e-12,
+            apparatus_mu1: 0.0,
+            start: None,
+        }
+    }
+}
+
+/// Fit failure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitError(pub String);
+impl std::fmt::Display for FitError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "fit failed: {}", self.0)
+    }
+}
+impl std::error::Error for FitError {}
+
+/// Result of a fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitResult {
+    /// Law name (`coulomb`, …, `poly:N`, `lugre`).
+    pub law: String,
+    /// Dimensionless constants μ_j in order of j (seed eq. 10–13).
+    pub mu: Vec<f64>,
+    /// SI coefficients `p_j = μ_j (k/(NΩ))^j` of `μ(v) = Σ p_j v^j` (v in m/s).
+    pub p_si: Vec<f64>,
+    /// RMS(measured − fitted envelope) / initial amplitude.
+    pub gap: f64,
+    /// Raw fitted parameters (equal to `mu` except for LuGre: `[μ_c, μ_s, σ2]`).
+    pub params: Vec<f64>,
+    /// LM iterations.
+    pub iterations: usize,
+    /// Whether LM met its tolerance.
+    pub converged: bool,
+    /// Envelope shape predicted by the fitted law over the measured amplitudes.
+    pub shape: Shape,
+    /// Initial amplitude Y0 (dimensionless).
+    pub y0: f64,
+    /// Number of envelope points compared.
+    pub points: usize,
+}
+
+impl FitResult {
+    /// The fitted law.
+    pub fn friction_law(&self) -> FrictionLaw {
+        match self.law.parse::<LawSpec>() {
+            Ok(spec) => spec.law(&self.params),
+            Err(_) => FrictionLaw::Polynomial { mu: self.mu.clone() },
+        }
+    }
+
+    /// One JSON object: `{"law", "mu", "gap", "p_si", "params", "iterations", "converged",
+    /// "shape", "y0", "points"}`.
+    pub fn to_json(&self) -> String {
+        let arr = |v: &[f64]| {
+            let items: Vec<String> = v.iter().map(|x| json_num(*x)).collect();
+            format!("[{}]", items.join(", "))
+        };
+        let mut s = String::new();
+        let _ = write!(
+            s,
+            "{{\"law\": \"{}\", \"mu\": {}, \"gap\": {}, \"p_si\": {}, \"params\": {}, \"iterations\": {}, \"converged\": {}, \"shape\": \"{}\", \"y0\": {}, \"points\": {}}}",
+            self.law,
+            arr(&self.mu),
+            json_num(self.gap),
+            arr(&self.p_si),
+            arr(&self.params),
+            self.iterations,
+            self.converged,
+            self.shape.name(),
+            json_num(self.y0),
+            self.points
+        );
+        s
+    }
+}
+
+fn json_num(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:e}")
+    } else {
+        "null".into()
+    }
+}
+
+/// Measured envelope prepared for fitting (dimensionless, decimated).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvelopeData {
+    /// τ of the compared points (starting at 0).
+    pub tau: Vec<f64>,
+    /// Mark & Crandall envelope there.
+    pub a: Vec<f64>,
+    /// Initial state (y, y') of the simulation.
+    pub y0: f64,
+    /// Initial velocity.
+    pub ydot0: f64,
+}
+
+impl EnvelopeData {
+    /// From dimensionless samples (τ shifted to start at 0), keeping at most `max_points`.
+    pub fn new(tau: &[f64], y: &[f64], ydot: &[f64], max_points: usize) -> Result<Self, FitError> {
+        let n = tau.len();
+        if n < 8 || y.len() != n || ydot.len() != n {
+            return Err(FitError(format!("need ≥ 8 samples of τ, y, y' (got {n})")));
+        }
+        if tau.iter().chain(y).chain(ydot).any(|v| !v.is_finite()) {
+            return Err(FitError("non-finite sample".into()));
+        }
+        let stride = n.div_ceil(max_points.max(8));
+        let a_all = mark_crandall(y, ydot);
+        let idx: Vec<usize> = (0..n).step_by(stride).collect();
+        Ok(EnvelopeData {
+            tau: idx.iter().map(|&i| tau[i] - tau[0]).collect(),
+            a: idx.iter().map(|&i| a_all[i]).collect(),
+            y0: y[0],
+            ydot0: ydot[0],
+        })
+    }
+    /// Initial amplitude.
+    pub fn a0(&self) -> f64 {
+        self.y0.hypot(self.ydot0)
+    }
+}
+
+/// Envelope of the response of `law` from the data's initial state at the data's times.
+pub fn simulated_envelope(
+    data: &EnvelopeData,
+    law: FrictionLaw,
+    opts: &FitOptions,
+) -> Result<Vec<f64>, FitError> {
+    let model = Model::new(law).with_apparatus_damping(opts.apparatus_mu1);
+    let tr = simulate(&model, data.y0, data.ydot0, &data.tau, opts.method)
+        .map_err(|e| FitError(e.to_string()))?;
+    Ok(mark_crandall(&tr.y, &tr.ydot))
+}
+
+/// Fits `spec` to an SI or dimensionless record (its rig constants must be known).
+pub fn fit(rec: &Record, spec: LawSpec, opts: &FitOptions) -> Result<FitResult, FitError> {
+    rec.validate().map_err(|e| FitError(e.0))?;
+    let rig = rec.rig().map_err(|e| FitError(e.0))?;
+    let (tau, y, ydot) = rec.dimensionless().map_err(|e| FitError(e.0))?;
+    let mut r = fit_dimensionless(&tau, &y, &ydot, spec, opts)?;
+    r.p_si = rig.p_of_mu(&r.mu);
+    Ok(r)
+}
+
+/// Fits `spec` to dimensionless samples.
+pub fn fit_dimensionless(
+    tau: &[f64],
+    y: &[f64],
+    ydot: &[f64],
+    spec: LawSpec,
+    opts: &FitOptions,
+) -> Result<FitResult, FitError> {
+    let data = EnvelopeData::new(tau, y, ydot, opts.max_points)?;
+    let p0 = match &opts.start {
+        Some(p) if p.len() == spec.n_params() => p.clone(),
+        Some(p) => {
+            return Err(FitError(format!(
+                "start has {} parameters, {} needs {}",
+                p.len(),
+                spec.name(),
+                spec.n_params()
+            )))
+        }
+        None => start_point(tau, y, ydot, spec),
+    };
+    fit_envelope(&data, spec, p0, opts)
+}
+
+/// Levenberg–Marquardt fit of `spec` to prepared envelope data from `p0`.
+pub fn fit_envelope(
+    data: &EnvelopeData,
+    spec: LawSpec,
+    p0: Vec<f64>,
+    opts: &FitOptions,
+) -> Result<FitResult, FitError> {
+    let resid = |p: &[f64]| -> Option<Vec<f64>> {
+        let a = simulated_envelope(data, spec.law(p), opts).ok()?;
+        Some(a.iter().zip(&data.a).map(|(s, m)| s - m).collect())
+    };
+    let lm = levenberg_marquardt(resid, &p0, opts.max_iter, opts.tol)
+        .ok_or_else(|| FitError("the model could not be simulated at the starting point".into()))?;
+    let a0 = data.a0();
+    let gap = (lm.cost * 2.0 / data.a.len() as f64).sqrt() / a0.max(1e-300);
+    let mu = spec.mu(&lm.p);
+    let a_lo = data.a.iter().copied().fold(f64::INFINITY, f64::min);
+    Ok(FitResult {
+        law: spec.name(),
+        shape: classify_shape(&mu, a_lo, a0),
+        p_si: mu.clone(),
+        mu,
+        gap,
+        params: lm.p,
+        iterations: lm.iterations,
+        converged: lm.converged,
+        y0: a0,
+        points: data.a.len(),
+    })
+}
+
+/// Starting parameters for `spec` from the fast estimators.
+pub fn start_point(tau: &[f64], y: &[f64], ydot: &[f64], spec: LawSpec) -> Vec<f64> {
+    let pw = spec.powers();
+    let mu = estimate_averaging(tau, y, ydot, &pw).unwrap_or_else(|| vec![0.01; pw.len()]);
+    match spec {
+        LawSpec::LuGre => vec![mu[0].abs().max(1e-3), mu[0].abs().max(1e-3) * 1.2, mu[1]],
+        _ => mu,
+    }
+}
+
+/// Half-cycle peak magnitudes `(τ, |y|)` of dimensionless samples (velocity sign changes at least
+/// 1 rad apart).
+pub fn half_cycle_peaks(tau: &[f64], y: &[f64], ydot: &[f64]) -> Vec<(f64, f64)> {
+    peaks(tau, y, ydot, 1.0)
+}
+
+/// Exact half-cycle decrement regression for Coulomb + viscous friction:
+/// `X_{n+1} = D X_n − μ0 (1 + D)`, `D = exp(−π ζ / √(1 − ζ²))`, `μ1 = 2ζ`.
+/// Returns `(μ0, μ1)`, or `None` with fewer than 3 half cycles.
+pub fn estimate_decrement(tau: &[f64], y: &[f64], ydot: &[f64]) -> Option<(f64, f64)> {
+    let pk = half_cycle_peaks(tau, y, ydot);
+    decrement_from_peaks(&pk.iter().map(|p| p.1).collect::<Vec<_>>())
+}
+
+/// [`estimate_decrement`] from successive half-cycle peak magnitudes.
+pub fn decrement_from_peaks(x: &[f64]) -> Option<(f64, f64)> {
+    if x.len() < 3 {
+        return None;
+    }
+    let (xs, ys) = (&x[..x.len() - 1], &x[1..]);
+    let (slope, icpt) = linreg(xs, ys)?;
+    let d = slope;
+    if !(d > 0.0 && d.is_finite()) {
+        return None;
+    }
+    let mu0 = -icpt / (1.0 + d);
+    let l = -d.ln() / std::f64::consts::PI;
+    let zeta = l / (1.0 + l * l).sqrt();
+    Some((mu0, 2.0 * zeta))
+}
+
+fn linreg(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
+    let n = x.len() as f64;
+    let mx = x.iter().sum::<f64>() / n;
+    let my = y.iter().sum::<f64>() / n;
+    let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let s = sxy / sxx;
+    Some((s, my - s * mx))
+}
+
+/// Averaging-law regression: `dA/dτ` (from successive half-cycle peaks) regressed on `A^j`,
+/// `j ∈ powers`, then `μ_j = −a_j / c_j` (eq. 27–28). Returns μ for the listed powers.
+pub fn estimate_averaging(tau: &[f64], y: &[f64], ydot: &[f64], powers: &[usize]) -> Option<Vec<f64>> {
+    let pk = half_cycle_peaks(tau, y, ydot);
+    if pk.len() < powers.len() + 2 {
+        return None;
+    }
+    let mut rows = Vec::new();
+    let mut rhs = Vec::new();
+    for w in pk.windows(2) {
+        let dt = w[1].0 - w[0].0;
+        if dt <= 0.0 {
+            continue;
+        }
+        let rate = (w[1].1 - w[0].1) / dt;
+        // Midpoint amplitude, averaging A^j over the half cycle.
+        let (a, b) = (w[0].1, w[1].1);
+        rows.push(
+            powers
+                .iter()
+                .map(|&j| {
+                    if (b - a).abs() < 1e-12 {
+                        a.powi(j as i32)
+                    } else {
+                        (b.powi(j as i32 + 1) - a.powi(j as i32 + 1)) / ((j as f64 + 1.0) * (b - a))
+                    }
+                })
+                .collect::<Vec<f64>>(),
+        );
+        rhs.push(rate);
+    }
+    let coef = least_squares(&rows, &rhs)?;
+    let mut a_full = vec![0.0; powers.iter().max().map_or(0, |m| m + 1)];
+    for (i, &j) in powers.iter().enumerate() {
+        a_full[j] = coef[i];
+    }
+    let mu_full = mu_from_averaging(&a_full);
+    Some(powers.iter().map(|&j| mu_full[j]).collect())
+}
+
+/// Linear least squares by normal equations (small problems).
+pub fn least_squares(rows: &[Vec<f64>], rhs: &[f64]) -> Option<Vec<f64>> {
+    let p = rows.first()?.len();
+    let mut a = vec![vec![0.0; p]; p];
+    let mut b = vec![0.0; p];
+    for (r, &y) in rows.iter().zip(rhs) {
+        for i in 0..p {
+            b[i] += r[i] * y;
+            for j in 0..p {
+                a[i][j] += r[i] * r[j];
+            }
+        }
+    }
+    solve(a, b)
+}
+
+/// Solves a small dense system by Gaussian elimination with partial pivoting.
+pub fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let n = b.len();
+    for c in 0..n {
+        let piv = (c..n).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        if a[piv][c].abs() < 1e-300 || !a[piv][c].is_finite() {
+            return None;
+        }
+        a.swap(c, piv);
+        b.swap(c, piv);
+        for r in c + 1..n {
+            let f = a[r][c] / a[c][c];
+            for k in c..n {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for r in (0..n).rev() {
+        let s: f64 = (r + 1..n).map(|k| a[r][k] * x[k]).sum();
+        x[r] = (b[r] - s) / a[r][r];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// Outcome of [`levenberg_marquardt`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct LmResult {
+    /// Parameters at the minimum.
+    pub p: Vec<f64>,
+    /// Cost ½ Σ r².
+    pub cost: f64,
+    /// Iterations.
+    pub iterations: usize,
+    /// Tolerance met.
+    pub converged: bool,
+}
+
+/// Levenberg–Marquardt on residuals `r(p)` (`None` = could not evaluate: treated as a rejected
+/// step), forward-difference Jacobian, Marquardt diagonal scaling. `None` if `r(p0)` fails.
+pub fn levenberg_marquardt(
+    mut r: impl FnMut(&[f64]) -> Option<Vec<f64>>,
+    p0: &[f64],
+    max_iter: usize,
+    tol: f64,
+) -> Option<LmResult> {
+    let n = p0.len();
+    let mut p = p0.to_vec();
+    let mut res = r(&p)?;
+    let cost = |v: &[f64]| 0.5 * v.iter().map(|x| x * x).sum::<f64>();
+    let mut c = cost(&res);
+    let mut lambda = 1e-3;
+    let mut converged = false;
+    let mut it = 0;
+    while it < max_iter {
+        it += 1;
+        // Jacobian.
+        let mut jac: Vec<Vec<f64>> = Vec::with_capacity(n);
+        for j in 0..n {
+            let h = 1e-7 * p[j].abs().max(1e-4);
+            let mut q = p.clone();
+            q[j] += h;
+            let rq = r(&q)?;
+            jac.push(rq.iter().zip(&res).map(|(a, b)| (a - b) / h).collect());
+        }
+        let mut jtj = vec![vec![0.0; n]; n];
+        let mut jtr = vec![0.0; n];
+        for i in 0..n {
+            jtr[i] = jac[i].iter().zip(&res).map(|(a, b)| a * b).sum();
+            for k in 0..n {
+                jtj[i][k] = jac[i].iter().zip(&jac[k]).map(|(a, b)| a * b).sum();
+            }
+        }
+        let mut improved = false;
+        for _ in 0..20 {
+            let mut a = jtj.clone();
+            for i in 0..n {
+                a[i][i] += lambda * jtj[i][i].max(1e-30);
+            }
+            let Some(step) = solve(a, jtr.iter().map(|v| -v).collect()) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let q: Vec<f64> = p.iter().zip(&step).map(|(a, b)| a + b).collect();
+            if let Some(rq) = r(&q) {
+                let cq = cost(&rq);
+                if cq.is_finite() && cq < c {
+                    let rel_step = step
+                        .iter()
+                        .zip(&q)
+                        .map(|(s, v)| s.abs() / v.abs().max(1e-6))
+                        .fold(0.0, f64::max);
+                    let rel_cost = (c - cq) / c.max(1e-300);
+                    p = q;
+                    res = rq;
+                    c = cq;
+                    lambda = (lambda * 0.2).max(1e-12);
+                    improved = true;
+                    if rel_step < tol.sqrt() * 1e-2 || rel_cost < tol || c < 1e-28 {
+                        converged = true;
+                    }
+                    break;
+                }
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            // No downhill step at any damping: a (numerical) minimum.
+            converged = true;
+            break;
+        }
+        if converged {
+            break;
+        }
+    }
+    Some(LmResult {
+        p,
+        cost: c,
+        iterations: it,
+        converged,
+    })
+}
+
+/// A fit restricted to an amplitude window (thesis Tables 6–7).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WindowFit {
+    /// Amplitude at the window start.
+    pub a_start: f64,
+    /// Amplitude at the window end.
+    pub a_end: f64,
+    /// τ of the window start (in the record).
+    pub tau_start: f64,
+    /// τ of the window end.
+    pub tau_end: f64,
+    /// The fit on that window.
+    pub fit: FitResult,
+}
+
+/// Splits the motion (until the envelope falls below 2 % of its start) into `windows` parts of
+/// equal amplitude drop and fits `spec` on each, starting each simulation from the window's
+/// first sample. Constants that drift from window to window mean the law misses something.
+pub fn windowed_fits(
+    tau: &[f64],
+    y: &[f64],
+    ydot: &[f64],
+    spec: LawSpec,
+    windows: usize,
+    opts: &FitOptions,
+) -> Result<Vec<WindowFit>, FitError> {
+    if windows == 0 {
+        return Err(FitError("need at least one window".into()));
+    }
+    let a = mark_crandall(y, ydot);
+    let a0 = *a.first().ok_or_else(|| FitError("empty record".into()))?;
+    let a_min = a.iter().copied().fold(f64::INFINITY, f64::min).max(0.02 * a0);
+    let mut out = Vec::new();
+    let mut start = 0usize;
+    for w in 1..=windows {
+        let level = a0 - (a0 - a_min) * w as f64 / windows as f64;
+        let mut end = a.iter().position(|&v| v <= level).unwrap_or(a.len() - 1);
+        if w == windows {
+            end = end.max(a.len().min(end + 1) - 1);
+        }
+        if end <= start + 8 {
+            continue;
+        }
+        let r = fit_dimensionless(
+            &tau[start..=end],
+            &y[start..=end],
+            &ydot[start..=end],
+            spec,
+            opts,
+        )?;
+        out.push(WindowFit {
+            a_start: a[start],
+            a_end: a[end],
+            tau_start: tau[start],
+            tau_end: tau[end],
+            fit: r,
+        });
+        start = end;
+    }
+    Ok(out)
+}
+
+/// Convenience: SI rig of a record or the unit rig.
+pub fn rig_of(rec: &Record) -> Rig {
+    rec.rig().unwrap_or(Rig::UNIT)
+}

@@ -1,0 +1,645 @@
+//! Integrators and the stepping simulator.
+//!
+//! [`Simulator`] integrates the dimensionless model `y'' + μ_a y' + y + κ y³ = −f(y', z)` with either
+//! fixed-step RK4 (as the thesis) or adaptive Dormand–Prince 5(4) with dense output. For laws with a
+//! `sgn(y')` term both integrators work on a branch (fixed sliding direction), locate the velocity
+//! zero crossing as an event, stop exactly there, apply the stick rule (eq. 14) and restart on the
+//! new branch — so the discontinuous friction is integrated exactly, never smeared over a step.
+//!
+//! It is a stepping API: [`Simulator::step_to`] advances to any later time and returns the
+//! interpolated state there, so a real-time virtual rig can pull samples one by one. The batch
+//! helper [`simulate`] samples a whole grid.
+
+use crate::model::Model;
+
+/// Integration method.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Method {
+    /// Classical fixed-step RK4 with step `h` (dimensionless time), events located by re-stepping.
+    Rk4 {
+        /// Step (rad of τ); 0.01 is accurate to ~1e-9 in amplitude per cycle.
+        h: f64,
+    },
+    /// Adaptive Dormand–Prince 5(4) with 4th-order dense output and event location.
+    Dopri45 {
+        /// Relative tolerance.
+        rtol: f64,
+        /// Absolute tolerance (in y units).
+        atol: f64,
+        /// Largest step (rad of τ).
+        h_max: f64,
+    },
+}
+
+impl Default for Method {
+    /// Dormand–Prince with rtol = 1e-10, atol = 1e-12, h_max = 0.5.
+    fn default() -> Self {
+        Method::Dopri45 {
+            rtol: 1e-10,
+            atol: 1e-12,
+            h_max: 0.5,
+        }
+    }
+}
+
+impl Method {
+    /// Dormand–Prince with the given relative tolerance (atol = rtol/100, h_max = 0.5).
+    pub fn dopri(rtol: f64) -> Method {
+        Method::Dopri45 {
+            rtol,
+            atol: rtol * 1e-2,
+            h_max: 0.5,
+        }
+    }
+}
+
+/// Simulation failure (non-finite state, step size underflow, bad parameters).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimError(pub String);
+
+impl std::fmt::Display for SimError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "simulation failed: {}", self.0)
+    }
+}
+impl std::error::Error for SimError {}
+
+/// Dimensionless state at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct State {
+    /// Dimensionless time τ = Ω t.
+    pub tau: f64,
+    /// Displacement y = k x / N.
+    pub y: f64,
+    /// Velocity y' = dy/dτ.
+    pub ydot: f64,
+    /// Internal friction state z (0 for memoryless laws).
+    pub z: f64,
+    /// Contact friction force f = F/N (while stuck: the static force holding the pin).
+    pub f: f64,
+    /// True once the pin has stuck for good (eq. 14).
+    pub stuck: bool,
+}
+
+#[derive(Debug, Clone)]
+enum Segment {
+    /// Dense output of a Dormand–Prince step started at t0 with step h, valid to t1 ≤ t0 + h.
+    Dense { t0: f64, h: f64, t1: f64, rc: [[f64; 3]; 5], dir: f64 },
+    /// Cubic Hermite between two RK4 points.
+    Hermite { t0: f64, t1: f64, s0: [f64; 3], s1: [f64; 3], f0: [f64; 3], f1: [f64; 3], dir: f64 },
+}
+
+// Dormand–Prince 5(4) tableau.
+const A21: f64 = 1.0 / 5.0;
+const A31: f64 = 3.0 / 40.0;
+const A32: f64 = 9.0 / 40.0;
+const A41: f64 = 44.0 / 45.0;
+const A42: f64 = -56.0 / 15.0;
+const A43: f64 = 32.0 / 9.0;
+const A51: f64 = 19372.0 / 6561.0;
+const A52: f64 = -25360.0 / 2187.0;
+const A53: f64 = 64448.0 / 6561.0;
+const A54: f64 = -212.0 / 729.0;
+const A61: f64 = 9017.0 / 3168.0;
+const A62: f64 = -355.0 / 33.0;
+const A63: f64 = 46732.0 / 5247.0;
+const A64: f64 = 49.0 / 176.0;
+const A65: f64 = -5103.0 / 18656.0;
+const A71: f64 = 35.0 / 384.0;
+const A73: f64 = 500.0 / 1113.0;
+const A74: f64 = 125.0 / 192.0;
+const A75: f64 = -2187.0 / 6784.0;
+const A76: f64 = 11.0 / 84.0;
+const E1: f64 = 71.0 / 57600.0;
+const E3: f64 = -71.0 / 16695.0;
+const E4: f64 = 71.0 / 1920.0;
+const E5: f64 = -17253.0 / 339200.0;
+const E6: f64 = 22.0 / 525.0;
+const E7: f64 = -1.0 / 40.0;
+const D1: f64 = -12715105075.0 / 11282082432.0;
+const D3: f64 = 87487479700.0 / 32700410799.0;
+const D4: f64 = -10690763975.0 / 1880347072.0;
+const D5: f64 = 701980252875.0 / 199316789632.0;
+const D6: f64 = -1453857185.0 / 822651844.0;
+const D7: f64 = 69997945.0 / 29380423.0;
+
+#[inline]
+fn comb(s: &[f64; 3], terms: &[(f64, &[f64; 3])], h: f64) -> [f64; 3] {
+    let mut out = *s;
+    for (c, k) in terms {
+        for i in 0..3 {
+            out[i] += h * c * k[i];
+        }
+    }
+    out
+}
+
+fn dense_eval(rc: &[[f64; 3]; 5], th: f64) -> [f64; 3] {
+    let th1 = 1.0 - th;
+    let mut o = [0.0; 3];
+    for (i, oi) in o.iter_mut().enumerate() {
+        *oi = rc[0][i] + th * (rc[1][i] + th1 * (rc[2][i] + th * (rc[3][i] + th1 * rc[4][i])));
+    }
+    o
+}
+
+fn hermite(s0: &[f64; 3], s1: &[f64; 3], f0: &[f64; 3], f1: &[f64; 3], h: f64, th: f64) -> [f64; 3] {
+    let h00 = (1.0 + 2.0 * th) * (1.0 - th) * (1.0 - th);
+    let h10 = th * (1.0 - th) * (1.0 - th);
+    let h01 = th * th * (3.0 - 2.0 * th);
+    let h11 = th * th * (th - 1.0);
+    let mut o = [0.0; 3];
+    for i in 0..3 {
+        o[i] = h00 * s0[i] + h10 * h * f0[i] + h01 * s1[i] + h11 * h * f1[i];
+    }
+    o
+}
+
+/// Stepping simulator of one model from one initial state.
+///
+/// ```
+/// use tribo_physics::{law::FrictionLaw, model::Model, integrate::{Simulator, Method}};
+/// let mut sim = Simulator::new(Model::new(FrictionLaw::coulomb(0.2)), 10.0, 0.0, Method::default());
+/// let s = sim.step_to(std::f64::consts::PI).unwrap(); // first half cycle: y = -(10 - 2·0.2)
+/// assert!((s.y + 9.6).abs() < 1e-8);
+/// ```
+#[derive(Debug, Clone)]
+pub struct Simulator {
+    model: Model,
+    method: Method,
+    t: f64,
+    s: [f64; 3],
+    dir: f64,
+    stuck: bool,
+    k1: Option<[f64; 3]>,
+    h: f64,
+    seg: Option<Segment>,
+    events: bool,
+    stick: Option<f64>,
+    reversals: Vec<(f64, f64)>,
+    steps: usize,
+}
+
+impl Simulator {
+    /// A simulator at τ = 0 in state `(y0, ydot0)` with `z = 0`. If `y0` is within the stick band
+    /// and `ydot0 = 0`, the pin starts (and stays) stuck.
+    pub fn new(model: Model, y0: f64, ydot0: f64, method: Method) -> Simulator {
+        Self::with_state(model, 0.0, [y0, ydot0, 0.0], method)
+    }
+
+    /// A simulator at time `tau0` in state `[y, y', z]`.
+    pub fn with_state(model: Model, tau0: f64, s0: [f64; 3], method: Method) -> Simulator {
+        let events = model.law.is_discontinuous();
+        let stick = model.stick_level();
+        let h = match method {
+            Method::Rk4 { h } => h,
+            Method::Dopri45 { h_max, .. } => (0.01f64).min(h_max),
+        };
+        let mut sim = Simulator {
+            model,
+            method,
+            t: tau0,
+            s: s0,
+            dir: 1.0,
+            stuck: false,
+            k1: None,
+            h,
+            seg: None,
+            events,
+            stick,
+            reversals: Vec::new(),
+            steps: 0,
+        };
+        if s0[1] != 0.0 {
+            sim.dir = s0[1].signum();
+        } else {
+            sim.at_rest();
+        }
+        sim
+    }
+
+    /// Velocity is zero: apply the stick rule and pick the new sliding direction.
+    fn at_rest(&mut self) {
+        let r = self.model.spring(self.s[0]);
+        if let Some(mus) = self.stick {
+            if r.abs() <= mus {
+                self.stuck = true;
+                self.s[1] = 0.0;
+                return;
+            }
+        }
+        if r != 0.0 {
+            self.dir = -r.signum();
+        } else if self.stick.is_some() {
+            self.stuck = true;
+        }
+    }
+
+    /// The model being simulated.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+    /// Time reached by the integration (≥ any time already returned).
+    pub fn tau(&self) -> f64 {
+        self.t
+    }
+    /// True once the pin is stuck for good.
+    pub fn is_stuck(&self) -> bool {
+        self.stuck
+    }
+    /// Number of accepted integration steps so far.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+    /// Velocity reversals found so far, as `(τ, y)` (the extrema of the displacement). Only
+    /// tracked for discontinuous laws.
+    pub fn reversals(&self) -> &[(f64, f64)] {
+        &self.reversals
+    }
+
+    fn state_of(&self, tau: f64, s: [f64; 3], dir: f64) -> State {
+        let f = if self.stuck && tau >= self.t {
+            -self.model.spring(s[0])
+        } else {
+            self.model.law.force(s[1], s[2], dir)
+        };
+        State {
+            tau,
+            y: s[0],
+            ydot: s[1],
+            z: s[2],
+            f,
+            stuck: self.stuck && tau >= self.t,
+        }
+    }
+
+    /// Current state at [`Simulator::tau`].
+    pub fn state(&self) -> State {
+        self.state_of(self.t, self.s, self.dir)
+    }
+
+    /// Advances to time `tau` and returns the state there. Times must not go back before the
+    /// start of the last internal step (sampling an increasing grid is always fine).
+    pub fn step_to(&mut self, tau: f64) -> Result<State, SimError> {
+        if !tau.is_finite() {
+            return Err(SimError(format!("requested time {tau} is not finite")));
+        }
+        loop {
+            if let Some(seg) = &self.seg {
+                let (t0, t1) = match seg {
+                    Segment::Dense { t0, t1, .. } | Segment::Hermite { t0, t1, .. } => (*t0, *t1),
+                };
+                if tau < t0 - 1e-12 * t0.abs().max(1.0) {
+                    return Err(SimError(format!(
+                        "cannot step back to τ = {tau} (last step starts at {t0})"
+                    )));
+                }
+                if tau <= t1 {
+                    let (s, dir) = match seg {
+                        Segment::Dense { t0, h, rc, dir, .. } => {
+                            (dense_eval(rc, ((tau - t0) / h).max(0.0)), *dir)
+                        }
+                        Segment::Hermite {
+                            t0,
+                            t1,
+                            s0,
+                            s1,
+                            f0,
+                            f1,
+                            dir,
+                        } => {
+                            let h = t1 - t0;
+                            let th = if h > 0.0 { ((tau - t0) / h).max(0.0) } else { 1.0 };
+                            (hermite(s0, s1, f0, f1, h, th), *dir)
+                        }
+                    };
+                    return Ok(self.state_of(tau, s, dir));
+                }
+            } else if tau <= self.t {
+                return Ok(self.state_of(tau, self.s, self.dir));
+            }
+            if self.stuck {
+                return Ok(self.state_of(tau.max(self.t), self.s, self.dir));
+            }
+            self.advance(tau)?;
+        }
+    }
+
+    /// Samples the increasing times `taus`.
+    pub fn sample(&mut self, taus: &[f64]) -> Result<Vec<State>, SimError> {
+        taus.iter().map(|&t| self.step_to(t)).collect()
+    }
+
+    /// Iterator over states at `tau0 + i·dtau`, i = 0, 1, … (endless; take what you need).
+    pub fn samples(&mut self, dtau: f64) -> impl Iterator<Item = Result<State, SimError>> + '_ {
+        let t0 = self.t;
+        (0u64..).map(move |i| self.step_to(t0 + i as f64 * dtau))
+    }
+
+    /// One internal step (at most up to the next event).
+    fn advance(&mut self, _target: f64) -> Result<(), SimError> {
+        match self.method {
+            Method::Rk4 { h } => self.advance_rk4(h),
+            Method::Dopri45 { rtol, atol, h_max } => self.advance_dopri(rtol, atol, h_max),
+        }
+    }
+
+    fn rk4(&self, s: &[f64; 3], f0: &[f64; 3], h: f64) -> [f64; 3] {
+        let m = &self.model;
+        let d = self.dir;
+        let k2 = m.rhs(&comb(s, &[(0.5, f0)], h), d);
+        let k3 = m.rhs(&comb(s, &[(0.5, &k2)], h), d);
+        let k4 = m.rhs(&comb(s, &[(1.0, &k3)], h), d);
+        comb(s, &[(1.0 / 6.0, f0), (1.0 / 3.0, &k2), (1.0 / 3.0, &k3), (1.0 / 6.0, &k4)], h)
+    }
+
+    fn advance_rk4(&mut self, h: f64) -> Result<(), SimError> {
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(SimError(format!("RK4 step must be > 0, got {h}")));
+        }
+        let s0 = self.s;
+        let f0 = self.model.rhs(&s0, self.dir);
+        let mut s1 = self.rk4(&s0, &f0, h);
+        let mut hs = h;
+        let mut event = false;
+        if self.events && self.dir * s1[1] < 0.0 {
+            // Find h* with v(rk4(s0, h*)) = 0 (Illinois regula falsi on the step length).
+            let (mut lo, mut hi) = (0.0, h);
+            let (mut vlo, mut vhi) = (self.dir * s0[1], self.dir * s1[1]);
+            let mut side = 0;
+            for _ in 0..100 {
+                let mut m = if vlo - vhi != 0.0 {
+                    lo + (hi - lo) * vlo / (vlo - vhi)
+                } else {
+                    0.5 * (lo + hi)
+                };
+                if !(m > lo && m < hi) {
+                    m = 0.5 * (lo + hi);
+                }
+                let sm = self.rk4(&s0, &f0, m);
+                let vm = self.dir * sm[1];
+                if vm >= 0.0 {
+                    lo = m;
+                    vlo = vm;
+                    if side == -1 {
+                        vhi *= 0.5;
+                    }
+                    side = -1;
+                } else {
+                    hi = m;
+                    vhi = vm;
+                    if side == 1 {
+                        vlo *= 0.5;
+                    }
+                    side = 1;
+                }
+                if hi - lo <= 1e-15 * (1.0 + self.t.abs()) || vm.abs() < 1e-15 {
+                    break;
+                }
+            }
+            hs = hi;
+            s1 = self.rk4(&s0, &f0, hs);
+            s1[1] = 0.0;
+            event = true;
+        }
+        check_finite(&s1, self.t)?;
+        let f1 = self.model.rhs(&s1, self.dir);
+        self.seg = Some(Segment::Hermite {
+            t0: self.t,
+            t1: self.t + hs,
+            s0,
+            s1,
+            f0,
+            f1,
+            dir: self.dir,
+        });
+        self.t += hs;
+        self.s = s1;
+        self.steps += 1;
+        if event {
+            self.reversal();
+        }
+        Ok(())
+    }
+
+    fn reversal(&mut self) {
+        self.reversals.push((self.t, self.s[0]));
+        self.k1 = None;
+        self.at_rest();
+    }
+
+    fn advance_dopri(&mut self, rtol: f64, atol: f64, h_max: f64) -> Result<(), SimError> {
+        if !(rtol > 0.0 && atol > 0.0 && h_max > 0.0) {
+            return Err(SimError("Dormand–Prince tolerances and h_max must be > 0".into()));
+        }
+        let m = &self.model;
+        let d = self.dir;
+        let s = self.s;
+        let k1 = match self.k1 {
+            Some(k) => k,
+            None => m.rhs(&s, d),
+        };
+        let mut h = self.h.min(h_max);
+        let mut rejects = 0;
+        loop {
+            if h < 1e-13 * (1.0 + self.t.abs()) {
+                return Err(SimError(format!(
+                    "step size underflow at τ = {} (stiff or singular)",
+                    self.t
+                )));
+            }
+            let k2 = m.rhs(&comb(&s, &[(A21, &k1)], h), d);
+            let k3 = m.rhs(&comb(&s, &[(A31, &k1), (A32, &k2)], h), d);
+            let k4 = m.rhs(&comb(&s, &[(A41, &k1), (A42, &k2), (A43, &k3)], h), d);
+            let k5 = m.rhs(
+                &comb(&s, &[(A51, &k1), (A52, &k2), (A53, &k3), (A54, &k4)], h),
+                d,
+            );
+            let k6 = m.rhs(
+                &comb(
+                    &s,
+                    &[(A61, &k1), (A62, &k2), (A63, &k3), (A64, &k4), (A65, &k5)],
+                    h,
+                ),
+                d,
+            );
+            let s1 = comb(
+                &s,
+                &[(A71, &k1), (A73, &k3), (A74, &k4), (A75, &k5), (A76, &k6)],
+                h,
+            );
+            let k7 = m.rhs(&s1, d);
+            let mut err = 0.0;
+            let mut finite = true;
+            for i in 0..3 {
+                let e = h
+                    * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i]
+                        + E7 * k7[i]);
+                let sc = atol + rtol * s[i].abs().max(s1[i].abs());
+                err += (e / sc).powi(2);
+                finite &= s1[i].is_finite();
+            }
+            let err = (err / 3.0).sqrt();
+            if !finite || !err.is_finite() {
+                h *= 0.25;
+                rejects += 1;
+                if rejects > 60 {
+                    return Err(SimError(format!("non-finite state at τ = {}", self.t)));
+                }
+                continue;
+            }
+            if err > 1.0 {
+                h *= (0.9 * err.powf(-0.2)).max(0.2);
+                rejects += 1;
+                continue;
+            }
+            // Accepted.
+            let fac = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+            let mut rc = [[0.0; 3]; 5];
+            for i in 0..3 {
+                let dy = s1[i] - s[i];
+                let bspl = h * k1[i] - dy;
+                rc[0][i] = s[i];
+                rc[1][i] = dy;
+                rc[2][i] = bspl;
+                rc[3][i] = dy - h * k7[i] - bspl;
+                rc[4][i] = h
+                    * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i]
+                        + D7 * k7[i]);
+            }
+            let t0 = self.t;
+            self.steps += 1;
+            self.h = (h * fac).min(h_max);
+            if self.events && d * s1[1] < 0.0 {
+                let th = find_reversal(&rc, d);
+                let mut se = dense_eval(&rc, th);
+                se[1] = 0.0;
+                self.seg = Some(Segment::Dense {
+                    t0,
+                    h,
+                    t1: t0 + th * h,
+                    rc,
+                    dir: d,
+                });
+                self.t = t0 + th * h;
+                self.s = se;
+                self.reversal();
+            } else {
+                self.seg = Some(Segment::Dense {
+                    t0,
+                    h,
+                    t1: t0 + h,
+                    rc,
+                    dir: d,
+                });
+                self.t = t0 + h;
+                self.s = s1;
+                self.k1 = Some(k7);
+            }
+            return Ok(());
+        }
+    }
+}
+
+/// The first θ in (0, 1] where `dir · v(θ)` turns negative on a dense-output polynomial.
+fn find_reversal(rc: &[[f64; 3]; 5], dir: f64) -> f64 {
+    let v = |th: f64| dir * dense_eval(rc, th)[1];
+    // Bracket: first of 16 sub-intervals where the sign turns.
+    let n = 16;
+    let mut lo = 0.0;
+    let mut hi = 1.0;
+    for i in 1..=n {
+        let th = i as f64 / n as f64;
+        if v(th) < 0.0 {
+            hi = th;
+            lo = (i - 1) as f64 / n as f64;
+            break;
+        }
+    }
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if v(mid) >= 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo < 1e-16 {
+            break;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+fn check_finite(s: &[f64; 3], t: f64) -> Result<(), SimError> {
+    if s.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(SimError(format!("non-finite state at τ = {t}")))
+    }
+}
+
+/// A sampled dimensionless trajectory.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trajectory {
+    /// τ.
+    pub tau: Vec<f64>,
+    /// y.
+    pub y: Vec<f64>,
+    /// y'.
+    pub ydot: Vec<f64>,
+    /// Internal state z.
+    pub z: Vec<f64>,
+    /// Contact friction force f.
+    pub f: Vec<f64>,
+    /// τ at which the pin stuck for good, if it did within the record.
+    pub stop_tau: Option<f64>,
+    /// Velocity reversals `(τ, y)` within the record (discontinuous laws).
+    pub reversals: Vec<(f64, f64)>,
+}
+
+/// Simulates `model` from `(y0, ydot0)` and samples it at the increasing times `taus`.
+pub fn simulate(
+    model: &Model,
+    y0: f64,
+    ydot0: f64,
+    taus: &[f64],
+    method: Method,
+) -> Result<Trajectory, SimError> {
+    model.validate().map_err(SimError)?;
+    if !(y0.is_finite() && ydot0.is_finite()) {
+        return Err(SimError("initial state must be finite".into()));
+    }
+    let mut sim = Simulator::new(model.clone(), y0, ydot0, method);
+    let mut tr = Trajectory {
+        tau: Vec::with_capacity(taus.len()),
+        y: Vec::with_capacity(taus.len()),
+        ydot: Vec::with_capacity(taus.len()),
+        z: Vec::with_capacity(taus.len()),
+        f: Vec::with_capacity(taus.len()),
+        ..Default::default()
+    };
+    for &t in taus {
+        let s = sim.step_to(t)?;
+        tr.tau.push(t);
+        tr.y.push(s.y);
+        tr.ydot.push(s.ydot);
+        tr.z.push(s.z);
+        tr.f.push(s.f);
+        if s.stuck && tr.stop_tau.is_none() {
+            tr.stop_tau = Some(sim.tau());
+        }
+    }
+    let end = taus.last().copied().unwrap_or(0.0);
+    tr.reversals = sim
+        .reversals()
+        .iter()
+        .copied()
+        .filter(|r| r.0 <= end)
+        .collect();
+    Ok(tr)
+}
+
+/// Uniform grid `0, dtau, 2 dtau, …` with `n` points.
+pub fn grid(n: usize, dtau: f64) -> Vec<f64> {
+    (0..n).map(|i| i as f64 * dtau).collect()
+}

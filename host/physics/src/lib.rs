@@ -1,0 +1,28 @@
+//! Physics of the oscillating tribometer (f64): the rig as a single-degree-of-freedom oscillator,
+//! friction laws, integrators, sensor model, envelopes and friction-law identification.
+//!
+//! Conventions follow the thesis (F. Majdoub, 2013): dimensionless time `τ = Ω t`, displacement
+//! `y = k x / N`, friction `f = F / N`, constants `μ_j` of seed eq. 10–13.
+//!
+//! - [`law`]: [`law::FrictionLaw`], one value per law (Coulomb … LuGre).
+//! - [`model`]: [`model::Rig`] constants and SI ↔ dimensionless conversion; [`model::Model`].
+//! - [`integrate`]: RK4 / Dormand–Prince with velocity-reversal events; [`integrate::Simulator`]
+//!   is a stepping API, [`integrate::simulate`] a batch one.
+//! - [`sensor`]: noise, 16-bit quantisation, 300 Hz force channel, lag, temperature, ECR.
+//! - [`record`]: [`record::Record`] and its CSV formats.
+//! - [`envelope`]: Mark & Crandall, Hilbert, averaging envelopes, closed forms, shape.
+//! - [`identify`]: Levenberg–Marquardt fits, fast estimators, windowed fits.
+
+pub mod envelope;
+pub mod identify;
+pub mod integrate;
+pub mod law;
+pub mod model;
+pub mod record;
+pub mod sensor;
+
+pub use identify::{FitResult, LawSpec};
+pub use integrate::{simulate, Method, SimError, Simulator, State, Trajectory};
+pub use law::FrictionLaw;
+pub use model::{Model, Rig};
+pub use record::Record;

@@ -1,0 +1,1 @@
+//! One module per `tribo` subcommand: its clap arguments and the function that runs it.

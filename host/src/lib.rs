@@ -1,0 +1,10 @@
+//! `tribo`: the host side of the oscillating tribometer.
+//!
+//! The CLI (`src/main.rs`) is thin: each subcommand parses its arguments and calls one function of
+//! this library, found in the module of the same name under [`cmd`].
+
+pub mod cmd;
+
+pub use tribo_firmware as firmware;
+pub use tribo_physics as physics;
+pub use tribo_wire as wire;

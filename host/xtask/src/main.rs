@@ -1,0 +1,206 @@
+//! Project automation, run as `cargo xtask <task>`.
+//!
+//! * `cargo xtask firmware [--run]`: builds the release firmware ELF for `thumbv7em-none-eabihf` and
+//!   prints its flash and RAM use. Uses the rustup target when it is installed; otherwise Debian's
+//!   `rustc-web`/`cargo-web`/`rust-web-src`/`lld-22` with `RUSTC_BOOTSTRAP=1 -Z build-std=core`,
+//!   installing those packages first when they are missing and we may (root, apt-get present).
+//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the firmware.
+
+mod elf;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+
+const TARGET: &str = "thumbv7em-none-eabihf";
+const BOARD: &str = "tribo-board";
+const PROFILE: &str = "firmware";
+const DEBIAN_PACKAGES: [&str; 4] = ["rustc-web", "cargo-web", "rust-web-src", "lld-22"];
+/// Budgets of the firmware issue: the ELF must fit these.
+const FLASH_BUDGET: u64 = 256 * 1024;
+const RAM_BUDGET: u64 = 256 * 1024;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("firmware") => firmware(&args[1..]).map(|_| ()),
+        Some("ci") => ci(),
+        _ => {
+            eprintln!(
+                "usage: cargo xtask <task>\n\n\
+                 tasks:\n  \
+                 firmware [--run]   build the STM32H743 firmware ELF and print its size\n                     \
+                 (--run: flash it with probe-rs and show the defmt log)\n  \
+                 ci                 rustfmt, clippy -D warnings, all tests, firmware build"
+            );
+            return ExitCode::from(2);
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().expect("workspace root")
+}
+
+fn run(cmd: &mut Command) -> Result<(), String> {
+    eprintln!("$ {}", show(cmd));
+    let status = cmd.status().map_err(|e| format!("cannot start {}: {e}", show(cmd)))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("`{}` failed ({status})", show(cmd)))
+    }
+}
+
+fn show(cmd: &Command) -> String {
+    let mut s: Vec<String> = cmd
+        .get_envs()
+        .filter_map(|(k, v)| Some(format!("{}={}", k.to_str()?, v?.to_str()?)))
+        .collect();
+    s.push(cmd.get_program().to_string_lossy().into_owned());
+    s.extend(cmd.get_args().map(|a| a.to_string_lossy().into_owned()));
+    s.join(" ")
+}
+
+fn cargo() -> Command {
+    let mut c = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    c.current_dir(root());
+    c
+}
+
+fn ci() -> Result<(), String> {
+    run(cargo().args(["fmt", "--all", "--", "--check"]))
+        .map_err(|e| format!("{e}\n  → run `cargo fmt --all` and commit the result"))?;
+    run(cargo().args(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))?;
+    run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
+    firmware(&[])?;
+    Ok(())
+}
+
+/// How the firmware gets built on this machine.
+enum Toolchain {
+    /// `rustup target add thumbv7em-none-eabihf` was done: the normal way.
+    Rustup,
+    /// Debian's rustc/cargo with the standard library sources, building `core` ourselves.
+    Debian { cargo: PathBuf, rustc: PathBuf },
+}
+
+fn rustup_has_target() -> bool {
+    let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
+    let out = Command::new(rustc).args(["--print", "sysroot"]).output();
+    match out {
+        Ok(o) if o.status.success() => {
+            let sysroot = String::from_utf8_lossy(&o.stdout).trim().to_owned();
+            Path::new(&sysroot).join("lib/rustlib").join(TARGET).join("lib").is_dir()
+        }
+        _ => false,
+    }
+}
+
+fn debian_ready() -> bool {
+    Path::new("/usr/bin/cargo").exists()
+        && Path::new("/usr/bin/rustc").exists()
+        && Path::new("/usr/lib/rustlib/src/rust/library/core").is_dir()
+        && (Path::new("/usr/bin/rust-lld").exists() || Path::new("/usr/bin/ld.lld-22").exists())
+}
+
+fn pick_toolchain() -> Result<Toolchain, String> {
+    if rustup_has_target() {
+        return Ok(Toolchain::Rustup);
+    }
+    if !debian_ready() {
+        let may_install = Path::new("/usr/bin/apt-get").exists() && is_root();
+        if !may_install {
+            return Err(format!(
+                "no toolchain for {TARGET}.\n  → either `rustup target add {TARGET}`\n  → or, on \
+                 Debian, `sudo apt-get install -y {}` and run this again",
+                DEBIAN_PACKAGES.join(" ")
+            ));
+        }
+        eprintln!("xtask: {TARGET} is not installed in rustup; installing Debian's toolchain");
+        run(Command::new("apt-get").arg("update").arg("-q"))?;
+        run(Command::new("apt-get").args(["install", "-y", "-q"]).args(DEBIAN_PACKAGES))?;
+        if !debian_ready() {
+            return Err("Debian's rust packages installed but incomplete (need /usr/bin/cargo, \
+                        /usr/lib/rustlib/src/rust/library, rust-lld)"
+                .into());
+        }
+    }
+    Ok(Toolchain::Debian { cargo: "/usr/bin/cargo".into(), rustc: "/usr/bin/rustc".into() })
+}
+
+fn is_root() -> bool {
+    Command::new("id")
+        .arg("-u")
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
+        .unwrap_or(false)
+}
+
+fn firmware(args: &[String]) -> Result<PathBuf, String> {
+    let flash = args.iter().any(|a| a == "--run");
+    let toolchain = pick_toolchain()?;
+    let root = root();
+    let (mut cmd, target_dir) = match &toolchain {
+        Toolchain::Rustup => {
+            let dir = root.join("target");
+            (cargo(), dir)
+        }
+        Toolchain::Debian { cargo, rustc } => {
+            // A target directory of its own: another compiler, another standard library.
+            let dir = root.join("target/debian-build-std");
+            let mut c = Command::new(cargo);
+            c.current_dir(&root)
+                .env("RUSTC", rustc)
+                .env("RUSTC_BOOTSTRAP", "1")
+                .env_remove("RUSTDOC")
+                .env_remove("RUSTC_WRAPPER")
+                .env_remove("CARGO");
+            c.args(["-Z", "build-std=core"]);
+            (c, dir)
+        }
+    };
+    cmd.env("CARGO_TARGET_DIR", &target_dir);
+    cmd.args([if flash { "run" } else { "build" }, "-p", BOARD, "--target", TARGET, "--profile", PROFILE]);
+    run(&mut cmd)?;
+    let elf_path = target_dir.join(TARGET).join(PROFILE).join(BOARD);
+    let bytes = std::fs::read(&elf_path).map_err(|e| format!("{}: {e}", elf_path.display()))?;
+    let size = elf::size(&bytes).map_err(|e| format!("{}: {e}", elf_path.display()))?;
+    println!("firmware ELF: {}", elf_path.display());
+    println!(
+        "toolchain:    {}",
+        match toolchain {
+            Toolchain::Rustup => "rustup target",
+            Toolchain::Debian { .. } => "Debian rustc-web + build-std=core",
+        }
+    );
+    println!(
+        "flash: {:>8} bytes ({:.1} KiB; text {} + rodata {} + data {} + vectors {}), budget {} KiB",
+        size.flash(),
+        size.flash() as f64 / 1024.0,
+        size.text,
+        size.rodata,
+        size.data,
+        size.vectors,
+        FLASH_BUDGET / 1024
+    );
+    println!(
+        "RAM:   {:>8} bytes ({:.1} KiB static; data {} + bss {} + uninit {}), budget {} KiB",
+        size.ram(),
+        size.ram() as f64 / 1024.0,
+        size.data,
+        size.bss,
+        size.uninit,
+        RAM_BUDGET / 1024
+    );
+    if size.flash() > FLASH_BUDGET || size.ram() > RAM_BUDGET {
+        return Err("the firmware is over its flash or RAM budget".into());
+    }
+    Ok(elf_path)
+}
