@@ -29,6 +29,19 @@
 //!   μ0 from this same fit, iterated), which removes the `r²/2A` bias of the plain envelope near the
 //!   end of Coulomb-dominated runs. A quadratic `a2 A²` fitted alongside gives the envelope's shape.
 //!
+//! The natural frequency comes from the reversal times (half a damped period apart, Coulomb or not),
+//! regressed on their index with weights ∝ amplitude² (a crossing's timing error goes as
+//! 1/amplitude), then Ω = ω_d / sqrt(1 − ζ²). The noise variances measured during the hold are taken
+//! out of the envelope's mean square, and the central differences use the nominal half-cycle spacing.
+//!
+//! `cycles` is half the number of velocity reversals seen; below [`MIN_CYCLES`] the verdict is
+//! `TooFewCycles` and every estimate is `NaN`. Saturated displacement or velocity samples after release
+//! give the verdict `Saturated` (the numbers are still filled in, to be read with care).
+//!
+//! Cost: per sample, integer sums and one `f32` calibration (≈ 170 host instructions, see
+//! `examples/pipeline_bench.rs`); per half-cycle, one peak fit over ±1 rad; the regressions run once,
+//! in `f64`, in [`Pipeline::finish`].
+//!
 //! The technician is shown the inverse-variance mean of the two ([`OnboardResult::best`]); its
 //! standard error includes half their difference in quadrature. When they differ by more than the
 //! method's stated precision (μ0 ± 0.001, μ1 ± 0.0002) plus three combined standard errors, the
@@ -37,7 +50,9 @@ use crate::calib::{self, OffsetCapture, ADC_MAX, CHANNELS};
 use crate::envelope::{HalfCycleMoments, Moments};
 use crate::fit::{self, Ols};
 use crate::peaks::{PeakFitter, ReversalDetector};
-use crate::wire::{Channel, ChannelCal, Configure, EnvelopeShape, Estimate, OnboardResult, Verdict};
+use crate::wire::{
+    Channel, ChannelCal, Configure, EnvelopeShape, Estimate, OnboardResult, Verdict,
+};
 use core::f64::consts::PI;
 
 /// Capacity of the half-cycle store: 1024 cycles, 39 s at 26 Hz. A run that fills it stops there.
@@ -83,11 +98,20 @@ impl core::fmt::Display for ConfigError {
             Self::Stiffness => f.write_str("stiffness must be a positive number of N/m"),
             Self::Load => f.write_str("normal load must be a positive number of N"),
             Self::SampleRate => f.write_str("sample rate must be positive"),
-            Self::MaxDuration => f.write_str("maximum duration must be a positive number of seconds"),
-            Self::InitialAmplitude => f.write_str("initial amplitude must be a positive number of metres"),
+            Self::MaxDuration => {
+                f.write_str("maximum duration must be a positive number of seconds")
+            }
+            Self::InitialAmplitude => {
+                f.write_str("initial amplitude must be a positive number of metres")
+            }
             Self::MissingChannel(c) => write!(f, "the on-board analysis needs the {c:?} channel"),
-            Self::Calibration(c) => write!(f, "the {c:?} calibration needs a finite non-zero gain and a finite zero"),
-            Self::Undersampled => f.write_str("sample rate must exceed 8 times the natural frequency sqrt(k/m)/2π"),
+            Self::Calibration(c) => write!(
+                f,
+                "the {c:?} calibration needs a finite non-zero gain and a finite zero"
+            ),
+            Self::Undersampled => {
+                f.write_str("sample rate must exceed 8 times the natural frequency sqrt(k/m)/2π")
+            }
         }
     }
 }
@@ -140,6 +164,13 @@ struct Pending {
 /// [`Pipeline::reset`]).
 #[derive(Clone, Debug)]
 pub struct Pipeline {
+    st: State,
+    records: heapless::Vec<HalfCycle, MAX_HALF_CYCLES>,
+}
+
+/// Everything but the half-cycle store (small: rebuilt in place by [`Pipeline::reset`]).
+#[derive(Clone, Debug)]
+struct State {
     mass: f64,
     stiffness: f64,
     load: f64,
@@ -159,14 +190,17 @@ pub struct Pipeline {
     v_ref: i32,
     x_release: f32,
     noise_x: f64,
+    /// Variances of the displacement (m²) and velocity (m²/s²) noise measured during the hold.
+    noise_var: (f64, f64),
     detector: ReversalDetector,
     fitter: PeakFitter,
     moments: Moments,
     pending: Option<Pending>,
-    records: heapless::Vec<HalfCycle, MAX_HALF_CYCLES>,
     first_sign: i8,
     last_rev: f64,
     half_period: f64,
+    /// Sample index after which, with no new reversal, the run is over (integer compare per sample).
+    deadline: u32,
     saturated: u32,
     rejected: u32,
 }
@@ -182,6 +216,13 @@ fn cal_ok(c: ChannelCal) -> bool {
 impl Pipeline {
     /// A pipeline for the run described by `cfg`, in the holding phase.
     pub fn new(cfg: &Configure) -> Result<Self, ConfigError> {
+        Ok(Self {
+            st: Self::state(cfg)?,
+            records: heapless::Vec::new(),
+        })
+    }
+
+    fn state(cfg: &Configure) -> Result<State, ConfigError> {
         let mass = positive(cfg.rig.mass_kg).ok_or(ConfigError::Mass)?;
         let stiffness = positive(cfg.rig.stiffness_n_per_m).ok_or(ConfigError::Stiffness)?;
         let load = positive(cfg.rig.load_n).ok_or(ConfigError::Load)?;
@@ -191,8 +232,10 @@ impl Pipeline {
         let rate = cfg.sample_rate_hz as f64;
         let max_duration = positive(cfg.max_duration_s).ok_or(ConfigError::MaxDuration)?;
         let x0 = positive(cfg.initial_amplitude_m).ok_or(ConfigError::InitialAmplitude)?;
-        let slot_x = calib::slot(cfg.channels, Channel::Displacement).ok_or(ConfigError::MissingChannel(Channel::Displacement))?;
-        let slot_v = calib::slot(cfg.channels, Channel::Velocity).ok_or(ConfigError::MissingChannel(Channel::Velocity))?;
+        let slot_x = calib::slot(cfg.channels, Channel::Displacement)
+            .ok_or(ConfigError::MissingChannel(Channel::Displacement))?;
+        let slot_v = calib::slot(cfg.channels, Channel::Velocity)
+            .ok_or(ConfigError::MissingChannel(Channel::Velocity))?;
         let cal = cfg.calibration;
         if !cal_ok(cal[Channel::Displacement as usize]) {
             return Err(ConfigError::Calibration(Channel::Displacement));
@@ -203,7 +246,7 @@ impl Pipeline {
         let omega = fit::sqrt(stiffness / mass);
         // half-period in samples
         let half_period = PI / omega * rate;
-        if !(half_period > 4.0) {
+        if half_period.is_nan() || half_period <= 4.0 {
             return Err(ConfigError::Undersampled);
         }
         let mut slots = [0u8; CHANNELS];
@@ -219,7 +262,7 @@ impl Pipeline {
         let max_samples = (max_duration * rate).min(u32::MAX as f64) as u32;
         let mut fitter = PeakFitter::new();
         fitter.set_step(PI / half_period);
-        Ok(Self {
+        Ok(State {
             mass,
             stiffness,
             load,
@@ -238,50 +281,52 @@ impl Pipeline {
             v_ref: 0,
             x_release: f32::NAN,
             noise_x: 0.0,
+            noise_var: (0.0, 0.0),
             detector: ReversalDetector::new(f32::MAX),
             fitter,
             moments: Moments::default(),
             pending: None,
-            records: heapless::Vec::new(),
             first_sign: 1,
             last_rev: 0.0,
             half_period,
+            deadline: (3.0 * half_period) as u32,
             saturated: 0,
             rejected: 0,
         })
     }
 
-    /// Re-initialises in place for a new run (no 43 KiB temporary on the stack of the caller beyond
-    /// the one `new` builds). On error the pipeline is left unchanged.
+    /// Re-initialises in place for a new run: only the small state (≈ 2 KiB) is rebuilt, the
+    /// half-cycle store is cleared, never copied. On error the pipeline is left unchanged.
     pub fn reset(&mut self, cfg: &Configure) -> Result<(), ConfigError> {
-        *self = Self::new(cfg)?;
+        self.st = Self::state(cfg)?;
+        self.records.clear();
         Ok(())
     }
 
     /// Current phase.
     pub fn phase(&self) -> Phase {
-        self.phase
+        self.st.phase
     }
 
     /// True once the run has stopped (pin at rest, amplitude in the noise, maximum duration, store
     /// full, or no motion).
     pub fn is_finished(&self) -> bool {
-        matches!(self.phase, Phase::Finished(_))
+        matches!(self.st.phase, Phase::Finished(_))
     }
 
     /// Samples analysed since release.
     pub fn samples(&self) -> u32 {
-        self.n
+        self.st.n
     }
 
     /// Sample vectors refused because they were shorter than the channel set.
     pub fn rejected(&self) -> u32 {
-        self.rejected
+        self.st.rejected
     }
 
     /// Calibration in use (zeros updated by the capture at release).
     pub fn calibration(&self) -> &[ChannelCal; CHANNELS] {
-        &self.cal
+        &self.st.cal
     }
 
     /// Half-cycles recorded so far.
@@ -291,160 +336,198 @@ impl Pipeline {
 
     /// SI value of one channel's count with the current calibration.
     pub fn to_si(&self, channel: Channel, count: u16) -> f32 {
-        self.cal.get(channel as usize).map_or(f32::NAN, |c| calib::to_si(*c, count))
+        self.st
+            .cal
+            .get(channel as usize)
+            .map_or(f32::NAN, |c| calib::to_si(*c, count))
     }
 
     /// Feeds one sample taken while the magnet holds the pin (counts in the channel-set order).
     /// Ignored once released.
     pub fn capture(&mut self, counts: &[u16]) {
-        if self.phase != Phase::Holding {
+        if self.st.phase != Phase::Holding {
             return;
         }
-        if counts.len() < self.width {
-            self.rejected = self.rejected.saturating_add(1);
+        if counts.len() < self.st.width {
+            self.st.rejected = self.st.rejected.saturating_add(1);
             return;
         }
-        let slots = self.slots;
-        self.capture.add(counts.iter().zip(slots.iter()).map(|(&c, &ch)| (ch as usize, c)));
+        let slots = self.st.slots;
+        self.st.capture.add(
+            counts
+                .iter()
+                .zip(slots.iter())
+                .map(|(&c, &ch)| (ch as usize, c)),
+        );
     }
 
     /// The magnet has let go: fixes the zeros and the noise thresholds and starts the analysis.
     pub fn release(&mut self) {
-        if self.phase != Phase::Holding {
+        if self.st.phase != Phase::Holding {
             return;
         }
         let xi = Channel::Displacement as usize;
         let vi = Channel::Velocity as usize;
         let fi = Channel::Force as usize;
-        if let Some(m) = self.capture.mean(vi) {
-            if let Some(c) = self.cal.get_mut(vi) {
+        if let Some(m) = self.st.capture.mean(vi) {
+            if let Some(c) = self.st.cal.get_mut(vi) {
                 c.zero = m as f32;
             }
         }
-        if let Some(m) = self.capture.mean(fi) {
-            if let Some(c) = self.cal.get_mut(fi) {
+        if let Some(m) = self.st.capture.mean(fi) {
+            if let Some(c) = self.st.cal.get_mut(fi) {
                 c.zero = m as f32;
             }
         }
-        if let Some(m) = self.capture.mean(xi) {
-            if let Some(c) = self.cal.get_mut(xi) {
-                let z = m - self.x0 / c.gain as f64;
+        if let Some(m) = self.st.capture.mean(xi) {
+            if let Some(c) = self.st.cal.get_mut(xi) {
+                let z = m - self.st.x0 / c.gain as f64;
                 if z.is_finite() {
                     c.zero = z as f32;
                 }
             }
         }
-        let xc = self.cal[xi];
-        let vc = self.cal[vi];
-        let sx = self.capture.std(xi).unwrap_or(MIN_NOISE_COUNTS).max(MIN_NOISE_COUNTS);
-        let sv = self.capture.std(vi).unwrap_or(MIN_NOISE_COUNTS).max(MIN_NOISE_COUNTS);
-        self.noise_x = sx * (xc.gain as f64).abs();
-        self.detector = ReversalDetector::new((ARM_SIGMAS * sv * (vc.gain as f64).abs()) as f32);
-        self.x_ref = (xc.zero as f64).clamp(0.0, ADC_MAX as f64) as i32;
-        self.v_ref = (vc.zero as f64).clamp(0.0, ADC_MAX as f64) as i32;
-        self.phase = Phase::Running;
+        let xc = self.st.cal[xi];
+        let vc = self.st.cal[vi];
+        let sx = self
+            .st
+            .capture
+            .std(xi)
+            .unwrap_or(MIN_NOISE_COUNTS)
+            .max(MIN_NOISE_COUNTS);
+        let sv = self
+            .st
+            .capture
+            .std(vi)
+            .unwrap_or(MIN_NOISE_COUNTS)
+            .max(MIN_NOISE_COUNTS);
+        self.st.noise_x = sx * (xc.gain as f64).abs();
+        let var = |ch: usize, gain: f32| {
+            let s = self.st.capture.std(ch).unwrap_or(0.0) * gain as f64;
+            s * s
+        };
+        self.st.noise_var = (var(xi, xc.gain), var(vi, vc.gain));
+        self.st.detector = ReversalDetector::new((ARM_SIGMAS * sv * (vc.gain as f64).abs()) as f32);
+        self.st.x_ref = (xc.zero as f64).clamp(0.0, ADC_MAX as f64) as i32;
+        self.st.v_ref = (vc.zero as f64).clamp(0.0, ADC_MAX as f64) as i32;
+        self.st.phase = Phase::Running;
     }
 
     /// Feeds one sample after release (counts in the channel-set order) and returns the phase.
     /// A sample pushed while holding releases the pin first.
     pub fn push(&mut self, counts: &[u16]) -> Phase {
-        if self.phase == Phase::Holding {
+        if self.st.phase == Phase::Holding {
             self.release();
         }
-        if self.phase != Phase::Running {
-            return self.phase;
+        if self.st.phase != Phase::Running {
+            return self.st.phase;
         }
-        let (Some(&cx), Some(&cv)) = (counts.get(self.slot_x), counts.get(self.slot_v)) else {
-            self.rejected = self.rejected.saturating_add(1);
-            return self.phase;
+        let (Some(&cx), Some(&cv)) = (counts.get(self.st.slot_x), counts.get(self.st.slot_v))
+        else {
+            self.st.rejected = self.st.rejected.saturating_add(1);
+            return self.st.phase;
         };
-        if counts.len() < self.width {
-            self.rejected = self.rejected.saturating_add(1);
-            return self.phase;
+        if counts.len() < self.st.width {
+            self.st.rejected = self.st.rejected.saturating_add(1);
+            return self.st.phase;
         }
         if cx == 0 || cx == ADC_MAX || cv == 0 || cv == ADC_MAX {
-            self.saturated = self.saturated.saturating_add(1);
+            self.st.saturated = self.st.saturated.saturating_add(1);
         }
-        let idx = self.n;
-        self.n = self.n.saturating_add(1);
+        let idx = self.st.n;
+        self.st.n = self.st.n.saturating_add(1);
         if idx == 0 {
-            self.x_release = calib::to_si(self.cal[Channel::Displacement as usize], cx);
+            self.st.x_release = calib::to_si(self.st.cal[Channel::Displacement as usize], cx);
         }
-        self.fitter.push(cx);
-        let v = calib::to_si(self.cal[Channel::Velocity as usize], cv);
-        if let Some(rev) = self.detector.update(v) {
+        self.st.fitter.push(cx);
+        let v = calib::to_si(self.st.cal[Channel::Velocity as usize], cv);
+        if let Some(rev) = self.st.detector.update(v) {
             self.on_reversal(idx, rev.frac as f64, rev.before);
         }
-        self.moments.add(cx as i32 - self.x_ref, cv as i32 - self.v_ref);
-        if let Some(p) = self.pending {
+        self.st
+            .moments
+            .add(cx as i32 - self.st.x_ref, cv as i32 - self.st.v_ref);
+        if let Some(p) = self.st.pending {
             if idx >= p.due {
                 self.complete_pending(p);
             }
         }
         self.check_stop(idx);
-        self.phase
+        self.st.phase
     }
 
     fn on_reversal(&mut self, idx: u32, frac: f64, before: i8) {
         let pos = (idx as f64 - 1.0 + frac).max(0.0);
-        let xc = self.cal[Channel::Displacement as usize];
-        let vc = self.cal[Channel::Velocity as usize];
-        let hm = self.moments.summarise(xc, self.x_ref, vc, self.v_ref).unwrap_or_default();
-        self.moments = Moments::default();
-        if let Some(p) = self.pending.take() {
+        let xc = self.st.cal[Channel::Displacement as usize];
+        let vc = self.st.cal[Channel::Velocity as usize];
+        let hm = self
+            .st
+            .moments
+            .summarise(xc, self.st.x_ref, vc, self.st.v_ref)
+            .unwrap_or_default();
+        self.st.moments = Moments::default();
+        if let Some(p) = self.st.pending.take() {
             // Two reversals within one window: only garbage does that; keep the raw peak.
             self.complete_pending(p);
         }
-        let first = self.records.is_empty() && self.pending.is_none();
-        let hp = pos - self.last_rev;
+        let first = self.records.is_empty() && self.st.pending.is_none();
+        let hp = pos - self.st.last_rev;
         if first {
-            self.first_sign = before;
+            self.st.first_sign = before;
         }
         if hp > 4.0 {
-            self.half_period = hp;
-            self.fitter.set_step(PI / hp);
+            self.st.half_period = hp;
+            self.st.fitter.set_step(PI / hp);
         }
-        self.last_rev = pos;
+        self.st.last_rev = pos;
+        let wait = 1.5 * self.st.half_period + self.st.fitter.half_window() as f64 + 2.0;
+        self.st.deadline = (pos + wait) as u32;
         let centre = (pos + 0.5) as u32;
-        let due = centre.saturating_add(self.fitter.half_window() as u32);
-        self.pending = Some(Pending { due, t: pos / self.rate, moments: hm });
+        let due = centre.saturating_add(self.st.fitter.half_window() as u32);
+        self.st.pending = Some(Pending {
+            due,
+            t: pos / self.st.rate,
+            moments: hm,
+        });
     }
 
     fn complete_pending(&mut self, p: Pending) {
-        self.pending = None;
-        let xc = self.cal[Channel::Displacement as usize];
-        let peak_count = self.fitter.fit_centre().unwrap_or(xc.zero as f64);
+        self.st.pending = None;
+        let xc = self.st.cal[Channel::Displacement as usize];
+        let peak_count = self.st.fitter.fit_centre().unwrap_or(xc.zero as f64);
         let peak = (xc.gain as f64 * (peak_count - xc.zero as f64)) as f32;
-        let rec = HalfCycle { t: p.t as f32, peak, moments: p.moments };
+        let rec = HalfCycle {
+            t: p.t as f32,
+            peak,
+            moments: p.moments,
+        };
         let prev = self.records.last().map(|r| r.peak);
         if self.records.push(rec).is_err() || self.records.is_full() {
-            self.phase = Phase::Finished(StopReason::BufferFull);
+            self.st.phase = Phase::Finished(StopReason::BufferFull);
             return;
         }
         if let Some(prev) = prev {
             let half_amplitude = (peak as f64 - prev as f64).abs() * 0.5;
-            if half_amplitude < 4.0 * self.noise_x {
-                self.phase = Phase::Finished(StopReason::InNoise);
+            if half_amplitude < 4.0 * self.st.noise_x {
+                self.st.phase = Phase::Finished(StopReason::InNoise);
             }
         }
     }
 
     fn check_stop(&mut self, idx: u32) {
-        if self.phase != Phase::Running {
+        if self.st.phase != Phase::Running {
             return;
         }
-        if self.n >= self.max_samples {
-            self.phase = Phase::Finished(StopReason::MaxDuration);
+        if self.st.n >= self.st.max_samples {
+            self.st.phase = Phase::Finished(StopReason::MaxDuration);
             return;
         }
-        let since = idx as f64 - self.last_rev;
-        let reversed = !self.records.is_empty() || self.pending.is_some();
-        if reversed {
-            if since > 1.5 * self.half_period + self.fitter.half_window() as f64 + 2.0 && self.pending.is_none() {
-                self.phase = Phase::Finished(StopReason::AtRest);
-            }
-        } else if since > 3.0 * self.half_period {
-            self.phase = Phase::Finished(StopReason::NoMotion);
+        if idx > self.st.deadline && self.st.pending.is_none() {
+            self.st.phase = Phase::Finished(if self.records.is_empty() {
+                StopReason::NoMotion
+            } else {
+                StopReason::AtRest
+            });
         }
     }
 
@@ -452,7 +535,12 @@ impl Pipeline {
     /// [`Pipeline::is_finished`]).
     pub fn finish(&self, run_id: u32) -> OnboardResult {
         let recs: &[HalfCycle] = &self.records;
-        let nan = Estimate { mu0: f32::NAN, mu1: f32::NAN, mu0_se: f32::NAN, mu1_se: f32::NAN };
+        let nan = Estimate {
+            mu0: f32::NAN,
+            mu1: f32::NAN,
+            mu0_se: f32::NAN,
+            mu1_se: f32::NAN,
+        };
         let n_rev = recs.len();
         let cycles = (n_rev / 2).min(u16::MAX as usize) as u16;
         let mut out = OnboardResult {
@@ -461,7 +549,10 @@ impl Pipeline {
             cycles,
             frequency_hz: f32::NAN,
             initial_amplitude_m: f32::NAN,
-            duration_s: recs.last().map_or(self.n as f64 / self.rate, |r| r.t as f64) as f32,
+            duration_s: recs
+                .last()
+                .map_or(self.st.n as f64 / self.st.rate, |r| r.t as f64)
+                as f32,
             best: nan,
             averaging: nan,
             decrement: nan,
@@ -469,13 +560,23 @@ impl Pipeline {
             curvature: f32::NAN,
         };
         // Frequency: reversals are half a damped period apart, Coulomb or not.
-        let Some(freq) = Ols::<1>::fit(recs.iter().enumerate().map(|(i, r)| ([i as f64], r.t as f64))) else {
+        // Weighted by the squared amplitude about the reversal (the crossing time's error goes as
+        // 1/amplitude), so that reversals of tiny final half-cycles do not bias it.
+        let omega_c = fit::sqrt(self.st.stiffness / self.st.mass);
+        let timing = recs.iter().enumerate().map(|(i, r)| {
+            let m = r.moments;
+            let w = m.var_x as f64 + m.mean_v2 as f64 / (omega_c * omega_c);
+            ([i as f64], r.t as f64, w)
+        });
+        let Some(freq) = Ols::<1>::fit_weighted(timing) else {
             return out;
         };
         let half_period_s = freq.coef[0];
-        let omega_cfg = fit::sqrt(self.stiffness / self.mass);
+        let omega_cfg = fit::sqrt(self.st.stiffness / self.st.mass);
         let omega_d = PI / half_period_s;
-        let plausible = omega_d > 0.5 * omega_cfg && omega_d < 2.0 * omega_cfg && fit::sqrt(freq.sigma2) < 0.05 * half_period_s;
+        let plausible = omega_d > 0.5 * omega_cfg
+            && omega_d < 2.0 * omega_cfg
+            && fit::sqrt(freq.sigma2) < 0.05 * half_period_s;
         if !plausible {
             return out;
         }
@@ -484,7 +585,7 @@ impl Pipeline {
             out.verdict = Verdict::TooFewCycles;
             return out;
         }
-        let scale = self.stiffness / self.load; // metres → y
+        let scale = self.st.stiffness / self.st.load; // metres → y
         let dec = self.decrement(scale);
         let avg = self.averaging(scale, omega_d);
         if let Some(d) = &dec {
@@ -498,9 +599,12 @@ impl Pipeline {
             let omega = omega_d / fit::sqrt((1.0 - 0.25 * mu1 * mu1).max(0.25));
             out.frequency_hz = (omega / (2.0 * PI)) as f32;
         }
-        let centre = dec.as_ref().map(|d| d.offset).or(avg.as_ref().map(|a| a.offset));
+        let centre = dec
+            .as_ref()
+            .map(|d| d.offset)
+            .or(avg.as_ref().map(|a| a.offset));
         if let Some(c) = centre {
-            out.initial_amplitude_m = (self.x_release as f64 - c).abs() as f32;
+            out.initial_amplitude_m = (self.st.x_release as f64 - c).abs() as f32;
         }
         let (verdict, best) = match (&dec, &avg) {
             (None, None) => (Verdict::NoOscillation, nan),
@@ -511,12 +615,14 @@ impl Pipeline {
         out.best = best;
         out.verdict = if verdict == Verdict::NoOscillation {
             verdict
-        } else if self.saturated > 0 {
+        } else if self.st.saturated > 0 {
             Verdict::Saturated
         } else {
             verdict
         };
-        let all_finite = [out.best.mu0, out.best.mu1, out.best.mu0_se, out.best.mu1_se].iter().all(|v| v.is_finite());
+        let all_finite = [out.best.mu0, out.best.mu1, out.best.mu0_se, out.best.mu1_se]
+            .iter()
+            .all(|v| v.is_finite());
         if !all_finite && out.verdict == Verdict::Ok {
             out.verdict = Verdict::NoOscillation;
         }
@@ -525,8 +631,8 @@ impl Pipeline {
 
     /// Peak sign (+1 maximum) of reversal `i`.
     fn sign(&self, i: usize) -> f64 {
-        let s = self.first_sign as f64;
-        if i % 2 == 0 {
+        let s = self.st.first_sign as f64;
+        if i & 1 == 0 {
             s
         } else {
             -s
@@ -553,39 +659,64 @@ impl Pipeline {
         let mu1 = 2.0 * zeta;
         let mu0 = r * scale;
         let dmu1_dd = 2.0 / (q * fit::sqrt(q)) * (-1.0 / (PI * d));
-        let g0 = [-scale / (1.0 + d), scale * beta / ((1.0 + d) * (1.0 + d)), 0.0];
+        let g0 = [
+            -scale / (1.0 + d),
+            scale * beta / ((1.0 + d) * (1.0 + d)),
+            0.0,
+        ];
         let g1 = [0.0, dmu1_dd, 0.0];
         let estimate = estimate(mu0, mu1, f.var_of(&g0), f.var_of(&g1))?;
-        Some(Fitted { estimate, offset, shape: EnvelopeShape::Straight, curvature: 0.0 })
+        Some(Fitted {
+            estimate,
+            offset,
+            shape: EnvelopeShape::Straight,
+            curvature: 0.0,
+        })
     }
 
     fn averaging(&self, scale: f64, omega_d: f64) -> Option<Fitted> {
         let recs: &[HalfCycle] = &self.records;
         let n = recs.len();
+        if n < 6 {
+            return None;
+        }
         // Half-cycle j (1 ≤ j < n) runs from reversal j−1 to reversal j; 0 starts at release: skipped.
-        let even = if (n - 1) % 2 == 0 { n - 1 } else { n - 2 };
+        let even = if (n - 1) & 1 == 0 { n - 1 } else { n - 2 };
         if even < 2 {
             return None;
         }
-        let offset = recs.iter().skip(1).take(even).map(|r| r.moments.mean_x as f64).sum::<f64>() / even as f64;
-        let t_mid = |j: usize| -> Option<f64> { Some(0.5 * (recs.get(j - 1)?.t as f64 + recs.get(j)?.t as f64)) };
+        let offset = recs
+            .iter()
+            .skip(1)
+            .take(even)
+            .map(|r| r.moments.mean_x as f64)
+            .sum::<f64>()
+            / even as f64;
         let (mut r, mut mu1) = (0.0f64, 0.0f64);
         let mut result = None;
         for _ in 0..4 {
             let omega = omega_d / fit::sqrt((1.0 - 0.25 * mu1 * mu1).max(0.25));
-            // envelope of half-cycle j, in y units, about its centre offset − s_j r
-            let amp = |j: usize| -> Option<f64> {
-                let centre = offset - self.sign(j) * r;
-                Some(recs.get(j)?.moments.envelope(centre, omega) * scale)
+            // Envelope of half-cycle j, in y units, about its centre offset − s_j r, with the
+            // measured noise variance taken out of the mean square.
+            let r_now = r;
+            let (nx, nv) = self.st.noise_var;
+            let noise = nx + nv / (omega * omega);
+            let amp = move |j: usize| -> Option<f64> {
+                let centre = offset - self.sign(j) * r_now;
+                let ms = recs.get(j)?.moments.mean_square(centre, omega) - noise;
+                Some(fit::sqrt(ms.max(0.0)) * scale)
             };
-            let row = |j: usize| -> Option<(f64, f64)> {
-                let dt = (t_mid(j + 1)? - t_mid(j - 1)?) * omega;
-                if !(dt > 0.0) {
-                    return None;
-                }
-                Some((amp(j)?, (amp(j + 1)? - amp(j - 1)?) / dt))
+            // Half-cycles last exactly π/ω_d (Coulomb or not): nominal spacing, free of the timing
+            // noise of reversals at tiny amplitude.
+            let dtau = 2.0 * PI * omega / omega_d;
+            let row = move |j: usize| -> Option<(f64, f64)> {
+                Some((amp(j)?, (amp(j + 1)? - amp(j - 1)?) / dtau))
             };
-            let lin = Ols::<1>::fit((2..n.saturating_sub(1)).filter_map(row).map(|(a, d)| ([a], d)))?;
+            let lin = Ols::<1>::fit(
+                (2..n.saturating_sub(1))
+                    .filter_map(row)
+                    .map(|(a, d)| ([a], d)),
+            )?;
             let (a0, a1) = (lin.intercept, lin.coef[0]);
             let mu0 = -PI * a0 / 2.0;
             mu1 = -2.0 * a1;
@@ -593,16 +724,27 @@ impl Pipeline {
             if !(r.is_finite() && mu1.is_finite()) {
                 return None;
             }
-            let quad = Ols::<2>::fit((2..n.saturating_sub(1)).filter_map(row).map(|(a, d)| ([a, a * a], d)));
+            let quad = Ols::<2>::fit(
+                (2..n.saturating_sub(1))
+                    .filter_map(row)
+                    .map(|(a, d)| ([a, a * a], d)),
+            );
             let (lo, hi) = (2..n.saturating_sub(1))
                 .filter_map(amp)
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| (lo.min(a), hi.max(a)));
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
+                    (lo.min(a), hi.max(a))
+                });
             let (shape, curvature) = match quad {
                 Some(q) => (shape_of(&q, lo, hi), q.coef[1]),
                 None => (EnvelopeShape::Straight, f64::NAN),
             };
             let est = estimate(mu0, mu1, lin.cov(0, 0) * PI * PI / 4.0, lin.cov(1, 1) * 4.0)?;
-            result = Some(Fitted { estimate: est, offset, shape, curvature });
+            result = Some(Fitted {
+                estimate: est,
+                offset,
+                shape,
+                curvature,
+            });
         }
         result
     }
@@ -617,8 +759,16 @@ struct Fitted {
 }
 
 fn estimate(mu0: f64, mu1: f64, var0: f64, var1: f64) -> Option<Estimate> {
-    let e = Estimate { mu0: mu0 as f32, mu1: mu1 as f32, mu0_se: fit::sqrt(var0.max(0.0)) as f32, mu1_se: fit::sqrt(var1.max(0.0)) as f32 };
-    [e.mu0, e.mu1, e.mu0_se, e.mu1_se].iter().all(|v| v.is_finite()).then_some(e)
+    let e = Estimate {
+        mu0: mu0 as f32,
+        mu1: mu1 as f32,
+        mu0_se: fit::sqrt(var0.max(0.0)) as f32,
+        mu1_se: fit::sqrt(var1.max(0.0)) as f32,
+    };
+    [e.mu0, e.mu1, e.mu0_se, e.mu1_se]
+        .iter()
+        .all(|v| v.is_finite())
+        .then_some(e)
 }
 
 /// Shape of `F(A) = a0 + a1 A + a2 A²` over `[lo, hi]` from the sign of `F'` at both ends (3σ).
@@ -656,6 +806,508 @@ fn combine(d: &Estimate, a: &Estimate) -> (Verdict, Estimate) {
     };
     let (m0, s0, ok0) = one(d.mu0, d.mu0_se, a.mu0, a.mu0_se, MU0_PRECISION);
     let (m1, s1, ok1) = one(d.mu1, d.mu1_se, a.mu1, a.mu1_se, MU1_PRECISION);
-    let best = Estimate { mu0: m0 as f32, mu1: m1 as f32, mu0_se: s0 as f32, mu1_se: s1 as f32 };
-    (if ok0 && ok1 { Verdict::Ok } else { Verdict::EstimatorsDisagree }, best)
+    let best = Estimate {
+        mu0: m0 as f32,
+        mu1: m1 as f32,
+        mu0_se: s0 as f32,
+        mu1_se: s1 as f32,
+    };
+    (
+        if ok0 && ok1 {
+            Verdict::Ok
+        } else {
+            Verdict::EstimatorsDisagree
+        },
+        best,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::{ChannelSet, RigConstants};
+    use proptest::prelude::*;
+
+    /// The rig's exact motion under Coulomb + viscous friction, piecewise closed form (f64): each
+    /// half-cycle between velocity reversals is a damped harmonic oscillation about the shifted
+    /// equilibrium −r·sgn(v); at a reversal inside the static band |x| ≤ r the pin sticks for good.
+    struct Exact {
+        omega: f64,
+        sigma: f64,
+        wd: f64,
+        r: f64,
+        t0: f64,
+        x_start: f64,
+        e: f64,
+        stuck: bool,
+        half_cycles: u32,
+    }
+
+    impl Exact {
+        fn new(k: f64, m: f64, load: f64, mu0: f64, mu1: f64, x0: f64) -> Self {
+            let omega = (k / m).sqrt();
+            let zeta = mu1 / 2.0;
+            let r = mu0 * load / k;
+            let mut s = Self {
+                omega,
+                sigma: zeta * omega,
+                wd: omega * (1.0 - zeta * zeta).sqrt(),
+                r,
+                t0: 0.0,
+                x_start: x0,
+                e: 0.0,
+                stuck: false,
+                half_cycles: 0,
+            };
+            s.start(x0);
+            s
+        }
+
+        fn start(&mut self, x: f64) {
+            self.x_start = x;
+            if x.abs() <= self.r {
+                self.stuck = true;
+            } else {
+                // moving towards zero: sgn(v) = −sgn(x); equilibrium −r sgn(v) = r sgn(x)
+                self.e = self.r * x.signum();
+            }
+        }
+
+        fn half(&self) -> f64 {
+            PI / self.wd
+        }
+
+        /// (x, v) at time t (non-decreasing between calls).
+        fn at(&mut self, t: f64) -> (f64, f64) {
+            while !self.stuck && t >= self.t0 + self.half() {
+                let amp = self.x_start - self.e;
+                let next = self.e - amp * (-self.sigma * self.half()).exp();
+                self.t0 += self.half();
+                self.half_cycles += 1;
+                self.start(next);
+            }
+            if self.stuck {
+                return (self.x_start, 0.0);
+            }
+            let tau = t - self.t0;
+            let amp = self.x_start - self.e;
+            let dec = (-self.sigma * tau).exp();
+            let (s, c) = (self.wd * tau).sin_cos();
+            let x = self.e + amp * dec * (c + self.sigma / self.wd * s);
+            let v = -amp * dec * (self.omega * self.omega / self.wd) * s;
+            (x, v)
+        }
+    }
+
+    /// Deterministic Gaussian noise (xorshift64* + Box–Muller).
+    struct Noise(u64);
+    impl Noise {
+        fn uniform(&mut self) -> f64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        }
+        fn gauss(&mut self) -> f64 {
+            let (u, v) = (self.uniform(), self.uniform());
+            (-2.0 * u.ln()).sqrt() * (2.0 * PI * v).cos()
+        }
+    }
+
+    const K: f64 = 1150.0;
+    const M: f64 = 0.04;
+    const X0: f64 = 667e-6;
+    const RATE: u32 = 20_000;
+
+    /// A configuration whose displacement and velocity converters span ±1.2 x0 and ±1.2 x0 Ω over
+    /// 16 bits, with zeros that the capture must correct (offset by a few hundred counts).
+    fn configure(load: f64, max_s: f32) -> Configure {
+        let omega = (K / M).sqrt();
+        let mut calibration = [ChannelCal {
+            gain: 1.0,
+            zero: 0.0,
+        }; 5];
+        calibration[0] = calib::spanning(-1.2 * X0, 1.2 * X0).unwrap();
+        calibration[1] = calib::spanning(-1.2 * X0 * omega, 1.2 * X0 * omega).unwrap();
+        calibration[2] = calib::spanning(-1.0, 1.0).unwrap();
+        Configure {
+            rig: RigConstants {
+                mass_kg: M as f32,
+                stiffness_n_per_m: K as f32,
+                load_n: load as f32,
+            },
+            sample_rate_hz: RATE,
+            channels: ChannelSet(0b111),
+            initial_amplitude_m: X0 as f32,
+            max_duration_s: max_s,
+            calibration,
+        }
+    }
+
+    struct Run {
+        result: OnboardResult,
+        true_half_cycles: u32,
+        pipeline_half_cycles: usize,
+    }
+
+    /// Simulates a run (hold, release, free oscillation) with noise of `noise_lsb` converter steps on
+    /// both vibrometer channels, 16-bit quantisation, and true ADC offsets shifted from the
+    /// configured zeros; feeds the counts through the pipeline as the MCU would.
+    fn simulate(load: f64, mu0: f64, mu1: f64, noise_lsb: f64, seed: u64) -> Run {
+        let mut p = Pipeline::new(&configure(load, 40.0)).unwrap();
+        simulate_into(&mut p, load, mu0, mu1, noise_lsb, seed)
+    }
+
+    /// As [`simulate`], into a pipeline already configured for `configure(load, 40.0)`.
+    fn simulate_into(
+        p: &mut Pipeline,
+        load: f64,
+        mu0: f64,
+        mu1: f64,
+        noise_lsb: f64,
+        seed: u64,
+    ) -> Run {
+        let cfg = configure(load, 40.0);
+        let mut truth = Exact::new(K, M, load, mu0, mu1, X0);
+        let mut noise = Noise(seed | 1);
+        // the converters' real zeros differ from the configured ones
+        let mut real = cfg.calibration;
+        real[0].zero += 211.0;
+        real[1].zero -= 97.0;
+        real[2].zero += 13.0;
+        let count = |cal: ChannelCal, si: f64, n: &mut Noise| {
+            calib::to_count(cal, si + noise_lsb * cal.gain as f64 * n.gauss()).unwrap()
+        };
+        for _ in 0..2000 {
+            let s = [
+                count(real[0], X0, &mut noise),
+                count(real[1], 0.0, &mut noise),
+                count(real[2], 0.0, &mut noise),
+            ];
+            p.capture(&s);
+        }
+        p.release();
+        let mut i = 0u64;
+        while !p.is_finished() {
+            let t = i as f64 / RATE as f64;
+            let (x, v) = truth.at(t);
+            let f = -load * mu0 * v.signum() - mu1 * M * truth.omega * v;
+            let s = [
+                count(real[0], x, &mut noise),
+                count(real[1], v, &mut noise),
+                count(real[2], f, &mut noise),
+            ];
+            p.push(&s);
+            i += 1;
+        }
+        Run {
+            result: p.finish(7),
+            true_half_cycles: truth.half_cycles,
+            pipeline_half_cycles: p.half_cycles().len(),
+        }
+    }
+
+    /// The acceptance grid on the real rig: N 0.05–0.7 N, μ0 0.005–0.2, μ1 0.0011–0.03,
+    /// 16-bit noisy records. Runs with at least 6 true cycles must give μ0 within ±0.001 and μ1 within
+    /// ±0.0002 (best and both estimators); runs below 5 cycles must be refused.
+    #[test]
+    fn accuracy_over_the_rig_grid() {
+        let mut worst = [(0.0f64, 0.0f64); 3];
+        let mut fitted = 0;
+        let mut seed = 1u64;
+        for (&load, noise) in [0.05, 0.2, 0.45, 0.7]
+            .iter()
+            .flat_map(|l| [(l, 1.0), (l, 4.0)])
+        {
+            for &mu0 in &[0.005, 0.02, 0.05, 0.2] {
+                for &mu1 in &[0.0011, 0.005, 0.01, 0.03] {
+                    seed += 1;
+                    let run = simulate(load, mu0, mu1, noise, seed);
+                    let r = run.result;
+                    let true_cycles = run.true_half_cycles / 2;
+                    let tag = format!("N={load} mu0={mu0} mu1={mu1} noise={noise} LSB: {r:?} true cycles {true_cycles}, pipeline half-cycles {}", run.pipeline_half_cycles);
+                    if true_cycles < MIN_CYCLES as u32 {
+                        assert_eq!(r.verdict, Verdict::TooFewCycles, "{tag}");
+                        assert!(r.best.mu0.is_nan(), "{tag}");
+                        continue;
+                    }
+                    if true_cycles < MIN_CYCLES as u32 + 1 && r.verdict == Verdict::TooFewCycles {
+                        continue; // on the boundary: the final sticking reversal may go undetected
+                    }
+                    assert_eq!(r.verdict, Verdict::Ok, "{tag}");
+                    fitted += 1;
+                    for (k, (name, e)) in [
+                        ("best", r.best),
+                        ("decrement", r.decrement),
+                        ("averaging", r.averaging),
+                    ]
+                    .into_iter()
+                    .enumerate()
+                    {
+                        let (d0, d1) = ((e.mu0 as f64 - mu0).abs(), (e.mu1 as f64 - mu1).abs());
+                        assert!(
+                            d0 <= 0.001 && d1 <= 0.0002,
+                            "{name}: |Δμ0| = {d0:.2e}, |Δμ1| = {d1:.2e}; {tag}"
+                        );
+                        if let Some(w) = worst.get_mut(k) {
+                            *w = (w.0.max(d0), w.1.max(d1));
+                        }
+                    }
+                    let f0 = (K / M).sqrt() / (2.0 * PI);
+                    assert!((r.frequency_hz as f64 / f0 - 1.0).abs() < 1e-3, "{tag}");
+                    assert!(
+                        (r.initial_amplitude_m as f64 / X0 - 1.0).abs() < 0.01,
+                        "{tag}"
+                    );
+                }
+            }
+        }
+        for (name, w) in ["best", "decrement", "averaging"].iter().zip(worst) {
+            eprintln!(
+                "grid: {fitted} runs fitted; {name}: worst |Δμ0| = {:.2e}, worst |Δμ1| = {:.2e}",
+                w.0, w.1
+            );
+        }
+        assert!(fitted >= 60);
+    }
+
+    #[test]
+    fn pure_viscous_gives_zero_coulomb_and_a_convex_envelope() {
+        // the apparatus alone: μ1 = 0.0011, no contact friction; load only scales y
+        let run = simulate(0.2, 0.0, 0.0011, 1.0, 99);
+        let r = run.result;
+        assert_eq!(r.verdict, Verdict::Ok, "{r:?}");
+        assert!(
+            r.best.mu0.abs() < 1e-3 && (r.best.mu1 - 0.0011).abs() < 2e-4,
+            "{r:?}"
+        );
+        assert_eq!(r.shape, EnvelopeShape::Convex, "{r:?}");
+    }
+
+    #[test]
+    fn coulomb_dominated_envelope_is_straight_and_viscous_one_convex() {
+        // Coulomb only: F(A) = a0, straight; strong viscous: convex
+        let run = simulate(0.05, 0.05, 0.0, 1.0, 5);
+        assert_eq!(
+            run.result.shape,
+            EnvelopeShape::Straight,
+            "{:?}",
+            run.result
+        );
+        assert!((run.result.best.mu1).abs() < 2e-4);
+        let run = simulate(0.2, 0.005, 0.03, 1.0, 6);
+        assert_eq!(run.result.shape, EnvelopeShape::Convex, "{:?}", run.result);
+    }
+
+    /// Viscous + quadratic friction (no Coulomb term, so no sticking), integrated by RK4: the
+    /// quadratic term fitted alongside recovers the averaging law's a2 = −4 μ2 / (3π) and the
+    /// envelope is convex.
+    #[test]
+    fn curvature_recovers_a_quadratic_friction_term() {
+        let (load, mu1, mu2) = (0.2, 0.002, 0.004);
+        let mut p = Pipeline::new(&configure(load, 6.0)).unwrap();
+        let omega = (K / M).sqrt();
+        let accel = |x: f64, v: f64| {
+            let yd = v * K / (load * omega);
+            (-K * x - load * (mu1 * yd + mu2 * yd * yd.abs())) / M
+        };
+        let cal = configure(load, 6.0).calibration;
+        let mut noise = Noise(77);
+        let count = |c: ChannelCal, si: f64, n: &mut Noise| {
+            calib::to_count(c, si + c.gain as f64 * n.gauss()).unwrap()
+        };
+        for _ in 0..1000 {
+            p.capture(&[
+                count(cal[0], X0, &mut noise),
+                count(cal[1], 0.0, &mut noise),
+                32768,
+            ]);
+        }
+        p.release();
+        let (mut x, mut v) = (X0, 0.0);
+        let h = 1.0 / RATE as f64;
+        while !p.is_finished() {
+            p.push(&[
+                count(cal[0], x, &mut noise),
+                count(cal[1], v, &mut noise),
+                32768,
+            ]);
+            let (k1x, k1v) = (v, accel(x, v));
+            let (k2x, k2v) = (
+                v + 0.5 * h * k1v,
+                accel(x + 0.5 * h * k1x, v + 0.5 * h * k1v),
+            );
+            let (k3x, k3v) = (
+                v + 0.5 * h * k2v,
+                accel(x + 0.5 * h * k2x, v + 0.5 * h * k2v),
+            );
+            let (k4x, k4v) = (v + h * k3v, accel(x + h * k3x, v + h * k3v));
+            x += h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
+            v += h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+        }
+        let r = p.finish(3);
+        let a2 = -4.0 * mu2 / (3.0 * PI);
+        eprintln!(
+            "quadratic law: a2 {} (averaging law {a2:.3e}), {:?}, {} cycles",
+            r.curvature, r.verdict, r.cycles
+        );
+        assert!(
+            (r.curvature as f64 / a2 - 1.0).abs() < 0.15,
+            "a2 {} vs {a2}: {r:?}",
+            r.curvature
+        );
+        assert_eq!(r.shape, EnvelopeShape::Convex, "{r:?}");
+    }
+
+    #[test]
+    fn fewer_than_five_cycles_is_refused() {
+        // r = 0.2·0.7/1150 = 122 µm: 667 µm lasts under 2 cycles
+        let run = simulate(0.7, 0.2, 0.01, 1.0, 3);
+        assert!(run.true_half_cycles < 10);
+        assert_eq!(
+            run.result.verdict,
+            Verdict::TooFewCycles,
+            "{:?}",
+            run.result
+        );
+        assert!(run.result.best.mu0.is_nan() && run.result.best.mu1.is_nan());
+        assert!(
+            (run.result.frequency_hz - 26.97).abs() < 0.1,
+            "{:?}",
+            run.result
+        );
+    }
+
+    #[test]
+    fn standard_errors_are_consistent_with_the_scatter() {
+        // same physics, different noise: the spread of μ1 across seeds is comparable to the SE
+        let mut vals = [0.0f64; 6];
+        let mut se = 0.0f64;
+        for (i, v) in vals.iter_mut().enumerate() {
+            let r = simulate(0.05, 0.005, 0.01, 3.0, 100 + i as u64).result;
+            *v = r.decrement.mu1 as f64;
+            se = se.max(r.decrement.mu1_se as f64);
+        }
+        let mean = vals.iter().sum::<f64>() / 6.0;
+        let sd = (vals.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / 5.0).sqrt();
+        assert!(se > 0.0 && sd < 5.0 * se, "scatter {sd:.2e} vs SE {se:.2e}");
+    }
+
+    #[test]
+    fn reset_reuses_the_pipeline_with_identical_results() {
+        let mut p = Pipeline::new(&configure(0.7, 40.0)).unwrap();
+        let first = simulate_into(&mut p, 0.7, 0.05, 0.03, 1.0, 11).result;
+        assert!(p.is_finished());
+        p.reset(&configure(0.2, 40.0)).unwrap();
+        assert_eq!(p.phase(), Phase::Holding);
+        assert!(p.half_cycles().is_empty());
+        let again = simulate_into(&mut p, 0.2, 0.02, 0.005, 1.0, 12).result;
+        let fresh = simulate(0.2, 0.02, 0.005, 1.0, 12).result;
+        assert_eq!(again, fresh);
+        assert_ne!(first, fresh);
+        // a refused configuration leaves the pipeline as it was
+        let mut bad = configure(0.2, 40.0);
+        bad.rig.mass_kg = -1.0;
+        assert_eq!(p.reset(&bad), Err(ConfigError::Mass));
+        assert_eq!(p.finish(7), fresh);
+    }
+
+    #[test]
+    fn nonsense_constants_are_refused() {
+        let good = configure(0.2, 10.0);
+        assert!(Pipeline::new(&good).is_ok());
+        let mut c = good;
+        c.rig.mass_kg = f32::NAN;
+        assert_eq!(Pipeline::new(&c).err(), Some(ConfigError::Mass));
+        let mut c = good;
+        c.rig.stiffness_n_per_m = -1.0;
+        assert_eq!(Pipeline::new(&c).err(), Some(ConfigError::Stiffness));
+        let mut c = good;
+        c.rig.load_n = 0.0;
+        assert_eq!(Pipeline::new(&c).err(), Some(ConfigError::Load));
+        let mut c = good;
+        c.sample_rate_hz = 0;
+        assert_eq!(Pipeline::new(&c).err(), Some(ConfigError::SampleRate));
+        let mut c = good;
+        c.sample_rate_hz = 100;
+        assert_eq!(Pipeline::new(&c).err(), Some(ConfigError::Undersampled));
+        let mut c = good;
+        c.channels = ChannelSet(0b101);
+        assert_eq!(
+            Pipeline::new(&c).err(),
+            Some(ConfigError::MissingChannel(Channel::Velocity))
+        );
+        let mut c = good;
+        c.calibration[0].gain = 0.0;
+        assert_eq!(
+            Pipeline::new(&c).err(),
+            Some(ConfigError::Calibration(Channel::Displacement))
+        );
+        let mut c = good;
+        c.max_duration_s = f32::INFINITY;
+        assert_eq!(Pipeline::new(&c).err(), Some(ConfigError::MaxDuration));
+    }
+
+    #[test]
+    fn capture_sets_zeros_so_the_hold_reads_x0() {
+        let cfg = configure(0.2, 1.0);
+        let mut p = Pipeline::new(&cfg).unwrap();
+        for i in 0..100u16 {
+            p.capture(&[40000 + i % 2, 30000, 31000]);
+        }
+        p.release();
+        assert!(
+            (p.to_si(Channel::Displacement, 40000) as f64 - X0).abs()
+                < 0.6 * cfg.calibration[0].gain as f64
+        );
+        assert!(p.to_si(Channel::Velocity, 30000).abs() < 1e-9);
+        assert!(p.to_si(Channel::Force, 31000).abs() < 1e-9);
+        // a sample vector too short is counted, not indexed
+        p.push(&[1]);
+        assert_eq!(p.rejected(), 1);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+        /// Garbage counts, saturated rails and short vectors never panic, and what comes out is either
+        /// a refusal or finite numbers.
+        #[test]
+        fn garbage_never_panics(
+            hold in proptest::collection::vec(any::<u16>(), 0..60),
+            body in proptest::collection::vec((any::<u16>(), any::<u16>(), 0u8..4), 0..6000),
+        ) {
+            let mut p = Pipeline::new(&configure(0.3, 0.5)).unwrap();
+            for c in hold.chunks(3) {
+                p.capture(c);
+            }
+            for (x, v, mode) in body {
+                let s = match mode {
+                    0 => [x, v, 0],
+                    1 => [if x % 2 == 0 { 0 } else { u16::MAX }, v, x],
+                    2 => [x, ((v as u32 * 7) % 65536) as u16, v],
+                    _ => [x / 2 + 16384, if v % 64 < 32 { 60000 } else { 5000 }, 0],
+                };
+                let n = if mode == 3 && x % 5 == 0 { 1 } else { 3 };
+                p.push(s.get(..n).unwrap_or(&s));
+            }
+            let r = p.finish(1);
+            let numbers = [r.best.mu0, r.best.mu1, r.best.mu0_se, r.best.mu1_se];
+            prop_assert!(r.verdict != Verdict::Ok || numbers.iter().all(|v| v.is_finite()), "{r:?}");
+        }
+
+        /// A square-wave velocity at the natural frequency with saturated displacement is flagged.
+        #[test]
+        fn saturated_displacement_is_flagged(period in 700u32..800) {
+            let mut p = Pipeline::new(&configure(0.3, 1.0)).unwrap();
+            for i in 0..20_000u32 {
+                let phase = i % period;
+                let v = if phase < period / 2 { 60000 } else { 5000 };
+                let x = if phase < period / 2 { u16::MAX } else { 0 };
+                p.push(&[x, v, 0]);
+                if p.is_finished() { break; }
+            }
+            let r = p.finish(2);
+            prop_assert!(r.verdict != Verdict::Ok, "{r:?}");
+        }
+    }
 }

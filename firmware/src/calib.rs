@@ -7,7 +7,7 @@
 use crate::wire::{Channel, ChannelCal, ChannelSet};
 
 /// Number of channels of the rig (indexing of `Configure::calibration`).
-pub const CHANNELS: usize = 5;
+pub use crate::wire::CHANNELS;
 
 /// Largest count of the 16-bit converters.
 pub const ADC_MAX: u16 = u16::MAX;
@@ -24,21 +24,30 @@ pub fn to_count(cal: ChannelCal, si: f64) -> Option<u16> {
         return None;
     }
     let c = si / cal.gain as f64 + cal.zero as f64 + 0.5;
-    let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, ADC_MAX as f64) };
+    let c = if c.is_nan() {
+        0.0
+    } else {
+        c.clamp(0.0, ADC_MAX as f64)
+    };
     // floor of a value in 0..=65535.5, then the saturating float-to-int cast
     Some(c as u16)
 }
 
 /// Calibration of a 16-bit converter whose full range `0..=ADC_MAX` spans `lo..=hi` (SI units).
-/// `None` unless `lo < hi`, both finite.
+/// `None` unless `lo < hi`, both finite, and the span lies within 16 widths of zero (farther, the
+/// `f32` zero count could not hold a fraction of a step).
 pub fn spanning(lo: f64, hi: f64) -> Option<ChannelCal> {
     if !(lo.is_finite() && hi.is_finite() && lo < hi) {
         return None;
     }
     let gain = (hi - lo) / ADC_MAX as f64;
     let zero = -lo / gain;
-    let cal = ChannelCal { gain: gain as f32, zero: zero as f32 };
-    (cal.gain.is_finite() && cal.gain > 0.0 && cal.zero.is_finite()).then_some(cal)
+    let cal = ChannelCal {
+        gain: gain as f32,
+        zero: zero as f32,
+    };
+    let near = zero.abs() <= 16.0 * ADC_MAX as f64;
+    (near && cal.gain.is_finite() && cal.gain > 0.0 && cal.zero.is_finite()).then_some(cal)
 }
 
 /// Position of `channel` in a sample vector ordered like the channel set, or `None` when the set
@@ -144,14 +153,24 @@ mod tests {
         assert!(spanning(1.0, 1.0).is_none());
         assert!(spanning(f64::NAN, 1.0).is_none());
         assert!(spanning(2.0, 1.0).is_none());
-        assert!(to_count(ChannelCal { gain: 0.0, zero: 0.0 }, 1.0).is_none());
+        assert!(spanning(1000.0, 1000.1).is_none()); // too far from zero for an f32 zero count
+        assert!(spanning(20.0, 150.0).is_some());
+        assert!(to_count(
+            ChannelCal {
+                gain: 0.0,
+                zero: 0.0
+            },
+            1.0
+        )
+        .is_none());
     }
 
     proptest! {
         /// SI → count → SI lands within half a step (the quantisation) inside the span, and out-of-span
         /// values saturate at the rails.
         #[test]
-        fn calibration_round_trip(lo in -1.0f64..0.0, width in 1e-4f64..2.0, frac in -0.2f64..1.2) {
+        fn calibration_round_trip(width in 1e-4f64..2.0, lo_frac in -10.0f64..10.0, frac in -0.2f64..1.2) {
+            let lo = lo_frac * width;
             let hi = lo + width;
             let cal = spanning(lo, hi).unwrap();
             let si = lo + frac * width;

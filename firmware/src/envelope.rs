@@ -54,7 +54,13 @@ impl Moments {
 
     /// SI summary, given the calibrations and the integer references the counts were taken from.
     /// `None` when empty.
-    pub fn summarise(&self, x_cal: ChannelCal, x_ref: i32, v_cal: ChannelCal, v_ref: i32) -> Option<HalfCycleMoments> {
+    pub fn summarise(
+        &self,
+        x_cal: ChannelCal,
+        x_ref: i32,
+        v_cal: ChannelCal,
+        v_ref: i32,
+    ) -> Option<HalfCycleMoments> {
         if self.n == 0 {
             return None;
         }
@@ -68,7 +74,11 @@ impl Moments {
         let dz = v_cal.zero as f64 - v_ref as f64;
         let msq = (self.svv as f64 / n - 2.0 * dz * mv + dz * dz).max(0.0);
         let gv = v_cal.gain as f64;
-        Some(HalfCycleMoments { mean_x: mean_x as f32, var_x: (gx * gx * var_c) as f32, mean_v2: (gv * gv * msq) as f32 })
+        Some(HalfCycleMoments {
+            mean_x: mean_x as f32,
+            var_x: (gx * gx * var_c) as f32,
+            mean_v2: (gv * gv * msq) as f32,
+        })
     }
 }
 
@@ -84,8 +94,13 @@ impl HalfCycleMoments {
     /// Root-mean-square Mark & Crandall envelope about the centre `centre` (m) with natural angular
     /// frequency `omega` (rad/s).
     pub fn envelope(&self, centre: f64, omega: f64) -> f64 {
+        crate::fit::sqrt(self.mean_square(centre, omega))
+    }
+
+    /// Mean square Mark & Crandall envelope `⟨(x − c)² + (v/Ω)²⟩` (m²).
+    pub fn mean_square(&self, centre: f64, omega: f64) -> f64 {
         let d = self.mean_x as f64 - centre;
-        crate::fit::sqrt(self.var_x as f64 + d * d + self.mean_v2 as f64 / (omega * omega))
+        self.var_x as f64 + d * d + self.mean_v2 as f64 / (omega * omega)
     }
 }
 
@@ -98,8 +113,14 @@ mod tests {
     #[test]
     fn half_cycle_envelope_of_a_sinusoid() {
         let (r_amp, c, omega) = (5e-4, 3e-5, 160.0);
-        let x_cal = ChannelCal { gain: 2e-8, zero: 30000.0 };
-        let v_cal = ChannelCal { gain: -4e-6, zero: 32000.25 };
+        let x_cal = ChannelCal {
+            gain: 2e-8,
+            zero: 30000.0,
+        };
+        let v_cal = ChannelCal {
+            gain: -4e-6,
+            zero: 32000.25,
+        };
         let mut m = Moments::default();
         let n = 4000;
         for i in 0..n {

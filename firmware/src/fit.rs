@@ -15,7 +15,11 @@ pub fn sqrt(x: f64) -> f64 {
         return x;
     }
     // Scale subnormals into the normal range so that the first guess is good.
-    let (x_n, scale) = if x < 1e-300 { (x * 1e300, 1e-150) } else { (x, 1.0) };
+    let (x_n, scale) = if x < 1e-300 {
+        (x * 1e300, 1e-150)
+    } else {
+        (x, 1.0)
+    };
     let mut y = f64::from_bits((x_n.to_bits() >> 1) + 0x1FF8_0000_0000_0000);
     for _ in 0..6 {
         y = 0.5 * (y + x_n / y);
@@ -62,7 +66,11 @@ pub fn ln(x: f64) -> f64 {
 
 /// Cosine for |φ| ≤ π (Taylor series to full precision); the argument is clamped to that range.
 pub fn cos(phi: f64) -> f64 {
-    let p = if phi.is_nan() { 0.0 } else { phi.clamp(-core::f64::consts::PI, core::f64::consts::PI) };
+    let p = if phi.is_nan() {
+        0.0
+    } else {
+        phi.clamp(-core::f64::consts::PI, core::f64::consts::PI)
+    };
     let p2 = p * p;
     let mut term = 1.0;
     let mut sum = 1.0;
@@ -99,34 +107,49 @@ impl<const P: usize> Ols<P> {
     where
         I: Iterator<Item = ([f64; P], f64)> + Clone,
     {
+        Self::fit_weighted(rows.map(|(x, y)| (x, y, 1.0)))
+    }
+
+    /// Weighted least squares over rows `(x, y, w)`, `w` an inverse variance of any scale
+    /// (`sigma2` is then the residual variance of a row of mean weight). Rows with a non-positive
+    /// or non-finite weight are ignored.
+    pub fn fit_weighted<I>(rows: I) -> Option<Self>
+    where
+        I: Iterator<Item = ([f64; P], f64, f64)> + Clone,
+    {
+        let rows = rows.filter(|r| r.2.is_finite() && r.2 > 0.0);
         let mut n = 0usize;
+        let mut sw = 0.0f64;
         let mut mx = [0.0f64; P];
         let mut my = 0.0f64;
-        for (x, y) in rows.clone() {
+        for (x, y, w) in rows.clone() {
             n += 1;
+            sw += w;
             for (m, xi) in mx.iter_mut().zip(x.iter()) {
-                *m += xi;
+                *m += w * xi;
             }
-            my += y;
+            my += w * y;
         }
-        if n < P + 2 {
+        if n < P + 2 || sw.is_nan() || sw <= 0.0 {
             return None;
         }
-        let nf = n as f64;
         for m in mx.iter_mut() {
-            *m /= nf;
+            *m /= sw;
         }
-        my /= nf;
+        my /= sw;
+        // weights normalised to a mean of 1
+        let wn = n as f64 / sw;
         let mut sxx = [[0.0f64; P]; P];
         let mut sxy = [0.0f64; P];
-        for (x, y) in rows.clone() {
+        for (x, y, w) in rows.clone() {
+            let w = w * wn;
             let mut d = [0.0f64; P];
             for ((di, xi), m) in d.iter_mut().zip(x.iter()).zip(mx.iter()) {
                 *di = xi - m;
             }
             let dy = y - my;
             for (i, row) in sxx.iter_mut().enumerate() {
-                let di = d.get(i).copied().unwrap_or(0.0);
+                let di = w * d.get(i).copied().unwrap_or(0.0);
                 for (s, dj) in row.iter_mut().zip(d.iter()) {
                     *s += di * dj;
                 }
@@ -142,12 +165,19 @@ impl<const P: usize> Ols<P> {
         }
         let intercept = my - coef.iter().zip(mx.iter()).map(|(c, m)| c * m).sum::<f64>();
         let mut rss = 0.0;
-        for (x, y) in rows {
+        for (x, y, w) in rows {
             let pred = intercept + coef.iter().zip(x.iter()).map(|(c, xi)| c * xi).sum::<f64>();
-            rss += (y - pred) * (y - pred);
+            rss += w * wn * (y - pred) * (y - pred);
         }
         let sigma2 = rss / (n - P - 1) as f64;
-        let fit = Self { n, intercept, coef, mean_x: mx, inv, sigma2 };
+        let fit = Self {
+            n,
+            intercept,
+            coef,
+            mean_x: mx,
+            inv,
+            sigma2,
+        };
         let finite = intercept.is_finite()
             && sigma2.is_finite()
             && coef.iter().all(|c| c.is_finite())
@@ -157,12 +187,24 @@ impl<const P: usize> Ols<P> {
 
     /// Covariance of parameters `i` and `j`, numbered 0 = intercept, 1.. = slopes.
     pub fn cov(&self, i: usize, j: usize) -> f64 {
-        let inv_at = |a: usize, b: usize| self.inv.get(a).and_then(|r| r.get(b)).copied().unwrap_or(0.0);
+        let inv_at = |a: usize, b: usize| {
+            self.inv
+                .get(a)
+                .and_then(|r| r.get(b))
+                .copied()
+                .unwrap_or(0.0)
+        };
         // Σ_k inv[a][k] x̄_k
-        let inv_mean = |a: usize| -> f64 { (0..P).map(|k| inv_at(a, k) * self.mean_x.get(k).copied().unwrap_or(0.0)).sum() };
+        let inv_mean = |a: usize| -> f64 {
+            (0..P)
+                .map(|k| inv_at(a, k) * self.mean_x.get(k).copied().unwrap_or(0.0))
+                .sum()
+        };
         let c = match (i, j) {
             (0, 0) => {
-                let quad: f64 = (0..P).map(|a| self.mean_x.get(a).copied().unwrap_or(0.0) * inv_mean(a)).sum();
+                let quad: f64 = (0..P)
+                    .map(|a| self.mean_x.get(a).copied().unwrap_or(0.0) * inv_mean(a))
+                    .sum();
                 1.0 / self.n as f64 + quad
             }
             (0, b) | (b, 0) => -inv_mean(b - 1),
@@ -193,8 +235,16 @@ fn invert<const P: usize>(a: [[f64; P]; P]) -> Option<[[f64; P]; P]> {
             *d = 1.0;
         }
     }
-    let scale = (0..P).map(|i| a.get(i).and_then(|r| r.get(i)).copied().unwrap_or(0.0).abs()).fold(0.0, f64::max);
-    if !(scale > 0.0) || !scale.is_finite() {
+    let scale = (0..P)
+        .map(|i| {
+            a.get(i)
+                .and_then(|r| r.get(i))
+                .copied()
+                .unwrap_or(0.0)
+                .abs()
+        })
+        .fold(0.0, f64::max);
+    if !(scale.is_finite() && scale > 0.0) {
         return None;
     }
     for col in 0..P {
@@ -208,7 +258,7 @@ fn invert<const P: usize>(a: [[f64; P]; P]) -> Option<[[f64; P]; P]> {
                 best = r;
             }
         }
-        if !(best_val > scale * 1e-14) {
+        if best_val.is_nan() || best_val <= scale * 1e-14 {
             return None;
         }
         m.swap(col, best);
@@ -228,7 +278,11 @@ fn invert<const P: usize>(a: [[f64; P]; P]) -> Option<[[f64; P]; P]> {
             if r == col {
                 continue;
             }
-            let f = m.get(r).and_then(|row| row.get(col)).copied().unwrap_or(0.0);
+            let f = m
+                .get(r)
+                .and_then(|row| row.get(col))
+                .copied()
+                .unwrap_or(0.0);
             if f == 0.0 {
                 continue;
             }
@@ -257,9 +311,15 @@ mod tests {
             let s = sqrt(x);
             assert!(((s - x.sqrt()) / x.sqrt()).abs() < 4e-16, "sqrt {x}: {s}");
             let l = ln(x);
-            assert!((l - x.ln()).abs() < 4e-15 * x.ln().abs().max(1.0), "ln {x}: {l} vs {}", x.ln());
+            assert!(
+                (l - x.ln()).abs() < 4e-15 * x.ln().abs().max(1.0),
+                "ln {x}: {l} vs {}",
+                x.ln()
+            );
         }
-        assert!(sqrt(-1.0).is_nan() && ln(0.0).is_nan() && ln(-2.0).is_nan() && sqrt(f64::NAN).is_nan());
+        assert!(
+            sqrt(-1.0).is_nan() && ln(0.0).is_nan() && ln(-2.0).is_nan() && sqrt(f64::NAN).is_nan()
+        );
         for i in -30..=30 {
             let p = i as f64 * 0.1;
             assert!((cos(p) - p.cos()).abs() < 1e-15, "cos {p}");

@@ -6,3 +6,19 @@
 #![cfg_attr(not(test), no_std)]
 
 pub use tribo_wire as wire;
+
+// On-board analysis (issue 4): counts → SI → peaks and envelope → two friction fits → result.
+pub mod analysis;
+pub mod calib;
+pub mod envelope;
+pub mod fit;
+pub mod peaks;
+
+// The application (issue 5): hardware traits, the rig's concerns, the state machine.
+pub mod acquisition;
+pub mod app;
+pub mod ecr;
+pub mod hal;
+pub mod heater;
+pub mod release;
+pub mod runstore;

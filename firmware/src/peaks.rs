@@ -41,8 +41,17 @@ pub struct ReversalDetector {
 impl ReversalDetector {
     /// A detector that arms once `|v| > threshold` (same units as the velocities fed to it).
     pub fn new(threshold: f32) -> Self {
-        let threshold = if threshold.is_finite() && threshold > 0.0 { threshold } else { f32::MAX };
-        Self { threshold, sign: 0, armed: false, prev: 0.0 }
+        let threshold = if threshold.is_finite() && threshold > 0.0 {
+            threshold
+        } else {
+            f32::MAX
+        };
+        Self {
+            threshold,
+            sign: 0,
+            armed: false,
+            prev: 0.0,
+        }
     }
 
     /// Feeds one velocity; returns the reversal if the velocity crossed zero since the previous one.
@@ -62,7 +71,11 @@ impl ReversalDetector {
         }
         if self.armed && v * s < 0.0 {
             let denom = prev - v;
-            let frac = if denom != 0.0 { (prev / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let frac = if denom != 0.0 {
+                (prev / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let before = self.sign;
             self.sign = -self.sign;
             self.armed = false;
@@ -99,7 +112,16 @@ impl Default for PeakFitter {
 impl PeakFitter {
     /// An empty fitter; call [`PeakFitter::set_step`] before fitting.
     pub fn new() -> Self {
-        Self { ring: [0; RING], head: 0, len: 0, half: 0, g: [0.0; MAX_HALF_WINDOW + 1], sg: 0.0, sgg: 0.0, step: 0.0 }
+        Self {
+            ring: [0; RING],
+            head: 0,
+            len: 0,
+            half: 0,
+            g: [0.0; MAX_HALF_WINDOW + 1],
+            sg: 0.0,
+            sgg: 0.0,
+            step: 0.0,
+        }
     }
 
     /// Forgets the stored samples.
@@ -123,7 +145,11 @@ impl PeakFitter {
         self.half = half;
         let (mut sg, mut sgg) = (0.0, 0.0);
         for (k, g) in self.g.iter_mut().enumerate() {
-            *g = if k <= half { 1.0 - fit::cos(k as f64 * step) } else { 0.0 };
+            *g = if k <= half {
+                1.0 - fit::cos(k as f64 * step)
+            } else {
+                0.0
+            };
             let w = if k == 0 { 1.0 } else { 2.0 };
             sg += w * *g;
             sgg += w * *g * *g;
@@ -159,7 +185,9 @@ impl PeakFitter {
     /// the window is not full or the fit is degenerate; `None` when nothing is stored.
     pub fn fit_centre(&self) -> Option<f64> {
         let half = self.half;
-        let centre = self.at(half).or_else(|| self.at(self.len.checked_sub(1)?))? as f64;
+        let centre = self
+            .at(half)
+            .or_else(|| self.at(self.len.checked_sub(1)?))? as f64;
         if half == 0 || self.len < 2 * half + 1 {
             return Some(centre);
         }
@@ -173,7 +201,7 @@ impl PeakFitter {
         }
         let n = (2 * half + 1) as f64;
         let det = n * self.sgg - self.sg * self.sg;
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             return Some(centre);
         }
         let p = (self.sgg * sx - self.sg * sxg) / det;
@@ -191,7 +219,13 @@ mod tests {
         let mut found = heapless::Vec::<(usize, f32, i8), 8>::new();
         // a sine of period 100 samples, then rest with ±0.3 noise
         for i in 0..400usize {
-            let v = if i < 250 { (i as f32 * core::f32::consts::TAU / 100.0).sin() * 10.0 } else if i % 2 == 0 { 0.3 } else { -0.3 };
+            let v = if i < 250 {
+                (i as f32 * core::f32::consts::TAU / 100.0).sin() * 10.0
+            } else if i % 2 == 0 {
+                0.3
+            } else {
+                -0.3
+            };
             if let Some(r) = d.update(v) {
                 let _ = found.push((i, r.frac, r.before));
             }

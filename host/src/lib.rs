@@ -4,6 +4,10 @@
 //! this library, found in the module of the same name under [`cmd`].
 
 pub mod cmd;
+pub mod link;
+mod load;
+
+pub use load::load_record;
 
 pub use tribo_firmware as firmware;
 pub use tribo_physics as physics;

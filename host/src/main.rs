@@ -13,9 +13,53 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Run the firmware's on-board analysis (μ0, μ1, envelope shape) over a record, as if live.
+    Onboard(tribo::cmd::onboard::Args),
+    /// List attached rigs: port, USB id, serial number, firmware version.
+    Devices(tribo::cmd::devices::Args),
+    /// Take a run: configure, settle the heater, arm, release, stream, save, print μ0/μ1.
+    Run(tribo::cmd::run::Args),
+    /// Fetch the rig's last run (or complete a stored one), resuming after the last good block.
+    Pull(tribo::cmd::pull::Args),
+    /// A series of runs over loads × temperatures × repetitions from PLAN.toml, resumable.
+    Campaign(tribo::cmd::campaign::Args),
+    /// Start the virtual rig (firmware logic + physics simulator) behind a pseudo-terminal.
+    Rig(tribo::cmd::rig::Args),
+    /// Feed a recorded run back through the firmware pipeline and the simulator; report differences.
+    Replay(tribo::cmd::replay::Args),
+    /// A complete run on a virtual rig through the serial path, saved, printed and drawn.
+    Demo(tribo::cmd::demo::Args),
+    /// List and filter the stored runs.
+    Runs(tribo::cmd::runs::Args),
+    /// Campaign tables (rows × columns of mean ± sd over repetitions), as the thesis's Tables 5–7.
+    Table(tribo::cmd::table::Args),
+    /// Simulate the rig's free response from a friction law and write a record (CSV).
+    Sim(tribo::cmd::sim::Args),
+    /// Fit a friction law (coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre) to a record.
+    Fit(tribo::cmd::fit::Args),
+    /// Find what a friction law misses in a record, add it, and show the gap shrink.
+    Explain(tribo::cmd::explain::Args),
+    /// Figures (SVG/PNG) and a self-contained HTML page of a run, a record or a campaign.
+    Report(tribo::cmd::report::Args),
+}
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Onboard(a) => tribo::cmd::onboard::run(a),
+        Command::Devices(a) => tribo::cmd::devices::run(a),
+        Command::Run(a) => tribo::cmd::run::run(a),
+        Command::Pull(a) => tribo::cmd::pull::run(a),
+        Command::Campaign(a) => tribo::cmd::campaign::run(a),
+        Command::Rig(a) => tribo::cmd::rig::run(a),
+        Command::Replay(a) => tribo::cmd::replay::run(a),
+        Command::Demo(a) => tribo::cmd::demo::run(a),
+        Command::Runs(a) => tribo::cmd::runs::run(a),
+        Command::Table(a) => tribo::cmd::table::run(a),
+        Command::Sim(a) => tribo::cmd::sim::run(a),
+        Command::Fit(a) => tribo::cmd::fit::run(a),
+        Command::Explain(a) => tribo::cmd::explain::run(a),
+        Command::Report(a) => tribo::cmd::report::run(a),
+    }
 }

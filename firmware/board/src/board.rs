@@ -1,18 +1,503 @@
-//! Binding of the rig logic to the NUCLEO-H743ZI. Placeholder until the application lands: brings
-//! the clocks up and blinks the status LED.
+//! Binding of the rig logic to the NUCLEO-H743ZI (pin map and assumptions: `firmware/README.md`).
+//!
+//! One embassy task per concern, hardware handed to each at start-up, no global mutable state: the
+//! tasks share one [`Shared`] value (initialised once in a `StaticCell`) made of embassy-sync
+//! primitives and atomics.
+//!
+//! * `app`: the rig's state machine (`tribo_firmware::app::App`), polled every millisecond and on
+//!   every USB packet; it owns the magnet and heater PWM, the ECR DAC and range switches, the button
+//!   and the lamps through [`BoardHw`].
+//! * `acquisition`: ticker-driven 16-bit conversions of the four analog channels into the ring (a
+//!   simpler binding than a timer-triggered ADC with DMA, see the README), overruns counted there.
+//! * `thermocouple`: the MAX31856 over SPI1 every 100 ms.
+//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class.
+use core::cell::{Cell, RefCell};
+use core::sync::atomic::{AtomicU32, Ordering};
+
 use defmt_rtt as _;
 use embassy_executor::Spawner;
-use embassy_stm32::gpio::{Level, Output, Speed};
-use embassy_time::Timer;
+use embassy_futures::select::{select, Either};
+use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, Resolution, SampleTime};
+use embassy_stm32::dac::{DacChannel, Value};
+use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
+use embassy_stm32::mode::Blocking;
+use embassy_stm32::peripherals::{ADC1, TIM1, TIM4, USB_OTG_FS};
+use embassy_stm32::spi::{self, Spi};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::CountingMode;
+use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
+use embassy_stm32::{bind_interrupts, usb};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::pipe::Pipe;
+use embassy_time::{Duration, Instant, Ticker, Timer};
+use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use panic_probe as _;
+use static_cell::{ConstStaticCell, StaticCell};
+use tribo_firmware::acquisition::Ring;
+use tribo_firmware::app::{App, AppConfig};
+use tribo_firmware::ecr::FULL_SCALE_V;
+use tribo_firmware::hal::*;
+use tribo_firmware::runstore::{BlockMeta, RunStore, BOARD_BLOCKS, BOARD_COUNTS};
+
+bind_interrupts!(struct Irqs {
+    OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
+});
+
+type Cs = CriticalSectionRawMutex;
+type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
+
+/// Samples the converter ring holds: 100 ms at 10 kS/s (the application drains it every 1 ms).
+const RING: usize = 1024;
+/// Bytes of frames waiting for the USB sender.
+const TX_PIPE: usize = 4096;
+/// ECR source divider: the DAC's 0..3.3 V become 0..3.3 mV across the contact.
+const ECR_DIVIDER: f32 = 1000.0;
+
+/// The latest thermocouple reading and when it was taken (ms of uptime).
+type TcReading = (Result<f32, ThermocoupleFault>, u64);
+/// A reading older than this counts as none: the converter task is stuck.
+const TC_STALE_MS: u64 = 500;
+
+/// What the tasks share.
+struct Shared {
+    ring: Mutex<Cs, RefCell<Ring<RING>>>,
+    /// Conversion rate, Hz; 0 = stopped.
+    rate_hz: AtomicU32,
+    /// Latest ECR channel count (converted even when stopped, every 10 ms).
+    ecr_count: AtomicU32,
+    thermocouple: &'static Mutex<Cs, Cell<TcReading>>,
+    tx: Pipe<Cs, TX_PIPE>,
+    rx: Channel<Cs, heapless::Vec<u8, 64>, 8>,
+}
+
+// The thermocouple cell apart: its non-zero initial value would put all of `Shared` (13 KiB of ring
+// and pipe) in `.data`, i.e. in flash too.
+static THERMOCOUPLE: ConstStaticCell<Mutex<Cs, Cell<TcReading>>> = ConstStaticCell::new(
+    Mutex::new(Cell::new((Err(ThermocoupleFault::NoReading), 0))),
+);
+static SHARED: StaticCell<Shared> = StaticCell::new();
+static STORE_COUNTS: ConstStaticCell<[u16; BOARD_COUNTS]> = ConstStaticCell::new([0; BOARD_COUNTS]);
+static STORE_META: ConstStaticCell<[BlockMeta; BOARD_BLOCKS]> =
+    ConstStaticCell::new([BlockMeta::EMPTY; BOARD_BLOCKS]);
+static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+static CONTROL_BUF: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
+static CDC_STATE: StaticCell<State> = StaticCell::new();
+
+/// The hardware the application task drives directly.
+struct BoardHw {
+    shared: &'static Shared,
+    magnet_hold: SimplePwmChannel<'static, TIM1>,
+    magnet_reverse: SimplePwmChannel<'static, TIM1>,
+    heater: SimplePwmChannel<'static, TIM4>,
+    ecr_dac: DacChannel<'static, Blocking>,
+    ecr_range: [Output<'static>; 3],
+    button: Input<'static>,
+    lamps: [Output<'static>; 3],
+}
+
+fn fraction(duty: f32) -> u32 {
+    if duty.is_finite() {
+        (duty.clamp(0.0, 1.0) * 1000.0) as u32
+    } else {
+        0
+    }
+}
+
+impl Magnet for BoardHw {
+    fn magnet_drive(&mut self, drive: MagnetDrive) {
+        let (hold, reverse) = match drive {
+            MagnetDrive::Off => (0.0, 0.0),
+            MagnetDrive::Hold { duty } => (duty, 0.0),
+            MagnetDrive::Reverse { duty } => (0.0, duty),
+        };
+        // Both bridge legs low before the other one is driven.
+        self.magnet_hold
+            .set_duty_cycle_fraction(fraction(hold), 1000);
+        self.magnet_reverse
+            .set_duty_cycle_fraction(fraction(reverse), 1000);
+    }
+}
+
+impl Thermocouple for BoardHw {
+    fn read_thermocouple(&mut self) -> Result<f32, ThermocoupleFault> {
+        let (reading, at_ms) = self.shared.thermocouple.lock(|c| c.get());
+        if Instant::now().as_millis().saturating_sub(at_ms) > TC_STALE_MS {
+            Err(ThermocoupleFault::NoReading)
+        } else {
+            reading
+        }
+    }
+}
+
+impl HeaterOutput for BoardHw {
+    fn set_heater_duty(&mut self, duty: f32) {
+        self.heater.set_duty_cycle_fraction(fraction(duty), 1000);
+    }
+}
+
+impl EcrFrontEnd for BoardHw {
+    fn set_ecr_source(&mut self, volts: f32) {
+        let dac_v = (volts * ECR_DIVIDER).clamp(0.0, FULL_SCALE_V);
+        self.ecr_dac
+            .set(Value::Bit12Right((dac_v / FULL_SCALE_V * 4095.0) as u16));
+    }
+    fn set_ecr_range(&mut self, range: u8) {
+        for (bit, pin) in self.ecr_range.iter_mut().enumerate() {
+            pin.set_level(if range & (1 << bit) != 0 {
+                Level::High
+            } else {
+                Level::Low
+            });
+        }
+    }
+    fn read_ecr_output(&mut self) -> f32 {
+        self.shared.ecr_count.load(Ordering::Relaxed) as f32 / 65535.0 * FULL_SCALE_V
+    }
+}
+
+impl SampleSource for BoardHw {
+    fn adc_start(&mut self, rate_hz: u32) -> bool {
+        self.shared.ring.lock(|r| r.borrow_mut().clear());
+        self.shared.rate_hz.store(rate_hz, Ordering::Relaxed);
+        rate_hz > 0
+    }
+    fn adc_stop(&mut self) {
+        self.shared.rate_hz.store(0, Ordering::Relaxed);
+    }
+    fn adc_running(&self) -> bool {
+        self.shared.rate_hz.load(Ordering::Relaxed) != 0
+    }
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize {
+        self.shared.ring.lock(|r| r.borrow_mut().pop_into(out))
+    }
+    fn adc_lost(&self) -> u32 {
+        self.shared.ring.lock(|r| r.borrow().lost())
+    }
+}
+
+impl Button for BoardHw {
+    fn button_pressed(&mut self) -> bool {
+        self.button.is_high()
+    }
+}
+
+impl Led for BoardHw {
+    fn set_lamps(&mut self, lamps: Lamps) {
+        for (pin, on) in self
+            .lamps
+            .iter_mut()
+            .zip([lamps.green, lamps.amber, lamps.red])
+        {
+            pin.set_level(if on { Level::High } else { Level::Low });
+        }
+    }
+}
+
+impl Link for BoardHw {
+    fn send_frame(&mut self, frame: &[u8]) -> bool {
+        if self.shared.tx.free_capacity() < frame.len() {
+            return false;
+        }
+        // Only this task writes the pipe, so the free space cannot shrink meanwhile.
+        let mut rest = frame;
+        while !rest.is_empty() {
+            match self.shared.tx.try_write(rest) {
+                Ok(n) => rest = &rest[n..],
+                Err(_) => return false,
+            }
+        }
+        true
+    }
+}
+
+fn now_us() -> u64 {
+    Instant::now().as_micros()
+}
+
+#[embassy_executor::task]
+async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64) {
+    let store = RunStore::new(STORE_COUNTS.take(), STORE_META.take());
+    let mut app = App::new(AppConfig::new(serial), store);
+    let mut ticker = Ticker::every(Duration::from_millis(1));
+    loop {
+        match select(shared.rx.receive(), ticker.next()).await {
+            Either::First(bytes) => app.on_bytes(&mut hw, &bytes, now_us()),
+            Either::Second(()) => app.poll(&mut hw, now_us()),
+        }
+    }
+}
+
+#[embassy_executor::task]
+async fn acquisition_task(
+    shared: &'static Shared,
+    mut adc: Adc<'static, ADC1>,
+    mut ch: [AnyAdcChannel<'static, ADC1>; 4],
+) {
+    const SAMPLE: SampleTime = SampleTime::CYCLES32_5;
+    loop {
+        let rate = shared.rate_hz.load(Ordering::Relaxed);
+        if rate == 0 {
+            let e = adc.blocking_read(&mut ch[3], SAMPLE);
+            shared.ecr_count.store(e as u32, Ordering::Relaxed);
+            Timer::after_millis(10).await;
+            continue;
+        }
+        let mut ticker = Ticker::every(Duration::from_hz(rate as u64));
+        while shared.rate_hz.load(Ordering::Relaxed) == rate {
+            ticker.next().await;
+            let mut s: AnalogSample = [0; ANALOG_CHANNELS];
+            for (v, c) in s.iter_mut().zip(ch.iter_mut()) {
+                *v = adc.blocking_read(c, SAMPLE);
+            }
+            shared.ecr_count.store(s[3] as u32, Ordering::Relaxed);
+            shared.ring.lock(|r| r.borrow_mut().push(s));
+        }
+    }
+}
+
+/// MAX31856: auto-conversion, type K, read every 100 ms with its fault register.
+#[embassy_executor::task]
+async fn thermocouple_task(
+    shared: &'static Shared,
+    mut spi: Spi<'static, Blocking, spi::mode::Master>,
+    mut cs: Output<'static>,
+) {
+    // CR0 (0x00, write 0x80): automatic conversions, open-circuit detection; CR1 (0x01): type K.
+    let mut init = [0x80u8, 0x90];
+    cs.set_low();
+    let _ = spi.blocking_transfer_in_place(&mut init);
+    cs.set_high();
+    let mut init = [0x81u8, 0x03];
+    cs.set_low();
+    let _ = spi.blocking_transfer_in_place(&mut init);
+    cs.set_high();
+    loop {
+        Timer::after_millis(100).await;
+        // Read LTCBH, LTCBM, LTCBL, SR from 0x0C.
+        let mut buf = [0x0Cu8, 0, 0, 0, 0];
+        cs.set_low();
+        let ok = spi.blocking_transfer_in_place(&mut buf).is_ok();
+        cs.set_high();
+        let reading = if !ok {
+            Err(ThermocoupleFault::NoReading)
+        } else {
+            let sr = buf[4];
+            if sr & 0x01 != 0 {
+                Err(ThermocoupleFault::Open)
+            } else if sr & 0x02 != 0 {
+                Err(ThermocoupleFault::Shorted)
+            } else {
+                // 19-bit two's complement, 1/128 °C, left-aligned in 24 bits.
+                let raw =
+                    ((buf[1] as i32) << 24 | (buf[2] as i32) << 16 | (buf[3] as i32) << 8) >> 13;
+                Ok(raw as f32 / 128.0)
+            }
+        };
+        let at_ms = Instant::now().as_millis();
+        shared.thermocouple.lock(|c| c.set((reading, at_ms)));
+    }
+}
+
+#[embassy_executor::task]
+async fn usb_task(mut dev: embassy_usb::UsbDevice<'static, UsbDriver>) -> ! {
+    dev.run().await
+}
+
+#[embassy_executor::task]
+async fn usb_tx_task(shared: &'static Shared, mut tx: Sender<'static, UsbDriver>) {
+    let mut buf = [0u8; 64];
+    loop {
+        tx.wait_connection().await;
+        loop {
+            let n = shared.tx.read(&mut buf).await;
+            if tx.write_packet(&buf[..n]).await.is_err() {
+                break;
+            }
+        }
+    }
+}
+
+#[embassy_executor::task]
+async fn usb_rx_task(shared: &'static Shared, mut rx: Receiver<'static, UsbDriver>) {
+    let mut buf = [0u8; 64];
+    loop {
+        rx.wait_connection().await;
+        while let Ok(n) = rx.read_packet(&mut buf).await {
+            let bytes = heapless::Vec::from_slice(&buf[..n]).unwrap_or_default();
+            shared.rx.send(bytes).await;
+        }
+    }
+}
+
+fn clocks() -> embassy_stm32::Config {
+    use embassy_stm32::rcc::*;
+    let mut config = embassy_stm32::Config::default();
+    config.rcc.hsi = Some(HSIPrescaler::DIV1);
+    config.rcc.csi = true;
+    config.rcc.hsi48 = Some(Hsi48Config {
+        sync_from_usb: true,
+    });
+    // 64 MHz HSI / 4 × 50 = 800 MHz VCO: 400 MHz core, 100 MHz for SPI1.
+    config.rcc.pll1 = Some(Pll {
+        source: PllSource::HSI,
+        prediv: PllPreDiv::DIV4,
+        mul: PllMul::MUL50,
+        fracn: None,
+        divp: Some(PllDiv::DIV2),
+        divq: Some(PllDiv::DIV8),
+        divr: None,
+    });
+    // 64 MHz / 8 × 50 = 400 MHz VCO / 16: 25 MHz ADC kernel clock.
+    config.rcc.pll2 = Some(Pll {
+        source: PllSource::HSI,
+        prediv: PllPreDiv::DIV8,
+        mul: PllMul::MUL50,
+        fracn: None,
+        divp: Some(PllDiv::DIV16),
+        divq: None,
+        divr: None,
+    });
+    config.rcc.sys = Sysclk::PLL1_P;
+    config.rcc.ahb_pre = AHBPrescaler::DIV2;
+    config.rcc.apb1_pre = APBPrescaler::DIV2;
+    config.rcc.apb2_pre = APBPrescaler::DIV2;
+    config.rcc.apb3_pre = APBPrescaler::DIV2;
+    config.rcc.apb4_pre = APBPrescaler::DIV2;
+    config.rcc.voltage_scale = VoltageScale::Scale1;
+    config.rcc.mux.usbsel = mux::Usbsel::HSI48;
+    config.rcc.mux.adcsel = mux::Adcsel::PLL2_P;
+    config
+}
+
+macro_rules! spawn {
+    ($spawner:expr, $task:expr) => {
+        match $task {
+            Ok(token) => $spawner.spawn(token),
+            Err(_) => defmt::error!("task could not be spawned"),
+        }
+    };
+}
 
 #[embassy_executor::main]
-async fn main(_spawner: Spawner) {
-    let p = embassy_stm32::init(Default::default());
-    defmt::info!("tribo-board, protocol v{}", tribo_firmware::wire::PROTOCOL_VERSION);
-    let mut led = Output::new(p.PB0, Level::High, Speed::Low);
-    loop {
-        led.toggle();
-        Timer::after_millis(500).await;
+async fn main(spawner: Spawner) {
+    let p = embassy_stm32::init(clocks());
+    defmt::info!(
+        "tribo-board, protocol v{}",
+        tribo_firmware::wire::PROTOCOL_VERSION
+    );
+    let shared: &'static Shared = SHARED.init(Shared {
+        ring: Mutex::new(RefCell::new(Ring::new())),
+        rate_hz: AtomicU32::new(0),
+        ecr_count: AtomicU32::new(0),
+        thermocouple: THERMOCOUPLE.take(),
+        tx: Pipe::new(),
+        rx: Channel::new(),
+    });
+    let uid = embassy_stm32::uid::uid();
+    let serial = uid.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x100_0000_01b3)
+    });
+
+    // Magnet H-bridge on TIM1 CH1 (hold) / CH2 (reverse), 20 kHz; heater MOSFET on TIM4 CH1, 1 kHz.
+    let magnet = SimplePwm::new(
+        p.TIM1,
+        Some(PwmPin::new(p.PE9, OutputType::PushPull)),
+        Some(PwmPin::new(p.PE11, OutputType::PushPull)),
+        None,
+        None,
+        Hertz(20_000),
+        CountingMode::EdgeAlignedUp,
+    )
+    .split();
+    let heater = SimplePwm::new(
+        p.TIM4,
+        Some(PwmPin::new(p.PD12, OutputType::PushPull)),
+        None,
+        None,
+        None,
+        Hertz(1_000),
+        CountingMode::EdgeAlignedUp,
+    )
+    .split();
+    let (mut magnet_hold, mut magnet_reverse, mut heater_ch) = (magnet.ch1, magnet.ch2, heater.ch1);
+    for ch in [&mut magnet_hold, &mut magnet_reverse] {
+        ch.set_duty_cycle_fully_off();
+        ch.enable();
     }
+    heater_ch.set_duty_cycle_fully_off();
+    heater_ch.enable();
+
+    let hw = BoardHw {
+        shared,
+        magnet_hold,
+        magnet_reverse,
+        heater: heater_ch,
+        ecr_dac: DacChannel::new_blocking(p.DAC1, p.PA4),
+        ecr_range: [
+            Output::new(p.PG0, Level::Low, Speed::Low),
+            Output::new(p.PG1, Level::Low, Speed::Low),
+            Output::new(p.PG2, Level::Low, Speed::Low),
+        ],
+        button: Input::new(p.PC13, Pull::Down),
+        lamps: [
+            Output::new(p.PB0, Level::Low, Speed::Low),
+            Output::new(p.PE1, Level::Low, Speed::Low),
+            Output::new(p.PB14, Level::Low, Speed::Low),
+        ],
+    };
+
+    // ADC1, 16 bits: displacement PA3, velocity PC0, force PB1, ECR PF11.
+    let adc = Adc::new_with_config(
+        p.ADC1,
+        AdcConfig {
+            resolution: Some(Resolution::BITS16),
+            averaging: None,
+        },
+    );
+    let channels: [AnyAdcChannel<'static, ADC1>; 4] = [
+        p.PA3.degrade_adc(),
+        p.PC0.degrade_adc(),
+        p.PB1.degrade_adc(),
+        p.PF11.degrade_adc(),
+    ];
+
+    // MAX31856 on SPI1 (mode 1, 1 MHz), chip select PD14.
+    let mut spi_cfg = spi::Config::default();
+    spi_cfg.mode = spi::MODE_1;
+    spi_cfg.frequency = Hertz(1_000_000);
+    let spi = Spi::new_blocking(p.SPI1, p.PA5, p.PB5, p.PA6, spi_cfg);
+    let cs = Output::new(p.PD14, Level::High, Speed::Medium);
+
+    // USB OTG FS (PA11/PA12), CDC-ACM.
+    let mut usb_cfg = usb::Config::default();
+    usb_cfg.vbus_detection = false;
+    let driver = usb::Driver::new_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, EP_OUT.take(), usb_cfg);
+    let mut config = embassy_usb::Config::new(0x1209, 0x0001);
+    config.manufacturer = Some("tribo");
+    config.product = Some("oscillating tribometer");
+    config.serial_number = Some("tribo-h743");
+    config.max_power = 100;
+    config.max_packet_size_0 = 64;
+    let mut builder = embassy_usb::Builder::new(
+        driver,
+        config,
+        CONFIG_DESC.take(),
+        BOS_DESC.take(),
+        &mut [],
+        CONTROL_BUF.take(),
+    );
+    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
+    let (tx, rx) = class.split();
+    let usb = builder.build();
+
+    spawn!(spawner, usb_task(usb));
+    spawn!(spawner, usb_tx_task(shared, tx));
+    spawn!(spawner, usb_rx_task(shared, rx));
+    spawn!(spawner, thermocouple_task(shared, spi, cs));
+    spawn!(spawner, acquisition_task(shared, adc, channels));
+    spawn!(spawner, app_task(shared, hw, serial));
 }

@@ -240,7 +240,7 @@ fn decode_stuffed<M: DeserializeOwned>(stuffed: &mut [u8]) -> Result<Frame<M>, F
     }
     let seq = u32::from_le_bytes([data[0], data[1], data[2], data[3]]);
     match postcard::take_from_bytes::<M>(&data[4..]) {
-        Ok((msg, rest)) if rest.is_empty() => Ok(Frame { seq, msg }),
+        Ok((msg, [])) => Ok(Frame { seq, msg }),
         _ => Err(FrameError::Decode),
     }
 }

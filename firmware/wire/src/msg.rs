@@ -343,6 +343,9 @@ impl HeaterSetpoint {
 
 wire_type! {
     /// Everything the rig sends.
+    // `Samples` is by far the largest variant, and the most frequent one: boxing it would need a heap
+    // the firmware does not have.
+    #[allow(clippy::large_enum_variant)]
     pub enum DeviceMsg {
         /// Variant 0, frozen forever: who the rig is and which protocol it speaks.
         Hello(DeviceInfo),
@@ -545,7 +548,7 @@ impl SampleBlock {
         let n = self.channels.len();
         self.channels.0 & !ChannelSet::ALL.0 == 0
             && n > 0
-            && self.counts.len() % n == 0
+            && self.counts.len().is_multiple_of(n)
             && self.counts.len() / n <= BLOCK_LEN
     }
 }
@@ -597,7 +600,7 @@ impl<'de> Deserialize<'de> for Counts {
                 write!(f, "an even number of bytes, at most {}", 2 * MAX_BLOCK_COUNTS)
             }
             fn visit_bytes<E: serde::de::Error>(self, b: &[u8]) -> Result<Counts, E> {
-                if b.len() % 2 != 0 || b.len() > 2 * MAX_BLOCK_COUNTS {
+                if !b.len().is_multiple_of(2) || b.len() > 2 * MAX_BLOCK_COUNTS {
                     return Err(E::invalid_length(b.len(), &self));
                 }
                 let mut v = heapless::Vec::new();

@@ -264,8 +264,15 @@ fn decode_stream<M: serde::de::DeserializeOwned>(
     (ok, bad)
 }
 
+/// 2000 cases per property by default; `PROPTEST_CASES=1000000 cargo test -p tribo-wire --release`
+/// runs the same properties at scale.
+fn config() -> ProptestConfig {
+    let cases = std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(2000);
+    ProptestConfig { cases, ..ProptestConfig::default() }
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 2000, ..ProptestConfig::default() })]
+    #![proptest_config(config())]
 
     #[test]
     fn every_host_message_round_trips(seq in any::<u32>(), msg in host_msg()) {

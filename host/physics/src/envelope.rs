@@ -24,7 +24,8 @@ pub enum Mirror {
 }
 
 /// Hilbert envelope `|x + i H[x]|` computed by FFT, with the signal mirrored at the start
-/// (`start`) and evenly at the end over a quarter of its length, then cropped (eq. 16–19).
+/// (`start`) and evenly about its last extremum at the end, over a quarter of its length, then
+/// cropped (eq. 16–19).
 pub fn hilbert_envelope(x: &[f64], start: Mirror) -> Vec<f64> {
     let n = x.len();
     if n < 4 {
@@ -39,8 +40,15 @@ pub fn hilbert_envelope(x: &[f64], start: Mirror) -> Vec<f64> {
         });
     }
     ext.extend_from_slice(x);
-    for i in 1..=p {
-        ext.push(x[n - 1 - i]);
+    // The record ends at an arbitrary phase: continue it by an even reflection about its last
+    // extremum, which is smooth, rather than about the last sample.
+    let e = (n / 2..n - 1)
+        .rev()
+        .find(|&i| i >= 1 && (x[i] - x[i - 1]) * (x[i + 1] - x[i]) <= 0.0)
+        .unwrap_or(n - 1);
+    for j in 1..=p {
+        let d = (n - 1 - e) + j;
+        ext.push(if d <= e { x[e - d] } else { 0.0 });
     }
     let m = ext.len();
     let mut buf: Vec<Complex<f64>> = ext.iter().map(|&v| Complex::new(v, 0.0)).collect();
@@ -49,7 +57,7 @@ pub fn hilbert_envelope(x: &[f64], start: Mirror) -> Vec<f64> {
     // Analytic signal: keep DC (and Nyquist), double positive frequencies, zero negative ones.
     let half = m / 2;
     for (k, c) in buf.iter_mut().enumerate() {
-        if k == 0 || (m % 2 == 0 && k == half) {
+        if k == 0 || (m & 1 == 0 && k == half) {
             continue;
         } else if k < m.div_ceil(2) {
             *c *= 2.0;
@@ -83,7 +91,9 @@ pub fn averaging_rate(mu: &[f64], a: f64) -> f64 {
 /// `F'(A)`.
 pub fn averaging_rate_derivative(mu: &[f64], a: f64) -> f64 {
     let c = averaging_coefficients(mu);
-    (1..c.len()).rev().fold(0.0, |acc, n| acc * a + n as f64 * c[n])
+    (1..c.len())
+        .rev()
+        .fold(0.0, |acc, n| acc * a + n as f64 * c[n])
 }
 
 /// Averaging envelope `A(τ)` from `dA/dτ = F(A)`, `A(τ0) = a0`, at increasing `taus` (RK4 with

@@ -203,7 +203,9 @@ impl FitResult {
     pub fn friction_law(&self) -> FrictionLaw {
         match self.law.parse::<LawSpec>() {
             Ok(spec) => spec.law(&self.params),
-            Err(_) => FrictionLaw::Polynomial { mu: self.mu.clone() },
+            Err(_) => FrictionLaw::Polynomial {
+                mu: self.mu.clone(),
+            },
         }
     }
 
@@ -264,9 +266,16 @@ impl EnvelopeData {
         if tau.iter().chain(y).chain(ydot).any(|v| !v.is_finite()) {
             return Err(FitError("non-finite sample".into()));
         }
-        let stride = n.div_ceil(max_points.max(8));
+        // Compare only while the pin moves: after the stop the rest position is a saw-tooth
+        // function of the constants and would make the cost landscape rugged.
+        let vmax = ydot.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let a_start = y[0].hypot(ydot[0]);
+        let thr = (2e-3 * a_start).max(1e-3 * vmax);
+        let last = ydot.iter().rposition(|v| v.abs() > thr).unwrap_or(n - 1);
+        let n_used = (last + 2).clamp(8.min(n), n);
+        let stride = n_used.div_ceil(max_points.max(8));
         let a_all = mark_crandall(y, ydot);
-        let idx: Vec<usize> = (0..n).step_by(stride).collect();
+        let idx: Vec<usize> = (0..n_used).step_by(stride).collect();
         Ok(EnvelopeData {
             tau: idx.iter().map(|&i| tau[i] - tau[0]).collect(),
             a: idx.iter().map(|&i| a_all[i]).collect(),
@@ -413,7 +422,12 @@ fn linreg(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
 
 /// Averaging-law regression: `dA/dτ` (from successive half-cycle peaks) regressed on `A^j`,
 /// `j ∈ powers`, then `μ_j = −a_j / c_j` (eq. 27–28). Returns μ for the listed powers.
-pub fn estimate_averaging(tau: &[f64], y: &[f64], ydot: &[f64], powers: &[usize]) -> Option<Vec<f64>> {
+pub fn estimate_averaging(
+    tau: &[f64],
+    y: &[f64],
+    ydot: &[f64],
+    powers: &[usize],
+) -> Option<Vec<f64>> {
     let pk = half_cycle_peaks(tau, y, ydot);
     if pk.len() < powers.len() + 2 {
         return None;
@@ -468,6 +482,7 @@ pub fn least_squares(rows: &[Vec<f64>], rhs: &[f64]) -> Option<Vec<f64>> {
 }
 
 /// Solves a small dense system by Gaussian elimination with partial pivoting.
+#[allow(clippy::needless_range_loop)]
 pub fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
     let n = b.len();
     for c in 0..n {
@@ -622,7 +637,11 @@ pub fn windowed_fits(
     }
     let a = mark_crandall(y, ydot);
     let a0 = *a.first().ok_or_else(|| FitError("empty record".into()))?;
-    let a_min = a.iter().copied().fold(f64::INFINITY, f64::min).max(0.02 * a0);
+    let a_min = a
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
+        .max(0.02 * a0);
     let mut out = Vec::new();
     let mut start = 0usize;
     for w in 1..=windows {

@@ -84,9 +84,23 @@ pub struct State {
 #[derive(Debug, Clone)]
 enum Segment {
     /// Dense output of a Dormand–Prince step started at t0 with step h, valid to t1 ≤ t0 + h.
-    Dense { t0: f64, h: f64, t1: f64, rc: [[f64; 3]; 5], dir: f64 },
+    Dense {
+        t0: f64,
+        h: f64,
+        t1: f64,
+        rc: [[f64; 3]; 5],
+        dir: f64,
+    },
     /// Cubic Hermite between two RK4 points.
-    Hermite { t0: f64, t1: f64, s0: [f64; 3], s1: [f64; 3], f0: [f64; 3], f1: [f64; 3], dir: f64 },
+    Hermite {
+        t0: f64,
+        t1: f64,
+        s0: [f64; 3],
+        s1: [f64; 3],
+        f0: [f64; 3],
+        f1: [f64; 3],
+        dir: f64,
+    },
 }
 
 // Dormand–Prince 5(4) tableau.
@@ -143,7 +157,14 @@ fn dense_eval(rc: &[[f64; 3]; 5], th: f64) -> [f64; 3] {
     o
 }
 
-fn hermite(s0: &[f64; 3], s1: &[f64; 3], f0: &[f64; 3], f1: &[f64; 3], h: f64, th: f64) -> [f64; 3] {
+fn hermite(
+    s0: &[f64; 3],
+    s1: &[f64; 3],
+    f0: &[f64; 3],
+    f1: &[f64; 3],
+    h: f64,
+    th: f64,
+) -> [f64; 3] {
     let h00 = (1.0 + 2.0 * th) * (1.0 - th) * (1.0 - th);
     let h10 = th * (1.0 - th) * (1.0 - th);
     let h01 = th * th * (3.0 - 2.0 * th);
@@ -309,7 +330,11 @@ impl Simulator {
                             dir,
                         } => {
                             let h = t1 - t0;
-                            let th = if h > 0.0 { ((tau - t0) / h).max(0.0) } else { 1.0 };
+                            let th = if h > 0.0 {
+                                ((tau - t0) / h).max(0.0)
+                            } else {
+                                1.0
+                            };
                             (hermite(s0, s1, f0, f1, h, th), *dir)
                         }
                     };
@@ -350,7 +375,16 @@ impl Simulator {
         let k2 = m.rhs(&comb(s, &[(0.5, f0)], h), d);
         let k3 = m.rhs(&comb(s, &[(0.5, &k2)], h), d);
         let k4 = m.rhs(&comb(s, &[(1.0, &k3)], h), d);
-        comb(s, &[(1.0 / 6.0, f0), (1.0 / 3.0, &k2), (1.0 / 3.0, &k3), (1.0 / 6.0, &k4)], h)
+        comb(
+            s,
+            &[
+                (1.0 / 6.0, f0),
+                (1.0 / 3.0, &k2),
+                (1.0 / 3.0, &k3),
+                (1.0 / 6.0, &k4),
+            ],
+            h,
+        )
     }
 
     fn advance_rk4(&mut self, h: f64) -> Result<(), SimError> {
@@ -430,7 +464,9 @@ impl Simulator {
 
     fn advance_dopri(&mut self, rtol: f64, atol: f64, h_max: f64) -> Result<(), SimError> {
         if !(rtol > 0.0 && atol > 0.0 && h_max > 0.0) {
-            return Err(SimError("Dormand–Prince tolerances and h_max must be > 0".into()));
+            return Err(SimError(
+                "Dormand–Prince tolerances and h_max must be > 0".into(),
+            ));
         }
         let m = &self.model;
         let d = self.dir;
@@ -473,8 +509,7 @@ impl Simulator {
             let mut finite = true;
             for i in 0..3 {
                 let e = h
-                    * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i]
-                        + E7 * k7[i]);
+                    * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
                 let sc = atol + rtol * s[i].abs().max(s1[i].abs());
                 err += (e / sc).powi(2);
                 finite &= s1[i].is_finite();
@@ -494,7 +529,11 @@ impl Simulator {
                 continue;
             }
             // Accepted.
-            let fac = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+            let fac = if err == 0.0 {
+                5.0
+            } else {
+                (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
+            };
             let mut rc = [[0.0; 3]; 5];
             for i in 0..3 {
                 let dy = s1[i] - s[i];
@@ -504,8 +543,7 @@ impl Simulator {
                 rc[2][i] = bspl;
                 rc[3][i] = dy - h * k7[i] - bspl;
                 rc[4][i] = h
-                    * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i]
-                        + D7 * k7[i]);
+                    * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i] + D7 * k7[i]);
             }
             let t0 = self.t;
             self.steps += 1;

@@ -158,10 +158,13 @@ impl ModifiedLuGre {
     }
 }
 
-/// Sign used on a branch: `sgn(v)` if `v ≠ 0`, else the branch direction `dir`.
+/// Sign used on a branch: the branch direction `dir` if it is non-zero (so that the law stays
+/// smooth while an integrator stage overshoots the reversal), else `sgn(v)`.
 #[inline]
 fn sgn_on(v: f64, dir: f64) -> f64 {
-    if v > 0.0 {
+    if dir != 0.0 {
+        dir.signum()
+    } else if v > 0.0 {
         1.0
     } else if v < 0.0 {
         -1.0
@@ -262,21 +265,25 @@ impl FrictionLaw {
         }
     }
 
-    /// Dimensionless friction force `f(y', z)` on the branch `dir` (the sign used when `y' = 0`).
+    /// Dimensionless friction force `f(y', z)` on the branch `dir`: `dir = ±1` is the sliding
+    /// direction that every `sgn(y')` takes (integrators stop at the reversal, so it equals
+    /// `sgn(y')` on the solution); `dir = 0` uses `sgn(y')` itself.
     pub fn force(&self, v: f64, z: f64, dir: f64) -> f64 {
         match self {
             FrictionLaw::Polynomial { mu } => {
+                // |v|^j = v^j for even j, so on a branch the law is a smooth polynomial.
                 let s = sgn_on(v, dir);
-                let a = v.abs();
-                let mut f = 0.0;
-                let mut p = 1.0; // |v|^j
+                let (mut even, mut odd) = (0.0, 0.0);
+                let mut p = 1.0; // v^j
                 for (j, &m) in mu.iter().enumerate() {
-                    if m != 0.0 {
-                        f += if j % 2 == 0 { m * p * s } else { m * p * sgn_on(v, 0.0) };
+                    if j % 2 == 0 {
+                        even += m * p;
+                    } else {
+                        odd += m * p;
                     }
-                    p *= a;
+                    p *= v;
                 }
-                f
+                s * even + odd
             }
             FrictionLaw::Stribeck {
                 mu_c,
@@ -394,7 +401,7 @@ pub fn averaging_coefficients(mu: &[f64]) -> Vec<f64> {
 
 /// The factor `c_n > 0` with `a_n = −c_n μ_n`.
 pub fn averaging_factor(n: usize) -> f64 {
-    if n % 2 == 0 {
+    if n & 1 == 0 {
         let k = n / 2;
         (1..=k).fold(2.0 / std::f64::consts::PI, |acc, j| {
             acc * (2 * j) as f64 / (2 * j + 1) as f64

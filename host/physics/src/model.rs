@@ -58,7 +58,9 @@ impl Rig {
             ("load_n", self.load_n),
         ] {
             if !v.is_finite() || v <= 0.0 {
-                return Err(format!("rig constant {name} must be finite and > 0, got {v}"));
+                return Err(format!(
+                    "rig constant {name} must be finite and > 0, got {v}"
+                ));
             }
         }
         Ok(())
@@ -173,7 +175,9 @@ impl Model {
         }
         if let Some(s) = self.static_mu {
             if !s.is_finite() || s < 0.0 {
-                return Err(format!("static friction level must be finite and >= 0, got {s}"));
+                return Err(format!(
+                    "static friction level must be finite and >= 0, got {s}"
+                ));
             }
         }
         Ok(())

@@ -11,6 +11,9 @@ use crate::model::Rig;
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// Three sample columns `(τ, y, y')`.
+pub type Columns = (Vec<f64>, Vec<f64>, Vec<f64>);
+
 /// Units of a record's columns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Units {
@@ -128,7 +131,10 @@ impl Record {
             }
         }
         if let Some(i) = self.t.windows(2).position(|w| w[1] <= w[0]) {
-            return err(format!("time is not strictly increasing at sample {}", i + 1));
+            return err(format!(
+                "time is not strictly increasing at sample {}",
+                i + 1
+            ));
         }
         if let Some(r) = &self.rig {
             r.validate().map_err(RecordError)?;
@@ -172,7 +178,11 @@ impl Record {
                     };
                     if let Some(i) = idx {
                         let val: f64 = v.trim().parse().map_err(|_| {
-                            RecordError(format!("line {}: bad value for {k}: {:?}", ln + 1, v.trim()))
+                            RecordError(format!(
+                                "line {}: bad value for {k}: {:?}",
+                                ln + 1,
+                                v.trim()
+                            ))
                         })?;
                         rig_vals[i] = Some(val);
                     }
@@ -197,10 +207,19 @@ impl Record {
                     }
                     for (i, f) in fields.iter().enumerate() {
                         let v: f64 = f.trim().parse().map_err(|_| {
-                            RecordError(format!("line {}: column {}: not a number: {:?}", ln + 1, h[i], f.trim()))
+                            RecordError(format!(
+                                "line {}: column {}: not a number: {:?}",
+                                ln + 1,
+                                h[i],
+                                f.trim()
+                            ))
                         })?;
                         if !v.is_finite() {
-                            return err(format!("line {}: column {}: non-finite value", ln + 1, h[i]));
+                            return err(format!(
+                                "line {}: column {}: non-finite value",
+                                ln + 1,
+                                h[i]
+                            ));
                         }
                         cols[i].push(v);
                     }
@@ -211,13 +230,18 @@ impl Record {
             return err("no header line (expected `t_s,x_m,v_m_s` or `tau,y,ydot`)");
         };
         let find = |name: &str| h.iter().position(|c| c == name);
-        let take = |i: Option<usize>, cols: &mut Vec<Vec<f64>>| i.map(|i| std::mem::take(&mut cols[i]));
-        let rec = if let (Some(it), Some(ix), Some(iv)) = (find("t_s"), find("x_m"), find("v_m_s")) {
-            let rig = match rig_vals {
-                [Some(m), Some(k), Some(n)] => Some(Rig::new(m, k, n).map_err(RecordError)?),
-                [None, None, None] => None,
-                _ => return err("incomplete rig constants: need all of mass_kg, stiffness_n_per_m, load_n"),
-            };
+        let take =
+            |i: Option<usize>, cols: &mut Vec<Vec<f64>>| i.map(|i| std::mem::take(&mut cols[i]));
+        let rec = if let (Some(it), Some(ix), Some(iv)) = (find("t_s"), find("x_m"), find("v_m_s"))
+        {
+            let rig =
+                match rig_vals {
+                    [Some(m), Some(k), Some(n)] => Some(Rig::new(m, k, n).map_err(RecordError)?),
+                    [None, None, None] => None,
+                    _ => return err(
+                        "incomplete rig constants: need all of mass_kg, stiffness_n_per_m, load_n",
+                    ),
+                };
             let (ift, itemp, iecr) = (find("ft_n"), find("temp_c"), find("ecr_ohm"));
             Record {
                 t: take(Some(it), &mut cols).unwrap_or_default(),
@@ -296,7 +320,7 @@ impl Record {
     }
 
     /// Dimensionless view `(τ, y, y')` using the record's rig.
-    pub fn dimensionless(&self) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), RecordError> {
+    pub fn dimensionless(&self) -> Result<Columns, RecordError> {
         let rig = self.rig()?;
         Ok((
             self.t.iter().map(|&t| rig.tau_of_t(t)).collect(),

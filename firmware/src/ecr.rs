@@ -1,0 +1,300 @@
+//! Electrical contact resistance: a DAC-driven voltage source across the contact, clamped to 2 mV
+//! and 5 mA, and a transimpedance amplifier whose gain is switched automatically so that 1 Ω to
+//! 1e8 Ω are all read well inside the ADC's range. Gives log10(R / Ω).
+//!
+//! Ranges are two decades apart. The controller steps down a range (less gain) when the output is
+//! near full scale, up a range when it is below 0.8 % of full scale (so that, a hundred times larger,
+//! it is still below 80 %): the hysteresis keeps it from hunting. The source is set to
+//! `min(2 mV, 5 mA · R / 1.25)` from the last estimate, so the current stays below 5 mA with margin
+//! even for contacts under 0.4 Ω.
+
+#[allow(unused_imports)]
+use micromath::F32Ext;
+
+use crate::hal::EcrFrontEnd;
+
+/// Number of transimpedance ranges.
+pub const RANGES: u8 = 5;
+/// Transimpedance gain of each range, V/A.
+pub const GAIN_V_PER_A: [f32; RANGES as usize] = [5e2, 5e4, 5e6, 5e8, 5e10];
+/// Output full scale of the transimpedance amplifier (the ADC's reference), V.
+pub const FULL_SCALE_V: f32 = 3.3;
+/// Largest source voltage across the contact, V.
+pub const MAX_SOURCE_V: f32 = 2e-3;
+/// Largest current through the contact, A.
+pub const MAX_CURRENT_A: f32 = 5e-3;
+/// Source voltage at start-up, before anything is known about the contact, V.
+pub const START_SOURCE_V: f32 = 1e-4;
+/// Output fraction of full scale above which the gain is reduced.
+pub const DOWN_FRACTION: f32 = 0.95;
+/// Output fraction of full scale below which the gain is raised.
+pub const UP_FRACTION: f32 = 0.008;
+/// log10(R) reported for an open contact (no measurable current on the most sensitive range).
+pub const LOG10_OPEN: f32 = 11.0;
+/// log10(R) reported when the current limit cannot be met (dead short).
+pub const LOG10_SHORT: f32 = -3.0;
+
+/// Clamps a requested source voltage to the rig's limits for a contact of about `r_ohm`.
+pub fn clamp_source(volts: f32, r_ohm: f32) -> f32 {
+    let by_current = if r_ohm.is_finite() && r_ohm > 0.0 {
+        MAX_CURRENT_A * r_ohm / 1.25
+    } else {
+        0.0
+    };
+    let v = if volts.is_nan() { 0.0 } else { volts };
+    v.min(MAX_SOURCE_V)
+        .min(if r_ohm.is_nan() {
+            MAX_SOURCE_V
+        } else {
+            by_current
+        })
+        .max(0.0)
+}
+
+/// The autoranging controller.
+#[derive(Debug, Clone)]
+pub struct Ecr {
+    range: u8,
+    source_v: f32,
+    r_ohm: f32,
+    log10_r: f32,
+}
+
+impl Default for Ecr {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Ecr {
+    pub const fn new() -> Self {
+        Ecr {
+            range: 0,
+            source_v: START_SOURCE_V,
+            r_ohm: f32::NAN,
+            log10_r: f32::NAN,
+        }
+    }
+
+    /// Puts the front end in the start-up state (least gain, low source).
+    pub fn init(&mut self, fe: &mut impl EcrFrontEnd) {
+        *self = Ecr::new();
+        fe.set_ecr_range(self.range);
+        fe.set_ecr_source(self.source_v);
+    }
+
+    pub fn range(&self) -> u8 {
+        self.range
+    }
+
+    pub fn source_v(&self) -> f32 {
+        self.source_v
+    }
+
+    /// Latest log10(R / Ω) (NaN before the first reading).
+    pub fn log10_r(&self) -> f32 {
+        self.log10_r
+    }
+
+    /// Takes one output reading made with the current range and source, updates log10 R, and sets
+    /// the range and source for the next reading. Returns log10 R.
+    pub fn update(&mut self, output_v: f32, fe: &mut impl EcrFrontEnd) -> f32 {
+        let v = if output_v.is_nan() {
+            0.0
+        } else {
+            output_v.clamp(0.0, FULL_SCALE_V)
+        };
+        let gain = GAIN_V_PER_A[self.range as usize];
+        let current = v / gain;
+        let saturated = v >= DOWN_FRACTION * FULL_SCALE_V;
+        let tiny = v < UP_FRACTION * FULL_SCALE_V;
+        // Estimate R unless the reading is out of the range's useful span.
+        if !saturated && current > 0.0 && !tiny {
+            self.r_ohm = self.source_v / current;
+            self.log10_r = self.r_ohm.log10();
+        } else if tiny && self.range == RANGES - 1 {
+            // Too little current even at the highest gain: open contact (or above 1e11 Ω).
+            self.r_ohm = if current > 0.0 {
+                self.source_v / current
+            } else {
+                f32::INFINITY
+            };
+            self.log10_r = if self.r_ohm.is_finite() {
+                self.r_ohm.log10().min(LOG10_OPEN)
+            } else {
+                LOG10_OPEN
+            };
+        } else if saturated && self.range == 0 {
+            // More than full scale on the least gain: at least this much current.
+            let r_max = self.source_v / (FULL_SCALE_V / gain);
+            self.r_ohm = r_max;
+            self.log10_r = if r_max > 0.0 {
+                r_max.log10().max(LOG10_SHORT)
+            } else {
+                LOG10_SHORT
+            };
+        }
+        let least_gain = self.range == 0;
+        if saturated && self.range > 0 {
+            self.range -= 1;
+        } else if tiny && self.range + 1 < RANGES {
+            self.range += 1;
+        }
+        // The source: as high as the limits allow for the contact as last measured; while saturated
+        // at the least gain, halve it until the current is readable.
+        let wanted = if saturated && least_gain {
+            self.source_v * 0.5
+        } else if self.r_ohm.is_finite() {
+            MAX_SOURCE_V
+        } else {
+            self.source_v.max(START_SOURCE_V)
+        };
+        self.source_v = clamp_source(
+            wanted,
+            if self.r_ohm.is_finite() {
+                self.r_ohm
+            } else {
+                f32::NAN
+            },
+        );
+        if self.r_ohm.is_infinite() {
+            self.source_v = MAX_SOURCE_V;
+        }
+        fe.set_ecr_range(self.range);
+        fe.set_ecr_source(self.source_v);
+        self.log10_r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An ideal front end on a contact of `r` Ω: current = V/R, output = current × gain clipped to full
+    /// scale and quantised to 16 bits. Records the worst current and voltage it was ever driven at.
+    struct Contact {
+        r: f32,
+        range: u8,
+        source: f32,
+        max_current: f32,
+        max_source: f32,
+    }
+    impl EcrFrontEnd for Contact {
+        fn set_ecr_source(&mut self, v: f32) {
+            self.source = v;
+            self.max_source = self.max_source.max(v);
+        }
+        fn set_ecr_range(&mut self, r: u8) {
+            self.range = r;
+        }
+        fn read_ecr_output(&mut self) -> f32 {
+            let i = self.source / self.r;
+            self.max_current = self.max_current.max(i);
+            let v = (i * GAIN_V_PER_A[self.range as usize]).min(FULL_SCALE_V);
+            (v / FULL_SCALE_V * 65535.0).round() / 65535.0 * FULL_SCALE_V
+        }
+    }
+
+    fn settle(ecr: &mut Ecr, c: &mut Contact, n: usize) -> f32 {
+        let mut l = f32::NAN;
+        for _ in 0..n {
+            let v = c.read_ecr_output();
+            l = ecr.update(v, c);
+        }
+        l
+    }
+
+    #[test]
+    fn reads_1_ohm_to_1e8_ohm_within_limits_from_a_cold_start() {
+        for k in 0..=32 {
+            let log_r = k as f32 * 0.25; // 1 Ω .. 1e8 Ω
+            let mut c = Contact {
+                r: 10f32.powf(log_r),
+                range: 9,
+                source: 0.0,
+                max_current: 0.0,
+                max_source: 0.0,
+            };
+            let mut ecr = Ecr::new();
+            ecr.init(&mut c);
+            let l = settle(&mut ecr, &mut c, 12);
+            assert!((l - log_r).abs() < 0.01, "R = 1e{log_r}: read 1e{l}");
+            assert!(
+                c.max_source <= MAX_SOURCE_V * 1.0001,
+                "source {}",
+                c.max_source
+            );
+            assert!(c.max_current <= MAX_CURRENT_A, "current {}", c.max_current);
+            // The range in use keeps the output between the thresholds.
+            let out = c.read_ecr_output() / FULL_SCALE_V;
+            assert!(
+                (UP_FRACTION..DOWN_FRACTION).contains(&out) || ecr.range() == RANGES - 1,
+                "{out}"
+            );
+            // At 1 Ω and above the full 2 mV is used.
+            assert!((ecr.source_v() - MAX_SOURCE_V).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn follows_a_contact_that_changes_by_decades_both_ways() {
+        let mut c = Contact {
+            r: 1e7,
+            range: 0,
+            source: 0.0,
+            max_current: 0.0,
+            max_source: 0.0,
+        };
+        let mut ecr = Ecr::new();
+        ecr.init(&mut c);
+        let mut ranges_seen = [false; RANGES as usize];
+        for &log_r in &[7.0f32, 1.0, 5.5, 0.2, 8.0, 3.0] {
+            c.r = 10f32.powf(log_r);
+            let l = settle(&mut ecr, &mut c, 6);
+            ranges_seen[ecr.range() as usize] = true;
+            assert!((l - log_r).abs() < 0.01, "1e{log_r} read as 1e{l}");
+        }
+        assert!(
+            ranges_seen.iter().filter(|&&s| s).count() >= 4,
+            "{ranges_seen:?}"
+        );
+        assert!(c.max_current <= MAX_CURRENT_A);
+    }
+
+    #[test]
+    fn current_clamp_holds_below_the_source_limit() {
+        // 0.05 Ω: 2 mV would drive 40 mA; the source must back off to keep ≤ 5 mA, and still read R.
+        let mut c = Contact {
+            r: 0.05,
+            range: 0,
+            source: 0.0,
+            max_current: 0.0,
+            max_source: 0.0,
+        };
+        let mut ecr = Ecr::new();
+        ecr.init(&mut c);
+        let l = settle(&mut ecr, &mut c, 10);
+        assert!(c.max_current <= MAX_CURRENT_A, "current {}", c.max_current);
+        assert!((l - 0.05f32.log10()).abs() < 0.02, "{l}");
+        assert!(ecr.source_v() < MAX_SOURCE_V);
+    }
+
+    #[test]
+    fn open_contact_reads_high_and_nan_output_is_harmless() {
+        let mut c = Contact {
+            r: f32::INFINITY,
+            range: 0,
+            source: 0.0,
+            max_current: 0.0,
+            max_source: 0.0,
+        };
+        let mut ecr = Ecr::new();
+        ecr.init(&mut c);
+        let l = settle(&mut ecr, &mut c, 8);
+        assert_eq!(l, LOG10_OPEN);
+        assert_eq!(ecr.range(), RANGES - 1);
+        let l = ecr.update(f32::NAN, &mut c);
+        assert!(l.is_finite());
+        assert!(ecr.source_v() <= MAX_SOURCE_V);
+    }
+}

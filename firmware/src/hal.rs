@@ -1,0 +1,120 @@
+//! The small hardware traits the rig logic talks to.
+//!
+//! Each trait is one concern of the rig and is implemented twice: by the board binary
+//! (`firmware/board`, embassy-stm32 peripherals) and by the host's virtual rig (`host/rig`, the
+//! physics simulator). The application ([`crate::app::App`]) needs all of them at once, so it takes
+//! one value implementing [`Hardware`], the union of the traits (blanket-implemented).
+//!
+//! Every method is non-blocking: the application is a state machine polled with the time, and a
+//! slow peripheral (SPI thermocouple, USB) is served by its own task that these methods only talk to.
+
+/// Drive of the release electromagnet (an H-bridge on the board: PWM duty and polarity).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MagnetDrive {
+    /// Coil off.
+    Off,
+    /// Holding polarity at this PWM duty (0..=1).
+    Hold { duty: f32 },
+    /// Reverse polarity at this duty: the short pulse that kills the remanent field at release.
+    Reverse { duty: f32 },
+}
+
+/// The release electromagnet.
+pub trait Magnet {
+    fn magnet_drive(&mut self, drive: MagnetDrive);
+}
+
+/// A thermocouple converter fault (MAX31856 fault register, or no answer).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ThermocoupleFault {
+    Open,
+    Shorted,
+    /// The converter did not answer or answered garbage.
+    NoReading,
+}
+
+/// The heater's thermocouple, cold-junction compensated by its converter.
+pub trait Thermocouple {
+    /// Latest hot-junction temperature, °C.
+    fn read_thermocouple(&mut self) -> Result<f32, ThermocoupleFault>;
+}
+
+/// The heater's power stage (PWM on a MOSFET).
+pub trait HeaterOutput {
+    /// Duty 0..=1 (the caller clamps).
+    fn set_heater_duty(&mut self, duty: f32);
+}
+
+/// The electrical-contact-resistance front end: a DAC-driven voltage source across the contact and a
+/// transimpedance amplifier with switchable gain reading the current.
+pub trait EcrFrontEnd {
+    /// Source voltage across the contact, V (the caller clamps to 2 mV / 5 mA).
+    fn set_ecr_source(&mut self, volts: f32);
+    /// Transimpedance range `0..crate::ecr::RANGES` (gain [`crate::ecr::GAIN_V_PER_A`]).
+    fn set_ecr_range(&mut self, range: u8);
+    /// Latest transimpedance output, V (0..=[`crate::ecr::FULL_SCALE_V`]).
+    fn read_ecr_output(&mut self) -> f32;
+}
+
+/// Analog channels converted by the ADC, in this order: displacement, velocity, force, ECR.
+/// (The temperature channel of a block comes from the thermocouple, not from the ADC.)
+pub const ANALOG_CHANNELS: usize = 4;
+
+/// One conversion of every analog channel, 16-bit counts.
+pub type AnalogSample = [u16; ANALOG_CHANNELS];
+
+/// Timer-triggered conversions of the analog channels into a ring the application drains.
+pub trait SampleSource {
+    /// Starts converting at `rate_hz`. Returns false if the converter could not start.
+    fn adc_start(&mut self, rate_hz: u32) -> bool;
+    fn adc_stop(&mut self);
+    fn adc_running(&self) -> bool;
+    /// Moves the oldest converted samples into `out`; returns how many.
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize;
+    /// Samples lost so far because the ring was full (cumulative since the last start).
+    fn adc_lost(&self) -> u32;
+}
+
+/// The user button (raw level; the application debounces).
+pub trait Button {
+    fn button_pressed(&mut self) -> bool;
+}
+
+/// The three status lamps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Lamps {
+    pub green: bool,
+    pub amber: bool,
+    pub red: bool,
+}
+
+pub trait Led {
+    fn set_lamps(&mut self, lamps: Lamps);
+}
+
+/// The byte link to the host (USB CDC-ACM on the board, any byte stream on the host).
+pub trait Link {
+    /// Queues one whole frame. Returns false, having queued nothing, when the link cannot take it now
+    /// (no host, or the host is not reading): the caller keeps what it must resend.
+    fn send_frame(&mut self, frame: &[u8]) -> bool;
+}
+
+/// A monotonic clock, microseconds.
+pub trait Clock {
+    fn now_us(&self) -> u64;
+}
+
+/// Everything the application drives.
+pub trait Hardware:
+    Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link
+{
+}
+
+impl<
+        T: Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link,
+    > Hardware for T
+{
+}

@@ -1,0 +1,245 @@
+//! Disagreement measures of a fitted base model (issue 7 step 1): envelope residual against
+//! amplitude and time, windowed fits (thesis Tables 6–7), instantaneous frequency against
+//! amplitude, force-channel lag and dissipated energy, temperature drift.
+
+use crate::model::{linreg, residuals, rms, simulate_spec, Prepared};
+use crate::FittedModel;
+use serde::Serialize;
+use tribo_physics::envelope::peaks;
+use tribo_physics::identify::{windowed_fits, FitOptions, LawSpec};
+use tribo_physics::integrate::Method;
+use tribo_physics::sensor::delay;
+
+/// Envelope residual statistics over a band.
+#[derive(Debug, Clone, Serialize)]
+pub struct Band {
+    /// Band start (amplitude relative to the initial one, or fraction of the record).
+    pub from: f64,
+    /// Band end.
+    pub to: f64,
+    /// Mean of (simulated − measured envelope) / initial amplitude.
+    pub mean: f64,
+    /// RMS of it.
+    pub rms: f64,
+}
+
+/// A windowed fit summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct Window {
+    /// Amplitude at the window start (dimensionless).
+    pub a_start: f64,
+    /// Amplitude at the window end.
+    pub a_end: f64,
+    /// Fitted `μ_j`.
+    pub mu: Vec<f64>,
+    /// Gap on the window.
+    pub gap: f64,
+}
+
+/// Diagnostics of the base model.
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnostics {
+    /// Envelope residual in amplitude bands (fractions of the initial amplitude).
+    pub residual_by_amplitude: Vec<Band>,
+    /// Envelope residual in time thirds (fractions of the record).
+    pub residual_by_time: Vec<Band>,
+    /// Base law fitted on windows of equal amplitude drop.
+    pub windows: Vec<Window>,
+    /// Largest relative drift of a constant between first and last window.
+    pub window_drift: Option<f64>,
+    /// Slope of the half-cycle angular frequency (in units of Ω) against amplitude².
+    pub freq_slope_per_a2: Option<f64>,
+    /// Cubic-spring estimate `κ = 8/3 · slope` (backbone of the Duffing oscillator).
+    pub kappa_estimate: Option<f64>,
+    /// Delay of the measured force behind the base model's force that best aligns them (s).
+    pub force_lag_s: Option<f64>,
+    /// Relative force RMS improvement that delay brings.
+    pub force_lag_gain: Option<f64>,
+    /// Friction energy dissipated according to the force channel divided by the base model's.
+    pub dissipation_ratio: Option<f64>,
+    /// Temperature slope (°C per second of record time).
+    pub temp_slope_c_per_s: Option<f64>,
+    /// Temperature change over the record (°C).
+    pub temp_change_c: Option<f64>,
+}
+
+/// Computes the diagnostics of `base` on `data`.
+pub fn diagnose(data: &Prepared, base: &FittedModel, law: LawSpec) -> Diagnostics {
+    let sim = simulate_spec(data, &base.spec, &base.p).ok();
+    let (env, _) = sim
+        .as_ref()
+        .map(|s| residuals(data, s))
+        .unwrap_or_default();
+    let a_rel: Vec<f64> = data.a_meas.iter().map(|a| a / data.a0).collect();
+    let band = |sel: &dyn Fn(usize) -> bool, from: f64, to: f64| {
+        let v: Vec<f64> = (0..env.len()).filter(|&i| sel(i)).map(|i| env[i]).collect();
+        Band {
+            from,
+            to,
+            mean: if v.is_empty() {
+                0.0
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            },
+            rms: rms(&v),
+        }
+    };
+    let edges = [1.01, 0.8, 0.6, 0.4, 0.2, 0.0];
+    let residual_by_amplitude = edges
+        .windows(2)
+        .map(|w| band(&|i| a_rel[i] <= w[0] && a_rel[i] > w[1], w[1], w[0].min(1.0)))
+        .collect();
+    let n = env.len().max(1) as f64;
+    let residual_by_time = (0..3)
+        .map(|k| {
+            let (a, b) = (k as f64 / 3.0, (k + 1) as f64 / 3.0);
+            band(&|i| (i as f64 / n) >= a && (i as f64 / n) < b, a, b)
+        })
+        .collect();
+
+    let wopts = FitOptions {
+        method: Method::dopri(1e-8),
+        max_points: 300,
+        max_iter: 12,
+        tol: 1e-9,
+        ..FitOptions::default()
+    };
+    let windows: Vec<Window> = windowed_fits(&data.tau, &data.y, &data.ydot, law, 3, &wopts)
+        .map(|ws| {
+            ws.into_iter()
+                .map(|w| Window {
+                    a_start: w.a_start,
+                    a_end: w.a_end,
+                    mu: w.fit.mu,
+                    gap: w.fit.gap,
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let window_drift = match (windows.first(), windows.last()) {
+        (Some(a), Some(b)) if windows.len() >= 2 => {
+            let scale: f64 = a.mu.iter().map(|v| v.abs()).fold(0.0, f64::max).max(1e-12);
+            Some(
+                a.mu.iter()
+                    .zip(&b.mu)
+                    .map(|(x, y)| (y - x).abs() / x.abs().max(0.05 * scale))
+                    .fold(0.0, f64::max),
+            )
+        }
+        _ => None,
+    };
+
+    let (freq_slope_per_a2, kappa_estimate) = match frequency_slope(data) {
+        Some(s) => (Some(s), Some(8.0 / 3.0 * s)),
+        None => (None, None),
+    };
+
+    let (mut force_lag_s, mut force_lag_gain, mut dissipation_ratio) = (None, None, None);
+    if let (Some(fm), Some(s)) = (&data.f_meas, &sim) {
+        let rss = |f: &[f64]| -> f64 {
+            data.f_idx
+                .iter()
+                .map(|&i| (f[i] - fm[i]).powi(2))
+                .sum::<f64>()
+        };
+        let r0 = rss(&s.f_meas);
+        // Scan 0..10 ms (or 2 rad) in steps of about 0.1 ms.
+        let max_d = (data.rig.tau_of_t(0.01).min(2.0) / data.dtau).ceil().max(1.0);
+        let step = (max_d / 100.0).max(0.25);
+        let mut best = (0.0, r0);
+        let mut d = step;
+        while d <= max_d {
+            let r = rss(&delay(&s.f_meas, d));
+            if r < best.1 {
+                best = (d, r);
+            }
+            d += step;
+        }
+        force_lag_s = Some(data.rig.t_of_tau(best.0 * data.dtau));
+        force_lag_gain = Some(1.0 - (best.1 / r0.max(1e-300)).sqrt());
+        let work = |f: &[f64]| -> f64 {
+            f.iter()
+                .zip(&data.ydot)
+                .map(|(a, v)| a * v)
+                .sum::<f64>()
+        };
+        let wm = work(&s.f_meas);
+        if wm.abs() > 0.0 {
+            dissipation_ratio = Some(work(fm) / wm);
+        }
+    }
+
+    let (temp_slope_c_per_s, temp_change_c) = match data.temp {
+        Some((_, slope)) => {
+            let per_s = slope * data.rig.omega();
+            let span = data.tau.last().copied().unwrap_or(0.0) - data.tau[0];
+            (Some(per_s), Some(slope * span))
+        }
+        None => (None, None),
+    };
+
+    Diagnostics {
+        residual_by_amplitude,
+        residual_by_time,
+        windows,
+        window_drift,
+        freq_slope_per_a2,
+        kappa_estimate,
+        force_lag_s,
+        force_lag_gain,
+        dissipation_ratio,
+        temp_slope_c_per_s,
+        temp_change_c,
+    }
+}
+
+/// Half-cycle frequency `π / Δτ` regressed on the squared mean amplitude of the half cycle
+/// (half cycles above 20 % of the initial amplitude): the slope.
+pub fn frequency_slope(data: &Prepared) -> Option<f64> {
+    let pk = peaks(&data.tau, &data.y, &data.ydot, 1.0);
+    let (mut a2, mut w) = (Vec::new(), Vec::new());
+    for p in pk.windows(2) {
+        let dt = p[1].0 - p[0].0;
+        let a = 0.5 * (p[0].1 + p[1].1);
+        if dt > 0.0 && a > 0.2 * data.a0 {
+            a2.push(a * a);
+            w.push(std::f64::consts::PI / dt);
+        }
+    }
+    if a2.len() < 4 {
+        return None;
+    }
+    linreg(&a2, &w).map(|(s, _)| s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tribo_physics::law::FrictionLaw;
+    use tribo_physics::model::{Model, Rig};
+    use tribo_physics::sensor::{generate, RecordSpec};
+
+    #[test]
+    fn frequency_slope_follows_the_duffing_backbone() {
+        // Weakly damped Duffing oscillator: ω(A) = 1 + 3κA²/8 (first-order backbone).
+        let kappa = 2e-3;
+        let m = Model::new(FrictionLaw::coulomb_viscous(0.01, 0.002)).with_cubic(kappa);
+        let sp = RecordSpec {
+            rig: Rig::REAL,
+            x0_m: 667e-6,
+            v0_m_s: 0.0,
+            duration_s: 1.0,
+            rate_hz: 10_000.0,
+        };
+        let rec = generate(&sp, &m, Method::dopri(1e-10), None).unwrap();
+        let data = Prepared::new(&rec, 400, 3000, None).unwrap();
+        let s = frequency_slope(&data).unwrap();
+        let k = 8.0 / 3.0 * s;
+        assert!((k - kappa).abs() < 0.1 * kappa, "kappa estimate {k}");
+        // A linear spring has no slope.
+        let rec = generate(&sp, &Model::new(FrictionLaw::coulomb_viscous(0.01, 0.002)), Method::dopri(1e-10), None)
+            .unwrap();
+        let data = Prepared::new(&rec, 400, 3000, None).unwrap();
+        assert!(frequency_slope(&data).unwrap().abs() < 0.05 * s);
+    }
+}

@@ -1,0 +1,704 @@
+//! The extended model: a base polynomial friction law plus any set of [`Effect`]s, its simulation
+//! and its residuals against a prepared record.
+//!
+//! Parameter vector layout: the base law's `μ_j` (for [`Spec::powers`]), then each effect's
+//! parameters in the order of [`Spec::effects`] (see [`Effect::param_names`]).
+
+use tribo_physics::integrate::{Method, SimError, Simulator};
+use tribo_physics::law::{FrictionLaw, LuGre};
+use tribo_physics::model::{Model, Rig};
+use tribo_physics::record::{Record, Units};
+use tribo_physics::sensor::{butterworth2, delay};
+
+/// A physical effect the base law may be missing (names as in the JSON output).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Effect {
+    /// Next pseudo-polynomial term (`μ2 y'² sgn(y')` on a Coulomb–viscous base).
+    QuadraticVelocity,
+    /// Exponential Stribeck rise at low sliding speed: static level `μ_s`, speed `v_s` (δ = 2).
+    Stribeck,
+    /// Friction with memory: LuGre bristle of stiffness `σ0` (σ1 = 0), same steady curve.
+    FrictionalLag,
+    /// Cubic spring `κ y³` (SI `k3 x³`).
+    CubicStiffness,
+    /// Coulomb level following the temperature channel: `μ0 + γ (T(t) − T(0))`.
+    ThermalDrift,
+    /// Force channel delayed by `τ_d` relative to the vibrometer.
+    SensorLag,
+}
+
+impl Effect {
+    /// Every effect of the vocabulary.
+    pub const ALL: [Effect; 6] = [
+        Effect::QuadraticVelocity,
+        Effect::Stribeck,
+        Effect::FrictionalLag,
+        Effect::CubicStiffness,
+        Effect::ThermalDrift,
+        Effect::SensorLag,
+    ];
+
+    /// JSON name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Effect::QuadraticVelocity => "quadratic-velocity",
+            Effect::Stribeck => "stribeck",
+            Effect::FrictionalLag => "frictional-lag",
+            Effect::CubicStiffness => "cubic-stiffness",
+            Effect::ThermalDrift => "thermal-drift",
+            Effect::SensorLag => "sensor-lag",
+        }
+    }
+
+    /// Parses a JSON name.
+    pub fn from_name(s: &str) -> Option<Effect> {
+        Effect::ALL.into_iter().find(|e| e.name() == s)
+    }
+
+    /// Number of parameters the effect adds.
+    pub fn n_params(&self) -> usize {
+        match self {
+            Effect::Stribeck => 2,
+            _ => 1,
+        }
+    }
+
+    /// Dimensionless parameter names (in parameter-vector order).
+    pub fn param_names(&self) -> &'static [&'static str] {
+        match self {
+            Effect::QuadraticVelocity => &["mu_next"],
+            Effect::Stribeck => &["mu_s", "v_s"],
+            Effect::FrictionalLag => &["sigma0"],
+            Effect::CubicStiffness => &["kappa"],
+            Effect::ThermalDrift => &["dmu0_dT_per_c"],
+            Effect::SensorLag => &["delay_tau"],
+        }
+    }
+}
+
+/// Model structure: base polynomial powers plus effects.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spec {
+    /// Powers `j` of the fitted base constants `μ_j` (e.g. `[0, 1]` for Coulomb–viscous).
+    pub powers: Vec<usize>,
+    /// Added effects, in the order they were added.
+    pub effects: Vec<Effect>,
+}
+
+impl Spec {
+    /// A base law without effects.
+    pub fn base(powers: Vec<usize>) -> Spec {
+        Spec {
+            powers,
+            effects: Vec::new(),
+        }
+    }
+
+    /// Number of parameters.
+    pub fn n_params(&self) -> usize {
+        self.powers.len() + self.effects.iter().map(|e| e.n_params()).sum::<usize>()
+    }
+
+    /// Highest polynomial power of the law (base plus any quadratic-velocity terms).
+    pub fn order(&self) -> usize {
+        self.powers.iter().copied().max().unwrap_or(0) + self.count(Effect::QuadraticVelocity)
+    }
+
+    fn count(&self, e: Effect) -> usize {
+        self.effects.iter().filter(|&&x| x == e).count()
+    }
+
+    /// True if the effect is present.
+    pub fn has(&self, e: Effect) -> bool {
+        self.count(e) > 0
+    }
+
+    /// Whether `e` can be added (each effect once, except further polynomial terms up to order
+    /// 4; Stribeck and LuGre need a law of order ≤ 1 with a Coulomb term; a polynomial term cannot
+    /// be added on top of either; sensor lag needs a force channel, thermal drift a temperature).
+    pub fn can_add(&self, e: Effect, has_force: bool, has_temp: bool) -> bool {
+        let coulomb = self.powers.contains(&0);
+        match e {
+            Effect::QuadraticVelocity => {
+                self.order() < 4 && !self.has(Effect::Stribeck) && !self.has(Effect::FrictionalLag)
+            }
+            Effect::Stribeck | Effect::FrictionalLag => {
+                !self.has(e) && self.order() <= 1 && coulomb
+            }
+            Effect::CubicStiffness => !self.has(e),
+            Effect::ThermalDrift => !self.has(e) && has_temp && coulomb,
+            Effect::SensorLag => !self.has(e) && has_force,
+        }
+    }
+
+    /// The spec with `e` added.
+    pub fn with(&self, e: Effect) -> Spec {
+        let mut s = self.clone();
+        s.effects.push(e);
+        s
+    }
+
+    /// Offset of the first parameter of the `i`-th effect.
+    pub fn offset(&self, i: usize) -> usize {
+        self.powers.len()
+            + self.effects[..i]
+                .iter()
+                .map(|e| e.n_params())
+                .sum::<usize>()
+    }
+
+    /// Parameters of effect `e` (first occurrence) in `p`.
+    pub fn effect_params<'a>(&self, e: Effect, p: &'a [f64]) -> Option<&'a [f64]> {
+        let i = self.effects.iter().position(|&x| x == e)?;
+        let o = self.offset(i);
+        p.get(o..o + e.n_params())
+    }
+
+    /// `μ_j` of the polynomial part (base plus added terms), in order of `j`.
+    pub fn mu(&self, p: &[f64]) -> Vec<f64> {
+        let mut mu = vec![0.0; self.order() + 1];
+        for (i, &j) in self.powers.iter().enumerate() {
+            mu[j] = p[i];
+        }
+        let mut next = self.powers.iter().copied().max().unwrap_or(0);
+        for (i, e) in self.effects.iter().enumerate() {
+            if *e == Effect::QuadraticVelocity {
+                next += 1;
+                mu[next] = p[self.offset(i)];
+            }
+        }
+        mu
+    }
+
+    /// Whether `p` is in the range the workflow explores (keeps the integrator out of stiff or
+    /// meaningless corners: Stribeck speed ≥ 0.02, bristle stiffness in [1e-3, 2], |κ| ≤ 0.05,
+    /// delay in [0, 3] rad).
+    pub fn in_range(&self, p: &[f64]) -> bool {
+        if p.len() != self.n_params() || p.iter().any(|v| !v.is_finite()) {
+            return false;
+        }
+        self.effects.iter().all(|&e| {
+            let q = self.effect_params(e, p).unwrap_or(&[]);
+            match e {
+                Effect::Stribeck => q[0] > 0.0 && (0.02..=10.0).contains(&q[1]),
+                Effect::FrictionalLag => (1e-3..=2.0).contains(&q[0]),
+                Effect::CubicStiffness => q[0].abs() <= 0.05,
+                Effect::SensorLag => (0.0..=3.0).contains(&q[0]),
+                Effect::QuadraticVelocity | Effect::ThermalDrift => true,
+            }
+        }) && self.mu(p).iter().all(|m| m.abs() < 1.0)
+    }
+
+    /// Typical magnitude of every parameter (finite-difference steps near 0).
+    pub fn scales(&self) -> Vec<f64> {
+        let mut s = vec![1e-3; self.powers.len()];
+        for e in &self.effects {
+            s.extend_from_slice(match e {
+                Effect::QuadraticVelocity => &[1e-3][..],
+                Effect::Stribeck => &[1e-3, 0.03][..],
+                Effect::FrictionalLag => &[0.03][..],
+                Effect::CubicStiffness => &[1e-4][..],
+                Effect::ThermalDrift => &[1e-5][..],
+                Effect::SensorLag => &[0.01][..],
+            });
+        }
+        s
+    }
+
+    /// Names of every parameter (dimensionless), in vector order.
+    pub fn param_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.powers.iter().map(|j| format!("mu{j}")).collect();
+        let mut next = self.powers.iter().copied().max().unwrap_or(0);
+        for e in &self.effects {
+            if *e == Effect::QuadraticVelocity {
+                next += 1;
+                names.push(format!("mu{next}"));
+            } else {
+                names.extend(e.param_names().iter().map(|s| s.to_string()));
+            }
+        }
+        names
+    }
+
+    /// The friction law with the Coulomb level shifted by `dmu0` (thermal drift).
+    pub fn law(&self, p: &[f64], dmu0: f64) -> FrictionLaw {
+        let mut mu = self.mu(p);
+        if let Some(m0) = mu.first_mut() {
+            *m0 += dmu0;
+        }
+        let mu0 = mu.first().copied().unwrap_or(0.0);
+        let mu1 = mu.get(1).copied().unwrap_or(0.0);
+        let stribeck = self.effect_params(Effect::Stribeck, p);
+        if let Some(lag) = self.effect_params(Effect::FrictionalLag, p) {
+            let (mu_s, v_s) = match stribeck {
+                Some(s) => (s[0] + dmu0, s[1]),
+                None => (mu0, 1.0),
+            };
+            FrictionLaw::LuGre(LuGre {
+                sigma0: lag[0],
+                sigma1: 0.0,
+                sigma2: mu1,
+                mu_c: mu0,
+                mu_s,
+                v_s,
+                a: 2.0,
+            })
+        } else if let Some(s) = stribeck {
+            FrictionLaw::Stribeck {
+                mu_c: mu0,
+                mu_s: s[0] + dmu0,
+                v_s: s[1],
+                delta: 2.0,
+                mu_v: mu1,
+            }
+        } else {
+            FrictionLaw::Polynomial { mu }
+        }
+    }
+}
+
+/// A record prepared for the comparison: dimensionless, uniformly sampled, with the compared
+/// envelope and force points.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// Rig constants.
+    pub rig: Rig,
+    /// τ of every sample (starting at 0).
+    pub tau: Vec<f64>,
+    /// Measured displacement y.
+    pub y: Vec<f64>,
+    /// Measured velocity y'.
+    pub ydot: Vec<f64>,
+    /// Sample interval in τ.
+    pub dtau: f64,
+    /// Sampling rate (Hz, or per unit τ for dimensionless records).
+    pub rate_hz: f64,
+    /// Indices of the compared envelope points.
+    pub env_idx: Vec<usize>,
+    /// Measured Mark & Crandall envelope at `env_idx`.
+    pub a_meas: Vec<f64>,
+    /// Measured dimensionless friction force `F/N`, every sample, if the record has `ft_n`.
+    pub f_meas: Option<Vec<f64>>,
+    /// Indices of the compared force points.
+    pub f_idx: Vec<usize>,
+    /// Linear fit of the temperature channel: `T(τ) = t0 + slope · τ` (°C, °C per unit τ).
+    pub temp: Option<(f64, f64)>,
+    /// Initial amplitude (the gap's normaliser).
+    pub a0: f64,
+    /// Known charge-amplifier low-pass applied to simulated force (Hz), if any.
+    pub force_cutoff_hz: Option<f64>,
+    /// Integrator.
+    pub method: Method,
+}
+
+/// Error of the workflow.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExplainError(pub String);
+
+impl std::fmt::Display for ExplainError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+impl std::error::Error for ExplainError {}
+
+impl From<SimError> for ExplainError {
+    fn from(e: SimError) -> Self {
+        ExplainError(e.0)
+    }
+}
+
+/// The comparison stops where the measured envelope first falls below this fraction of its
+/// initial value.
+pub const CUT_FRACTION: f64 = 0.1;
+
+fn stride(n: usize, max: usize) -> usize {
+    n.div_ceil(max.max(1)).max(1)
+}
+
+impl Prepared {
+    /// Prepares a record: validates it, checks uniform sampling, converts it to dimensionless
+    /// form, picks at most `max_env` envelope and `max_force` force points.
+    pub fn new(
+        rec: &Record,
+        max_env: usize,
+        max_force: usize,
+        force_cutoff_hz: Option<f64>,
+    ) -> Result<Prepared, ExplainError> {
+        rec.validate().map_err(|e| ExplainError(e.0))?;
+        let rig = rec.rig().map_err(|e| ExplainError(e.0))?;
+        let dt = rec.dt();
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(ExplainError("cannot tell the sampling interval".into()));
+        }
+        if let Some(w) = rec
+            .t
+            .windows(2)
+            .find(|w| ((w[1] - w[0]) / dt - 1.0).abs() > 0.01)
+        {
+            return Err(ExplainError(format!(
+                "the record is not uniformly sampled (interval {} at t = {}, mean {dt})",
+                w[1] - w[0],
+                w[0]
+            )));
+        }
+        let (tau, mut y, mut ydot) = rec.dimensionless().map_err(|e| ExplainError(e.0))?;
+        let t0 = tau[0];
+        let mut tau: Vec<f64> = tau.iter().map(|t| t - t0).collect();
+        let mut a_all = tribo_physics::envelope::mark_crandall(&y, &ydot);
+        let a0 = a_all[0];
+        if !(a0 > 0.0) {
+            return Err(ExplainError(
+                "the record starts at rest at equilibrium: nothing to explain".into(),
+            ));
+        }
+        // Compare the motion down to CUT_FRACTION of the release amplitude: the final stop (and the
+        // half cycle it falls on) makes the misfit jump with the parameters.
+        let n = a_all
+            .iter()
+            .position(|&a| a < CUT_FRACTION * a0)
+            .unwrap_or(a_all.len());
+        if n < 64 {
+            return Err(ExplainError(format!(
+                "only {n} samples before the motion decays below {} % of its start",
+                CUT_FRACTION * 100.0
+            )));
+        }
+        for v in [&mut tau, &mut y, &mut ydot, &mut a_all] {
+            v.truncate(n);
+        }
+        let env_idx: Vec<usize> = (0..n).step_by(stride(n, max_env)).collect();
+        let a_meas = env_idx.iter().map(|&i| a_all[i]).collect();
+        let f_meas = match (&rec.ft, rec.units) {
+            (Some(f), _) => Some(f[..n].iter().map(|v| v / rig.load_n).collect::<Vec<f64>>()),
+            _ => None,
+        };
+        let f_idx: Vec<usize> = if f_meas.is_some() {
+            (0..n).step_by(stride(n, max_force)).collect()
+        } else {
+            Vec::new()
+        };
+        let temp = rec.temp.as_ref().and_then(|tc| {
+            let (s, c) = linreg(&tau, &tc[..n])?;
+            Some((c, s))
+        });
+        let dtau = rig.tau_of_t(dt);
+        let rate_hz = 1.0 / dt;
+        Ok(Prepared {
+            rig,
+            tau,
+            y,
+            ydot,
+            dtau,
+            rate_hz,
+            env_idx,
+            a_meas,
+            f_meas,
+            f_idx,
+            temp,
+            a0,
+            force_cutoff_hz: if rec.units == Units::Si {
+                force_cutoff_hz
+            } else {
+                None
+            },
+            method: Method::dopri(1e-8),
+        })
+    }
+
+    /// Initial state of the simulations: the first sample, with a velocity below 1 % of the
+    /// amplitude taken as the release from rest (0) rather than as noise with a sliding direction.
+    pub fn initial_state(&self) -> (f64, f64) {
+        let v = self.ydot[0];
+        (self.y[0], if v.abs() < 0.01 * self.a0 { 0.0 } else { v })
+    }
+
+    /// True if a force channel is compared.
+    pub fn has_force(&self) -> bool {
+        self.f_meas.is_some()
+    }
+
+    /// True if a temperature channel is known.
+    pub fn has_temp(&self) -> bool {
+        self.temp.is_some()
+    }
+}
+
+/// Ordinary least-squares line: `(slope, intercept)`.
+pub fn linreg(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
+    let n = x.len().min(y.len());
+    if n < 2 {
+        return None;
+    }
+    let (x, y) = (&x[..n], &y[..n]);
+    let mx = x.iter().sum::<f64>() / n as f64;
+    let my = y.iter().sum::<f64>() / n as f64;
+    let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    if !(sxx > 0.0) {
+        return None;
+    }
+    let s = sxy / sxx;
+    Some((s, my - s * mx)).filter(|(a, b)| a.is_finite() && b.is_finite())
+}
+
+/// Simulated channels of a model on the record's grid.
+#[derive(Debug, Clone)]
+pub struct Simulated {
+    /// y at every sample.
+    pub y: Vec<f64>,
+    /// y' at every sample.
+    pub ydot: Vec<f64>,
+    /// Force `F/N` as the force channel would read it (low-pass, delay), every sample.
+    pub f_meas: Vec<f64>,
+}
+
+/// Length of the τ segments over which a drifting Coulomb level is held constant.
+const THERMAL_SEGMENT: f64 = 0.5;
+
+/// Integration steps allowed per radian of τ (a well-behaved law needs about ten at rtol 1e-9);
+/// beyond, the candidate is rejected as too stiff.
+const STEPS_PER_RAD: f64 = 60.0;
+
+fn steps_used_check(_sim: &Simulator, used: usize, budget: usize) -> Result<(), ExplainError> {
+    if used > budget {
+        Err(ExplainError(format!(
+            "simulation needs more than {budget} steps (stiff parameters)"
+        )))
+    } else {
+        Ok(())
+    }
+}
+
+/// Simulates the model `spec`/`p` on the prepared record's grid.
+pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulated, ExplainError> {
+    if !spec.in_range(p) {
+        return Err(ExplainError("parameters out of range".into()));
+    }
+    let span = data.tau.last().copied().unwrap_or(0.0);
+    let budget = (STEPS_PER_RAD * span) as usize + 2000;
+    let kappa = spec
+        .effect_params(Effect::CubicStiffness, p)
+        .map_or(0.0, |k| k[0]);
+    let model_at = |dmu0: f64| Model::new(spec.law(p, dmu0)).with_cubic(kappa);
+    let (y0, v0) = data.initial_state();
+    let (y, ydot, f) = match (spec.effect_params(Effect::ThermalDrift, p), data.temp) {
+        (Some(g), Some((_, slope))) => {
+            let gamma = g[0];
+            let dmu = |tau: f64| gamma * slope * tau;
+            let model = model_at(dmu(0.5 * THERMAL_SEGMENT));
+            model.validate().map_err(ExplainError)?;
+            let mut sim = Simulator::new(model, y0, v0, data.method);
+            let mut seg_end = THERMAL_SEGMENT;
+            let mut prior = 0usize;
+            let n = data.tau.len();
+            let (mut y, mut yd, mut f) = (
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+            );
+            for &t in &data.tau {
+                while t > seg_end {
+                    let s = sim.step_to(seg_end)?;
+                    prior += sim.steps();
+                    let m = model_at(dmu(seg_end + 0.5 * THERMAL_SEGMENT));
+                    m.validate().map_err(ExplainError)?;
+                    sim = Simulator::with_state(m, seg_end, [s.y, s.ydot, s.z], data.method);
+                    seg_end += THERMAL_SEGMENT;
+                }
+                let s = sim.step_to(t)?;
+                steps_used_check(&sim, prior + sim.steps(), budget)?;
+                y.push(s.y);
+                yd.push(s.ydot);
+                f.push(s.f);
+            }
+            (y, yd, f)
+        }
+        _ => {
+            let model = model_at(0.0);
+            model.validate().map_err(ExplainError)?;
+            let mut sim = Simulator::new(model, y0, v0, data.method);
+            let n = data.tau.len();
+            let (mut y, mut yd, mut f) = (
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+            );
+            for &t in &data.tau {
+                let s = sim.step_to(t)?;
+                steps_used_check(&sim, sim.steps(), budget)?;
+                y.push(s.y);
+                yd.push(s.ydot);
+                f.push(s.f);
+            }
+            (y, yd, f)
+        }
+    };
+    let mut fm = match data.force_cutoff_hz {
+        Some(fc) => butterworth2(&f, fc, data.rate_hz),
+        None => f,
+    };
+    if let Some(d) = spec.effect_params(Effect::SensorLag, p) {
+        fm = delay(&fm, d[0] / data.dtau);
+    }
+    Ok(Simulated { y, ydot, f_meas: fm })
+}
+
+/// Residuals of a simulation against the record: `(envelope, force)`, both divided by the
+/// initial amplitude (forces in units of N, i.e. relative to the initial spring force `k x0`).
+pub fn residuals(data: &Prepared, sim: &Simulated) -> (Vec<f64>, Vec<f64>) {
+    let env: Vec<f64> = data
+        .env_idx
+        .iter()
+        .zip(&data.a_meas)
+        .map(|(&i, &m)| (sim.y[i].hypot(sim.ydot[i]) - m) / data.a0)
+        .collect();
+    let force = match &data.f_meas {
+        Some(fm) => data
+            .f_idx
+            .iter()
+            .map(|&i| (sim.f_meas[i] - fm[i]) / data.a0)
+            .collect(),
+        None => Vec::new(),
+    };
+    (env, force)
+}
+
+/// Root mean square (0 for an empty slice).
+pub fn rms(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        0.0
+    } else {
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+    }
+}
+
+/// The gap: `√(gap_env² + gap_force²)`, each the RMS of its block of [`residuals`].
+pub fn gap_of(env: &[f64], force: &[f64]) -> f64 {
+    rms(env).hypot(rms(force))
+}
+
+/// Weighted residual vector minimised by the fits: each block divided by `√n`, so that
+/// `Σ r² = gap²`.
+pub fn weighted(env: &[f64], force: &[f64]) -> Vec<f64> {
+    let we = 1.0 / (env.len().max(1) as f64).sqrt();
+    let wf = 1.0 / (force.len().max(1) as f64).sqrt();
+    env.iter()
+        .map(|r| r * we)
+        .chain(force.iter().map(|r| r * wf))
+        .collect()
+}
+
+/// Bayesian information criterion with a separate unknown noise level per channel:
+/// `Σ_b n_b ln(RSS_b / n_b) + p ln n`.
+pub fn bic(env: &[f64], force: &[f64], n_params: usize) -> f64 {
+    let block = |v: &[f64]| {
+        if v.is_empty() {
+            0.0
+        } else {
+            let rss = v.iter().map(|x| x * x).sum::<f64>().max(1e-300);
+            v.len() as f64 * (rss / v.len() as f64).ln()
+        }
+    };
+    let n = (env.len() + force.len()).max(1) as f64;
+    block(env) + block(force) + n_params as f64 * n.ln()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tribo_physics::sensor::{generate, RecordSpec};
+
+    fn spec_rec(model: &Model, duration_s: f64) -> Record {
+        let sp = RecordSpec {
+            rig: Rig::REAL,
+            x0_m: 667e-6,
+            v0_m_s: 0.0,
+            duration_s,
+            rate_hz: 10_000.0,
+        };
+        generate(&sp, model, Method::dopri(1e-10), None).unwrap()
+    }
+
+    #[test]
+    fn parameter_layout_and_laws() {
+        let s = Spec::base(vec![0, 1])
+            .with(Effect::QuadraticVelocity)
+            .with(Effect::CubicStiffness)
+            .with(Effect::SensorLag);
+        assert_eq!(s.n_params(), 5);
+        assert_eq!(s.param_names(), ["mu0", "mu1", "mu2", "kappa", "delay_tau"]);
+        let p = [0.02, 0.002, 0.004, 1e-3, 0.5];
+        assert_eq!(s.mu(&p), vec![0.02, 0.002, 0.004]);
+        assert_eq!(s.law(&p, 0.0), FrictionLaw::quadratic(0.02, 0.002, 0.004));
+        assert_eq!(s.effect_params(Effect::CubicStiffness, &p), Some(&[1e-3][..]));
+        // A polynomial term excludes Stribeck and LuGre, which need a Coulomb–viscous law.
+        assert!(!s.can_add(Effect::Stribeck, true, true));
+        assert!(!s.can_add(Effect::FrictionalLag, true, true));
+        assert!(!s.can_add(Effect::SensorLag, true, true));
+        let b = Spec::base(vec![0, 1]);
+        assert!(b.can_add(Effect::Stribeck, false, false));
+        assert!(!b.can_add(Effect::SensorLag, false, false));
+        assert!(!b.can_add(Effect::ThermalDrift, true, false));
+        let st = b.with(Effect::Stribeck).with(Effect::FrictionalLag);
+        // LuGre over a Stribeck curve, thermal shift applied to both levels.
+        match st.law(&[0.02, 0.002, 0.03, 0.3, 0.5], 0.001) {
+            FrictionLaw::LuGre(l) => {
+                assert_eq!((l.mu_c, l.mu_s, l.v_s, l.sigma0, l.sigma2), (0.021, 0.031, 0.3, 0.5, 0.002));
+            }
+            other => panic!("expected LuGre, got {other:?}"),
+        }
+        for e in Effect::ALL {
+            assert_eq!(Effect::from_name(e.name()), Some(e));
+        }
+    }
+
+    #[test]
+    fn the_true_model_reproduces_an_ideal_record() {
+        // Ideal channels carry the true contact force: no charge-amplifier filter to apply.
+        let m = Model::new(FrictionLaw::coulomb_viscous(0.02, 0.002)).with_cubic(1e-3);
+        let rec = spec_rec(&m, 0.6);
+        let data = Prepared::new(&rec, 400, 3000, None).unwrap();
+        let s = Spec::base(vec![0, 1]).with(Effect::CubicStiffness);
+        let sim = simulate_spec(&data, &s, &[0.02, 0.002, 1e-3]).unwrap();
+        let (e, f) = residuals(&data, &sim);
+        assert!(gap_of(&e, &f) < 1e-7, "gap {}", gap_of(&e, &f));
+        // …and a wrong one does not.
+        let sim = simulate_spec(&data, &s, &[0.021, 0.002, 1e-3]).unwrap();
+        let (e, f) = residuals(&data, &sim);
+        assert!(gap_of(&e, &f) > 1e-3);
+    }
+
+    #[test]
+    fn bad_records_are_clear_errors() {
+        let m = Model::new(FrictionLaw::coulomb_viscous(0.02, 0.002));
+        let mut rec = spec_rec(&m, 0.2);
+        rec.t[100] += 0.5 * rec.dt();
+        let e = Prepared::new(&rec, 400, 3000, None).unwrap_err();
+        assert!(e.0.contains("uniformly"), "{e}");
+        let mut rec = spec_rec(&m, 0.2);
+        rec.x[3] = f64::NAN;
+        assert!(Prepared::new(&rec, 400, 3000, None).is_err());
+        let mut rec = spec_rec(&m, 0.2);
+        rec.x.iter_mut().for_each(|x| *x = 0.0);
+        rec.v.iter_mut().for_each(|v| *v = 0.0);
+        let e = Prepared::new(&rec, 400, 3000, None).unwrap_err();
+        assert!(e.0.contains("rest"), "{e}");
+        let mut rec = spec_rec(&m, 0.2);
+        rec.rig = None;
+        assert!(Prepared::new(&rec, 400, 3000, None).is_err());
+    }
+
+    #[test]
+    fn bic_penalises_parameters_and_rewards_fit() {
+        let noise: Vec<f64> = (0..500).map(|i| ((i * 7919) % 101) as f64 / 101.0 - 0.5).collect();
+        let worse: Vec<f64> = noise.iter().map(|v| 1.5 * v).collect();
+        assert!(bic(&noise, &[], 2) < bic(&worse, &[], 2));
+        assert!(bic(&noise, &[], 2) < bic(&noise, &[], 3));
+        // Same RSS per channel gives the same score whatever the other channel's scale.
+        let a = bic(&noise, &noise, 2) - bic(&noise, &worse, 2);
+        let b = bic(&worse, &noise, 2) - bic(&worse, &worse, 2);
+        assert!((a - b).abs() < 1e-9);
+        assert_eq!(gap_of(&[3.0, 3.0], &[4.0]), 5.0);
+    }
+}

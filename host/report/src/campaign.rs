@@ -1,0 +1,303 @@
+//! The report of a campaign: friction constants against load, oscillation count against
+//! temperature, mean ± sample standard deviation over the repetitions.
+
+use crate::html::table;
+use crate::plot::{Figure, LegendPos, Panel, Series, Style};
+use crate::{write_report, Report, ReportError, ReportFiles};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One run of a campaign (e.g. a row of the store's catalog).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct CampaignPoint {
+    /// Run id (shown in the table).
+    pub run: String,
+    /// Normal load N (N).
+    pub load_n: f64,
+    /// Nominal plane temperature (°C): the setpoint, else the measured one.
+    pub temp_c: Option<f64>,
+    /// Dimensionless Coulomb and viscous constants (host fit preferred, else on-board).
+    pub mu0: Option<f64>,
+    pub mu1: Option<f64>,
+    /// Oscillation cycles until the stop.
+    pub cycles: Option<f64>,
+}
+
+/// Page-level inputs of a campaign report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CampaignInputs {
+    /// Page title (e.g. the campaign name).
+    pub title: String,
+    /// Also write PNG files.
+    pub png: bool,
+}
+
+impl Default for CampaignInputs {
+    fn default() -> Self {
+        CampaignInputs {
+            title: "Campaign report".into(),
+            png: true,
+        }
+    }
+}
+
+/// Builds and writes a campaign report into `out_dir`.
+pub fn write_campaign_report(
+    points: &[CampaignPoint],
+    inputs: &CampaignInputs,
+    out_dir: &Path,
+) -> Result<ReportFiles, ReportError> {
+    write_report(&campaign_report(points, inputs)?, out_dir)
+}
+
+/// Values grouped by proximity: sorted, a new cluster wherever the gap to the previous value
+/// exceeds `tol` (temperatures measured at 25.2 and 25.6 °C are one setting, not two).
+struct Clusters {
+    /// `(lo, hi, mean)` per cluster, ascending.
+    spans: Vec<(f64, f64, f64)>,
+}
+
+impl Clusters {
+    fn new(mut v: Vec<f64>, tol: f64) -> Clusters {
+        v.sort_by(f64::total_cmp);
+        let mut spans: Vec<(f64, f64, f64)> = Vec::new();
+        let mut members: Vec<f64> = Vec::new();
+        for x in v {
+            if let Some(&last) = members.last() {
+                if x - last > tol {
+                    let m = members.iter().sum::<f64>() / members.len() as f64;
+                    spans.push((members[0], last, m));
+                    members.clear();
+                }
+            }
+            members.push(x);
+        }
+        if let Some(&last) = members.last() {
+            let m = members.iter().sum::<f64>() / members.len() as f64;
+            spans.push((members[0], last, m));
+        }
+        Clusters { spans }
+    }
+    /// Index of the cluster holding `x` (which must be one of the values given).
+    fn of(&self, x: f64) -> usize {
+        self.spans
+            .iter()
+            .position(|&(lo, hi, _)| x >= lo && x <= hi)
+            .unwrap_or(0)
+    }
+    fn mean(&self, i: usize) -> f64 {
+        self.spans[i].2
+    }
+}
+
+/// Mean and sample standard deviation (0 for a single value).
+fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let sd = if v.len() > 1 {
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    } else {
+        0.0
+    };
+    (m, sd)
+}
+
+/// The runs of one group by x cluster: `(x values, values)`.
+type Cells = BTreeMap<usize, (Vec<f64>, Vec<f64>)>;
+
+/// One figure: `value` against `x`, one series per group (clusters of `group` within `g_tol`),
+/// means over the runs of each x cluster (within `x_tol`) with ±sd bars, plus the single runs.
+#[allow(clippy::too_many_arguments)]
+fn grouped_figure(
+    points: &[CampaignPoint],
+    name: &str,
+    title: &str,
+    caption: &str,
+    x_label: &str,
+    y_label: &str,
+    x: impl Fn(&CampaignPoint) -> Option<f64>,
+    x_tol: f64,
+    group: impl Fn(&CampaignPoint) -> Option<f64>,
+    g_tol: f64,
+    g_label: impl Fn(f64) -> String,
+    value: impl Fn(&CampaignPoint) -> Option<f64>,
+) -> Option<Figure> {
+    let rows: Vec<(f64, Option<f64>, f64)> = points
+        .iter()
+        .filter_map(|p| Some((x(p)?, group(p).filter(|g| g.is_finite()), value(p)?)))
+        .filter(|(xv, _, val)| xv.is_finite() && val.is_finite())
+        .collect();
+    if rows.is_empty() {
+        return None;
+    }
+    let xc = Clusters::new(rows.iter().map(|r| r.0).collect(), x_tol);
+    let gc = Clusters::new(rows.iter().filter_map(|r| r.1).collect(), g_tol);
+    // group cluster (None: not recorded) -> x cluster -> (xs, values)
+    let mut groups: BTreeMap<Option<usize>, Cells> = BTreeMap::new();
+    for &(xv, g, val) in &rows {
+        let cell = groups
+            .entry(g.map(|g| gc.of(g)))
+            .or_default()
+            .entry(xc.of(xv))
+            .or_default();
+        cell.0.push(xv);
+        cell.1.push(val);
+    }
+    let mut p = Panel::new(title, x_label, y_label);
+    p.legend_pos = LegendPos::Auto;
+    for (i, (g, cells)) in groups.iter().enumerate() {
+        let label = match g {
+            Some(g) => g_label(gc.mean(*g)),
+            None if gc.spans.is_empty() => "all runs".to_string(),
+            None => "not recorded".to_string(),
+        };
+        let mut means = Vec::new();
+        let mut bars = Vec::new();
+        let mut singles = Vec::new();
+        for (ix, (xs, vals)) in cells {
+            let (m, sd) = mean_sd(vals);
+            let xm = xc.mean(*ix);
+            means.push((xm, m));
+            if vals.len() > 1 {
+                bars.push((xm, m - sd, m + sd));
+            }
+            singles.extend(xs.iter().zip(vals).map(|(x, v)| (*x, *v)));
+        }
+        let mut s = Series::line(format!("{label} (mean ± sd)"), i, means);
+        s.errors = bars;
+        p.series.push(s);
+        p.series
+            .push(Series::line("", i, singles).with_style(Style::Points(2)));
+    }
+    Some(Figure {
+        name: name.into(),
+        title: title.into(),
+        caption: caption.into(),
+        panels: vec![p],
+        size: (900, 600),
+    })
+}
+
+fn fmt_opt(v: Option<f64>, prec: usize) -> String {
+    match v {
+        Some(x) if x.is_finite() => format!("{x:.prec$}"),
+        _ => "—".into(),
+    }
+}
+
+/// Runs whose loads differ by at most this are one load setting (N).
+pub const LOAD_TOL_N: f64 = 2e-3;
+/// Runs whose temperatures differ by at most this from the next are one temperature setting (°C).
+pub const TEMP_TOL_C: f64 = 2.0;
+
+/// Builds a campaign report in memory. Errors if there is no point or a point has a bad load.
+pub fn campaign_report(
+    points: &[CampaignPoint],
+    inputs: &CampaignInputs,
+) -> Result<Report, ReportError> {
+    if points.is_empty() {
+        return Err(ReportError::Input("the campaign has no runs".into()));
+    }
+    if let Some(p) = points
+        .iter()
+        .find(|p| !(p.load_n.is_finite() && p.load_n >= 0.0))
+    {
+        return Err(ReportError::Input(format!(
+            "run {}: load {} N is not a finite non-negative number",
+            p.run, p.load_n
+        )));
+    }
+    let mut notes = Vec::new();
+    let mut figures = Vec::new();
+    let temp_label = |t: f64| format!("{t:.0} °C");
+    let load_label = |n: f64| format!("N = {n:.3} N");
+    let f = grouped_figure(
+        points,
+        "mu0_vs_load",
+        "Coulomb constant μ0 vs normal load",
+        "μ0 is a friction coefficient: for a Coulomb contact it does not depend on the load, so the \
+         points of a temperature should lie on a horizontal line within the method's precision \
+         (± 0.001). A trend with the load means the contact is not Coulomb (e.g. a film whose \
+         thickness depends on the pressure).",
+        "normal load N (N)",
+        "μ0",
+        |p| Some(p.load_n),
+        LOAD_TOL_N,
+        |p| p.temp_c,
+        TEMP_TOL_C,
+        temp_label,
+        |p| p.mu0,
+    );
+    match f {
+        Some(f) => figures.push(f),
+        None => notes.push("no run has a μ0: the μ0-vs-load figure is skipped".into()),
+    }
+    let f = grouped_figure(
+        points,
+        "mu1_vs_load",
+        "Viscous constant μ1 vs normal load",
+        "μ1 = c/(mΩ) of a viscous damper does not depend on the load; the apparatus alone gives \
+         μ1 = 0.0011 ± 0.0002. A μ1 that grows as the temperature drops follows the lubricant's \
+         viscosity.",
+        "normal load N (N)",
+        "μ1",
+        |p| Some(p.load_n),
+        LOAD_TOL_N,
+        |p| p.temp_c,
+        TEMP_TOL_C,
+        temp_label,
+        |p| p.mu1,
+    );
+    match f {
+        Some(f) => figures.push(f),
+        None => notes.push("no run has a μ1: the μ1-vs-load figure is skipped".into()),
+    }
+    let f = grouped_figure(
+        points,
+        "cycles_vs_temperature",
+        "Oscillation cycles vs temperature",
+        "the number of cycles before the stop is the most direct reading of friction: more cycles, \
+         less friction. A change with temperature at a given load shows the lubricant's \
+         (or the film's) response to heating; at least 5 cycles are needed for a fit.",
+        "plane temperature (°C)",
+        "cycles until the stop",
+        |p| p.temp_c,
+        TEMP_TOL_C,
+        |p| Some(p.load_n),
+        LOAD_TOL_N,
+        load_label,
+        |p| p.cycles,
+    );
+    match f {
+        Some(f) => figures.push(f),
+        None => notes.push(
+            "no run has both a temperature and a cycle count: the cycles-vs-temperature figure is skipped"
+                .into(),
+        ),
+    }
+    let rows: Vec<Vec<String>> = points
+        .iter()
+        .map(|p| {
+            vec![
+                p.run.clone(),
+                format!("{:.3}", p.load_n),
+                fmt_opt(p.temp_c, 1),
+                fmt_opt(p.mu0, 5),
+                fmt_opt(p.mu1, 5),
+                fmt_opt(p.cycles, 1),
+            ]
+        })
+        .collect();
+    let mut summary = String::from("<h2>Runs</h2>\n");
+    summary.push_str(&table(
+        &["run", "load (N)", "temperature (°C)", "μ0", "μ1", "cycles"],
+        &rows,
+    ));
+    Ok(Report {
+        title: inputs.title.clone(),
+        summary_html: summary,
+        figures,
+        notes,
+        png: inputs.png,
+    })
+}

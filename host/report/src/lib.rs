@@ -1,0 +1,137 @@
+//! Figures and a self-contained HTML report of oscillating-tribometer runs and campaigns
+//! (`tribo report`).
+//!
+//! Entry points (names are stable; `tribo demo` and `tribo report` call them):
+//!
+//! - [`write_record_report`]`(rec: &Record, inputs: &ReportInputs, out_dir: &Path)
+//!   -> Result<ReportFiles, ReportError>`: one run. Writes `<fig>.svg` (+ `<fig>.png`) per figure
+//!   and `report.html` into `out_dir` (created if missing).
+//! - [`write_campaign_report`]`(points: &[CampaignPoint], inputs: &CampaignInputs, out_dir: &Path)
+//!   -> Result<ReportFiles, ReportError>`: a set of runs (μ0 vs load, cycles vs temperature).
+//! - [`record_report`] / [`campaign_report`] build the same figures and tables in memory
+//!   ([`Report`]) without writing anything; [`write_report`] writes a [`Report`].
+//! - [`store::write_run_report`]`(run: &tribo_store::Run, out_dir: &Path)
+//!   -> Result<ReportFiles, ReportError>`: a stored run folder ([`store::run_inputs`] gives its
+//!   [`ReportInputs`]); [`store::write_catalog_report`]`(rows: &[CatalogRow], title, out_dir)`:
+//!   catalogued runs (a campaign).
+//! - [`regime::classify_regime`]: lubrication regime from `log10` ECR.
+//!
+//! Figures of a run (file stems): `motion` (x and v with their Mark & Crandall envelopes),
+//! `envelopes` (measured envelope and the envelope of each fitted law, dimensionless with SI
+//! secondary axes), `law` (the fitted friction laws f(y'), on-board estimate, measured F/N if any),
+//! `windows` (Coulomb–viscous constants fitted per amplitude window, thesis Tables 6–7),
+//! `force_velocity` and `force_displacement` (loops, only with a force channel), `ecr` (log10 R and
+//! the lubrication regime, only with an ECR channel), `temperature` (only with a thermocouple).
+//! A missing channel skips its figures with a note on the page, never an error.
+//!
+//! Figures of a campaign: `mu0_vs_load`, `mu1_vs_load`, `cycles_vs_temperature`.
+//!
+//! Rendering uses `plotters`: SVG needs no font; PNG uses the embedded DejaVu Sans
+//! (`assets/`, Bitstream Vera licence).
+
+pub mod campaign;
+mod html;
+pub mod plot;
+pub mod regime;
+pub mod run;
+pub mod store;
+
+pub use campaign::{campaign_report, write_campaign_report, CampaignInputs, CampaignPoint};
+pub use plot::Figure;
+pub use regime::{classify_regime, Regime, RegimeAssessment};
+pub use run::{record_report, write_record_report, ReportInputs, ReportOptions};
+
+use std::path::{Path, PathBuf};
+
+/// Why a report could not be made.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ReportError {
+    /// The data given cannot be reported (empty, NaN, no rig constants…).
+    Input(String),
+    /// Writing a file failed.
+    Io(String),
+    /// A figure could not be drawn.
+    Plot(String),
+}
+
+impl std::fmt::Display for ReportError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReportError::Input(m) => write!(f, "cannot report: {m}"),
+            ReportError::Io(m) => write!(f, "writing the report: {m}"),
+            ReportError::Plot(m) => write!(f, "drawing the report: {m}"),
+        }
+    }
+}
+impl std::error::Error for ReportError {}
+
+/// A report in memory: figures, the HTML tables and notes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Report {
+    /// Page title.
+    pub title: String,
+    /// HTML fragment (tables) shown above the figures; already escaped.
+    pub summary_html: String,
+    pub figures: Vec<Figure>,
+    /// Figures skipped or fits failed, one sentence each (shown on the page).
+    pub notes: Vec<String>,
+    /// Also write PNG files.
+    pub png: bool,
+}
+
+/// One written figure.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FigureFile {
+    pub name: String,
+    pub title: String,
+    pub svg: PathBuf,
+    pub png: Option<PathBuf>,
+}
+
+/// What [`write_report`] wrote.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReportFiles {
+    /// `report.html`.
+    pub html: PathBuf,
+    pub figures: Vec<FigureFile>,
+    /// Same as [`Report::notes`].
+    pub notes: Vec<String>,
+}
+
+fn io_err(path: &Path, e: std::io::Error) -> ReportError {
+    ReportError::Io(format!("{}: {e}", path.display()))
+}
+
+/// Writes every figure (SVG, and PNG if asked) and `report.html` into `out_dir`.
+pub fn write_report(report: &Report, out_dir: &Path) -> Result<ReportFiles, ReportError> {
+    std::fs::create_dir_all(out_dir).map_err(|e| io_err(out_dir, e))?;
+    let mut files = Vec::new();
+    let mut svgs = Vec::new();
+    for fig in &report.figures {
+        let svg = plot::to_svg(fig)?;
+        let svg_path = out_dir.join(format!("{}.svg", fig.name));
+        std::fs::write(&svg_path, &svg).map_err(|e| io_err(&svg_path, e))?;
+        let png = if report.png {
+            let p = out_dir.join(format!("{}.png", fig.name));
+            plot::to_png(fig, &p)?;
+            Some(p)
+        } else {
+            None
+        };
+        svgs.push(svg);
+        files.push(FigureFile {
+            name: fig.name.clone(),
+            title: fig.title.clone(),
+            svg: svg_path,
+            png,
+        });
+    }
+    let page = html::page(report, &svgs);
+    let html_path = out_dir.join("report.html");
+    std::fs::write(&html_path, page).map_err(|e| io_err(&html_path, e))?;
+    Ok(ReportFiles {
+        html: html_path,
+        figures: files,
+        notes: report.notes.clone(),
+    })
+}

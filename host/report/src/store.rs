@@ -1,0 +1,106 @@
+//! Adapters from the run store (`tribo-store`): a run folder to a run report, catalog rows to a
+//! campaign report.
+
+use crate::campaign::CampaignPoint;
+use crate::run::ReportInputs;
+use crate::{write_campaign_report, write_record_report, CampaignInputs, ReportError, ReportFiles};
+use std::path::Path;
+use tribo_store::{CatalogRow, Run};
+
+/// What the report shows of a stored run besides its samples: metadata lines and the on-board
+/// result; the host fits are redone by the report (all laws of [`crate::ReportOptions::laws`]).
+pub fn run_inputs(run: &Run) -> ReportInputs {
+    let m = run.meta();
+    let mut meta = vec![
+        ("run".to_string(), m.id.clone()),
+        ("created".into(), m.created.clone()),
+        ("status".into(), m.status.name().into()),
+    ];
+    for (k, v) in [
+        ("label", &m.label),
+        ("sample", &m.sample),
+        ("lubricant", &m.lubricant),
+        ("campaign", &m.campaign),
+    ] {
+        if let Some(v) = v {
+            meta.push((k.into(), v.clone()));
+        }
+    }
+    if let Some(r) = m.repeat {
+        meta.push(("repetition".into(), r.to_string()));
+    }
+    match (m.temp_setpoint_c, m.temp_c) {
+        (Some(s), Some(t)) => meta.push((
+            "temperature".into(),
+            format!("{t:.1} °C (setpoint {s:.0} °C)"),
+        )),
+        (Some(s), None) => meta.push(("temperature".into(), format!("setpoint {s:.0} °C"))),
+        (None, Some(t)) => meta.push(("temperature".into(), format!("{t:.1} °C (heater off)"))),
+        (None, None) => {}
+    }
+    if let Some(d) = &m.device {
+        meta.push(("firmware".into(), d.firmware.clone()));
+        meta.push(("rig serial".into(), d.serial.clone()));
+    }
+    let missing = run.missing_blocks().len();
+    if missing > 0 {
+        meta.push((
+            "missing sample blocks".into(),
+            format!("{missing} (pull the run again to fill them)"),
+        ));
+    }
+    if let Some(h) = run.host_fit() {
+        meta.push((
+            "stored host fit".into(),
+            format!(
+                "{}: μ0 = {:.5}, μ1 = {:.5}, gap {:.3} %",
+                h.law,
+                h.mu0,
+                h.mu1,
+                100.0 * h.gap
+            ),
+        ));
+    }
+    ReportInputs {
+        title: format!("Run {}", m.id),
+        meta,
+        onboard: run.result().copied(),
+        ..ReportInputs::default()
+    }
+}
+
+/// Writes the report of a stored run into `out_dir` (the samples as recorded, on-board result from
+/// `result.toml`).
+pub fn write_run_report(run: &Run, out_dir: &Path) -> Result<ReportFiles, ReportError> {
+    let rec = run
+        .record()
+        .map_err(|e| ReportError::Input(format!("run {}: {e}", run.id())))?;
+    write_record_report(&rec, &run_inputs(run), out_dir)
+}
+
+/// A campaign point from a catalog row: host fit preferred, else the on-board estimate; cycles
+/// from the on-board analysis.
+pub fn campaign_point(row: &CatalogRow) -> CampaignPoint {
+    CampaignPoint {
+        run: row.id.clone(),
+        load_n: row.load_n,
+        temp_c: row.temp_c,
+        mu0: row.host_mu0.or(row.onboard_mu0),
+        mu1: row.host_mu1.or(row.onboard_mu1),
+        cycles: row.cycles.map(f64::from),
+    }
+}
+
+/// Writes the report of catalogued runs (e.g. one campaign) into `out_dir`.
+pub fn write_catalog_report(
+    rows: &[CatalogRow],
+    title: &str,
+    out_dir: &Path,
+) -> Result<ReportFiles, ReportError> {
+    let points: Vec<CampaignPoint> = rows.iter().map(campaign_point).collect();
+    let inputs = CampaignInputs {
+        title: title.into(),
+        ..CampaignInputs::default()
+    };
+    write_campaign_report(&points, &inputs, out_dir)
+}

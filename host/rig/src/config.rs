@@ -1,0 +1,282 @@
+//! Configuration of the virtual rig, readable from TOML. Every field has a default (the thesis's
+//! rig, a Coulomb–viscous contact, realistic noise), so an empty file is a valid rig:
+//!
+//! ```toml
+//! mass_kg = 0.04
+//! stiffness_n_per_m = 1150.0
+//! load_n = 0.3
+//! x0_m = 667e-6
+//! apparatus_mu1 = 0.0011
+//! seed = 7
+//!
+//! [law]
+//! kind = "coulomb_viscous"   # or "coulomb", "viscous", "quadratic", "polynomial", "stribeck"
+//! mu0 = 0.02
+//! mu1 = 0.004
+//!
+//! [noise]
+//! displacement_m = 2e-8
+//! velocity_m_s = 2e-5
+//! force_n = 2e-4
+//!
+//! [ecr]
+//! log10_film = 7.0
+//! fluctuation_decades = 0.0   # ~1 for mixed lubrication
+//! log10_rest = 9.0
+//! ```
+
+use serde::Deserialize;
+use tribo_physics::FrictionLaw;
+
+/// The contact's friction law, dimensionless as in the thesis (μ_j of eq. 10–13).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum LawConfig {
+    Coulomb {
+        mu0: f64,
+    },
+    Viscous {
+        mu1: f64,
+    },
+    CoulombViscous {
+        mu0: f64,
+        mu1: f64,
+    },
+    Quadratic {
+        mu0: f64,
+        mu1: f64,
+        mu2: f64,
+    },
+    Polynomial {
+        mu: Vec<f64>,
+    },
+    Stribeck {
+        mu_c: f64,
+        mu_s: f64,
+        v_s: f64,
+        delta: f64,
+        mu_v: f64,
+    },
+}
+
+impl LawConfig {
+    pub fn to_law(&self) -> FrictionLaw {
+        match self {
+            LawConfig::Coulomb { mu0 } => FrictionLaw::coulomb(*mu0),
+            LawConfig::Viscous { mu1 } => FrictionLaw::viscous(*mu1),
+            LawConfig::CoulombViscous { mu0, mu1 } => FrictionLaw::coulomb_viscous(*mu0, *mu1),
+            LawConfig::Quadratic { mu0, mu1, mu2 } => FrictionLaw::quadratic(*mu0, *mu1, *mu2),
+            LawConfig::Polynomial { mu } => FrictionLaw::polynomial(mu.clone()),
+            LawConfig::Stribeck {
+                mu_c,
+                mu_s,
+                v_s,
+                delta,
+                mu_v,
+            } => FrictionLaw::Stribeck {
+                mu_c: *mu_c,
+                mu_s: *mu_s,
+                v_s: *v_s,
+                delta: *delta,
+                mu_v: *mu_v,
+            },
+        }
+    }
+
+    /// (μ0, μ1) of the contact when the law is Coulomb–viscous (or one of its halves).
+    pub fn coulomb_viscous(&self) -> Option<(f64, f64)> {
+        match self {
+            LawConfig::Coulomb { mu0 } => Some((*mu0, 0.0)),
+            LawConfig::Viscous { mu1 } => Some((0.0, *mu1)),
+            LawConfig::CoulombViscous { mu0, mu1 } => Some((*mu0, *mu1)),
+            _ => None,
+        }
+    }
+}
+
+/// Sensor noise, standard deviations (SI).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Noise {
+    pub displacement_m: f64,
+    pub velocity_m_s: f64,
+    pub force_n: f64,
+    /// Thermocouple, °C.
+    pub temperature_c: f64,
+    /// ECR transimpedance output, V.
+    pub ecr_v: f64,
+}
+
+impl Default for Noise {
+    fn default() -> Self {
+        Noise {
+            displacement_m: 2e-8,
+            velocity_m_s: 2e-5,
+            force_n: 2e-4,
+            temperature_c: 0.03,
+            ecr_v: 2e-4,
+        }
+    }
+}
+
+/// The heated plate: `C dT/dt = P duty − (T − T_ambient) / R`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ThermalModel {
+    pub ambient_c: f64,
+    pub heater_power_w: f64,
+    pub resistance_k_per_w: f64,
+    pub capacity_j_per_k: f64,
+}
+
+impl Default for ThermalModel {
+    fn default() -> Self {
+        ThermalModel {
+            ambient_c: 22.0,
+            heater_power_w: 30.0,
+            resistance_k_per_w: 4.0,
+            capacity_j_per_k: 20.0,
+        }
+    }
+}
+
+/// The contact's resistance: log10(R/Ω) is `log10_film` while sliding, with Gaussian fluctuations of
+/// `fluctuation_decades` (0 = full film, ~1 = mixed lubrication) correlated over `correlation_s`,
+/// and `log10_rest` while the pin is at rest.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EcrModel {
+    pub log10_film: f64,
+    pub fluctuation_decades: f64,
+    pub correlation_s: f64,
+    pub log10_rest: f64,
+}
+
+impl Default for EcrModel {
+    fn default() -> Self {
+        EcrModel {
+            log10_film: 7.0,
+            fluctuation_decades: 0.0,
+            correlation_s: 0.005,
+            log10_rest: 9.0,
+        }
+    }
+}
+
+/// The simulated rig.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VirtualRigConfig {
+    pub mass_kg: f64,
+    pub stiffness_n_per_m: f64,
+    /// Normal load, N (0 = unloaded: only the apparatus damping acts).
+    pub load_n: f64,
+    /// Where the electromagnet holds the pin, m.
+    pub x0_m: f64,
+    /// Apparatus viscous damping, dimensionless (= 2ζ; the real rig: 0.0011).
+    pub apparatus_mu1: f64,
+    pub law: LawConfig,
+    /// A magnet switched off without the reverse pulse lets go this much later (remanence), s.
+    pub remanence_s: f64,
+    /// Charge-amplifier low-pass of the force channel, Hz.
+    pub force_cutoff_hz: f64,
+    /// Time lag of the force channel behind the velocity, s (the thesis observed ~3 ms, ch. 4.4).
+    pub force_lag_s: f64,
+    pub noise: Noise,
+    pub thermal: ThermalModel,
+    pub ecr: EcrModel,
+    /// Seed of every random draw: the same seed gives the same run.
+    pub seed: u64,
+    /// Serial number announced in the hello.
+    pub serial: u64,
+}
+
+impl Default for VirtualRigConfig {
+    fn default() -> Self {
+        VirtualRigConfig {
+            mass_kg: 0.04,
+            stiffness_n_per_m: 1150.0,
+            load_n: 0.3,
+            x0_m: 667e-6,
+            apparatus_mu1: 0.0011,
+            law: LawConfig::CoulombViscous {
+                mu0: 0.02,
+                mu1: 0.004,
+            },
+            remanence_s: 0.005,
+            force_cutoff_hz: 300.0,
+            force_lag_s: 0.003,
+            noise: Noise::default(),
+            thermal: ThermalModel::default(),
+            ecr: EcrModel::default(),
+            seed: 1,
+            serial: 0x7472_6962_6f00_0001,
+        }
+    }
+}
+
+impl VirtualRigConfig {
+    /// Parses a TOML description (missing fields take their defaults).
+    pub fn from_toml(text: &str) -> Result<VirtualRigConfig, String> {
+        let c: VirtualRigConfig =
+            toml::from_str(text).map_err(|e| format!("virtual rig configuration: {e}"))?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// Checks the ranges the simulator needs.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("{name} must be a positive number, got {v}"))
+            }
+        };
+        pos("mass_kg", self.mass_kg)?;
+        pos("stiffness_n_per_m", self.stiffness_n_per_m)?;
+        pos("x0_m", self.x0_m)?;
+        pos("force_cutoff_hz", self.force_cutoff_hz)?;
+        if self.force_lag_s > 1.0 {
+            return Err(format!(
+                "force_lag_s must be at most 1 s, got {}",
+                self.force_lag_s
+            ));
+        }
+        pos("thermal.heater_power_w", self.thermal.heater_power_w)?;
+        pos(
+            "thermal.resistance_k_per_w",
+            self.thermal.resistance_k_per_w,
+        )?;
+        pos("thermal.capacity_j_per_k", self.thermal.capacity_j_per_k)?;
+        pos("ecr.correlation_s", self.ecr.correlation_s)?;
+        if !(self.load_n.is_finite() && self.load_n >= 0.0) {
+            return Err(format!("load_n must be >= 0, got {}", self.load_n));
+        }
+        for (name, v) in [
+            ("apparatus_mu1", self.apparatus_mu1),
+            ("remanence_s", self.remanence_s),
+            ("force_lag_s", self.force_lag_s),
+            ("noise.displacement_m", self.noise.displacement_m),
+            ("noise.velocity_m_s", self.noise.velocity_m_s),
+            ("noise.force_n", self.noise.force_n),
+            ("noise.temperature_c", self.noise.temperature_c),
+            ("noise.ecr_v", self.noise.ecr_v),
+            ("ecr.fluctuation_decades", self.ecr.fluctuation_decades),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} must be >= 0, got {v}"));
+            }
+        }
+        if !(self.thermal.ambient_c.is_finite()
+            && self.ecr.log10_film.is_finite()
+            && self.ecr.log10_rest.is_finite())
+        {
+            return Err("ambient temperature and ECR levels must be finite".into());
+        }
+        self.law
+            .to_law()
+            .validate()
+            .map_err(|e| format!("law: {e}"))
+    }
+}

@@ -1,0 +1,529 @@
+//! The simulated hardware: every trait of `tribo_firmware::hal` backed by a model.
+//!
+//! * Pin: `tribo_physics::Simulator` of `m x'' + k x = −N μ(v)` (plus apparatus damping), started at
+//!   rest at `x0` when the magnet lets go: at once on the reverse pulse, `remanence_s` later if the
+//!   coil is merely switched off. Until then the magnet really holds it at `x0`.
+//! * ADC: samples at the configured rate, each on its own time instant, displacement and velocity
+//!   with white noise, force through the charge amplifier's 2nd-order 300 Hz low-pass, ECR as the
+//!   transimpedance output of the range and source the firmware set; 16-bit counts through the board
+//!   front end's calibration (`Configure::real_rig`), into a ring that drops and counts on overflow.
+//! * Heater: first-order thermal model of the plate; thermocouple with noise at the MAX31856's
+//!   resolution (1/128 °C), faults injectable.
+
+use crate::config::VirtualRigConfig;
+use tribo_firmware::acquisition::Ring;
+use tribo_firmware::ecr::{FULL_SCALE_V, GAIN_V_PER_A, RANGES};
+use tribo_firmware::hal::*;
+use tribo_firmware::wire::{ChannelCal, Configure, CHANNELS};
+use tribo_physics::sensor::Rng;
+use tribo_physics::{FrictionLaw, Method, Model, Rig, Simulator};
+
+/// Converter ring capacity, samples (as on the board).
+pub const RING: usize = 1024;
+
+/// 2nd-order Butterworth low-pass (bilinear transform), streaming.
+#[derive(Debug, Clone)]
+struct Biquad {
+    b: [f64; 3],
+    a: [f64; 2],
+    x: [f64; 2],
+    y: [f64; 2],
+}
+
+impl Biquad {
+    fn lowpass(cutoff_hz: f64, rate_hz: f64) -> Biquad {
+        let k = (std::f64::consts::PI * (cutoff_hz / rate_hz).min(0.49)).tan();
+        let q = std::f64::consts::FRAC_1_SQRT_2;
+        let norm = 1.0 / (1.0 + k / q + k * k);
+        let b0 = k * k * norm;
+        Biquad {
+            b: [b0, 2.0 * b0, b0],
+            a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm],
+            x: [0.0; 2],
+            y: [0.0; 2],
+        }
+    }
+
+    fn reset(&mut self, v: f64) {
+        self.x = [v; 2];
+        self.y = [v; 2];
+    }
+
+    fn step(&mut self, x: f64) -> f64 {
+        let y = self.b[0] * x + self.b[1] * self.x[0] + self.b[2] * self.x[1]
+            - self.a[0] * self.y[0]
+            - self.a[1] * self.y[1];
+        self.x = [x, self.x[0]];
+        self.y = [y, self.y[0]];
+        y
+    }
+}
+
+/// Where the pin is.
+#[derive(Debug, Clone)]
+enum Pin {
+    /// Held by the magnet at x0 (or resting there before the first arm).
+    Held,
+    /// Free since `t0_us`.
+    Free { t0_us: u64, sim: Box<Simulator> },
+}
+
+/// The simulated hardware of one rig.
+pub struct SimHardware {
+    cfg: VirtualRigConfig,
+    rig: Rig,
+    model: Model,
+    cal: [ChannelCal; CHANNELS],
+    rng: Rng,
+    now_us: u64,
+    pin: Pin,
+    /// Last free state (x m, v m/s, friction N, stuck).
+    last: (f64, f64, f64, bool),
+    magnet: MagnetDrive,
+    /// The coil was switched off without a reverse pulse at this time: the remanent field holds the
+    /// pin until `remanence_s` later.
+    remanent_since_us: Option<u64>,
+    // Heater.
+    temp_c: f64,
+    heater_duty: f64,
+    pub(crate) tc_fault: Option<ThermocoupleFault>,
+    // ECR.
+    ecr_range: u8,
+    ecr_source_v: f64,
+    ecr_dev: f64,
+    // ADC.
+    adc_on: bool,
+    rate_hz: u32,
+    next_sample: u64,
+    ring: Ring<RING>,
+    force_lp: Biquad,
+    /// Force samples waiting out the channel's lag.
+    force_delay: std::collections::VecDeque<f64>,
+    // User interface.
+    pub(crate) button: bool,
+    lamps: Lamps,
+    pub(crate) connected: bool,
+    pub(crate) out: Vec<u8>,
+}
+
+impl SimHardware {
+    pub fn new(cfg: &VirtualRigConfig) -> Result<SimHardware, String> {
+        cfg.validate()?;
+        // Unloaded: the contact transmits no force whatever its law; only the apparatus damps. The
+        // dimensionless model needs N > 0, so it runs at a token load with no contact law.
+        let (load, law) = if cfg.load_n > 0.0 {
+            (cfg.load_n, cfg.law.to_law())
+        } else {
+            (1e-3, FrictionLaw::polynomial(vec![0.0, 0.0]))
+        };
+        let rig = Rig::new(cfg.mass_kg, cfg.stiffness_n_per_m, load)?;
+        let model = Model::new(law).with_apparatus_damping(cfg.apparatus_mu1);
+        model.validate()?;
+        let cal = Configure::real_rig(cfg.load_n.min(0.7) as f32).calibration;
+        Ok(SimHardware {
+            cfg: cfg.clone(),
+            rig,
+            model,
+            cal,
+            rng: Rng::new(cfg.seed),
+            now_us: 0,
+            pin: Pin::Held,
+            last: (cfg.x0_m, 0.0, 0.0, true),
+            magnet: MagnetDrive::Off,
+            remanent_since_us: None,
+            temp_c: cfg.thermal.ambient_c,
+            heater_duty: 0.0,
+            tc_fault: None,
+            ecr_range: 0,
+            ecr_source_v: 0.0,
+            ecr_dev: 0.0,
+            adc_on: false,
+            rate_hz: 10_000,
+            next_sample: 0,
+            ring: Ring::new(),
+            force_lp: Biquad::lowpass(cfg.force_cutoff_hz, 10_000.0),
+            force_delay: std::collections::VecDeque::new(),
+            button: false,
+            lamps: Lamps::default(),
+            connected: true,
+            out: Vec::new(),
+        })
+    }
+
+    /// (μ0, μ1) a Coulomb–viscous fit should find (contact law + apparatus damping).
+    pub fn truth(&self) -> Option<(f64, f64)> {
+        if self.cfg.load_n == 0.0 {
+            return None;
+        }
+        self.cfg
+            .law
+            .coulomb_viscous()
+            .map(|(m0, m1)| (m0, m1 + self.cfg.apparatus_mu1))
+    }
+
+    /// Plate temperature, °C (the truth, not the thermocouple's reading).
+    pub fn plate_temp_c(&self) -> f64 {
+        self.temp_c
+    }
+
+    /// Sets the plate temperature (e.g. to provoke the over-temperature cut-off).
+    pub fn set_plate_temp_c(&mut self, t: f64) {
+        self.temp_c = t;
+    }
+
+    pub fn heater_duty(&self) -> f64 {
+        self.heater_duty
+    }
+
+    pub fn magnet(&self) -> MagnetDrive {
+        self.magnet
+    }
+
+    pub fn lamps(&self) -> Lamps {
+        self.lamps
+    }
+
+    /// Whether the pin is free (released and not yet caught again).
+    pub fn pin_free(&self) -> bool {
+        matches!(self.pin, Pin::Free { .. })
+    }
+
+    /// Samples dropped by the converter ring so far.
+    pub fn lost(&self) -> u32 {
+        self.ring.lost()
+    }
+
+    /// Stalls the consumer: converts `samples` samples into the ring at once (overrun tests).
+    pub fn flood(&mut self, samples: u32) {
+        for _ in 0..samples {
+            let t = self.next_sample;
+            self.convert_one(t);
+            self.next_sample += 1;
+        }
+    }
+
+    /// The true ECR, log10 Ω, at this instant.
+    pub fn log10_ecr(&self) -> f64 {
+        let sliding = matches!(self.pin, Pin::Free { .. }) && !self.last.3;
+        if sliding {
+            self.cfg.ecr.log10_film + self.ecr_dev
+        } else {
+            self.cfg.ecr.log10_rest
+        }
+    }
+
+    /// Advances every model to `t_us` (converting the samples due on the way).
+    pub(crate) fn advance(&mut self, t_us: u64) {
+        if t_us <= self.now_us {
+            return;
+        }
+        let dt = (t_us - self.now_us) as f64 * 1e-6;
+        // Heater: exact step of the first-order plate model.
+        let th = self.cfg.thermal;
+        let t_inf = th.ambient_c + th.heater_power_w * self.heater_duty * th.resistance_k_per_w;
+        let a = (-dt / (th.resistance_k_per_w * th.capacity_j_per_k)).exp();
+        self.temp_c = t_inf + (self.temp_c - t_inf) * a;
+        // Remanence: the pin goes once it has faded.
+        if let Some(t0) = self.remanent_since_us {
+            let t_go = t0 + (self.cfg.remanence_s * 1e6) as u64;
+            if t_go <= t_us {
+                self.remanent_since_us = None;
+                self.free_pin(t_go);
+            }
+        }
+        // ADC samples due up to t_us.
+        if self.adc_on {
+            let per = 1e6 / self.rate_hz as f64;
+            loop {
+                let ts = (self.next_sample as f64 * per) as u64;
+                if ts > t_us {
+                    break;
+                }
+                self.convert_one(ts);
+                self.next_sample += 1;
+            }
+        }
+        self.now_us = t_us;
+    }
+
+    fn free_pin(&mut self, t0_us: u64) {
+        if matches!(self.pin, Pin::Free { .. }) {
+            return;
+        }
+        let y0 = self.rig.y_of_x(self.cfg.x0_m);
+        let sim = Simulator::new(self.model.clone(), y0, 0.0, Method::default());
+        self.pin = Pin::Free {
+            t0_us,
+            sim: Box::new(sim),
+        };
+    }
+
+    fn state_at(&mut self, t_us: u64) -> (f64, f64, f64, bool) {
+        let x0 = self.cfg.x0_m;
+        match &mut self.pin {
+            Pin::Held => (x0, 0.0, 0.0, true),
+            Pin::Free { t0_us, sim } => {
+                if t_us < *t0_us {
+                    return (x0, 0.0, 0.0, true);
+                }
+                let tau = self.rig.tau_of_t((t_us - *t0_us) as f64 * 1e-6);
+                match sim.step_to(tau) {
+                    Ok(s) => {
+                        let f_n = if self.cfg.load_n > 0.0 {
+                            s.f * self.cfg.load_n
+                        } else {
+                            0.0
+                        };
+                        self.last = (
+                            self.rig.x_of_y(s.y),
+                            self.rig.v_of_ydot(s.ydot),
+                            f_n,
+                            s.stuck,
+                        );
+                        self.last
+                    }
+                    Err(_) => self.last,
+                }
+            }
+        }
+    }
+
+    fn convert_one(&mut self, t_us: u64) {
+        let (x, v, f, _) = self.state_at(t_us);
+        let n = self.cfg.noise;
+        let x = x + n.displacement_m * self.rng.normal();
+        let v = v + n.velocity_m_s * self.rng.normal();
+        // Charge amplifier: lag (a delay line of whole samples), then its low-pass.
+        let lag = (self.cfg.force_lag_s * self.rate_hz as f64).round() as usize;
+        self.force_delay.push_back(f);
+        let f_lagged = if self.force_delay.len() > lag {
+            self.force_delay.pop_front().unwrap_or(f)
+        } else {
+            self.force_delay.front().copied().unwrap_or(f)
+        };
+        let f = self.force_lp.step(f_lagged) + n.force_n * self.rng.normal();
+        // ECR: correlated fluctuation of log10 R (AR(1) at the sample rate).
+        let dt = 1.0 / self.rate_hz as f64;
+        let rho = (-dt / self.cfg.ecr.correlation_s).exp();
+        self.ecr_dev = rho * self.ecr_dev
+            + (1.0 - rho * rho).sqrt() * self.cfg.ecr.fluctuation_decades * self.rng.normal();
+        let e = self.ecr_output() + n.ecr_v * self.rng.normal();
+        let s = [
+            self.cal[0].to_count(x as f32),
+            self.cal[1].to_count(v as f32),
+            self.cal[2].to_count(f as f32),
+            self.cal[3].to_count(e as f32),
+        ];
+        self.ring.push(s);
+    }
+
+    fn ecr_output(&self) -> f64 {
+        let r = 10f64.powf(self.log10_ecr());
+        let gain = GAIN_V_PER_A[(self.ecr_range.min(RANGES - 1)) as usize] as f64;
+        (self.ecr_source_v / r * gain).clamp(0.0, FULL_SCALE_V as f64)
+    }
+}
+
+impl Magnet for SimHardware {
+    fn magnet_drive(&mut self, drive: MagnetDrive) {
+        let was_holding = matches!(self.magnet, MagnetDrive::Hold { .. });
+        match drive {
+            MagnetDrive::Hold { duty } if duty > 0.2 => {
+                // The magnet pulls the head back to x0 and holds it there.
+                self.pin = Pin::Held;
+                self.last = (self.cfg.x0_m, 0.0, 0.0, true);
+                self.remanent_since_us = None;
+            }
+            MagnetDrive::Hold { .. } => {}
+            MagnetDrive::Reverse { .. } => {
+                self.remanent_since_us = None;
+                if was_holding || matches!(self.pin, Pin::Held) {
+                    self.free_pin(self.now_us);
+                }
+            }
+            MagnetDrive::Off => {
+                if was_holding {
+                    self.remanent_since_us = Some(self.now_us);
+                }
+            }
+        }
+        self.magnet = drive;
+    }
+}
+
+impl Thermocouple for SimHardware {
+    fn read_thermocouple(&mut self) -> Result<f32, ThermocoupleFault> {
+        if let Some(f) = self.tc_fault {
+            return Err(f);
+        }
+        let t = self.temp_c + self.cfg.noise.temperature_c * self.rng.normal();
+        Ok(((t * 128.0).round() / 128.0) as f32)
+    }
+}
+
+impl HeaterOutput for SimHardware {
+    fn set_heater_duty(&mut self, duty: f32) {
+        self.heater_duty = if duty.is_finite() {
+            duty.clamp(0.0, 1.0) as f64
+        } else {
+            0.0
+        };
+    }
+}
+
+impl EcrFrontEnd for SimHardware {
+    fn set_ecr_source(&mut self, volts: f32) {
+        self.ecr_source_v = volts as f64;
+    }
+    fn set_ecr_range(&mut self, range: u8) {
+        self.ecr_range = range.min(RANGES - 1);
+    }
+    fn read_ecr_output(&mut self) -> f32 {
+        (self.ecr_output() + self.cfg.noise.ecr_v * self.rng.normal())
+            .clamp(0.0, FULL_SCALE_V as f64) as f32
+    }
+}
+
+impl SampleSource for SimHardware {
+    fn adc_start(&mut self, rate_hz: u32) -> bool {
+        if rate_hz == 0 {
+            return false;
+        }
+        self.rate_hz = rate_hz;
+        self.adc_on = true;
+        self.ring.clear();
+        self.force_lp = Biquad::lowpass(self.cfg.force_cutoff_hz, rate_hz as f64);
+        self.force_lp.reset(self.last.2);
+        self.force_delay.clear();
+        // Sample k is at k / rate: the first one due at or after now.
+        self.next_sample = (self.now_us as f64 * 1e-6 * rate_hz as f64).ceil() as u64;
+        true
+    }
+    fn adc_stop(&mut self) {
+        self.adc_on = false;
+    }
+    fn adc_running(&self) -> bool {
+        self.adc_on
+    }
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize {
+        self.ring.pop_into(out)
+    }
+    fn adc_lost(&self) -> u32 {
+        self.ring.lost()
+    }
+}
+
+impl Button for SimHardware {
+    fn button_pressed(&mut self) -> bool {
+        self.button
+    }
+}
+
+impl Led for SimHardware {
+    fn set_lamps(&mut self, lamps: Lamps) {
+        self.lamps = lamps;
+    }
+}
+
+impl Link for SimHardware {
+    fn send_frame(&mut self, frame: &[u8]) -> bool {
+        if self.connected {
+            self.out.extend_from_slice(frame);
+        }
+        self.connected
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn butterworth_has_unit_dc_gain_and_minus_3_db_at_cutoff() {
+        let rate = 10_000.0;
+        let mut lp = Biquad::lowpass(300.0, rate);
+        let mut y = 0.0;
+        for _ in 0..2000 {
+            y = lp.step(1.0);
+        }
+        assert!((y - 1.0).abs() < 1e-9);
+        let mut lp = Biquad::lowpass(300.0, rate);
+        let mut peak = 0.0f64;
+        for i in 0..20_000 {
+            let y = lp.step((2.0 * std::f64::consts::PI * 300.0 * i as f64 / rate).sin());
+            if i > 10_000 {
+                peak = peak.max(y.abs());
+            }
+        }
+        assert!(
+            (peak - std::f64::consts::FRAC_1_SQRT_2).abs() < 0.01,
+            "{peak}"
+        );
+    }
+
+    #[test]
+    fn magnet_holds_until_released_and_remanence_delays_a_plain_switch_off() {
+        let cfg = VirtualRigConfig::default();
+        let mut hw = SimHardware::new(&cfg).unwrap();
+        hw.magnet_drive(MagnetDrive::Hold { duty: 0.6 });
+        hw.advance(100_000);
+        assert!(!hw.pin_free());
+        assert_eq!(hw.state_at(100_000).0, cfg.x0_m);
+        hw.magnet_drive(MagnetDrive::Off);
+        hw.advance(104_000);
+        assert!(!hw.pin_free(), "let go before the remanent field faded");
+        hw.advance(106_000);
+        assert!(hw.pin_free());
+        // Re-held, then released with the reverse pulse: free at once, and moving towards 0.
+        hw.magnet_drive(MagnetDrive::Hold { duty: 0.6 });
+        hw.advance(200_000);
+        hw.magnet_drive(MagnetDrive::Reverse { duty: 0.3 });
+        assert!(hw.pin_free());
+        let (x, v, _, _) = hw.state_at(205_000);
+        assert!(x < cfg.x0_m && v < 0.0);
+    }
+
+    fn force_counts(lag_s: f64) -> Vec<f64> {
+        let cfg = VirtualRigConfig {
+            force_lag_s: lag_s,
+            noise: crate::config::Noise {
+                displacement_m: 0.0,
+                velocity_m_s: 0.0,
+                force_n: 0.0,
+                temperature_c: 0.0,
+                ecr_v: 0.0,
+            },
+            ..Default::default()
+        };
+        let mut hw = SimHardware::new(&cfg).unwrap();
+        hw.magnet_drive(MagnetDrive::Hold { duty: 0.6 });
+        hw.adc_start(10_000);
+        hw.magnet_drive(MagnetDrive::Reverse { duty: 0.3 });
+        let mut f = Vec::new();
+        let mut out = [[0u16; 4]; 256];
+        for ms in 1..=300 {
+            hw.advance(ms * 1000);
+            let n = hw.adc_read(&mut out);
+            f.extend(out[..n].iter().map(|s| s[2] as f64));
+        }
+        assert_eq!(hw.lost(), 0);
+        f
+    }
+
+    #[test]
+    fn force_channel_lags_by_the_configured_delay() {
+        let f0 = force_counts(0.0);
+        let f3 = force_counts(0.003);
+        assert!(f0.len() >= 2999);
+        let mismatch =
+            |shift: usize| -> f64 { (100..2500).map(|i| (f3[i + shift] - f0[i]).abs()).sum() };
+        let best = (0..60)
+            .min_by(|&a, &b| mismatch(a).total_cmp(&mismatch(b)))
+            .unwrap();
+        assert_eq!(best, 30, "3 ms at 10 kS/s");
+        assert!(
+            mismatch(30) < 1e-9 * mismatch(0).max(1.0) + 1.0,
+            "the lag must be a pure delay"
+        );
+    }
+}

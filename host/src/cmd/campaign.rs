@@ -1,0 +1,345 @@
+//! `tribo campaign PLAN.toml`: a series of runs over loads × temperatures × repetitions (the
+//! thesis's temperature studies), resumable after an interruption without redoing finished runs.
+//!
+//! ```toml
+//! name = "pao-temperature"    # stored with every run; identifies finished points on resume
+//! loads_n = [0.2, 0.4]
+//! temps_c = [25, 60]          # optional: omit for runs with the heater off
+//! repeats = 3
+//! sample = "steel AISI 52100"   # optional: label, sample, lubricant
+//! lubricant = "PAO 6"
+//! # optional: rate_hz, max_duration_s, mass_kg, stiffness_n_per_m, x0_m,
+//! #           ramp_c_per_min, settle_tol_c, settle_s, settle_timeout_s, prompt_load
+//! ```
+
+use super::run::{abort_flag, print_outcome, LinkArgs, Ui};
+use crate::link::session::{record_run, HeaterPlan, RunPlan};
+use crate::link::{firmware_version, Link};
+use anyhow::{bail, Context};
+use serde::Deserialize;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
+use tribo_store::catalog::{Axis, Value};
+use tribo_store::run::{list_run_dirs, META_FILE};
+use tribo_store::{Catalog, Filter, RunMeta, RunStatus};
+use tribo_wire::{Configure, HostMsg};
+
+/// A campaign plan (PLAN.toml).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plan {
+    pub name: String,
+    pub loads_n: Vec<f32>,
+    #[serde(default)]
+    pub temps_c: Vec<f32>,
+    #[serde(default = "one")]
+    pub repeats: u32,
+    #[serde(default)]
+    pub label: Option<String>,
+    #[serde(default)]
+    pub sample: Option<String>,
+    #[serde(default)]
+    pub lubricant: Option<String>,
+    #[serde(default)]
+    pub rate_hz: Option<u32>,
+    #[serde(default)]
+    pub max_duration_s: Option<f32>,
+    #[serde(default)]
+    pub mass_kg: Option<f32>,
+    #[serde(default)]
+    pub stiffness_n_per_m: Option<f32>,
+    #[serde(default)]
+    pub x0_m: Option<f32>,
+    #[serde(default = "ramp")]
+    pub ramp_c_per_min: f32,
+    #[serde(default = "tol")]
+    pub settle_tol_c: f32,
+    #[serde(default = "settle")]
+    pub settle_s: f64,
+    #[serde(default = "settle_timeout")]
+    pub settle_timeout_s: f64,
+    /// Ask the operator to turn the load knob when the load changes (on a terminal).
+    #[serde(default = "yes")]
+    pub prompt_load: bool,
+}
+
+fn one() -> u32 {
+    1
+}
+fn ramp() -> f32 {
+    10.0
+}
+fn tol() -> f32 {
+    0.5
+}
+fn settle() -> f64 {
+    30.0
+}
+fn settle_timeout() -> f64 {
+    1800.0
+}
+fn yes() -> bool {
+    true
+}
+
+/// One run of a campaign.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Point {
+    pub temp_c: Option<f32>,
+    pub load_n: f32,
+    pub repeat: u32,
+}
+
+impl Plan {
+    pub fn load(path: &Path) -> anyhow::Result<Plan> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read the plan {}", path.display()))?;
+        let p: Plan =
+            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        p.check().with_context(|| format!("{}", path.display()))?;
+        Ok(p)
+    }
+
+    fn check(&self) -> anyhow::Result<()> {
+        if self.name.trim().is_empty() {
+            bail!("`name` must not be empty (it identifies the campaign's runs when resuming)");
+        }
+        if self.loads_n.is_empty() || self.repeats == 0 {
+            bail!("nothing to do: give at least one load in `loads_n` and `repeats` ≥ 1");
+        }
+        for p in self.points() {
+            self.config(p.load_n).validate().map_err(|f| {
+                anyhow::anyhow!("load {} N: {f:?} out of the rig's range", p.load_n)
+            })?;
+            if let Some(t) = p.temp_c {
+                tribo_wire::HeaterSetpoint {
+                    setpoint_c: t,
+                    ramp_c_per_min: self.ramp_c_per_min,
+                }
+                .validate()
+                .map_err(|f| {
+                    anyhow::anyhow!(
+                        "temperature {t} °C: {f:?} out of range (15–100 °C, ramp 0.1–30 °C/min)"
+                    )
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Every run, temperatures outermost (heating is the slow part), then loads, then repetitions.
+    pub fn points(&self) -> Vec<Point> {
+        let temps: Vec<Option<f32>> = if self.temps_c.is_empty() {
+            vec![None]
+        } else {
+            self.temps_c.iter().map(|t| Some(*t)).collect()
+        };
+        let mut v = vec![];
+        for t in &temps {
+            for l in &self.loads_n {
+                for r in 1..=self.repeats {
+                    v.push(Point {
+                        temp_c: *t,
+                        load_n: *l,
+                        repeat: r,
+                    });
+                }
+            }
+        }
+        v
+    }
+
+    pub fn config(&self, load: f32) -> Configure {
+        let mut c = Configure::real_rig(load);
+        if let Some(v) = self.rate_hz {
+            c.sample_rate_hz = v;
+        }
+        if let Some(v) = self.max_duration_s {
+            c.max_duration_s = v;
+        }
+        if let Some(v) = self.mass_kg {
+            c.rig.mass_kg = v;
+        }
+        if let Some(v) = self.stiffness_n_per_m {
+            c.rig.stiffness_n_per_m = v;
+        }
+        if let Some(v) = self.x0_m {
+            c.initial_amplitude_m = v;
+        }
+        c
+    }
+}
+
+/// The points of `plan` already done: a complete run of this campaign in `store` with the same
+/// load, temperature setpoint and repetition.
+pub fn finished(plan: &Plan, store: &Path) -> anyhow::Result<Vec<Point>> {
+    let metas: Vec<RunMeta> = list_run_dirs(store)?
+        .iter()
+        .filter_map(|d| std::fs::read_to_string(d.join(META_FILE)).ok())
+        .filter_map(|t| toml::from_str::<RunMeta>(&t).ok())
+        .filter(|m| {
+            m.status == RunStatus::Complete && m.campaign.as_deref() == Some(plan.name.as_str())
+        })
+        .collect();
+    Ok(plan
+        .points()
+        .into_iter()
+        .filter(|p| {
+            metas.iter().any(|m| {
+                m.repeat == Some(p.repeat)
+                    && (m.load_n - p.load_n as f64).abs() < 5e-4
+                    && match (m.temp_setpoint_c, p.temp_c) {
+                        (None, None) => true,
+                        (Some(a), Some(b)) => (a - b as f64).abs() < 0.05,
+                        _ => false,
+                    }
+            })
+        })
+        .collect())
+}
+
+/// Arguments of `tribo campaign`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The plan (TOML: name, loads_n, temps_c, repeats, …).
+    pub plan: PathBuf,
+    #[command(flatten)]
+    pub link: LinkArgs,
+    /// Never ask for the load knob (e.g. a virtual rig, or the load is already right).
+    #[arg(long)]
+    pub no_prompt: bool,
+    /// Show what would be run and what is already done, and stop.
+    #[arg(long)]
+    pub dry_run: bool,
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Runs the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let plan = Plan::load(&args.plan)?;
+    let store = args.link.store();
+    let done = finished(&plan, &store)?;
+    let todo: Vec<Point> = plan
+        .points()
+        .into_iter()
+        .filter(|p| !done.contains(p))
+        .collect();
+    println!(
+        "campaign {:?}: {} runs planned, {} already done, {} to take",
+        plan.name,
+        plan.points().len(),
+        done.len(),
+        todo.len()
+    );
+    if args.dry_run || todo.is_empty() {
+        for p in &todo {
+            println!(
+                "  to do: load {} N, {}, repetition {}",
+                p.load_n,
+                p.temp_c.map_or("heater off".into(), |t| format!("{t} °C")),
+                p.repeat
+            );
+        }
+        if todo.is_empty() {
+            print_table(&plan, &store)?;
+        }
+        return Ok(());
+    }
+    let abort = abort_flag();
+    let port = args.link.port()?;
+    let mut link = Link::open(&port)?;
+    let info = link.hello()?;
+    eprintln!(
+        "rig on {}: firmware {}, serial {:016x}",
+        link.name(),
+        firmware_version(&info),
+        info.serial
+    );
+    let mut last_load: Option<f32> = None;
+    for (i, p) in todo.iter().enumerate() {
+        if abort.load(Ordering::Relaxed) {
+            break;
+        }
+        if last_load != Some(p.load_n)
+            && plan.prompt_load
+            && !args.no_prompt
+            && std::io::stdin().is_terminal()
+        {
+            eprintln!("set the load knob to {} N, then press Enter", p.load_n);
+            let mut s = String::new();
+            std::io::stdin().read_line(&mut s)?;
+        }
+        last_load = Some(p.load_n);
+        eprintln!(
+            "[{}/{}] load {} N, {}, repetition {}/{}",
+            i + 1,
+            todo.len(),
+            p.load_n,
+            p.temp_c.map_or("heater off".into(), |t| format!("{t} °C")),
+            p.repeat,
+            plan.repeats
+        );
+        let mut rp = RunPlan::new(plan.config(p.load_n));
+        rp.heater = p.temp_c.map(|t| HeaterPlan {
+            setpoint_c: t,
+            ramp_c_per_min: plan.ramp_c_per_min,
+            tolerance_c: plan.settle_tol_c,
+            settle_s: plan.settle_s,
+            timeout_s: plan.settle_timeout_s,
+        });
+        rp.keep_heater = true;
+        rp.label = plan.label.clone();
+        rp.sample = plan.sample.clone();
+        rp.lubricant = plan.lubricant.clone();
+        rp.campaign = Some(plan.name.clone());
+        rp.repeat = Some(p.repeat);
+        let mut ui = Ui::new(args.quiet);
+        let o = record_run(&mut link, &info, &store, &rp, &abort, &mut |e| ui.on(e));
+        ui.finish();
+        let o = o.with_context(|| {
+            format!(
+                "campaign {:?} stopped; run `tribo campaign {}` again to resume",
+                plan.name,
+                args.plan.display()
+            )
+        })?;
+        print_outcome(&o);
+        if o.aborted || o.link_lost.is_some() {
+            println!(
+                "campaign interrupted: run `tribo campaign {}` again to resume where it stopped",
+                args.plan.display()
+            );
+            return Ok(());
+        }
+    }
+    let _ = link.command(HostMsg::HeaterOff);
+    if abort.load(Ordering::Relaxed) {
+        println!(
+            "campaign interrupted: run `tribo campaign {}` again to resume",
+            args.plan.display()
+        );
+        return Ok(());
+    }
+    print_table(&plan, &store)
+}
+
+fn print_table(plan: &Plan, store: &Path) -> anyhow::Result<()> {
+    let cat = Catalog::open(store)?;
+    let f = Filter {
+        campaign: Some(plan.name.clone()),
+        ..Default::default()
+    };
+    for v in [Value::Mu0, Value::Mu1] {
+        let t = cat.table(Axis::Temp, Axis::Load, v, &f)?;
+        if !t.rows.is_empty() {
+            println!(
+                "{} (host fit, mean ± sd over repetitions):",
+                if v == Value::Mu0 { "μ0" } else { "μ1" }
+            );
+            print!("{}", t.render());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,335 @@
+//! `tribo onboard RECORD [--json]`: runs the firmware's on-board analysis over a record, as if the
+//! record were being sampled live by the rig.
+//!
+//! The record's SI samples are turned into 16-bit counts through a calibration that spans the record
+//! like the rig's bipolar converters would (each channel's full scale is ±1.05 × its largest
+//! magnitude, zero at mid-scale), then fed one by one to the very same
+//! [`tribo_firmware::analysis::Pipeline`] the MCU runs. No offset capture is needed (the zeros of
+//! this calibration are exact): the pipeline is released at once, and a record that starts with the
+//! pin still held has that hold skipped (up to an eighth of a period before the velocity first exceeds
+//! 1 % of its peak). The record must be uniformly sampled (1 % jitter at most).
+use crate::firmware::analysis::Pipeline;
+use crate::firmware::calib;
+use crate::physics::Record;
+use crate::wire::{
+    Channel, ChannelCal, ChannelSet, Configure, Estimate, OnboardResult, RigConstants,
+};
+use anyhow::{bail, Context};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+/// Arguments of `tribo onboard`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Record to analyse: CSV `t_s,x_m,v_m_s[,ft_n,…]` with `# mass_kg=…`, `# stiffness_n_per_m=…`,
+    /// `# load_n=…` comment lines.
+    pub record: PathBuf,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let record = Record::load(&args.record)?;
+    let result = analyse(&record).with_context(|| format!("{}", args.record.display()))?;
+    if args.json {
+        println!("{}", to_json(&result));
+    } else {
+        print!("{}", to_text(&result));
+    }
+    Ok(())
+}
+
+/// Relative spread of the sampling interval tolerated (the pipeline assumes a uniform rate).
+const MAX_JITTER: f64 = 0.01;
+/// Full scale of each converter relative to the channel's largest magnitude in the record.
+const HEADROOM: f64 = 1.05;
+
+/// Runs the on-board pipeline over a record (sampled live, 16-bit counts) and returns its result.
+pub fn analyse(record: &Record) -> anyhow::Result<OnboardResult> {
+    record.validate()?;
+    let rig = record.rig()?;
+    let dt = record.dt();
+    if !(dt.is_finite() && dt > 0.0) {
+        bail!("cannot tell the sampling interval of the record");
+    }
+    if let Some(w) = record
+        .t
+        .windows(2)
+        .find(|w| ((w[1] - w[0]) / dt - 1.0).abs() > MAX_JITTER)
+    {
+        bail!(
+            "the record is not uniformly sampled (interval {} s at t = {} s, mean {dt} s); the on-board \
+             analysis needs a constant sample rate",
+            w[1] - w[0],
+            w[0]
+        );
+    }
+    let rate = (1.0 / dt).round();
+    if !(1.0..=u32::MAX as f64).contains(&rate) {
+        bail!("sample rate {rate} Hz is out of range");
+    }
+    let bipolar = |c: &[f64]| -> anyhow::Result<ChannelCal> {
+        let peak = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let fs = if peak > 0.0 { HEADROOM * peak } else { 1.0 };
+        calib::spanning(-fs, fs).context("cannot build a converter range for the record")
+    };
+    let mut calibration = [ChannelCal {
+        gain: 1.0,
+        zero: 0.0,
+    }; 5];
+    calibration[Channel::Displacement as usize] = bipolar(&record.x)?;
+    calibration[Channel::Velocity as usize] = bipolar(&record.v)?;
+    let mut channels = ChannelSet(0)
+        .with(Channel::Displacement)
+        .with(Channel::Velocity);
+    if let Some(ft) = &record.ft {
+        calibration[Channel::Force as usize] = bipolar(ft)?;
+        channels = channels.with(Channel::Force);
+    }
+    let x0 = record.x.first().map(|x| x.abs()).filter(|x| *x > 0.0);
+    let x0 = x0.unwrap_or_else(|| record.x.iter().fold(0.0f64, |m, v| m.max(v.abs())));
+    let duration =
+        record.t.last().copied().unwrap_or(0.0) - record.t.first().copied().unwrap_or(0.0);
+    let cfg = Configure {
+        rig: RigConstants {
+            mass_kg: rig.mass_kg as f32,
+            stiffness_n_per_m: rig.stiffness_n_per_m as f32,
+            load_n: rig.load_n as f32,
+        },
+        sample_rate_hz: rate as u32,
+        channels,
+        initial_amplitude_m: x0 as f32,
+        max_duration_s: (duration + 2.0 * dt) as f32,
+        calibration,
+    };
+    let mut pipeline = Pipeline::new(&cfg).map_err(|e| anyhow::anyhow!("{e}"))?;
+    pipeline.release();
+    let start = release_index(record, rate, rig.stiffness_n_per_m / rig.mass_kg);
+    let count = |ch: Channel, v: f64| calib::to_count(calibration[ch as usize], v).unwrap_or(0);
+    let mut sample = [0u16; 3];
+    for i in start..record.len() {
+        sample[0] = count(Channel::Displacement, record.x[i]);
+        sample[1] = count(Channel::Velocity, record.v[i]);
+        let n = match &record.ft {
+            Some(ft) => {
+                sample[2] = count(Channel::Force, ft[i]);
+                3
+            }
+            None => 2,
+        };
+        if pipeline.push(&sample[..n]) != crate::firmware::analysis::Phase::Running {
+            break;
+        }
+    }
+    Ok(pipeline.finish(0))
+}
+
+/// Index at which to start feeding: a record may begin with the pin still held (v ≈ 0); the
+/// pipeline would wait for motion only so long, so the hold is skipped up to an eighth of a period
+/// before the velocity first exceeds 1 % of its peak.
+fn release_index(record: &Record, rate: f64, omega_sq: f64) -> usize {
+    let vmax = record.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let first = record
+        .v
+        .iter()
+        .position(|v| v.abs() > 0.01 * vmax)
+        .unwrap_or(0);
+    let period = 2.0 * std::f64::consts::PI / omega_sq.sqrt();
+    let margin = (period / 8.0 * rate) as usize;
+    first.saturating_sub(margin)
+}
+
+fn num(v: f32) -> String {
+    if v.is_finite() {
+        format!("{v}")
+    } else {
+        "null".into()
+    }
+}
+
+fn estimate_json(e: &Estimate) -> String {
+    format!(
+        "{{\"mu0\": {}, \"mu1\": {}, \"mu0_se\": {}, \"mu1_se\": {}}}",
+        num(e.mu0),
+        num(e.mu1),
+        num(e.mu0_se),
+        num(e.mu1_se)
+    )
+}
+
+/// The result as one JSON object: `mu0`, `mu1`, `mu0_se`, `mu1_se` (the value shown to the
+/// technician), `cycles`, `envelope_shape`, `verdict`, `frequency_hz`, `curvature`,
+/// `initial_amplitude_m`, `duration_s`, and the two estimators under `averaging` and `decrement`.
+/// Unavailable numbers are `null`.
+pub fn to_json(r: &OnboardResult) -> String {
+    format!(
+        "{{\"mu0\": {}, \"mu1\": {}, \"mu0_se\": {}, \"mu1_se\": {}, \"cycles\": {}, \"envelope_shape\": \"{}\", \
+         \"verdict\": \"{}\", \"frequency_hz\": {}, \"curvature\": {}, \"initial_amplitude_m\": {}, \
+         \"duration_s\": {}, \"averaging\": {}, \"decrement\": {}}}",
+        num(r.best.mu0),
+        num(r.best.mu1),
+        num(r.best.mu0_se),
+        num(r.best.mu1_se),
+        r.cycles,
+        r.shape.name(),
+        r.verdict.name(),
+        num(r.frequency_hz),
+        num(r.curvature),
+        num(r.initial_amplitude_m),
+        num(r.duration_s),
+        estimate_json(&r.averaging),
+        estimate_json(&r.decrement),
+    )
+}
+
+/// The result as a short table for the terminal.
+pub fn to_text(r: &OnboardResult) -> String {
+    let mut s = String::new();
+    let row = |s: &mut String, name: &str, e: &Estimate| {
+        let _ = writeln!(
+            s,
+            "{name:<10} mu0 = {:<12} ± {:<10} mu1 = {:<12} ± {}",
+            num(e.mu0),
+            num(e.mu0_se),
+            num(e.mu1),
+            num(e.mu1_se)
+        );
+    };
+    let _ = writeln!(s, "verdict    {}", r.verdict.name());
+    let _ = writeln!(
+        s,
+        "cycles     {}   frequency {} Hz   x0 {} m   duration {} s",
+        r.cycles,
+        num(r.frequency_hz),
+        num(r.initial_amplitude_m),
+        num(r.duration_s)
+    );
+    row(&mut s, "best", &r.best);
+    row(&mut s, "averaging", &r.averaging);
+    row(&mut s, "decrement", &r.decrement);
+    let _ = writeln!(
+        s,
+        "envelope   {} (a2 = {})",
+        r.shape.name(),
+        num(r.curvature)
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Exact Coulomb + viscous free response written as an SI record (f64, piecewise closed form).
+    fn exact_record(load: f64, mu0: f64, mu1: f64, rate: f64, seconds: f64) -> Record {
+        let (k, m, x0) = (1150.0f64, 0.04f64, 667e-6f64);
+        let omega = f64::sqrt(k / m);
+        let sigma = 0.5 * mu1 * omega;
+        let wd = (omega * omega - sigma * sigma).sqrt();
+        let (r, half) = (mu0 * load / k, std::f64::consts::PI / wd);
+        let (mut t0, mut xs, mut stuck) = (0.0, x0, false);
+        let (mut t, mut x, mut v) = (vec![], vec![], vec![]);
+        for i in 0..(rate * seconds) as usize {
+            let ti = i as f64 / rate;
+            let mut e = r * xs.signum();
+            while !stuck && ti >= t0 + half {
+                xs = e - (xs - e) * (-sigma * half).exp();
+                t0 += half;
+                stuck = xs.abs() <= r;
+                e = r * xs.signum();
+            }
+            let (xi, vi) = if stuck {
+                (xs, 0.0)
+            } else {
+                let tau = ti - t0;
+                let (s, c) = (wd * tau).sin_cos();
+                let d = (-sigma * tau).exp();
+                (
+                    e + (xs - e) * d * (c + sigma / wd * s),
+                    -(xs - e) * d * omega * omega / wd * s,
+                )
+            };
+            t.push(ti);
+            x.push(xi);
+            v.push(vi);
+        }
+        let rig = crate::physics::Rig {
+            mass_kg: m,
+            stiffness_n_per_m: k,
+            load_n: load,
+        };
+        Record::new(t, x, v, Some(rig), crate::physics::record::Units::Si)
+    }
+
+    #[test]
+    fn a_csv_record_goes_through_the_firmware_pipeline() {
+        let rec = exact_record(0.2, 0.02, 0.005, 10_000.0, 4.0);
+        // through the CSV format, as the command reads it
+        let rec = Record::from_csv_str(&rec.to_csv_string()).unwrap();
+        let r = analyse(&rec).unwrap();
+        assert_eq!(r.verdict, crate::wire::Verdict::Ok, "{r:?}");
+        assert!(
+            (r.best.mu0 - 0.02).abs() < 1e-3 && (r.best.mu1 - 0.005).abs() < 2e-4,
+            "{r:?}"
+        );
+        let j = to_json(&r);
+        for key in [
+            "\"mu0\":",
+            "\"mu1\":",
+            "\"cycles\":",
+            "\"envelope_shape\": \"",
+            "\"mu0_se\":",
+            "\"verdict\": \"ok\"",
+        ] {
+            assert!(j.contains(key), "{key} missing in {j}");
+        }
+        assert!(!j.contains("NaN") && !j.contains("inf"));
+    }
+
+    #[test]
+    fn too_short_a_record_is_refused_with_nulls() {
+        let rec = exact_record(0.7, 0.2, 0.01, 10_000.0, 1.0);
+        let r = analyse(&rec).unwrap();
+        assert_eq!(r.verdict, crate::wire::Verdict::TooFewCycles);
+        let j = to_json(&r);
+        assert!(
+            j.contains("\"mu0\": null") && j.contains("too-few-cycles"),
+            "{j}"
+        );
+    }
+
+    #[test]
+    fn a_held_start_is_skipped() {
+        let rec = exact_record(0.2, 0.02, 0.005, 10_000.0, 4.0);
+        let plain = analyse(&rec).unwrap();
+        // prepend half a second of hold at x0
+        let hold = 5000;
+        let mut held = rec.clone();
+        held.t = (0..hold + rec.len()).map(|i| i as f64 / 10_000.0).collect();
+        held.x = std::iter::repeat_n(rec.x[0], hold)
+            .chain(rec.x.iter().copied())
+            .collect();
+        held.v = std::iter::repeat_n(0.0, hold)
+            .chain(rec.v.iter().copied())
+            .collect();
+        let r = analyse(&held).unwrap();
+        assert_eq!(r.verdict, crate::wire::Verdict::Ok, "{r:?}");
+        assert!(
+            (r.best.mu0 - plain.best.mu0).abs() < 1e-4,
+            "{r:?} vs {plain:?}"
+        );
+        assert!(
+            (r.best.mu1 - plain.best.mu1).abs() < 2e-5,
+            "{r:?} vs {plain:?}"
+        );
+    }
+
+    #[test]
+    fn irregular_sampling_is_an_error_not_a_panic() {
+        let mut rec = exact_record(0.2, 0.02, 0.005, 10_000.0, 0.5);
+        rec.t[100] += 0.5e-4;
+        assert!(analyse(&rec).is_err());
+    }
+}

@@ -1,0 +1,38 @@
+//! `tribo pull [RUN]`: fetches the rig's last run, resuming after the last block already stored
+//! (or completes the run folder RUN).
+
+use super::run::{print_outcome, LinkArgs, Ui};
+use crate::link::session::pull_run;
+use std::path::PathBuf;
+
+/// Arguments of `tribo pull`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    pub link: LinkArgs,
+    /// Run folder to complete (default: the stored copy of the rig's last run, or a new folder).
+    pub run: Option<PathBuf>,
+    /// Keep the intact part of a corrupt frame log (cut the rest) and fetch what is missing.
+    #[arg(long)]
+    pub salvage: bool,
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Runs the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let (mut link, info) = args.link.connect()?;
+    let mut ui = Ui::new(args.quiet);
+    let o = pull_run(
+        &mut link,
+        &info,
+        &args.link.store(),
+        args.run.as_deref(),
+        args.salvage,
+        &mut |p| ui.on(p),
+    );
+    ui.finish();
+    let o = o?;
+    print_outcome(&o);
+    Ok(())
+}

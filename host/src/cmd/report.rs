@@ -1,0 +1,234 @@
+//! `tribo report RUN|RECORD|CAMPAIGN`: figures (SVG, PNG) and one self-contained HTML page.
+//!
+//! The work is done by `tribo-report`; this is the glue that tells what the argument names.
+use anyhow::{bail, Context};
+use std::path::{Path, PathBuf};
+use tribo_physics::identify::LawSpec;
+use tribo_physics::Record;
+use tribo_report::{write_record_report, ReportFiles, ReportInputs};
+use tribo_store::{Catalog, Filter, Run};
+
+/// Arguments of `tribo report`.
+///
+/// TARGET is a run folder of the store, a record CSV (`t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` with
+/// `# mass_kg=…` lines), or the name of a campaign in the store's catalog (with `--label`, a
+/// substring of the runs' labels). A run gives the figures of one free oscillation; a campaign
+/// μ0 and μ1 against the load and the oscillation count against the temperature.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Run folder, record CSV, or campaign name.
+    pub target: String,
+    /// Output directory (default: `report-<name>` in the current directory).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+    /// Run store, for a campaign (default: $TRIBO_STORE, else ./runs).
+    #[arg(long)]
+    pub store: Option<PathBuf>,
+    /// Select the campaign's runs by label substring instead of campaign name.
+    #[arg(long)]
+    pub label: bool,
+    /// Laws fitted for a run, comma-separated (coulomb, viscous, coulomb-viscous, quadratic,
+    /// poly:N, lugre).
+    #[arg(
+        long,
+        default_value = "coulomb,viscous,coulomb-viscous,quadratic",
+        value_delimiter = ','
+    )]
+    pub laws: Vec<String>,
+    /// Write SVG only (no PNG).
+    #[arg(long)]
+    pub no_png: bool,
+}
+
+/// Keeps a name usable as a folder name.
+fn clean(name: &str) -> String {
+    let s: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if s.is_empty() {
+        "report".into()
+    } else {
+        s
+    }
+}
+
+/// Runs the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let path = Path::new(&args.target);
+    let laws = args
+        .laws
+        .iter()
+        .map(|l| l.parse::<LawSpec>().map_err(anyhow::Error::msg))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let out_for = |name: &str| {
+        args.out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(format!("report-{}", clean(name))))
+    };
+    let files = if path.is_dir() && path.join("meta.toml").is_file() {
+        let run = Run::open(path)?;
+        let mut inputs = tribo_report::store::run_inputs(&run);
+        inputs.options.laws = laws;
+        inputs.options.png = !args.no_png;
+        let rec = run
+            .record()
+            .with_context(|| format!("reading the samples of {}", path.display()))?;
+        write_record_report(&rec, &inputs, &out_for(run.id()))?
+    } else if path.is_file() {
+        let rec = Record::load(path)?;
+        let stem = path
+            .file_stem()
+            .map_or("record".into(), |s| s.to_string_lossy().into_owned());
+        let mut inputs = ReportInputs {
+            title: format!("Record {}", path.display()),
+            meta: vec![("file".into(), path.display().to_string())],
+            ..ReportInputs::default()
+        };
+        inputs.options.laws = laws;
+        inputs.options.png = !args.no_png;
+        write_record_report(&rec, &inputs, &out_for(&stem))?
+    } else if path.is_dir() {
+        bail!(
+            "{} is a folder but not a run (no meta.toml): give a run folder, a record CSV or a campaign name",
+            path.display()
+        );
+    } else {
+        campaign(&args, &out_for(&args.target))?
+    };
+    print_files(&files);
+    Ok(())
+}
+
+fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
+    let store = args
+        .store
+        .clone()
+        .unwrap_or_else(tribo_store::default_store_dir);
+    if !store.is_dir() {
+        bail!(
+            "{:?} is neither a run folder, a record file, nor a campaign: there is no run store at {} \
+             (point --store at one)",
+            args.target,
+            store.display()
+        );
+    }
+    let cat = Catalog::open(&store)?;
+    let filter = if args.label {
+        Filter {
+            label: Some(args.target.clone()),
+            ..Filter::default()
+        }
+    } else {
+        Filter {
+            campaign: Some(args.target.clone()),
+            ..Filter::default()
+        }
+    };
+    let rows = cat.list(&filter)?;
+    if rows.is_empty() {
+        bail!(
+            "no run of {} {:?} in the catalog of {} (see `tribo runs`; `tribo runs --reindex` rebuilds the catalog)",
+            if args.label { "label" } else { "campaign" },
+            args.target,
+            store.display()
+        );
+    }
+    let title = if args.label {
+        format!("Runs labelled {:?}", args.target)
+    } else {
+        format!("Campaign {}", args.target)
+    };
+    let points: Vec<_> = rows
+        .iter()
+        .map(tribo_report::store::campaign_point)
+        .collect();
+    let inputs = tribo_report::CampaignInputs {
+        title,
+        png: !args.no_png,
+    };
+    Ok(tribo_report::write_campaign_report(&points, &inputs, out)?)
+}
+
+fn print_files(files: &ReportFiles) {
+    println!("report: {}", files.html.display());
+    for f in &files.figures {
+        match &f.png {
+            Some(p) => println!("  {:<20} {} {}", f.name, f.svg.display(), p.display()),
+            None => println!("  {:<20} {}", f.name, f.svg.display()),
+        }
+    }
+    for n in &files.notes {
+        println!("  note: {n}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tribo_physics::integrate::Method;
+    use tribo_physics::model::Model;
+    use tribo_physics::sensor::{generate, RecordSpec};
+    use tribo_physics::{FrictionLaw, Rig};
+
+    fn args(target: &str, out: Option<PathBuf>) -> Args {
+        Args {
+            target: target.into(),
+            out,
+            store: None,
+            label: false,
+            laws: vec!["coulomb-viscous".into()],
+            no_png: true,
+        }
+    }
+
+    #[test]
+    fn a_record_csv_gets_its_figures_and_page() {
+        let dir = std::env::temp_dir().join(format!("tribo-report-cmd-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let spec = RecordSpec {
+            rig: Rig::REAL,
+            x0_m: 667e-6,
+            v0_m_s: 0.0,
+            duration_s: 0.5,
+            rate_hz: 2000.0,
+        };
+        let model = Model::new(FrictionLaw::coulomb_viscous(0.02, 0.004));
+        let rec = generate(&spec, &model, Method::dopri(1e-9), None).unwrap();
+        let csv = dir.join("run.csv");
+        rec.save(&csv).unwrap();
+        let out = dir.join("out");
+        run(args(csv.to_str().unwrap(), Some(out.clone()))).unwrap();
+        let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+        for f in [
+            "motion",
+            "envelopes",
+            "law",
+            "force_velocity",
+            "force_displacement",
+        ] {
+            assert!(out.join(format!("{f}.svg")).is_file(), "{f}");
+            assert!(html.contains(&format!("id=\"fig-{f}\"")), "{f}");
+        }
+        assert!(!out.join("motion.png").exists(), "--no-png");
+        // Not a run folder, nor a record, nor a campaign of an existing store.
+        let e = run(args(dir.to_str().unwrap(), None))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not a run"), "{e}");
+        let mut a = args("no-such-campaign", None);
+        a.store = Some(dir.join("no-store"));
+        let e = run(a).unwrap_err().to_string();
+        assert!(e.contains("no run store"), "{e}");
+        let mut a = args(csv.to_str().unwrap(), Some(out.clone()));
+        a.laws = vec!["cubic-spline".into()];
+        assert!(run(a).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,419 @@
+//! `tribo run`: one run on the rig — configure, settle the heater, arm, release (or wait for the
+//! button), stream with a live progress bar, save, and print μ0/μ1 on-board vs host fit.
+//!
+//! Also the pieces the other rig commands share: choosing the port and the store, the Ctrl-C flag,
+//! the progress display and the result table.
+
+use crate::link::session::{record_run, HeaterPlan, Outcome, Progress, RunPlan};
+use crate::link::{devices, firmware_version, Link};
+use anyhow::{bail, Context};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::Duration;
+use tribo_store::Run;
+use tribo_wire::Configure;
+
+/// Where the virtual rig's port is linked by default (`tribo rig --virtual`).
+pub const DEFAULT_VIRTUAL_LINK: &str = "/tmp/tribo-virtual-rig";
+
+/// How to reach the rig and where to store runs.
+#[derive(clap::Args, Debug, Clone)]
+pub struct LinkArgs {
+    /// Serial port of the rig (default: $TRIBO_PORT, else the only attached rig, else the virtual rig
+    /// at /tmp/tribo-virtual-rig).
+    #[arg(long, short)]
+    pub port: Option<PathBuf>,
+    /// Run store directory (default: $TRIBO_STORE, else ./runs).
+    #[arg(long)]
+    pub store: Option<PathBuf>,
+}
+
+impl LinkArgs {
+    pub fn store(&self) -> PathBuf {
+        self.store
+            .clone()
+            .unwrap_or_else(tribo_store::default_store_dir)
+    }
+
+    /// The port to use, or an error listing what to do.
+    pub fn port(&self) -> anyhow::Result<PathBuf> {
+        if let Some(p) = &self.port {
+            return Ok(p.clone());
+        }
+        if let Some(p) = std::env::var_os("TRIBO_PORT").filter(|p| !p.is_empty()) {
+            return Ok(p.into());
+        }
+        let ports = devices::scan(Path::new("/sys/class/tty"));
+        match ports.len() {
+            1 => return Ok(ports[0].path.clone()),
+            0 => {}
+            _ => bail!(
+                "several serial ports are attached ({}): choose one with --port (`tribo devices` shows which is a rig)",
+                ports.iter().map(|p| p.path.display().to_string()).collect::<Vec<_>>().join(", ")
+            ),
+        }
+        let v = Path::new(DEFAULT_VIRTUAL_LINK);
+        if v.exists() {
+            return Ok(v.to_owned());
+        }
+        bail!(
+            "no rig found: attach one (see `tribo devices`) and give --port, or start a virtual rig with `tribo rig \
+             --virtual` in another terminal"
+        )
+    }
+
+    /// Opens the link and says hello.
+    pub fn connect(&self) -> anyhow::Result<(Link, tribo_wire::DeviceInfo)> {
+        let port = self.port()?;
+        let mut link = Link::open(&port)?;
+        let info = link.hello()?;
+        Ok((link, info))
+    }
+}
+
+/// Set on Ctrl-C (a second Ctrl-C exits at once).
+pub fn abort_flag() -> Arc<AtomicBool> {
+    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    FLAG.get_or_init(|| {
+        let f = Arc::new(AtomicBool::new(false));
+        let g = f.clone();
+        let _ = ctrlc::set_handler(move || {
+            if g.swap(true, Ordering::SeqCst) {
+                eprintln!("\ninterrupted twice: exiting now (the run folder stays readable)");
+                std::process::exit(130);
+            }
+            eprintln!("\ninterrupted: aborting the run cleanly (Ctrl-C again to quit at once)…");
+        });
+        f
+    })
+    .clone()
+}
+
+/// Progress bar and messages for a run.
+pub struct Ui {
+    bar: Option<ProgressBar>,
+    quiet: bool,
+    /// Release amplitude (m) and sample rate of the run in progress.
+    a0: f64,
+    rate: f64,
+}
+
+impl Ui {
+    pub fn new(quiet: bool) -> Ui {
+        Ui {
+            bar: None,
+            quiet,
+            a0: 0.0,
+            rate: 1.0,
+        }
+    }
+
+    fn bar(&mut self, len: u64) -> &ProgressBar {
+        self.bar.get_or_insert_with(|| {
+            let b = if self.quiet {
+                ProgressBar::hidden()
+            } else {
+                ProgressBar::new(len)
+            };
+            b.set_style(
+                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {msg}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            b.enable_steady_tick(Duration::from_millis(200));
+            b
+        })
+    }
+
+    fn say(&self, s: &str) {
+        if self.quiet {
+            return;
+        }
+        match &self.bar {
+            Some(b) if !b.is_hidden() => b.println(s),
+            _ => eprintln!("{s}"),
+        }
+    }
+
+    /// Shows one progress event.
+    pub fn on(&mut self, p: Progress<'_>) {
+        match p {
+            Progress::Heating {
+                temp_c,
+                setpoint_c,
+                elapsed_s,
+            } => {
+                let b = self.bar(0);
+                b.set_message(format!(
+                    "heating: plate {temp_c:.1} °C → {setpoint_c:.1} °C ({elapsed_s:.0} s)"
+                ));
+            }
+            Progress::WaitingForButton => {
+                self.say("armed: press the button on the rig to release the pin")
+            }
+            Progress::Started { header, dir } => {
+                // The bar follows the envelope's decay from the release amplitude to zero: the run
+                // ends when the pin stops, long before its maximum duration.
+                self.a0 = header.config.initial_amplitude_m as f64;
+                self.rate = header.config.sample_rate_hz as f64;
+                let b = self.bar(1000);
+                b.set_length(1000);
+                b.set_position(0);
+                b.set_message(format!("run {} released", header.run_id));
+                let msg = format!("recording run {} into {}", header.run_id, dir.display());
+                self.say(&msg);
+            }
+            Progress::Block {
+                envelope_m,
+                samples,
+                ..
+            } => {
+                let a0 = self.a0;
+                let rate = self.rate;
+                let b = self.bar(1000);
+                if a0 > 0.0 && envelope_m.is_finite() {
+                    let done = ((1.0 - envelope_m / a0).clamp(0.0, 1.0) * 1000.0) as u64;
+                    b.set_position(b.position().max(done));
+                }
+                b.set_message(format!(
+                    "envelope {:.1} µm of {:.0} µm, {:.2} s, {samples} samples",
+                    envelope_m * 1e6,
+                    a0 * 1e6,
+                    samples as f64 / rate.max(1.0)
+                ));
+            }
+            Progress::Gap { from, to } => self.say(&format!(
+                "frames lost: blocks {from}..{to} (they will be pulled again)"
+            )),
+            Progress::Pulling { from_block } => {
+                self.say(&format!("fetching the run from block {from_block} on"))
+            }
+            Progress::Warning(w) => self.say(&format!("warning: {w}")),
+            Progress::Ended(e) => {
+                if let Some(b) = &self.bar {
+                    b.set_position(1000);
+                }
+                self.say(&format!(
+                    "run {} ended ({:?}): {} blocks, {} samples",
+                    e.run_id, e.reason, e.blocks, e.samples
+                ));
+            }
+        }
+    }
+
+    pub fn finish(&mut self) {
+        if let Some(b) = self.bar.take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+fn num(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.5}")
+    } else {
+        "—".into()
+    }
+}
+
+/// μ0/μ1 of the rig and of the host fit, side by side.
+pub fn result_table(run: &Run) -> String {
+    let mut s = String::new();
+    let ob = run.result();
+    let host = run.host_fit();
+    let pm = |v: f32, se: f32| {
+        if se.is_finite() && se > 0.0 {
+            format!("{} ± {:.1e}", num(v as f64), se)
+        } else {
+            num(v as f64)
+        }
+    };
+    s.push_str(&format!(
+        "{:<10}{:<26}{}\n",
+        "", "on-board", "host fit (Levenberg–Marquardt)"
+    ));
+    let (o0, o1) = ob.map_or(("—".into(), "—".into()), |r| {
+        (pm(r.best.mu0, r.best.mu0_se), pm(r.best.mu1, r.best.mu1_se))
+    });
+    let (h0, h1) = host.map_or(("—".into(), "—".into()), |h| (num(h.mu0), num(h.mu1)));
+    s.push_str(&format!("{:<10}{:<26}{}\n", "μ0", o0, h0));
+    s.push_str(&format!("{:<10}{:<26}{}\n", "μ1", o1, h1));
+    if let Some(r) = ob {
+        s.push_str(&format!(
+            "{:<10}{}, {} cycles, {:.2} Hz, envelope {}\n",
+            "rig",
+            r.verdict.name(),
+            r.cycles,
+            r.frequency_hz,
+            r.shape.name()
+        ));
+    }
+    if let Some(h) = host {
+        s.push_str(&format!(
+            "{:<10}envelope misfit {:.2e} of A0{}\n",
+            "host",
+            h.gap,
+            if h.converged { "" } else { " (not converged)" }
+        ));
+    } else if let Some(e) = &run.results.host_error {
+        s.push_str(&format!("{:<10}no fit: {e}\n", "host"));
+    }
+    s
+}
+
+/// Prints what a recording gave and what to do if it is incomplete.
+pub fn print_outcome(o: &Outcome) {
+    let run = &o.run;
+    let samples: usize = run.blocks().map(|b| b.samples()).sum();
+    println!(
+        "run {} saved in {} ({}, {} blocks, {} samples{})",
+        run.id(),
+        run.dir().display(),
+        run.meta.status.name(),
+        run.block_count(),
+        samples,
+        if o.pulled_blocks > 0 {
+            format!(", {} fetched again with Pull", o.pulled_blocks)
+        } else {
+            String::new()
+        }
+    );
+    if let Some(e) = &o.link_lost {
+        println!("the link was lost: {e}");
+        println!(
+            "reconnect the rig and run `tribo pull {}` to fetch the rest",
+            run.dir().display()
+        );
+    }
+    if o.aborted {
+        println!("aborted: what was received is kept (status: aborted)");
+    }
+    print!("{}", result_table(run));
+}
+
+/// Arguments of `tribo run`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    pub link: LinkArgs,
+    /// Normal load set on the rig's knob, N (0–0.7).
+    #[arg(long)]
+    pub load: f32,
+    /// Heat the plate to this temperature first, °C (15–100; default: heater off).
+    #[arg(long)]
+    pub temp: Option<f32>,
+    /// Runs to take in a row.
+    #[arg(long, default_value_t = 1)]
+    pub repeat: u32,
+    /// Free label stored with the run (and in its folder name).
+    #[arg(long)]
+    pub label: Option<String>,
+    #[arg(long)]
+    pub sample: Option<String>,
+    #[arg(long)]
+    pub lubricant: Option<String>,
+    /// Wait for the button on the rig instead of releasing from here.
+    #[arg(long)]
+    pub button: bool,
+    /// Sample rate, Hz.
+    #[arg(long, default_value_t = 10_000)]
+    pub rate: u32,
+    /// Longest run, s (it ends earlier when the pin stops).
+    #[arg(long, default_value_t = 40.0)]
+    pub max_duration: f32,
+    /// Moving mass, kg.
+    #[arg(long, default_value_t = 0.04)]
+    pub mass: f32,
+    /// Blade stiffness, N/m.
+    #[arg(long, default_value_t = 1150.0)]
+    pub stiffness: f32,
+    /// Initial displacement held by the magnet, m.
+    #[arg(long, default_value_t = 667e-6)]
+    pub x0: f32,
+    /// Heater: settled when within this many °C…
+    #[arg(long, default_value_t = 0.5)]
+    pub settle_tol: f32,
+    /// …for this many seconds.
+    #[arg(long, default_value_t = 10.0)]
+    pub settle_secs: f64,
+    /// Give up heating after this many seconds.
+    #[arg(long, default_value_t = 1800.0)]
+    pub settle_timeout: f64,
+    /// Heater ramp, °C/min.
+    #[arg(long, default_value_t = 10.0)]
+    pub ramp: f32,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+impl Args {
+    /// The run plan these arguments describe.
+    pub fn plan(&self) -> RunPlan {
+        let mut c = Configure::real_rig(self.load);
+        c.rig.mass_kg = self.mass;
+        c.rig.stiffness_n_per_m = self.stiffness;
+        c.sample_rate_hz = self.rate;
+        c.max_duration_s = self.max_duration;
+        c.initial_amplitude_m = self.x0;
+        let mut p = RunPlan::new(c);
+        p.heater = self.temp.map(|t| HeaterPlan {
+            setpoint_c: t,
+            ramp_c_per_min: self.ramp,
+            tolerance_c: self.settle_tol,
+            settle_s: self.settle_secs,
+            timeout_s: self.settle_timeout,
+        });
+        p.button = self.button;
+        p.keep_heater = self.repeat > 1;
+        p.label = self.label.clone();
+        p.sample = self.sample.clone();
+        p.lubricant = self.lubricant.clone();
+        p
+    }
+}
+
+/// Runs the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let plan = args.plan();
+    if let Err(f) = plan.config.validate() {
+        bail!("{} is out of the rig's range: check --load (0–0.7 N), --rate (1–20 kHz), --x0 (≤ 1 mm), --max-duration (0.1–60 s)", format!("{f:?}").to_lowercase());
+    }
+    if let Some(t) = args.temp {
+        if !tribo_wire::limits::HEATER_SETPOINT_C.contains(&t)
+            || !tribo_wire::limits::HEATER_RAMP_C_PER_MIN.contains(&args.ramp)
+        {
+            bail!(
+                "--temp {t} °C / --ramp {} °C/min: the heater takes 15–100 °C and 0.1–30 °C/min",
+                args.ramp
+            );
+        }
+    }
+    let abort = abort_flag();
+    let (mut link, info) = args.link.connect()?;
+    eprintln!(
+        "rig on {}: firmware {}, serial {:016x}",
+        link.name(),
+        firmware_version(&info),
+        info.serial
+    );
+    let store = args.link.store();
+    for k in 1..=args.repeat.max(1) {
+        let mut plan = plan.clone();
+        if args.repeat > 1 {
+            plan.repeat = Some(k);
+            plan.keep_heater = k < args.repeat;
+            eprintln!("repetition {k}/{}", args.repeat);
+        }
+        let mut ui = Ui::new(args.quiet);
+        let o = record_run(&mut link, &info, &store, &plan, &abort, &mut |p| ui.on(p));
+        ui.finish();
+        let o = o.with_context(|| format!("run {k} on {}", link.name()))?;
+        print_outcome(&o);
+        if o.aborted || o.link_lost.is_some() {
+            break;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,135 @@
+//! `tribo runs`: lists and filters the runs of the store (from its SQLite catalog).
+
+use std::path::PathBuf;
+use tribo_store::{Catalog, Filter};
+
+/// Arguments of `tribo runs`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Run store directory (default: $TRIBO_STORE, else ./runs).
+    #[arg(long)]
+    pub store: Option<PathBuf>,
+    #[arg(long)]
+    pub campaign: Option<String>,
+    /// Runs whose label contains this.
+    #[arg(long)]
+    pub label: Option<String>,
+    /// complete, incomplete, aborted or recording.
+    #[arg(long)]
+    pub status: Option<String>,
+    /// Load range, N: `0.2` or `0.1..0.4`.
+    #[arg(long)]
+    pub load: Option<String>,
+    /// Temperature range, °C: `60` or `25..60`.
+    #[arg(long)]
+    pub temp: Option<String>,
+    /// Rebuild the catalog from the run folders first.
+    #[arg(long)]
+    pub reindex: bool,
+    /// Print the run folders only (for scripts).
+    #[arg(long)]
+    pub paths: bool,
+}
+
+/// `a` or `a..b` as an inclusive range.
+pub fn parse_range(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
+    let num = |t: &str| -> anyhow::Result<f64> {
+        t.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--{what} {s:?}: not a number or range; write e.g. `0.3` or `0.1..0.4`"
+                )
+            })
+    };
+    match s.split_once("..") {
+        Some((a, b)) => Ok((num(a)?, num(b)?)),
+        None => {
+            let v = num(s)?;
+            // A single value matches what rounds to it.
+            let tol = if what == "temp" { 0.5 } else { 5e-4 };
+            Ok((v - tol, v + tol))
+        }
+    }
+}
+
+/// Runs the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let store = args
+        .store
+        .clone()
+        .unwrap_or_else(tribo_store::default_store_dir);
+    if !store.is_dir() {
+        anyhow::bail!("no run store at {}: take a run with `tribo run` or `tribo demo`, or point --store at one", store.display());
+    }
+    let cat = Catalog::open(&store)?;
+    // Folders the catalog does not know (a killed recorder, runs copied in): rebuild it.
+    let folders = tribo_store::run::list_run_dirs(&store)?.len();
+    let known = cat.list(&Filter::default())?.len();
+    if args.reindex || folders != known {
+        let (n, bad) = cat.reindex()?;
+        eprintln!("catalog rebuilt from the run folders: {n} runs");
+        for (d, e) in bad {
+            eprintln!("skipped {}: {e}", d.display());
+        }
+    }
+    let mut f = Filter {
+        campaign: args.campaign,
+        label: args.label,
+        status: args.status,
+        ..Default::default()
+    };
+    if let Some(l) = &args.load {
+        let (a, b) = parse_range(l, "load")?;
+        f.load_min = Some(a);
+        f.load_max = Some(b);
+    }
+    if let Some(t) = &args.temp {
+        let (a, b) = parse_range(t, "temp")?;
+        f.temp_min = Some(a);
+        f.temp_max = Some(b);
+    }
+    let rows = cat.list(&f)?;
+    if args.paths {
+        for r in rows {
+            println!("{}", r.path.display());
+        }
+        return Ok(());
+    }
+    if rows.is_empty() {
+        println!("no run matches (try `tribo runs --reindex` if folders were copied in by hand)");
+        return Ok(());
+    }
+    let opt = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.5}"));
+    println!(
+        "{:<44} {:<10} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
+        "run",
+        "status",
+        "load N",
+        "°C",
+        "campaign",
+        "rep",
+        "μ0 rig",
+        "μ1 rig",
+        "μ0 host",
+        "μ1 host"
+    );
+    for r in rows {
+        println!(
+            "{:<44} {:<10} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
+            r.id,
+            r.status,
+            r.load_n,
+            r.temp_c.map_or("—".into(), |t| format!("{t:.1}")),
+            r.campaign.as_deref().unwrap_or("—"),
+            r.repeat.map_or("—".into(), |x| x.to_string()),
+            opt(r.onboard_mu0),
+            opt(r.onboard_mu1),
+            opt(r.host_mu0),
+            opt(r.host_mu1),
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,61 @@
+//! `tribo table --rows temp --cols load --value mu0`: campaign tables (the thesis's Tables 5–7)
+//! with the spread over repetitions (mean ± sd).
+
+use std::path::PathBuf;
+use tribo_store::catalog::{Axis, Value};
+use tribo_store::{Catalog, Filter};
+
+/// Arguments of `tribo table`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Run store directory (default: $TRIBO_STORE, else ./runs).
+    #[arg(long)]
+    pub store: Option<PathBuf>,
+    /// `temp` or `load`.
+    #[arg(long, default_value = "temp")]
+    pub rows: String,
+    /// `load` or `temp`.
+    #[arg(long, default_value = "load")]
+    pub cols: String,
+    /// mu0 or mu1 (host fit, as the thesis), onboard-mu0 or onboard-mu1 (the rig's).
+    #[arg(long, default_value = "mu0")]
+    pub value: String,
+    /// Only this campaign's runs.
+    #[arg(long)]
+    pub campaign: Option<String>,
+}
+
+/// Runs the subcommand.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let store = args
+        .store
+        .clone()
+        .unwrap_or_else(tribo_store::default_store_dir);
+    if !store.is_dir() {
+        anyhow::bail!("no run store at {}: run a campaign first (`tribo campaign PLAN.toml`), or point --store at one", store.display());
+    }
+    let rows: Axis = args.rows.parse()?;
+    let cols: Axis = args.cols.parse()?;
+    let value: Value = args.value.parse()?;
+    let cat = Catalog::open(&store)?;
+    let t = cat.table(
+        rows,
+        cols,
+        value,
+        &Filter {
+            campaign: args.campaign.clone(),
+            ..Default::default()
+        },
+    )?;
+    if t.rows.is_empty() {
+        println!(
+            "no complete run with a {} value in {}: nothing to tabulate",
+            args.value,
+            store.display()
+        );
+        return Ok(());
+    }
+    println!("{} (mean ± sd over repetitions, (n) runs)", args.value);
+    print!("{}", t.render());
+    Ok(())
+}

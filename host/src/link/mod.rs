@@ -1,0 +1,583 @@
+//! The link to a rig: frames over a serial port (USB CDC) or any byte stream (a pseudo-terminal,
+//! a socket in tests).
+//!
+//! * [`Link`]: hello and protocol check, commands answered by `Ack`/`Error` with timeouts and
+//!   retries, and the raw frames as received (the run store logs them byte for byte).
+//! * [`serial`]: opening a tty in raw mode; [`devices`]: finding attached rigs.
+//! * [`session`]: a whole run (configure, heat, arm, release, stream, resume with `Pull`) and
+//!   `pull` of a run already taken.
+//! * [`pty`]: the virtual rig behind a pseudo-terminal.
+
+pub mod devices;
+pub mod pty;
+pub mod serial;
+pub mod session;
+
+use std::collections::VecDeque;
+use std::fmt;
+use std::io::{Read, Write};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tribo_wire::frame::{decode_one, encode_vec, MAX_FRAME};
+use tribo_wire::{
+    check_protocol, DeviceError, DeviceInfo, DeviceMsg, ErrorCode, Field, Frame, FrameError,
+    HeaterFault, HostMsg, Interlock, Status, PROTOCOL_VERSION,
+};
+
+/// A frame from the rig, with its bytes exactly as received (closing zero included).
+#[derive(Debug, Clone)]
+pub struct Incoming {
+    pub raw: Vec<u8>,
+    pub frame: Frame<DeviceMsg>,
+}
+
+impl Incoming {
+    pub fn msg(&self) -> &DeviceMsg {
+        &self.frame.msg
+    }
+}
+
+enum Event {
+    Frame(Box<Incoming>),
+    Bad(FrameError),
+    Closed(String),
+}
+
+/// What kind of link failure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkErrorKind {
+    /// The port could not be opened.
+    Open,
+    /// The rig did not answer in time (after the retries).
+    NoAnswer,
+    /// The stream ended: cable pulled, rig reset, virtual rig stopped.
+    Closed,
+    /// The rig refused a command.
+    Refused,
+    /// The rig speaks another protocol version.
+    Protocol,
+}
+
+/// A link failure. The message says what to do next.
+#[derive(Debug, Clone)]
+pub struct LinkError {
+    pub kind: LinkErrorKind,
+    pub msg: String,
+    /// The rig's error code, when it refused a command.
+    pub code: Option<ErrorCode>,
+}
+
+impl LinkError {
+    fn new(kind: LinkErrorKind, msg: impl Into<String>) -> Self {
+        LinkError {
+            kind,
+            msg: msg.into(),
+            code: None,
+        }
+    }
+}
+
+impl fmt::Display for LinkError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.msg)
+    }
+}
+
+impl std::error::Error for LinkError {}
+
+fn field_name(f: Field) -> &'static str {
+    match f {
+        Field::Mass => "the mass",
+        Field::Stiffness => "the stiffness",
+        Field::Load => "the load (0–0.7 N)",
+        Field::SampleRate => "the sample rate (1–20 kHz)",
+        Field::Channels => "the channel set (displacement and velocity are required)",
+        Field::InitialAmplitude => "the initial amplitude (1 µm – 1 mm)",
+        Field::MaxDuration => "the maximum duration (0.1–60 s)",
+        Field::Calibration => "a channel calibration",
+        Field::HeaterSetpoint => "the heater setpoint (15–100 °C)",
+        Field::HeaterRamp => "the heater ramp (0.1–30 °C/min)",
+        Field::RunId => "the run id",
+    }
+}
+
+/// A sentence for a rig's error code, ending with what to do.
+pub fn explain(code: ErrorCode) -> String {
+    match code {
+        ErrorCode::Malformed => "the rig could not read a command (garbled on the line): check the cable and retry".into(),
+        ErrorCode::ProtocolMismatch { device } => {
+            tribo_wire::ProtocolMismatch { ours: PROTOCOL_VERSION, theirs: device }.to_string()
+        }
+        ErrorCode::OutOfRange(f) => format!("the rig refused {}: out of range; fix the value and retry", field_name(f)),
+        ErrorCode::NotConfigured => "the rig has no configuration for this run: run `tribo run` again".into(),
+        ErrorCode::Busy => "the rig is busy with a run: wait for it to end (or abort it from the program that \
+                            started it), then fetch it with `tribo pull`"
+            .into(),
+        ErrorCode::Interlock(i) => match i {
+            Interlock::NotArmed => "release refused: the pin is not held; arm again (rerun the command)".into(),
+            Interlock::NotSampling => "release refused: the acquisition is not running yet; retry in a moment".into(),
+            Interlock::HeaterUnhealthy => "release refused: the heater is faulted; check the thermocouple and the \
+                                           plate, then run again"
+                .into(),
+            Interlock::MagnetOff => "release refused: the electromagnet is off; check its supply and arm again".into(),
+        },
+        ErrorCode::Heater(f) => format!(
+            "heater fault ({}): the heater was cut off; check the thermocouple wiring and the plate, then set the \
+             temperature again",
+            match f {
+                HeaterFault::OverTemperature => "over temperature",
+                HeaterFault::OpenThermocouple => "thermocouple open",
+                HeaterFault::ShortedThermocouple => "thermocouple shorted",
+                HeaterFault::NoReading => "no thermocouple reading",
+            }
+        ),
+        ErrorCode::NoRun => "the rig holds no such run (it was power-cycled, or a newer run replaced it)".into(),
+        ErrorCode::Overrun { lost_samples } => format!(
+            "the rig lost {lost_samples} samples (acquisition overrun): the run cannot be trusted; repeat it at a \
+             lower sample rate"
+        ),
+        ErrorCode::HoldTimeExceeded => "the electromagnet held the pin too long and was switched off to protect it: \
+                                        release sooner after arming (or check the release wiring)"
+            .into(),
+    }
+}
+
+/// Timeouts and retries of a [`Link`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timeouts {
+    /// Wait for an answer to a command.
+    pub reply: Duration,
+    /// Sends of an idempotent command before giving up.
+    pub attempts: u32,
+    /// Silence during a run stream after which the rig is asked for its status.
+    pub stream_idle: Duration,
+}
+
+impl Default for Timeouts {
+    fn default() -> Self {
+        Timeouts {
+            reply: Duration::from_millis(1000),
+            attempts: 3,
+            stream_idle: Duration::from_secs(3),
+        }
+    }
+}
+
+/// Counters of a link.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    pub bytes_in: u64,
+    pub frames_in: u64,
+    pub bad_frames: u64,
+    pub frames_out: u64,
+}
+
+/// A connection to a rig.
+pub struct Link {
+    name: String,
+    tx: Box<dyn Write + Send>,
+    rx: Receiver<Event>,
+    backlog: VecDeque<Incoming>,
+    seq: u32,
+    stop: Arc<AtomicBool>,
+    bytes_in: Arc<AtomicU64>,
+    closed: Option<String>,
+    last_bad: Option<FrameError>,
+    stats: LinkStats,
+    /// Joined on drop when its reads time out by themselves (serial ports), so that the port is
+    /// closed (and unlocked) when the link is dropped.
+    reader: Option<std::thread::JoinHandle<()>>,
+    pub timeouts: Timeouts,
+}
+
+impl Drop for Link {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(r) = self.reader.take() {
+            let _ = r.join();
+        }
+    }
+}
+
+fn reader_loop(
+    mut r: Box<dyn Read + Send>,
+    tx: Sender<Event>,
+    stop: Arc<AtomicBool>,
+    bytes_in: Arc<AtomicU64>,
+) {
+    let mut buf = vec![0u8; 8192];
+    let mut cur: Vec<u8> = Vec::with_capacity(MAX_FRAME);
+    let mut overflow = false;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return;
+        }
+        let n = match r.read(&mut buf) {
+            Ok(0) => {
+                let _ = tx.send(Event::Closed("the rig closed the connection".into()));
+                return;
+            }
+            Ok(n) => n,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::Interrupted
+                        | std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                continue
+            }
+            Err(e) => {
+                let _ = tx.send(Event::Closed(format!("read failed: {e}")));
+                return;
+            }
+        };
+        bytes_in.fetch_add(n as u64, Ordering::Relaxed);
+        for &b in &buf[..n] {
+            if b == 0 {
+                let ev = if overflow {
+                    Some(Event::Bad(FrameError::Overflow))
+                } else if cur.is_empty() {
+                    None
+                } else {
+                    cur.push(0);
+                    Some(match decode_one::<DeviceMsg>(&cur) {
+                        Ok(frame) => Event::Frame(Box::new(Incoming {
+                            raw: cur.clone(),
+                            frame,
+                        })),
+                        Err(e) => Event::Bad(e),
+                    })
+                };
+                cur.clear();
+                overflow = false;
+                if let Some(ev) = ev {
+                    if tx.send(ev).is_err() {
+                        return;
+                    }
+                }
+            } else if cur.len() < MAX_FRAME {
+                cur.push(b);
+            } else {
+                overflow = true;
+            }
+        }
+    }
+}
+
+impl Link {
+    /// Opens a serial port (or a pseudo-terminal) in raw mode.
+    pub fn open(port: &Path) -> Result<Link, LinkError> {
+        let (r, w) = serial::open(port)?;
+        Ok(Link::spawn(port.display().to_string(), r, w, true))
+    }
+
+    /// A link over any byte stream. The reader is read on a thread of its own; a read returning 0
+    /// is the end of the stream (reads that time out should return `TimedOut`/`WouldBlock`).
+    pub fn from_stream(
+        name: impl Into<String>,
+        reader: impl Read + Send + 'static,
+        writer: impl Write + Send + 'static,
+    ) -> Link {
+        Link::spawn(name.into(), reader, writer, false)
+    }
+
+    fn spawn(
+        name: String,
+        reader: impl Read + Send + 'static,
+        writer: impl Write + Send + 'static,
+        join_on_drop: bool,
+    ) -> Link {
+        let (tx, rx) = mpsc::channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let bytes_in = Arc::new(AtomicU64::new(0));
+        let (s, b) = (stop.clone(), bytes_in.clone());
+        let handle = std::thread::Builder::new()
+            .name("tribo-link-reader".into())
+            .spawn(move || reader_loop(Box::new(reader), tx, s, b))
+            .expect("spawning a thread");
+        Link {
+            reader: join_on_drop.then_some(handle),
+            name,
+            tx: Box::new(writer),
+            rx,
+            backlog: VecDeque::new(),
+            seq: 0,
+            stop,
+            bytes_in,
+            closed: None,
+            last_bad: None,
+            stats: LinkStats::default(),
+            timeouts: Timeouts::default(),
+        }
+    }
+
+    /// The port's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Why the last bad frame was dropped (CRC, COBS…), if any was.
+    pub fn last_bad_frame(&self) -> Option<FrameError> {
+        self.last_bad
+    }
+
+    pub fn stats(&self) -> LinkStats {
+        LinkStats {
+            bytes_in: self.bytes_in.load(Ordering::Relaxed),
+            ..self.stats
+        }
+    }
+
+    fn closed_error(&self) -> LinkError {
+        LinkError::new(
+            LinkErrorKind::Closed,
+            format!(
+                "lost the link to the rig on {} ({}): check the cable (or restart the virtual rig); what was \
+                 received is saved, and `tribo pull` fetches the rest",
+                self.name,
+                self.closed.as_deref().unwrap_or("closed")
+            ),
+        )
+    }
+
+    /// Sends a command; returns its sequence number.
+    pub fn send(&mut self, msg: &HostMsg) -> Result<u32, LinkError> {
+        self.seq = self.seq.wrapping_add(1);
+        let bytes = encode_vec(self.seq, msg).map_err(|_| {
+            LinkError::new(
+                LinkErrorKind::Refused,
+                "command too large to frame (a bug in tribo)",
+            )
+        })?;
+        self.tx
+            .write_all(&bytes)
+            .and_then(|_| self.tx.flush())
+            .map_err(|e| {
+                self.closed = Some(format!("write failed: {e}"));
+                self.closed_error()
+            })?;
+        self.stats.frames_out += 1;
+        Ok(self.seq)
+    }
+
+    /// The next frame, waiting at most `timeout`; `Ok(None)` on timeout, an error when the stream
+    /// ended. Frames that failed their CRC are counted and skipped.
+    pub fn next(&mut self, timeout: Duration) -> Result<Option<Incoming>, LinkError> {
+        if let Some(f) = self.backlog.pop_front() {
+            return Ok(Some(f));
+        }
+        if self.closed.is_some() {
+            return Err(self.closed_error());
+        }
+        let deadline = Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.rx.recv_timeout(left) {
+                Ok(Event::Frame(f)) => {
+                    self.stats.frames_in += 1;
+                    return Ok(Some(*f));
+                }
+                Ok(Event::Bad(e)) => {
+                    self.stats.bad_frames += 1;
+                    self.last_bad = Some(e);
+                }
+                Ok(Event::Closed(why)) => {
+                    self.closed = Some(why);
+                    return Err(self.closed_error());
+                }
+                Err(RecvTimeoutError::Timeout) => return Ok(None),
+                Err(RecvTimeoutError::Disconnected) => {
+                    self.closed.get_or_insert_with(|| "reader stopped".into());
+                    return Err(self.closed_error());
+                }
+            }
+        }
+    }
+
+    /// Throws away whatever the rig sent so far (stale frames of an earlier session).
+    pub fn drain(&mut self, quiet: Duration) -> Result<usize, LinkError> {
+        let mut n = self.backlog.len();
+        self.backlog.clear();
+        while self.next(quiet)?.is_some() {
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Opens the session: says hello, checks the protocol. Retries, then explains.
+    pub fn hello(&mut self) -> Result<DeviceInfo, LinkError> {
+        for _ in 0..self.timeouts.attempts.max(1) {
+            let seq = self.send(&HostMsg::Hello {
+                protocol: PROTOCOL_VERSION,
+            })?;
+            let deadline = Instant::now() + self.timeouts.reply;
+            while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+                let Some(f) = self.next(left)? else { break };
+                match f.frame.msg {
+                    DeviceMsg::Hello(info) => {
+                        check_protocol(info.protocol).map_err(|e| LinkError {
+                            kind: LinkErrorKind::Protocol,
+                            msg: e.to_string(),
+                            code: None,
+                        })?;
+                        self.backlog.clear();
+                        return Ok(info);
+                    }
+                    DeviceMsg::Error(DeviceError {
+                        code: c @ ErrorCode::ProtocolMismatch { .. },
+                        about_seq,
+                    }) if about_seq == Some(seq) => {
+                        return Err(LinkError {
+                            kind: LinkErrorKind::Protocol,
+                            msg: explain(c),
+                            code: Some(c),
+                        });
+                    }
+                    _ => {} // stale frames of an earlier session
+                }
+            }
+        }
+        Err(LinkError::new(
+            LinkErrorKind::NoAnswer,
+            format!(
+                "no answer from {} to hello after {} tries: is it a tribometer with its firmware running? Check the \
+                 cable and the port (`tribo devices` lists attached rigs), or start a virtual one with `tribo rig \
+                 --virtual`",
+                self.name, self.timeouts.attempts
+            ),
+        ))
+    }
+
+    /// Sends a command and waits for its `Ack` (or `Error`). Idempotent commands are sent again
+    /// when no answer comes; `Arm` and `Release` are not. Frames that are not the answer are kept
+    /// for [`Link::next`].
+    pub fn command(&mut self, msg: HostMsg) -> Result<(), LinkError> {
+        let retry = !matches!(msg, HostMsg::Arm | HostMsg::Release);
+        let attempts = if retry {
+            self.timeouts.attempts.max(1)
+        } else {
+            1
+        };
+        for _ in 0..attempts {
+            let seq = self.send(&msg)?;
+            let deadline = Instant::now() + self.timeouts.reply;
+            let mut held = Vec::new();
+            let answer = loop {
+                let left = deadline.saturating_duration_since(Instant::now());
+                let f = match self.rx_only(left) {
+                    Ok(Some(f)) => f,
+                    Ok(None) => break None,
+                    Err(e) => {
+                        self.backlog.extend(held);
+                        return Err(e);
+                    }
+                };
+                match &f.frame.msg {
+                    DeviceMsg::Ack { seq: s } if *s == seq => break Some(Ok(())),
+                    DeviceMsg::Error(DeviceError {
+                        code,
+                        about_seq: Some(s),
+                    }) if *s == seq => break Some(Err(*code)),
+                    // A release answered by the run itself (its Ack lost): the run started.
+                    DeviceMsg::RunStarted(_) if matches!(msg, HostMsg::Release) => {
+                        held.push(f);
+                        break Some(Ok(()));
+                    }
+                    DeviceMsg::Ack { .. }
+                    | DeviceMsg::Error(DeviceError {
+                        about_seq: Some(_), ..
+                    }) => {}
+                    _ => held.push(f),
+                }
+            };
+            self.backlog.extend(held);
+            match answer {
+                Some(Ok(())) => return Ok(()),
+                Some(Err(code)) => {
+                    return Err(LinkError {
+                        kind: LinkErrorKind::Refused,
+                        msg: explain(code),
+                        code: Some(code),
+                    })
+                }
+                None => {}
+            }
+        }
+        Err(LinkError::new(
+            LinkErrorKind::NoAnswer,
+            format!(
+                "the rig on {} did not answer {} (after {attempts} tries): check the cable; if it persists, \
+                 power-cycle the rig",
+                self.name,
+                command_name(&msg)
+            ),
+        ))
+    }
+
+    /// Like [`Link::next`] but ignores the backlog (used while waiting for an answer).
+    fn rx_only(&mut self, timeout: Duration) -> Result<Option<Incoming>, LinkError> {
+        let saved = std::mem::take(&mut self.backlog);
+        let r = self.next(timeout);
+        self.backlog = saved;
+        r
+    }
+
+    /// Asks for the rig's status.
+    pub fn status(&mut self) -> Result<Status, LinkError> {
+        for _ in 0..self.timeouts.attempts.max(1) {
+            self.send(&HostMsg::Status)?;
+            let deadline = Instant::now() + self.timeouts.reply;
+            let mut held = Vec::new();
+            let mut got = None;
+            while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+                match self.rx_only(left)? {
+                    Some(f) => match f.frame.msg {
+                        DeviceMsg::Status(s) => {
+                            got = Some(s);
+                            break;
+                        }
+                        DeviceMsg::Ack { .. } => {}
+                        _ => held.push(f),
+                    },
+                    None => break,
+                }
+            }
+            self.backlog.extend(held);
+            if let Some(s) = got {
+                return Ok(s);
+            }
+        }
+        Err(LinkError::new(
+            LinkErrorKind::NoAnswer,
+            format!("the rig on {} does not answer status requests: check the cable, or power-cycle the rig", self.name),
+        ))
+    }
+}
+
+fn command_name(m: &HostMsg) -> &'static str {
+    match m {
+        HostMsg::Hello { .. } => "hello",
+        HostMsg::Configure(_) => "configure",
+        HostMsg::SetHeater(_) => "set-heater",
+        HostMsg::HeaterOff => "heater-off",
+        HostMsg::Arm => "arm",
+        HostMsg::Disarm => "disarm",
+        HostMsg::Release => "release",
+        HostMsg::Abort => "abort",
+        HostMsg::Status => "status",
+        HostMsg::Pull { .. } => "pull",
+    }
+}
+
+/// `major.minor.patch`.
+pub fn firmware_version(info: &DeviceInfo) -> String {
+    format!(
+        "{}.{}.{}",
+        info.firmware[0], info.firmware[1], info.firmware[2]
+    )
+}

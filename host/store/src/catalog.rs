@@ -1,0 +1,415 @@
+//! The catalog: one SQLite file (`catalog.sqlite` at the store's root) indexing every run.
+//!
+//! It is an index, never the only copy: [`Catalog::reindex`] rebuilds it from the run folders.
+
+use crate::run::{list_run_dirs, Run};
+use crate::{ErrorKind, Result, StoreError};
+use rusqlite::{params, Connection};
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+pub const CATALOG_FILE: &str = "catalog.sqlite";
+
+const SCHEMA: &str = "
+CREATE TABLE IF NOT EXISTS runs (
+    id TEXT PRIMARY KEY,
+    path TEXT NOT NULL,
+    created TEXT NOT NULL,
+    status TEXT NOT NULL,
+    label TEXT,
+    sample TEXT,
+    lubricant TEXT,
+    campaign TEXT,
+    repeat INTEGER,
+    load_n REAL NOT NULL,
+    temp_c REAL,
+    firmware TEXT,
+    serial TEXT,
+    samples INTEGER NOT NULL,
+    missing_blocks INTEGER NOT NULL,
+    verdict TEXT,
+    cycles INTEGER,
+    onboard_mu0 REAL,
+    onboard_mu1 REAL,
+    host_mu0 REAL,
+    host_mu1 REAL,
+    host_gap REAL
+);
+CREATE INDEX IF NOT EXISTS runs_campaign ON runs(campaign);
+";
+
+/// One catalogued run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CatalogRow {
+    pub id: String,
+    pub path: PathBuf,
+    pub created: String,
+    pub status: String,
+    pub label: Option<String>,
+    pub sample: Option<String>,
+    pub lubricant: Option<String>,
+    pub campaign: Option<String>,
+    pub repeat: Option<u32>,
+    pub load_n: f64,
+    /// Nominal temperature: the setpoint, else the measured one.
+    pub temp_c: Option<f64>,
+    pub firmware: Option<String>,
+    pub serial: Option<String>,
+    pub samples: u64,
+    pub missing_blocks: u64,
+    pub verdict: Option<String>,
+    pub cycles: Option<u32>,
+    pub onboard_mu0: Option<f64>,
+    pub onboard_mu1: Option<f64>,
+    pub host_mu0: Option<f64>,
+    pub host_mu1: Option<f64>,
+    pub host_gap: Option<f64>,
+}
+
+/// Which runs to list.
+#[derive(Debug, Clone, Default)]
+pub struct Filter {
+    pub campaign: Option<String>,
+    /// Substring of the label.
+    pub label: Option<String>,
+    pub status: Option<String>,
+    pub load_min: Option<f64>,
+    pub load_max: Option<f64>,
+    pub temp_min: Option<f64>,
+    pub temp_max: Option<f64>,
+}
+
+/// What a campaign table's rows or columns are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Axis {
+    Load,
+    Temp,
+}
+
+impl std::str::FromStr for Axis {
+    type Err = StoreError;
+    fn from_str(s: &str) -> Result<Axis> {
+        match s {
+            "load" => Ok(Axis::Load),
+            "temp" | "temperature" => Ok(Axis::Temp),
+            _ => Err(StoreError::new(
+                ErrorKind::Invalid,
+                format!("unknown axis {s:?}: use `load` or `temp`"),
+            )),
+        }
+    }
+}
+
+/// The quantity a campaign table shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Value {
+    /// Host fit (Levenberg–Marquardt, as the thesis's tables).
+    Mu0,
+    Mu1,
+    /// The rig's own estimate.
+    OnboardMu0,
+    OnboardMu1,
+}
+
+impl std::str::FromStr for Value {
+    type Err = StoreError;
+    fn from_str(s: &str) -> Result<Value> {
+        match s {
+            "mu0" => Ok(Value::Mu0),
+            "mu1" => Ok(Value::Mu1),
+            "onboard-mu0" => Ok(Value::OnboardMu0),
+            "onboard-mu1" => Ok(Value::OnboardMu1),
+            _ => Err(StoreError::new(
+                ErrorKind::Invalid,
+                format!("unknown value {s:?}: use mu0, mu1 (host fit), onboard-mu0 or onboard-mu1"),
+            )),
+        }
+    }
+}
+
+/// Mean ± sample standard deviation over the repetitions in one cell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cell {
+    pub mean: f64,
+    /// Sample standard deviation (n − 1); `None` for a single run.
+    pub sd: Option<f64>,
+    pub n: usize,
+}
+
+impl Cell {
+    pub fn of(values: &[f64]) -> Option<Cell> {
+        let n = values.len();
+        if n == 0 {
+            return None;
+        }
+        let mean = values.iter().sum::<f64>() / n as f64;
+        let sd = (n > 1).then(|| {
+            (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+        });
+        Some(Cell { mean, sd, n })
+    }
+}
+
+/// A campaign table: `cells[r][c]` for `rows[r]` × `cols[c]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Table {
+    pub rows: Vec<f64>,
+    pub cols: Vec<f64>,
+    pub cells: Vec<Vec<Option<Cell>>>,
+    pub row_axis: Axis,
+    pub col_axis: Axis,
+}
+
+fn axis_label(a: Axis, v: f64) -> String {
+    match a {
+        Axis::Load => format!("{v:.3} N"),
+        Axis::Temp => format!("{v:.0} °C"),
+    }
+}
+
+impl Table {
+    /// Text rendering: `mean ± sd (n)` per cell, `—` where no run was made.
+    pub fn render(&self) -> String {
+        let head = match self.row_axis {
+            Axis::Load => "load \\ temp",
+            Axis::Temp => "temp \\ load",
+        };
+        let mut grid: Vec<Vec<String>> = vec![std::iter::once(head.to_string())
+            .chain(self.cols.iter().map(|c| axis_label(self.col_axis, *c)))
+            .collect()];
+        for (r, row) in self.rows.iter().zip(&self.cells) {
+            let mut line = vec![axis_label(self.row_axis, *r)];
+            for cell in row {
+                line.push(match cell {
+                    None => "—".into(),
+                    Some(Cell {
+                        mean,
+                        sd: Some(sd),
+                        n,
+                    }) => format!("{mean:.5} ± {sd:.5} ({n})"),
+                    Some(Cell { mean, sd: None, n }) => format!("{mean:.5} ({n})"),
+                });
+            }
+            grid.push(line);
+        }
+        let ncol = grid[0].len();
+        let widths: Vec<usize> = (0..ncol)
+            .map(|c| grid.iter().map(|l| l[c].chars().count()).max().unwrap_or(0))
+            .collect();
+        let mut s = String::new();
+        for l in &grid {
+            for (c, cell) in l.iter().enumerate() {
+                let pad = widths[c] - cell.chars().count();
+                if c > 0 {
+                    s.push_str("  ");
+                }
+                s.push_str(cell);
+                s.push_str(&" ".repeat(pad));
+            }
+            let _ = writeln!(s);
+        }
+        s
+    }
+}
+
+/// The SQLite catalog of a store.
+pub struct Catalog {
+    conn: Connection,
+    root: PathBuf,
+}
+
+fn db_err(ctx: &str, e: rusqlite::Error) -> StoreError {
+    StoreError::new(
+        ErrorKind::Catalog,
+        format!("catalog: {ctx}: {e}; the catalog is only an index: delete catalog.sqlite and run `tribo runs --reindex`"),
+    )
+}
+
+impl Catalog {
+    /// Opens (or creates) the catalog of the store at `root`.
+    pub fn open(root: &Path) -> Result<Catalog> {
+        std::fs::create_dir_all(root).map_err(|e| {
+            StoreError::io(format!("cannot create the store {}", root.display()), e)
+        })?;
+        let conn = Connection::open(root.join(CATALOG_FILE)).map_err(|e| db_err("open", e))?;
+        conn.busy_timeout(std::time::Duration::from_secs(5))
+            .map_err(|e| db_err("open", e))?;
+        conn.execute_batch(SCHEMA)
+            .map_err(|e| db_err("schema", e))?;
+        Ok(Catalog {
+            conn,
+            root: root.to_owned(),
+        })
+    }
+
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// Adds or updates a run.
+    pub fn upsert(&self, run: &Run) -> Result<()> {
+        let m = &run.meta;
+        let samples: u64 = run.blocks().map(|b| b.samples() as u64).sum();
+        let ob = run.result();
+        let host = run.host_fit();
+        self.conn
+            .execute(
+                "INSERT OR REPLACE INTO runs VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22)",
+                params![
+                    m.id,
+                    run.dir().to_string_lossy(),
+                    m.created,
+                    m.status.name(),
+                    m.label,
+                    m.sample,
+                    m.lubricant,
+                    m.campaign,
+                    m.repeat,
+                    m.load_n,
+                    m.nominal_temp_c(),
+                    m.device.as_ref().map(|d| d.firmware.clone()),
+                    m.device.as_ref().map(|d| d.serial.clone()),
+                    samples as i64,
+                    run.missing_blocks().len() as i64,
+                    ob.map(|r| r.verdict.name()),
+                    ob.map(|r| r.cycles),
+                    ob.map(|r| r.best.mu0 as f64).filter(|v| v.is_finite()),
+                    ob.map(|r| r.best.mu1 as f64).filter(|v| v.is_finite()),
+                    host.map(|h| h.mu0).filter(|v| v.is_finite()),
+                    host.map(|h| h.mu1).filter(|v| v.is_finite()),
+                    host.map(|h| h.gap).filter(|v| v.is_finite()),
+                ],
+            )
+            .map_err(|e| db_err("insert", e))?;
+        Ok(())
+    }
+
+    /// Rebuilds the catalog from the run folders. Returns the runs indexed and the folders that
+    /// could not be read (with why).
+    pub fn reindex(&self) -> Result<(usize, Vec<(PathBuf, String)>)> {
+        self.conn
+            .execute("DELETE FROM runs", [])
+            .map_err(|e| db_err("reindex", e))?;
+        let mut n = 0;
+        let mut bad = Vec::new();
+        for dir in list_run_dirs(&self.root)? {
+            match Run::open(&dir) {
+                Ok(run) => {
+                    self.upsert(&run)?;
+                    n += 1;
+                }
+                Err(e) => bad.push((dir, e.msg)),
+            }
+        }
+        Ok((n, bad))
+    }
+
+    /// Runs matching `f`, oldest first.
+    pub fn list(&self, f: &Filter) -> Result<Vec<CatalogRow>> {
+        let mut stmt = self
+            .conn
+            .prepare(
+                "SELECT id,path,created,status,label,sample,lubricant,campaign,repeat,load_n,temp_c,firmware,serial,\
+                 samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,host_mu0,host_mu1,host_gap FROM runs \
+                 WHERE (?1 IS NULL OR campaign = ?1) AND (?2 IS NULL OR instr(label, ?2) > 0) \
+                 AND (?3 IS NULL OR status = ?3) AND (?4 IS NULL OR load_n >= ?4 - 1e-9) \
+                 AND (?5 IS NULL OR load_n <= ?5 + 1e-9) AND (?6 IS NULL OR temp_c >= ?6 - 1e-9) \
+                 AND (?7 IS NULL OR temp_c <= ?7 + 1e-9) ORDER BY created, id",
+            )
+            .map_err(|e| db_err("query", e))?;
+        let rows = stmt
+            .query_map(
+                params![
+                    f.campaign, f.label, f.status, f.load_min, f.load_max, f.temp_min, f.temp_max
+                ],
+                |r| {
+                    Ok(CatalogRow {
+                        id: r.get(0)?,
+                        path: PathBuf::from(r.get::<_, String>(1)?),
+                        created: r.get(2)?,
+                        status: r.get(3)?,
+                        label: r.get(4)?,
+                        sample: r.get(5)?,
+                        lubricant: r.get(6)?,
+                        campaign: r.get(7)?,
+                        repeat: r.get(8)?,
+                        load_n: r.get(9)?,
+                        temp_c: r.get(10)?,
+                        firmware: r.get(11)?,
+                        serial: r.get(12)?,
+                        samples: r.get::<_, i64>(13)? as u64,
+                        missing_blocks: r.get::<_, i64>(14)? as u64,
+                        verdict: r.get(15)?,
+                        cycles: r.get(16)?,
+                        onboard_mu0: r.get(17)?,
+                        onboard_mu1: r.get(18)?,
+                        host_mu0: r.get(19)?,
+                        host_mu1: r.get(20)?,
+                        host_gap: r.get(21)?,
+                    })
+                },
+            )
+            .map_err(|e| db_err("query", e))?;
+        rows.collect::<std::result::Result<Vec<_>, _>>()
+            .map_err(|e| db_err("query", e))
+    }
+
+    /// Campaign table of `value` over complete runs matching `f`: mean ± sd over repetitions for
+    /// each (row, column) pair. Loads are grouped to the mN, temperatures to the °C.
+    pub fn table(&self, rows: Axis, cols: Axis, value: Value, f: &Filter) -> Result<Table> {
+        if rows == cols {
+            return Err(StoreError::new(
+                ErrorKind::Invalid,
+                "rows and columns must differ: use --rows temp --cols load",
+            ));
+        }
+        let mut f = f.clone();
+        f.status.get_or_insert_with(|| "complete".into());
+        let key = |a: Axis, r: &CatalogRow| -> Option<i64> {
+            match a {
+                Axis::Load => Some((r.load_n * 1000.0).round() as i64),
+                Axis::Temp => r.temp_c.filter(|t| t.is_finite()).map(|t| t.round() as i64),
+            }
+        };
+        let scale = |a: Axis| if a == Axis::Load { 1e-3 } else { 1.0 };
+        let mut groups: BTreeMap<(i64, i64), Vec<f64>> = BTreeMap::new();
+        let (mut rk, mut ck) = (Vec::new(), Vec::new());
+        for r in self.list(&f)? {
+            let (Some(a), Some(b)) = (key(rows, &r), key(cols, &r)) else {
+                continue;
+            };
+            let v = match value {
+                Value::Mu0 => r.host_mu0,
+                Value::Mu1 => r.host_mu1,
+                Value::OnboardMu0 => r.onboard_mu0,
+                Value::OnboardMu1 => r.onboard_mu1,
+            };
+            let Some(v) = v.filter(|v| v.is_finite()) else {
+                continue;
+            };
+            groups.entry((a, b)).or_default().push(v);
+            rk.push(a);
+            ck.push(b);
+        }
+        rk.sort_unstable();
+        rk.dedup();
+        ck.sort_unstable();
+        ck.dedup();
+        let cells = rk
+            .iter()
+            .map(|a| {
+                ck.iter()
+                    .map(|b| groups.get(&(*a, *b)).and_then(|v| Cell::of(v)))
+                    .collect()
+            })
+            .collect();
+        Ok(Table {
+            rows: rk.iter().map(|&a| a as f64 * scale(rows)).collect(),
+            cols: ck.iter().map(|&b| b as f64 * scale(cols)).collect(),
+            cells,
+            row_axis: rows,
+            col_axis: cols,
+        })
+    }
+}

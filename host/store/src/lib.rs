@@ -1,0 +1,83 @@
+//! Run store of the oscillating tribometer.
+//!
+//! A run is a folder:
+//!
+//! | file          | written                      | content                                                |
+//! |---------------|------------------------------|--------------------------------------------------------|
+//! | `frames.log`  | append-only, while recording | every frame the rig sent for this run, as received     |
+//! | `meta.toml`   | at creation, rewritten atomically at the end | [`RunMeta`]: rig constants, sample, load, temperature, firmware |
+//! | `result.toml` | atomically at the end        | [`Results`]: on-board result and the host's fit         |
+//! | `samples.csv` | at the end (or `Run::export_csv`) | SI samples in the physics CSV format (`# mass_kg=…`) |
+//!
+//! The frame log ([`log`]) is the truth; everything else can be rebuilt from it and the
+//! metadata. A killed process or a pulled cable never corrupts what was already written: each record
+//! is written with one `write` call and carries its length and CRC, so at worst the last record is
+//! torn, and [`log::LogReader`] / [`RunWriter::resume`] cut it off and say so.
+//!
+//! The [`catalog`] indexes all runs of a store in SQLite (`catalog.sqlite` at the store's root); it
+//! is an index only and [`catalog::Catalog::reindex`] rebuilds it from the folders.
+
+pub mod catalog;
+pub mod log;
+pub mod run;
+mod time;
+
+pub use catalog::{Catalog, CatalogRow, Filter};
+pub use log::{LogReader, LogWriter, Recovery};
+pub use run::{DeviceMeta, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples};
+pub use time::utc_now_rfc3339;
+
+use std::fmt;
+
+/// Any store failure. The message says what went wrong, where, and what to do next.
+#[derive(Debug)]
+pub struct StoreError {
+    pub kind: ErrorKind,
+    pub msg: String,
+}
+
+/// Broad class of a [`StoreError`], for callers that react differently.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    Io,
+    /// The log or a metadata file is damaged (not just a torn tail).
+    Corrupt,
+    /// Not a run folder / not a store.
+    NotFound,
+    /// A caller's mistake (bad filter, bad value).
+    Invalid,
+    Catalog,
+}
+
+impl StoreError {
+    pub fn new(kind: ErrorKind, msg: impl Into<String>) -> Self {
+        StoreError {
+            kind,
+            msg: msg.into(),
+        }
+    }
+    pub(crate) fn io(ctx: impl fmt::Display, e: std::io::Error) -> Self {
+        StoreError::new(ErrorKind::Io, format!("{ctx}: {e}"))
+    }
+}
+
+impl fmt::Display for StoreError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.msg)
+    }
+}
+
+impl std::error::Error for StoreError {}
+
+pub type Result<T, E = StoreError> = std::result::Result<T, E>;
+
+/// Default store directory: `$TRIBO_STORE`, else `./runs`.
+pub fn default_store_dir() -> std::path::PathBuf {
+    std::env::var_os("TRIBO_STORE")
+        .filter(|s| !s.is_empty())
+        .map(Into::into)
+        .unwrap_or_else(|| "runs".into())
+}
+
+#[cfg(test)]
+mod tests;

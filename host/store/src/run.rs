@@ -1,0 +1,779 @@
+//! A run folder: [`RunWriter`] records one, [`Run`] reads one back.
+
+use crate::log::{LogContents, LogReader, LogWriter, Recovery};
+use crate::{ErrorKind, Result, StoreError};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+use tribo_physics::record::Units;
+use tribo_physics::{Record, Rig};
+use tribo_wire::frame::decode_one;
+use tribo_wire::{
+    Channel, Configure, DeviceMsg, EndReason, OnboardResult, RunEnd, RunHeader, SampleBlock,
+};
+
+pub const LOG_FILE: &str = "frames.log";
+pub const META_FILE: &str = "meta.toml";
+pub const RESULT_FILE: &str = "result.toml";
+pub const CSV_FILE: &str = "samples.csv";
+/// Version of the run folder layout written in [`RunMeta::format`].
+pub const RUN_FORMAT: u32 = 1;
+
+/// Where a run stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RunStatus {
+    /// Being recorded (or the recorder was killed: see [`Run::is_complete`]).
+    Recording,
+    /// Every block and the run's end were received.
+    Complete,
+    /// Aborted by the operator (Ctrl-C) or the rig; what was received is kept.
+    Aborted,
+    /// The link was lost before the end; `tribo pull` can fetch the rest.
+    Incomplete,
+}
+
+impl RunStatus {
+    pub fn name(self) -> &'static str {
+        match self {
+            RunStatus::Recording => "recording",
+            RunStatus::Complete => "complete",
+            RunStatus::Aborted => "aborted",
+            RunStatus::Incomplete => "incomplete",
+        }
+    }
+}
+
+/// The rig the run was taken on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DeviceMeta {
+    /// `major.minor.patch`.
+    pub firmware: String,
+    /// Serial number, 16 hex digits.
+    pub serial: String,
+    pub protocol: u16,
+    /// Port it was reached through (`/dev/ttyACM0`, a pty…).
+    pub port: String,
+}
+
+/// Everything known about a run besides its samples (`meta.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunMeta {
+    /// Folder layout version ([`RUN_FORMAT`]).
+    pub format: u32,
+    /// The run's id in the store (its folder name).
+    pub id: String,
+    /// Creation time, UTC, `YYYY-MM-DDTHH:MM:SSZ`.
+    pub created: String,
+    pub status: RunStatus,
+    #[serde(default)]
+    pub label: Option<String>,
+    #[serde(default)]
+    pub sample: Option<String>,
+    #[serde(default)]
+    pub lubricant: Option<String>,
+    /// Campaign name and this run's repetition index (from 1), if part of one.
+    #[serde(default)]
+    pub campaign: Option<String>,
+    #[serde(default)]
+    pub repeat: Option<u32>,
+    /// Normal load N.
+    pub load_n: f64,
+    pub mass_kg: f64,
+    pub stiffness_n_per_m: f64,
+    pub sample_rate_hz: u32,
+    pub initial_amplitude_m: f64,
+    /// Heater setpoint asked for (`None` = heater off, room temperature).
+    #[serde(default)]
+    pub temp_setpoint_c: Option<f64>,
+    /// Plane temperature measured at the release.
+    #[serde(default)]
+    pub temp_c: Option<f64>,
+    #[serde(default)]
+    pub device: Option<DeviceMeta>,
+    /// The rig's own number for the run (what `Pull` asks for).
+    #[serde(default)]
+    pub device_run_id: Option<u32>,
+    /// The full configuration sent to the rig.
+    pub config: Configure,
+}
+
+impl RunMeta {
+    /// Metadata for a run about to be taken with `config`.
+    pub fn new(config: Configure) -> RunMeta {
+        RunMeta {
+            format: RUN_FORMAT,
+            id: String::new(),
+            created: crate::utc_now_rfc3339(),
+            status: RunStatus::Recording,
+            label: None,
+            sample: None,
+            lubricant: None,
+            campaign: None,
+            repeat: None,
+            load_n: clean(config.rig.load_n),
+            mass_kg: clean(config.rig.mass_kg),
+            stiffness_n_per_m: clean(config.rig.stiffness_n_per_m),
+            sample_rate_hz: config.sample_rate_hz,
+            initial_amplitude_m: clean(config.initial_amplitude_m),
+            temp_setpoint_c: None,
+            temp_c: None,
+            device: None,
+            device_run_id: None,
+            config,
+        }
+    }
+
+    /// The temperature a table groups by: the setpoint if the heater was on, else the measured one.
+    pub fn nominal_temp_c(&self) -> Option<f64> {
+        self.temp_setpoint_c.or(self.temp_c)
+    }
+
+    fn folder_name(&self) -> String {
+        let stamp: String = self
+            .created
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric())
+            .collect();
+        let mut name = format!("{stamp}-N{:.3}", self.load_n);
+        if let Some(t) = self.temp_setpoint_c {
+            name.push_str(&format!("-T{t:.0}"));
+        }
+        if let Some(l) = &self.label {
+            let clean: String = l
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
+                .take(40)
+                .collect();
+            if !clean.is_empty() {
+                name.push('-');
+                name.push_str(&clean);
+            }
+        }
+        name
+    }
+}
+
+/// Host-side fit of the run's samples (Coulomb–viscous, tribo-physics' Levenberg–Marquardt).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HostFit {
+    pub law: String,
+    pub mu0: f64,
+    pub mu1: f64,
+    /// RMS envelope misfit relative to the initial amplitude.
+    pub gap: f64,
+    pub converged: bool,
+}
+
+/// `result.toml`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Results {
+    #[serde(default)]
+    pub onboard: Option<OnboardResult>,
+    #[serde(default)]
+    pub host: Option<HostFit>,
+    /// Why the host fit failed, if it did.
+    #[serde(default)]
+    pub host_error: Option<String>,
+}
+
+/// A run's samples in SI units, in time order (`t` from the release).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Samples {
+    pub t: Vec<f64>,
+    pub x: Vec<f64>,
+    pub v: Vec<f64>,
+    /// Tangential force, N (if the channel was on).
+    pub force: Option<Vec<f64>>,
+    /// Plane temperature, °C (the channel if on, else the block's reading).
+    pub temp_c: Option<Vec<f64>>,
+    /// Contact resistance, Ω (one value per block, held over its samples; NaN for a block in which
+    /// the autoranger had no reading, typically the first few while it searches its range).
+    pub ecr_ohm: Option<Vec<f64>>,
+}
+
+impl Samples {
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+}
+
+/// The messages of a log, sorted into a run.
+#[derive(Debug, Clone, Default)]
+struct Assembled {
+    header: Option<RunHeader>,
+    blocks: BTreeMap<u32, SampleBlock>,
+    result: Option<OnboardResult>,
+    end: Option<RunEnd>,
+    /// Records that were not frames of this protocol (count).
+    undecodable: usize,
+    /// Blocks received twice with different contents.
+    conflicts: Vec<u32>,
+}
+
+impl Assembled {
+    fn add(&mut self, msg: DeviceMsg) {
+        match msg {
+            DeviceMsg::RunStarted(h) if self.header.is_none() => self.header = Some(h),
+            DeviceMsg::Samples(b) => match self.blocks.get(&b.block) {
+                Some(old) if *old != b => self.conflicts.push(b.block),
+                Some(_) => {}
+                None => {
+                    self.blocks.insert(b.block, b);
+                }
+            },
+            DeviceMsg::Result(r) => self.result = Some(r),
+            DeviceMsg::RunEnded(e) => self.end = Some(e),
+            _ => {}
+        }
+    }
+
+    fn from_records(records: &[Vec<u8>]) -> Assembled {
+        let mut a = Assembled::default();
+        for r in records {
+            match decode_one::<DeviceMsg>(r) {
+                Ok(f) => a.add(f.msg),
+                Err(_) => a.undecodable += 1,
+            }
+        }
+        a
+    }
+
+    /// Block indices missing before the last one expected.
+    fn missing(&self) -> Vec<u32> {
+        let expected = match (&self.end, self.blocks.keys().next_back()) {
+            (Some(e), _) => e.blocks,
+            (None, Some(&last)) => last + 1,
+            (None, None) => 0,
+        };
+        (0..expected)
+            .filter(|b| !self.blocks.contains_key(b))
+            .collect()
+    }
+
+    /// The block a resumed pull should start from: the first one missing (or the next one).
+    fn resume_from(&self) -> u32 {
+        let mut next = 0;
+        while self.blocks.contains_key(&next) {
+            next += 1;
+        }
+        next
+    }
+}
+
+fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            StoreError::new(
+                ErrorKind::NotFound,
+                format!(
+                    "{} is missing: is {} a run folder?",
+                    path.display(),
+                    path.parent().unwrap_or(path).display()
+                ),
+            )
+        } else {
+            StoreError::io(format!("cannot read {}", path.display()), e)
+        }
+    })?;
+    toml::from_str(&text).map_err(|e| {
+        StoreError::new(
+            ErrorKind::Corrupt,
+            format!("{} is damaged: {e}; fix or delete the file", path.display()),
+        )
+    })
+}
+
+/// Writes `value` to `path` atomically (temporary file, fsync, rename).
+fn write_toml_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = toml::to_string(value).map_err(|e| {
+        StoreError::new(
+            ErrorKind::Invalid,
+            format!("cannot encode {}: {e}", path.display()),
+        )
+    })?;
+    write_atomic(path, text.as_bytes())
+}
+
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let tmp = path.with_extension("tmp");
+    let io = |e| StoreError::io(format!("cannot write {}", path.display()), e);
+    let mut f = std::fs::File::create(&tmp).map_err(io)?;
+    f.write_all(bytes).and_then(|_| f.sync_all()).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+/// A stored run, read back from its folder.
+#[derive(Debug, Clone)]
+pub struct Run {
+    dir: PathBuf,
+    pub meta: RunMeta,
+    pub results: Results,
+    /// What had to be cut off the frame log's end, if anything.
+    pub recovery: Option<Recovery>,
+    data: Assembled,
+}
+
+impl Run {
+    /// Opens the run in folder `dir`. A torn tail of the log is dropped and reported in
+    /// [`Run::recovery`]; corruption before the end is an error.
+    pub fn open(dir: impl AsRef<Path>) -> Result<Run> {
+        Self::open_with(dir.as_ref(), false)
+    }
+
+    /// Like [`Run::open`] but keeps the intact prefix of a corrupt log.
+    pub fn open_salvage(dir: impl AsRef<Path>) -> Result<Run> {
+        Self::open_with(dir.as_ref(), true)
+    }
+
+    fn open_with(dir: &Path, salvage: bool) -> Result<Run> {
+        if !dir.is_dir() {
+            return Err(StoreError::new(
+                ErrorKind::NotFound,
+                format!(
+                    "{} is not a run folder (list runs with `tribo runs`)",
+                    dir.display()
+                ),
+            ));
+        }
+        let meta: RunMeta = read_toml(&dir.join(META_FILE))?;
+        if meta.format > RUN_FORMAT {
+            return Err(StoreError::new(
+                ErrorKind::Corrupt,
+                format!(
+                    "{}: run format v{} is newer than this tribo (v{RUN_FORMAT}): update tribo",
+                    dir.display(),
+                    meta.format
+                ),
+            ));
+        }
+        let results = match read_toml(&dir.join(RESULT_FILE)) {
+            Ok(r) => r,
+            Err(e) if e.kind == ErrorKind::NotFound => Results::default(),
+            Err(e) => return Err(e),
+        };
+        let LogContents { records, recovery } = LogReader::read(&dir.join(LOG_FILE), salvage)?;
+        let data = Assembled::from_records(&records);
+        let mut results = results;
+        if results.onboard.is_none() {
+            results.onboard = data.result;
+        }
+        Ok(Run {
+            dir: dir.to_owned(),
+            meta,
+            results,
+            recovery,
+            data,
+        })
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn id(&self) -> &str {
+        &self.meta.id
+    }
+
+    pub fn meta(&self) -> &RunMeta {
+        &self.meta
+    }
+
+    /// The on-board analysis, if the rig sent it.
+    pub fn result(&self) -> Option<&OnboardResult> {
+        self.results.onboard.as_ref()
+    }
+
+    /// The host's fit, if one was made.
+    pub fn host_fit(&self) -> Option<&HostFit> {
+        self.results.host.as_ref()
+    }
+
+    pub fn header(&self) -> Option<&RunHeader> {
+        self.data.header.as_ref()
+    }
+
+    pub fn end(&self) -> Option<&RunEnd> {
+        self.data.end.as_ref()
+    }
+
+    /// Sample blocks received, in index order.
+    pub fn blocks(&self) -> impl Iterator<Item = &SampleBlock> {
+        self.data.blocks.values()
+    }
+
+    pub fn block_count(&self) -> usize {
+        self.data.blocks.len()
+    }
+
+    /// Indices of blocks known to exist that were not received.
+    pub fn missing_blocks(&self) -> Vec<u32> {
+        self.data.missing()
+    }
+
+    /// First block a resumed `Pull` should ask for.
+    pub fn resume_from(&self) -> u32 {
+        self.data.resume_from()
+    }
+
+    /// Log records that did not decode as frames of this protocol.
+    pub fn undecodable_records(&self) -> usize {
+        self.data.undecodable
+    }
+
+    /// All blocks and the end received, nothing missing.
+    pub fn is_complete(&self) -> bool {
+        self.data.end.is_some() && self.data.missing().is_empty() && self.data.header.is_some()
+    }
+
+    /// The configuration the samples were taken with (the rig's header, else the metadata's).
+    pub fn config(&self) -> Configure {
+        self.data
+            .header
+            .map(|h| h.config)
+            .unwrap_or(self.meta.config)
+    }
+
+    /// The samples in SI units (calibrated with the run's own calibration). Missing blocks leave
+    /// gaps in `t`, never misplaced samples.
+    pub fn samples_si(&self) -> Result<Samples> {
+        let cfg = self.config();
+        if cfg.sample_rate_hz == 0 {
+            return Err(StoreError::new(
+                ErrorKind::Corrupt,
+                format!("{}: sample rate is 0", self.dir.display()),
+            ));
+        }
+        let dt = 1.0 / cfg.sample_rate_hz as f64;
+        let cal = cfg.calibration;
+        let mut s = Samples::default();
+        let any = |c: Channel| {
+            self.data.blocks.values().all(|b| b.channels.contains(c))
+                && !self.data.blocks.is_empty()
+        };
+        let (has_f, has_t) = (any(Channel::Force), any(Channel::Temperature));
+        let mut force = Vec::new();
+        let mut temp = Vec::new();
+        let mut ecr = Vec::new();
+        for b in self.data.blocks.values() {
+            let ch = b.channels;
+            let (Some(px), Some(pv)) = (
+                ch.position(Channel::Displacement),
+                ch.position(Channel::Velocity),
+            ) else {
+                return Err(StoreError::new(
+                    ErrorKind::Corrupt,
+                    format!(
+                        "{}: block {} lacks displacement or velocity",
+                        self.dir.display(),
+                        b.block
+                    ),
+                ));
+            };
+            for i in 0..b.samples() {
+                let Some(c) = b.sample(i) else { break };
+                s.t.push((b.first_sample as f64 + i as f64) * dt);
+                s.x.push(cal[Channel::Displacement.index()].to_si(c[px]) as f64);
+                s.v.push(cal[Channel::Velocity.index()].to_si(c[pv]) as f64);
+                if let (true, Some(p)) = (has_f, ch.position(Channel::Force)) {
+                    force.push(cal[Channel::Force.index()].to_si(c[p]) as f64);
+                }
+                match (has_t, ch.position(Channel::Temperature)) {
+                    (true, Some(p)) => {
+                        temp.push(cal[Channel::Temperature.index()].to_si(c[p]) as f64)
+                    }
+                    _ => temp.push(b.temp_c as f64),
+                }
+                ecr.push(10f64.powf(b.log10_ecr_ohm as f64));
+            }
+        }
+        s.force = has_f.then_some(force);
+        s.temp_c = temp.iter().all(|v| v.is_finite()).then_some(temp);
+        s.ecr_ohm = ecr.iter().any(|v| v.is_finite() && *v > 0.0).then_some(ecr);
+        Ok(s)
+    }
+
+    /// The run as a physics [`Record`] (SI, with its rig constants), for `tribo fit` and the reports.
+    /// A record's columns must be finite, so blocks without an ECR reading (see [`Samples::ecr_ohm`])
+    /// take the nearest reading: the previous one, or the first one for the blocks before it.
+    pub fn record(&self) -> Result<Record> {
+        let mut s = self.samples_si()?;
+        if let Some(e) = &mut s.ecr_ohm {
+            fill_gaps(e);
+        }
+        let cfg = self.config();
+        let rig = Rig::new(
+            clean(cfg.rig.mass_kg),
+            clean(cfg.rig.stiffness_n_per_m),
+            clean(cfg.rig.load_n),
+        )
+        .map_err(|e| {
+            StoreError::new(
+                ErrorKind::Corrupt,
+                format!("{}: rig constants: {e}", self.dir.display()),
+            )
+        })?;
+        let mut r = Record::new(s.t, s.x, s.v, Some(rig), Units::Si);
+        r.ft = s.force;
+        r.temp = s.temp_c;
+        r.ecr = s.ecr_ohm;
+        Ok(r)
+    }
+
+    /// Writes the samples as CSV in the physics format (`# mass_kg=…` lines, `t_s,x_m,v_m_s,…`).
+    pub fn export_csv(&self, path: &Path) -> Result<()> {
+        let rec = self.record()?;
+        write_atomic(path, rec.to_csv_string().as_bytes())
+    }
+
+    /// Replaces the stored results (atomically).
+    pub fn save_results(&mut self, results: Results) -> Result<()> {
+        write_toml_atomic(&self.dir.join(RESULT_FILE), &results)?;
+        self.results = results;
+        Ok(())
+    }
+
+    /// Replaces the stored metadata (atomically).
+    pub fn save_meta(&mut self) -> Result<()> {
+        write_toml_atomic(&self.dir.join(META_FILE), &self.meta)
+    }
+}
+
+/// Records a run: appends frames to its log as they arrive.
+pub struct RunWriter {
+    dir: PathBuf,
+    meta: RunMeta,
+    log: LogWriter,
+    data: Assembled,
+    last_sync: Instant,
+}
+
+impl RunWriter {
+    /// Creates a new run folder under `store` (created if needed) and writes its metadata.
+    pub fn create(store: &Path, mut meta: RunMeta) -> Result<RunWriter> {
+        std::fs::create_dir_all(store).map_err(|e| {
+            StoreError::io(
+                format!(
+                    "cannot create the store {} (use --store DIR)",
+                    store.display()
+                ),
+                e,
+            )
+        })?;
+        let base = meta.folder_name();
+        let mut n = 1;
+        let dir = loop {
+            let name = if n == 1 {
+                base.clone()
+            } else {
+                format!("{base}-{n}")
+            };
+            let dir = store.join(&name);
+            match std::fs::create_dir(&dir) {
+                Ok(()) => {
+                    meta.id = name;
+                    break dir;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && n < 1000 => n += 1,
+                Err(e) => {
+                    return Err(StoreError::io(
+                        format!("cannot create run folder {}", dir.display()),
+                        e,
+                    ))
+                }
+            }
+        };
+        meta.status = RunStatus::Recording;
+        write_toml_atomic(&dir.join(META_FILE), &meta)?;
+        let log = LogWriter::create(&dir.join(LOG_FILE))?;
+        Ok(RunWriter {
+            dir,
+            meta,
+            log,
+            data: Assembled::default(),
+            last_sync: Instant::now(),
+        })
+    }
+
+    /// Reopens a run to add frames (after a lost link or a killed recorder), cutting a torn tail.
+    /// With `salvage`, a corrupt log is cut after its intact prefix. Returns the writer and what
+    /// was cut, if anything.
+    pub fn resume(dir: &Path, salvage: bool) -> Result<(RunWriter, Option<Recovery>)> {
+        let meta: RunMeta = read_toml(&dir.join(META_FILE))?;
+        let (log, contents) = LogWriter::reopen(&dir.join(LOG_FILE), salvage)?;
+        let data = Assembled::from_records(&contents.records);
+        Ok((
+            RunWriter {
+                dir: dir.to_owned(),
+                meta,
+                log,
+                data,
+                last_sync: Instant::now(),
+            },
+            contents.recovery,
+        ))
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn meta(&self) -> &RunMeta {
+        &self.meta
+    }
+
+    pub fn meta_mut(&mut self) -> &mut RunMeta {
+        &mut self.meta
+    }
+
+    /// Logs one raw wire frame (as received) and files the message it holds. Frames that do not
+    /// decode are refused (the link layer asks again for them).
+    pub fn append_frame(&mut self, raw: &[u8]) -> Result<()> {
+        let frame = decode_one::<DeviceMsg>(raw).map_err(|e| {
+            StoreError::new(
+                ErrorKind::Invalid,
+                format!("refusing to log a bad frame: {e}"),
+            )
+        })?;
+        let is_header = matches!(frame.msg, DeviceMsg::RunStarted(_));
+        let is_end = matches!(frame.msg, DeviceMsg::RunEnded(_) | DeviceMsg::Result(_));
+        if let DeviceMsg::RunStarted(h) = &frame.msg {
+            self.meta.device_run_id = Some(h.run_id);
+            if h.temp_c.is_finite() {
+                self.meta.temp_c = Some(clean(h.temp_c));
+            }
+        }
+        self.log.append(raw)?;
+        self.data.add(frame.msg);
+        if is_header {
+            // The rig's run id is how `tribo pull` finds this folder again, even if this process
+            // is killed before `finish`.
+            write_toml_atomic(&self.dir.join(META_FILE), &self.meta)?;
+        }
+        if is_header || is_end || self.last_sync.elapsed() >= Duration::from_secs(1) {
+            self.log.sync()?;
+            self.last_sync = Instant::now();
+        }
+        Ok(())
+    }
+
+    /// Block `i`, if logged.
+    pub fn block(&self, i: u32) -> Option<&SampleBlock> {
+        self.data.blocks.get(&i)
+    }
+
+    /// Whether block `i` is already logged.
+    pub fn has_block(&self, i: u32) -> bool {
+        self.data.blocks.contains_key(&i)
+    }
+
+    pub fn blocks(&self) -> usize {
+        self.data.blocks.len()
+    }
+
+    pub fn header(&self) -> Option<&RunHeader> {
+        self.data.header.as_ref()
+    }
+
+    pub fn end(&self) -> Option<&RunEnd> {
+        self.data.end.as_ref()
+    }
+
+    pub fn onboard(&self) -> Option<&OnboardResult> {
+        self.data.result.as_ref()
+    }
+
+    pub fn missing_blocks(&self) -> Vec<u32> {
+        self.data.missing()
+    }
+
+    /// First block a resumed `Pull` should ask for.
+    pub fn resume_from(&self) -> u32 {
+        self.data.resume_from()
+    }
+
+    /// Header, end and every block present.
+    pub fn is_complete(&self) -> bool {
+        self.data.header.is_some() && self.data.end.is_some() && self.data.missing().is_empty()
+    }
+
+    /// Syncs the log and writes the metadata with its final status; the status is derived from
+    /// what was received unless `aborted`. Returns the run read back.
+    pub fn finish(mut self, aborted: bool) -> Result<Run> {
+        self.log.sync()?;
+        let ended_by_abort = matches!(
+            self.data.end,
+            Some(RunEnd {
+                reason: EndReason::Aborted,
+                ..
+            })
+        );
+        self.meta.status = if self.is_complete() && !aborted && !ended_by_abort {
+            RunStatus::Complete
+        } else if aborted || ended_by_abort {
+            RunStatus::Aborted
+        } else {
+            RunStatus::Incomplete
+        };
+        write_toml_atomic(&self.dir.join(META_FILE), &self.meta)?;
+        Run::open(&self.dir)
+    }
+
+    /// Writes the metadata as it is now (e.g. after the link was lost), leaving the log open.
+    pub fn checkpoint(&mut self, status: RunStatus) -> Result<()> {
+        self.log.sync()?;
+        self.meta.status = status;
+        write_toml_atomic(&self.dir.join(META_FILE), &self.meta)
+    }
+}
+
+/// Lists run folders under a store (those with a `meta.toml`), sorted by name (= creation time).
+pub fn list_run_dirs(store: &Path) -> Result<Vec<PathBuf>> {
+    let rd = match std::fs::read_dir(store) {
+        Ok(rd) => rd,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(vec![]),
+        Err(e) => {
+            return Err(StoreError::io(
+                format!("cannot list the store {}", store.display()),
+                e,
+            ))
+        }
+    };
+    let mut dirs: Vec<PathBuf> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join(META_FILE).is_file())
+        .collect();
+    dirs.sort();
+    Ok(dirs)
+}
+
+/// An `f32` setting as the `f64` a person typed (0.3, not 0.30000001192092896).
+pub fn clean(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(x as f64)
+}
+
+/// Replaces non-finite values by the previous finite one (the first finite one at the start).
+fn fill_gaps(v: &mut [f64]) {
+    let Some(first) = v.iter().copied().find(|x| x.is_finite()) else {
+        return;
+    };
+    let mut last = first;
+    for x in v.iter_mut() {
+        if x.is_finite() {
+            last = *x;
+        } else {
+            *x = last;
+        }
+    }
+}

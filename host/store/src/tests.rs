@@ -1,0 +1,354 @@
+//! Round trips through a run folder and the catalog.
+
+use crate::catalog::{Axis, Value};
+use crate::*;
+use tribo_wire::frame::encode_vec;
+use tribo_wire::*;
+
+/// Frames of a synthetic run: a decaying sine of amplitude `a0`, `nblocks` full blocks.
+fn run_frames(cfg: &Configure, nblocks: u32, mu0: f32) -> Vec<Vec<u8>> {
+    let w = cfg.omega() as f64;
+    let rate = cfg.sample_rate_hz as f64;
+    let mut out = vec![];
+    let mut seq = 0;
+    let mut push = |m: DeviceMsg| {
+        seq += 1;
+        out.push(encode_vec(seq, &m).unwrap());
+    };
+    push(DeviceMsg::RunStarted(RunHeader {
+        run_id: 7,
+        config: *cfg,
+        temp_c: 41.5,
+        t_us: 1000,
+    }));
+    for b in 0..nblocks {
+        let mut counts = Counts::default();
+        for i in 0..BLOCK_LEN {
+            let t = (b as usize * BLOCK_LEN + i) as f64 / rate;
+            let x = cfg.initial_amplitude_m as f64 * (-t).exp() * (w * t).cos();
+            let v = -cfg.initial_amplitude_m as f64 * w * (-t).exp() * (w * t).sin();
+            let vals = [x, v, 0.01 * v.signum(), 1.0, 41.5];
+            for c in cfg.channels.iter() {
+                counts
+                    .push(cfg.calibration[c.index()].to_count(vals[c.index()] as f32))
+                    .unwrap();
+            }
+        }
+        push(DeviceMsg::Samples(SampleBlock {
+            run_id: 7,
+            block: b,
+            first_sample: b * BLOCK_LEN as u32,
+            t_us: 1000 + (b as u64 * BLOCK_LEN as u64 * 100),
+            channels: cfg.channels,
+            ecr_range: 2,
+            log10_ecr_ohm: 6.5,
+            temp_c: 41.5,
+            counts,
+        }));
+    }
+    let est = Estimate {
+        mu0,
+        mu1: 0.01,
+        mu0_se: 0.0001,
+        mu1_se: f32::NAN,
+    };
+    push(DeviceMsg::Result(OnboardResult {
+        run_id: 7,
+        verdict: Verdict::Ok,
+        cycles: 12,
+        frequency_hz: 26.9,
+        initial_amplitude_m: cfg.initial_amplitude_m,
+        duration_s: 1.0,
+        best: est,
+        averaging: est,
+        decrement: est,
+        shape: EnvelopeShape::Straight,
+        curvature: 0.0,
+    }));
+    push(DeviceMsg::RunEnded(RunEnd {
+        run_id: 7,
+        blocks: nblocks,
+        samples: nblocks * BLOCK_LEN as u32,
+        overruns: 0,
+        reason: EndReason::Stopped,
+    }));
+    out
+}
+
+fn record(
+    store: &std::path::Path,
+    cfg: &Configure,
+    frames: &[Vec<u8>],
+    meta_fn: impl FnOnce(&mut RunMeta),
+) -> Run {
+    let mut meta = RunMeta::new(*cfg);
+    meta_fn(&mut meta);
+    let mut w = RunWriter::create(store, meta).unwrap();
+    for f in frames {
+        w.append_frame(f).unwrap();
+    }
+    w.finish(false).unwrap()
+}
+
+#[test]
+fn samples_round_trip_through_the_store() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let frames = run_frames(&cfg, 20, 0.02);
+    let run = record(d.path(), &cfg, &frames, |m| {
+        m.label = Some("steel/PAO".into())
+    });
+    assert_eq!(run.meta.status, RunStatus::Complete);
+    assert!(run.is_complete());
+    assert!(run.meta.id.ends_with("steel_PAO"), "{}", run.meta.id);
+    assert_eq!(run.meta.device_run_id, Some(7));
+    assert_eq!(run.meta.temp_c, Some(41.5));
+    let s = run.samples_si().unwrap();
+    assert_eq!(s.len(), 20 * BLOCK_LEN);
+    let w = cfg.omega() as f64;
+    let qx = cfg.calibration[0].gain as f64;
+    let qv = cfg.calibration[1].gain as f64;
+    for i in 0..s.len() {
+        let t = i as f64 / 10_000.0;
+        assert!((s.t[i] - t).abs() < 1e-12);
+        let x = 667e-6 * (-t).exp() * (w * t).cos();
+        let v = -667e-6 * w * (-t).exp() * (w * t).sin();
+        assert!(
+            (s.x[i] - x).abs() <= 0.51 * qx + 1e-12,
+            "x at {i}: {} vs {x}",
+            s.x[i]
+        );
+        assert!((s.v[i] - v).abs() <= 0.51 * qv + 1e-9, "v at {i}");
+    }
+    let ecr = s.ecr_ohm.as_ref().unwrap();
+    assert!((ecr[0] / 10f64.powf(6.5) - 1.0).abs() < 1e-6);
+    assert!(s
+        .temp_c
+        .as_ref()
+        .unwrap()
+        .iter()
+        .all(|t| (t - 41.5).abs() < 0.01));
+    assert_eq!(run.result().unwrap().best.mu0, 0.02);
+    // NaN survives the TOML result file.
+    assert!(run.result().unwrap().best.mu1_se.is_nan());
+}
+
+#[test]
+fn csv_export_reads_back_as_a_physics_record() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.45);
+    let run = record(d.path(), &cfg, &run_frames(&cfg, 4, 0.02), |_| {});
+    let path = d.path().join("x.csv");
+    run.export_csv(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.starts_with("# mass_kg="), "{}", &text[..60]);
+    let back = tribo_physics::Record::from_csv_str(&text).unwrap();
+    let orig = run.record().unwrap();
+    assert_eq!(back.rig, orig.rig);
+    assert_eq!(back.len(), orig.len());
+    for i in 0..back.len() {
+        assert!((back.x[i] - orig.x[i]).abs() <= 1e-15 + 1e-12 * orig.x[i].abs());
+        assert!((back.v[i] - orig.v[i]).abs() <= 1e-15 + 1e-12 * orig.v[i].abs());
+    }
+    assert!(back.ft.is_some() && back.temp.is_some() && back.ecr.is_some());
+}
+
+#[test]
+fn killed_recorder_leaves_a_readable_resumable_run() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let frames = run_frames(&cfg, 10, 0.02);
+    let mut w = RunWriter::create(d.path(), RunMeta::new(cfg)).unwrap();
+    for f in &frames[..6] {
+        w.append_frame(f).unwrap();
+    }
+    let dir = w.dir().to_owned();
+    drop(w); // killed: no finish
+             // And half of a 7th record made it to disk.
+    let log = dir.join(run::LOG_FILE);
+    let mut bytes = std::fs::read(&log).unwrap();
+    let extra = &frames[6];
+    bytes.extend_from_slice(&(extra.len() as u32).to_le_bytes());
+    bytes.extend_from_slice(&[1, 2, 3, 4]);
+    bytes.extend_from_slice(&extra[..extra.len() / 2]);
+    std::fs::write(&log, &bytes).unwrap();
+
+    let run = Run::open(&dir).unwrap();
+    assert_eq!(run.meta.status, RunStatus::Recording);
+    assert!(!run.is_complete());
+    assert_eq!(run.block_count(), 5);
+    assert_eq!(run.resume_from(), 5);
+    assert!(run.recovery.is_some());
+    assert_eq!(run.samples_si().unwrap().len(), 5 * BLOCK_LEN);
+
+    // Resume: the torn tail is cut and the rest appended; blocks already held are deduplicated.
+    let (mut w, rec) = RunWriter::resume(&dir, false).unwrap();
+    assert_eq!(rec.unwrap().records, 6);
+    for f in &frames[3..] {
+        w.append_frame(f).unwrap();
+    }
+    let run = w.finish(false).unwrap();
+    assert!(run.recovery.is_none());
+    assert!(run.is_complete(), "missing {:?}", run.missing_blocks());
+    assert_eq!(run.meta.status, RunStatus::Complete);
+    assert_eq!(run.samples_si().unwrap().len(), 10 * BLOCK_LEN);
+}
+
+#[test]
+fn gaps_are_reported_not_papered_over() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let frames = run_frames(&cfg, 8, 0.02);
+    // Drop blocks 2 and 5 (frames 3 and 6).
+    let kept: Vec<Vec<u8>> = frames
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != 3 && *i != 6)
+        .map(|(_, f)| f.clone())
+        .collect();
+    let run = record(d.path(), &cfg, &kept, |_| {});
+    assert_eq!(run.missing_blocks(), vec![2, 5]);
+    assert_eq!(run.meta.status, RunStatus::Incomplete);
+    assert_eq!(run.resume_from(), 2);
+    let s = run.samples_si().unwrap();
+    assert_eq!(s.len(), 6 * BLOCK_LEN);
+    // Time jumps over the gap instead of shifting samples.
+    assert!((s.t[2 * BLOCK_LEN] - (3 * BLOCK_LEN) as f64 / 10_000.0).abs() < 1e-12);
+}
+
+#[test]
+fn open_reports_what_is_wrong() {
+    let d = tempfile::tempdir().unwrap();
+    let e = Run::open(d.path().join("nope")).unwrap_err();
+    assert!(
+        e.msg.contains("not a run folder") && e.msg.contains("tribo runs"),
+        "{e}"
+    );
+    std::fs::write(d.path().join("meta.toml"), "format = \"x\"").unwrap();
+    let e = Run::open(d.path()).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::Corrupt);
+    assert!(e.msg.contains("meta.toml is damaged"), "{e}");
+}
+
+#[test]
+fn catalog_lists_filters_and_tabulates_mean_and_sd() {
+    let d = tempfile::tempdir().unwrap();
+    let mut expected = std::collections::BTreeMap::new();
+    for (load, temp) in [(0.2f32, 25.0), (0.2, 60.0), (0.4, 25.0)] {
+        for rep in 1..=3u32 {
+            let cfg = Configure::real_rig(load);
+            let mu0 = 0.01 * load + 0.0001 * temp as f32 + 0.001 * rep as f32;
+            let mut run = record(d.path(), &cfg, &run_frames(&cfg, 2, mu0), |m| {
+                m.campaign = Some("c1".into());
+                m.repeat = Some(rep);
+                m.temp_setpoint_c = Some(temp);
+                m.label = Some(format!("r{rep}"));
+            });
+            let host = HostFit {
+                law: "coulomb-viscous".into(),
+                mu0: mu0 as f64 * 1.01,
+                mu1: 0.01,
+                gap: 0.001,
+                converged: true,
+            };
+            let mut res = run.results.clone();
+            res.host = Some(host);
+            run.save_results(res).unwrap();
+            expected
+                .entry(((load * 1000.0).round() as i64, temp as i64))
+                .or_insert_with(Vec::new)
+                .push(mu0 as f64);
+        }
+    }
+    let cat = Catalog::open(d.path()).unwrap();
+    let (n, bad) = cat.reindex().unwrap();
+    assert_eq!((n, bad.len()), (9, 0));
+    let all = cat.list(&Filter::default()).unwrap();
+    assert_eq!(all.len(), 9);
+    let hot = cat
+        .list(&Filter {
+            temp_min: Some(50.0),
+            ..Default::default()
+        })
+        .unwrap();
+    assert_eq!(hot.len(), 3);
+    assert!(hot.iter().all(|r| r.temp_c == Some(60.0)));
+    let heavy = cat
+        .list(&Filter {
+            load_min: Some(0.3),
+            label: Some("r2".into()),
+            ..Default::default()
+        })
+        .unwrap();
+    assert_eq!(heavy.len(), 1);
+
+    let t = cat
+        .table(
+            Axis::Temp,
+            Axis::Load,
+            Value::OnboardMu0,
+            &Filter::default(),
+        )
+        .unwrap();
+    assert_eq!(t.rows, vec![25.0, 60.0]);
+    assert_eq!(t.cols, vec![0.2, 0.4]);
+    assert!(t.cells[1][1].is_none(), "no run at 60 °C, 0.4 N");
+    for (r, temp) in t.rows.iter().enumerate() {
+        for (c, load) in t.cols.iter().enumerate() {
+            let Some(cell) = t.cells[r][c] else { continue };
+            let v = &expected[&((load * 1000.0).round() as i64, *temp as i64)];
+            let mean = v.iter().sum::<f64>() / 3.0;
+            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 2.0).sqrt();
+            assert_eq!(cell.n, 3);
+            assert!((cell.mean - mean).abs() < 1e-6 * mean.abs().max(1e-3));
+            // The repeats differ by 0.001 each: sd = 0.001.
+            assert!(
+                (cell.sd.unwrap() - sd).abs() < 1e-7 && (sd - 0.001).abs() < 1e-6,
+                "{cell:?}"
+            );
+        }
+    }
+    let host = cat
+        .table(Axis::Temp, Axis::Load, Value::Mu0, &Filter::default())
+        .unwrap();
+    assert!((host.cells[0][0].unwrap().mean / t.cells[0][0].unwrap().mean - 1.01).abs() < 1e-6);
+    let text = t.render();
+    assert!(
+        text.contains("± 0.00100 (3)") && text.contains('—'),
+        "{text}"
+    );
+    assert!(cat
+        .table(Axis::Load, Axis::Load, Value::Mu0, &Filter::default())
+        .is_err());
+}
+
+#[test]
+fn blocks_without_an_ecr_reading_stay_nan_in_samples_and_take_the_nearest_reading_in_the_record() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let mut frames = run_frames(&cfg, 6, 0.02);
+    // Blocks 0 and 1 (frames 1, 2): the autoranger had no reading; block 3 (frame 4) neither.
+    for (i, f) in frames.iter_mut().enumerate().skip(1).take(6) {
+        let tribo_wire::Frame { seq, msg } = tribo_wire::frame::decode_one::<DeviceMsg>(f).unwrap();
+        let DeviceMsg::Samples(mut b) = msg else {
+            panic!()
+        };
+        b.log10_ecr_ohm = match i {
+            1 | 2 | 4 => f32::NAN,
+            _ => 5.0 + i as f32,
+        };
+        *f = encode_vec(seq, &DeviceMsg::Samples(b)).unwrap();
+    }
+    let run = record(d.path(), &cfg, &frames, |_| {});
+    let s = run.samples_si().unwrap();
+    let e = s.ecr_ohm.unwrap();
+    assert!(e[0].is_nan() && e[BLOCK_LEN].is_nan() && e[3 * BLOCK_LEN].is_nan());
+    assert!((e[2 * BLOCK_LEN] / 1e8 - 1.0).abs() < 1e-5);
+    let r = run.record().unwrap();
+    r.validate().unwrap();
+    let e = r.ecr.unwrap();
+    // Leading gap: the first reading (block 2, 10^8); inner gap: the previous one.
+    assert!((e[0] / 1e8 - 1.0).abs() < 1e-5 && (e[BLOCK_LEN + 5] / 1e8 - 1.0).abs() < 1e-5);
+    assert!((e[3 * BLOCK_LEN] / 1e8 - 1.0).abs() < 1e-5);
+    assert!((e[4 * BLOCK_LEN] / 1e10 - 1.0).abs() < 1e-5);
+}

@@ -1,0 +1,77 @@
+//! Shared by the host tests: a virtual rig behind a pseudo-terminal, and run plans.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::time::Duration;
+use tribo::link::pty::VirtualPort;
+use tribo::link::session::RunPlan;
+use tribo::link::Link;
+use tribo_rig::{LawConfig, ServeOptions, VirtualRig, VirtualRigConfig};
+use tribo_wire::{Configure, DeviceInfo};
+
+/// A virtual rig with a Coulomb–viscous contact, served on a new pseudo-terminal at `speed`× real
+/// time. Returns the port and the (μ0, μ1) a Coulomb–viscous fit should find.
+pub fn virtual_rig(mu0: f64, mu1: f64, seed: u64, speed: f64) -> (PathBuf, (f64, f64)) {
+    let cfg = VirtualRigConfig {
+        law: LawConfig::CoulombViscous { mu0, mu1 },
+        seed,
+        ..Default::default()
+    };
+    let rig = VirtualRig::new(cfg).expect("valid virtual rig");
+    let truth = rig.truth().expect("Coulomb–viscous truth");
+    let port = VirtualPort::open().expect("a pseudo-terminal");
+    let path = port.path().to_owned();
+    port.spawn(
+        rig,
+        ServeOptions {
+            speed,
+            max_wait: Duration::from_millis(2),
+        },
+    );
+    (path, truth)
+}
+
+pub fn connect(port: &std::path::Path) -> (Link, DeviceInfo) {
+    let mut link = Link::open(port).expect("open the pty");
+    let info = link.hello().expect("hello");
+    (link, info)
+}
+
+/// The thesis's rig at 0.3 N (the virtual rig's knob), runs of at most 8 s.
+pub fn plan() -> RunPlan {
+    let mut c = Configure::real_rig(0.3);
+    c.max_duration_s = 8.0;
+    RunPlan::new(c)
+}
+
+/// Asserts the thesis's stated precision of the method: μ0 ± 0.001, μ1 ± 0.0002.
+pub fn assert_close(what: &str, mu0: f64, mu1: f64, truth: (f64, f64)) {
+    assert!(
+        (mu0 - truth.0).abs() < 1e-3,
+        "{what}: μ0 {mu0} vs {}",
+        truth.0
+    );
+    assert!(
+        (mu1 - truth.1).abs() < 2e-4,
+        "{what}: μ1 {mu1} vs {}",
+        truth.1
+    );
+}
+
+/// Asserts a stored run holds every block of the run, in place: complete, nothing missing, as many
+/// blocks and samples as the rig's end frame says, sample times contiguous.
+pub fn assert_lossless(run: &tribo_store::Run) {
+    assert!(
+        run.is_complete(),
+        "missing blocks {:?}",
+        run.missing_blocks()
+    );
+    let end = run.end().expect("end frame");
+    assert_eq!(run.block_count() as u32, end.blocks);
+    let s = run.samples_si().unwrap();
+    assert_eq!(s.len() as u32, end.samples);
+    let dt = 1.0 / run.config().sample_rate_hz as f64;
+    for (i, t) in s.t.iter().enumerate() {
+        assert!((t - i as f64 * dt).abs() < 1e-9, "sample {i} at {t}");
+    }
+}
