@@ -508,3 +508,42 @@ fn a_restarted_rig_never_completes_an_older_run_with_its_number() {
         2
     );
 }
+
+#[test]
+fn with_button_the_run_starts_when_the_rig_button_is_pressed() {
+    // `tribo rig --virtual --button-after 0.3`: a finger on the button 0.3 s after arming.
+    let rig = tribo::cmd::rig::VirtualArgs {
+        button_after: Some(0.3),
+        speed: 20.0,
+        ..Default::default()
+    };
+    let (port, _) = rig.start().unwrap();
+    let store = tempfile::tempdir().unwrap();
+    let (mut link, info) = connect(&port);
+    let mut p = plan();
+    p.button = true;
+    let mut waited = false;
+    let o = record_run(
+        &mut link,
+        &info,
+        store.path(),
+        &p,
+        &AtomicBool::new(false),
+        &mut |e| {
+            if matches!(e, tribo::link::session::Progress::WaitingForButton) {
+                waited = true;
+            }
+        },
+    )
+    .unwrap();
+    assert!(waited, "the operator is told to press the button");
+    assert_lossless(&o.run);
+    // Released by the button, not by a command: the release came at least 0.3 s (device) after arming.
+    let ob = o.run.result().unwrap();
+    assert_eq!(ob.verdict, tribo_wire::Verdict::Ok);
+    assert!(
+        o.run.header().unwrap().t_us >= 300_000,
+        "{}",
+        o.run.header().unwrap().t_us
+    );
+}

@@ -74,18 +74,30 @@ fn json_contract_and_report() {
     assert_eq!(steps.len(), 1);
     let s = &steps[0];
     assert_eq!(s["effect"], "sensor-lag");
-    let (g0, g1) = (s["gap_before"].as_f64().unwrap(), s["gap_after"].as_f64().unwrap());
+    let (g0, g1) = (
+        s["gap_before"].as_f64().unwrap(),
+        s["gap_after"].as_f64().unwrap(),
+    );
     assert_eq!(v["gap_initial"].as_f64().unwrap(), g0);
     assert_eq!(v["gap_final"].as_f64().unwrap(), g1);
     assert!(g1 <= 0.5 * g0, "gap {g0} -> {g1}");
     let delay = s["params"]["delay_s"].as_f64().unwrap();
     assert!((delay - 3e-3).abs() < 2e-4, "delay {delay}");
-    for f in ["index.html", "envelope.svg", "residual.svg", "force.svg", "force_velocity.svg"] {
+    for f in [
+        "index.html",
+        "envelope.svg",
+        "residual.svg",
+        "force.svg",
+        "force_velocity.svg",
+    ] {
         let p = report.join(f);
         let text = std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         assert!(text.len() > 200, "{f} is nearly empty");
         if f.ends_with(".svg") {
-            assert!(text.contains("<svg") && text.contains("<polyline"), "{f} has no curve");
+            assert!(
+                text.contains("<svg") && text.contains("<polyline"),
+                "{f} has no curve"
+            );
             assert!(text.contains("index") || f != "index.html");
         }
     }

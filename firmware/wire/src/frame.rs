@@ -179,7 +179,12 @@ impl<M: DeserializeOwned> Default for Decoder<M> {
 
 impl<M: DeserializeOwned> Decoder<M> {
     pub const fn new() -> Self {
-        Decoder { buf: [0; MAX_FRAME], len: 0, overflowed: false, _msg: PhantomData }
+        Decoder {
+            buf: [0; MAX_FRAME],
+            len: 0,
+            overflowed: false,
+            _msg: PhantomData,
+        }
     }
 
     /// Bytes of an unfinished frame held so far.

@@ -28,7 +28,10 @@ pub fn check_protocol(theirs: u16) -> Result<(), ProtocolMismatch> {
     if theirs == PROTOCOL_VERSION {
         Ok(())
     } else {
-        Err(ProtocolMismatch { ours: PROTOCOL_VERSION, theirs })
+        Err(ProtocolMismatch {
+            ours: PROTOCOL_VERSION,
+            theirs,
+        })
     }
 }
 

@@ -175,12 +175,18 @@ wire_type! {
 impl ChannelCal {
     /// Calibration of a bipolar input spanning ±`full_scale` over the 16-bit range.
     pub fn bipolar(full_scale: f32) -> Self {
-        ChannelCal { gain: 2.0 * full_scale / 65536.0, zero: 32768.0 }
+        ChannelCal {
+            gain: 2.0 * full_scale / 65536.0,
+            zero: 32768.0,
+        }
     }
 
     /// Calibration of a unipolar input spanning 0..`full_scale`.
     pub fn unipolar(full_scale: f32) -> Self {
-        ChannelCal { gain: full_scale / 65536.0, zero: 0.0 }
+        ChannelCal {
+            gain: full_scale / 65536.0,
+            zero: 0.0,
+        }
     }
 
     pub fn to_si(&self, count: u16) -> f32 {
@@ -200,7 +206,10 @@ impl ChannelCal {
     }
 
     fn is_valid(&self) -> bool {
-        self.gain.is_finite() && self.gain != 0.0 && self.zero.is_finite() && (0.0..=65535.0).contains(&self.zero)
+        self.gain.is_finite()
+            && self.gain != 0.0
+            && self.zero.is_finite()
+            && (0.0..=65535.0).contains(&self.zero)
     }
 }
 
@@ -252,7 +261,11 @@ impl Configure {
     /// front-end ranges of the default board (±2 mm, ±0.25 m/s, ±1 N, 0–3.3 V, 0–200 °C).
     pub fn real_rig(load_n: f32) -> Self {
         Configure {
-            rig: RigConstants { mass_kg: 0.04, stiffness_n_per_m: 1150.0, load_n },
+            rig: RigConstants {
+                mass_kg: 0.04,
+                stiffness_n_per_m: 1150.0,
+                load_n,
+            },
             sample_rate_hz: 10_000,
             channels: ChannelSet::ALL,
             initial_amplitude_m: 667e-6,
@@ -270,9 +283,17 @@ impl Configure {
     /// Checks every field against [`limits`]; names the first one out of range.
     pub fn validate(&self) -> Result<(), Field> {
         in_range(self.rig.mass_kg, limits::MASS_KG, Field::Mass)?;
-        in_range(self.rig.stiffness_n_per_m, limits::STIFFNESS_N_PER_M, Field::Stiffness)?;
+        in_range(
+            self.rig.stiffness_n_per_m,
+            limits::STIFFNESS_N_PER_M,
+            Field::Stiffness,
+        )?;
         in_range(self.rig.load_n, limits::LOAD_N, Field::Load)?;
-        in_range(self.sample_rate_hz, limits::SAMPLE_RATE_HZ, Field::SampleRate)?;
+        in_range(
+            self.sample_rate_hz,
+            limits::SAMPLE_RATE_HZ,
+            Field::SampleRate,
+        )?;
         let ch = self.channels;
         if ch.0 & !ChannelSet::ALL.0 != 0
             || !ch.contains(Channel::Displacement)
@@ -280,8 +301,16 @@ impl Configure {
         {
             return Err(Field::Channels);
         }
-        in_range(self.initial_amplitude_m, limits::INITIAL_AMPLITUDE_M, Field::InitialAmplitude)?;
-        in_range(self.max_duration_s, limits::MAX_DURATION_S, Field::MaxDuration)?;
+        in_range(
+            self.initial_amplitude_m,
+            limits::INITIAL_AMPLITUDE_M,
+            Field::InitialAmplitude,
+        )?;
+        in_range(
+            self.max_duration_s,
+            limits::MAX_DURATION_S,
+            Field::MaxDuration,
+        )?;
         if !self.calibration.iter().all(ChannelCal::is_valid) {
             return Err(Field::Calibration);
         }
@@ -332,8 +361,16 @@ wire_type! {
 
 impl HeaterSetpoint {
     pub fn validate(&self) -> Result<(), Field> {
-        in_range(self.setpoint_c, limits::HEATER_SETPOINT_C, Field::HeaterSetpoint)?;
-        in_range(self.ramp_c_per_min, limits::HEATER_RAMP_C_PER_MIN, Field::HeaterRamp)
+        in_range(
+            self.setpoint_c,
+            limits::HEATER_SETPOINT_C,
+            Field::HeaterSetpoint,
+        )?;
+        in_range(
+            self.ramp_c_per_min,
+            limits::HEATER_RAMP_C_PER_MIN,
+            Field::HeaterRamp,
+        )
     }
 }
 
@@ -539,7 +576,12 @@ impl SampleBlock {
     pub fn channel(&self, c: Channel) -> impl Iterator<Item = u16> + '_ {
         let n = self.channels.len();
         let pos = self.channels.position(c);
-        self.counts.iter().skip(pos.unwrap_or(0)).step_by(n.max(1)).take(if pos.is_some() { self.samples() } else { 0 }).copied()
+        self.counts
+            .iter()
+            .skip(pos.unwrap_or(0))
+            .step_by(n.max(1))
+            .take(if pos.is_some() { self.samples() } else { 0 })
+            .copied()
     }
 
     /// A well-formed block: counts a whole number of samples of a valid, non-empty set, at most
@@ -597,7 +639,11 @@ impl<'de> Deserialize<'de> for Counts {
         impl<'de> serde::de::Visitor<'de> for V {
             type Value = Counts;
             fn expecting(&self, f: &mut core::fmt::Formatter) -> core::fmt::Result {
-                write!(f, "an even number of bytes, at most {}", 2 * MAX_BLOCK_COUNTS)
+                write!(
+                    f,
+                    "an even number of bytes, at most {}",
+                    2 * MAX_BLOCK_COUNTS
+                )
             }
             fn visit_bytes<E: serde::de::Error>(self, b: &[u8]) -> Result<Counts, E> {
                 if !b.len().is_multiple_of(2) || b.len() > 2 * MAX_BLOCK_COUNTS {

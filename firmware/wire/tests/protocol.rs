@@ -9,7 +9,13 @@ use tribo_wire::*;
 fn any_f32() -> impl Strategy<Value = f32> {
     // Finite values only: NaN != NaN would make equality-based round trips meaningless. NaN handling
     // is tested separately (it must survive the wire bit for bit).
-    prop_oneof![-1e6f32..1e6, Just(0.0), Just(-0.0), Just(f32::MAX), Just(f32::MIN_POSITIVE)]
+    prop_oneof![
+        -1e6f32..1e6,
+        Just(0.0),
+        Just(-0.0),
+        Just(f32::MAX),
+        Just(f32::MIN_POSITIVE)
+    ]
 }
 
 fn channel_set() -> impl Strategy<Value = ChannelSet> {
@@ -29,14 +35,20 @@ fn configure() -> impl Strategy<Value = Configure> {
         any_f32(),
         prop::array::uniform5(cal()),
     )
-        .prop_map(|((m, k, n), rate, channels, x0, dur, calibration)| Configure {
-            rig: RigConstants { mass_kg: m, stiffness_n_per_m: k, load_n: n },
-            sample_rate_hz: rate,
-            channels,
-            initial_amplitude_m: x0,
-            max_duration_s: dur,
-            calibration,
-        })
+        .prop_map(
+            |((m, k, n), rate, channels, x0, dur, calibration)| Configure {
+                rig: RigConstants {
+                    mass_kg: m,
+                    stiffness_n_per_m: k,
+                    load_n: n,
+                },
+                sample_rate_hz: rate,
+                channels,
+                initial_amplitude_m: x0,
+                max_duration_s: dur,
+                calibration,
+            },
+        )
 }
 
 fn field() -> impl Strategy<Value = Field> {
@@ -86,8 +98,12 @@ fn error_code() -> impl Strategy<Value = ErrorCode> {
 }
 
 fn estimate() -> impl Strategy<Value = Estimate> {
-    (any_f32(), any_f32(), any_f32(), any_f32())
-        .prop_map(|(mu0, mu1, mu0_se, mu1_se)| Estimate { mu0, mu1, mu0_se, mu1_se })
+    (any_f32(), any_f32(), any_f32(), any_f32()).prop_map(|(mu0, mu1, mu0_se, mu1_se)| Estimate {
+        mu0,
+        mu1,
+        mu0_se,
+        mu1_se,
+    })
 }
 
 fn host_msg() -> impl Strategy<Value = HostMsg> {
@@ -95,7 +111,10 @@ fn host_msg() -> impl Strategy<Value = HostMsg> {
         any::<u16>().prop_map(|protocol| HostMsg::Hello { protocol }),
         configure().prop_map(HostMsg::Configure),
         (any_f32(), any_f32()).prop_map(|(setpoint_c, ramp_c_per_min)| HostMsg::SetHeater(
-            HeaterSetpoint { setpoint_c, ramp_c_per_min }
+            HeaterSetpoint {
+                setpoint_c,
+                ramp_c_per_min
+            }
         )),
         Just(HostMsg::HeaterOff),
         Just(HostMsg::Arm),
@@ -117,19 +136,21 @@ fn sample_block() -> impl Strategy<Value = SampleBlock> {
         any_f32(),
         prop::collection::vec(any::<u16>(), 0..=MAX_BLOCK_COUNTS),
     )
-        .prop_map(|((run_id, block, first_sample, t_us), channels, ecr_range, l, t, counts)| {
-            SampleBlock {
-                run_id,
-                block,
-                first_sample,
-                t_us,
-                channels,
-                ecr_range,
-                log10_ecr_ohm: l,
-                temp_c: t,
-                counts: Counts::from_slice(&counts).unwrap(),
-            }
-        })
+        .prop_map(
+            |((run_id, block, first_sample, t_us), channels, ecr_range, l, t, counts)| {
+                SampleBlock {
+                    run_id,
+                    block,
+                    first_sample,
+                    t_us,
+                    channels,
+                    ecr_range,
+                    log10_ecr_ohm: l,
+                    temp_c: t,
+                    counts: Counts::from_slice(&counts).unwrap(),
+                }
+            },
+        )
 }
 
 fn device_msg() -> impl Strategy<Value = DeviceMsg> {
@@ -163,15 +184,16 @@ fn device_msg() -> impl Strategy<Value = DeviceMsg> {
         Just(EndReason::Overrun),
     ];
     prop_oneof![
-        (any::<u16>(), any::<[u16; 3]>(), any::<u64>(), any::<u32>()).prop_map(
-            |(protocol, firmware, serial, max_sample_rate_hz)| DeviceMsg::Hello(DeviceInfo {
-                protocol,
-                firmware,
-                serial,
-                max_sample_rate_hz
-            })
-        )
-        .boxed(),
+        (any::<u16>(), any::<[u16; 3]>(), any::<u64>(), any::<u32>())
+            .prop_map(
+                |(protocol, firmware, serial, max_sample_rate_hz)| DeviceMsg::Hello(DeviceInfo {
+                    protocol,
+                    firmware,
+                    serial,
+                    max_sample_rate_hz
+                })
+            )
+            .boxed(),
         any::<u32>().prop_map(|seq| DeviceMsg::Ack { seq }),
         (error_code(), any::<Option<u32>>())
             .prop_map(|(code, about_seq)| DeviceMsg::Error(DeviceError { code, about_seq })),
@@ -187,35 +209,45 @@ fn device_msg() -> impl Strategy<Value = DeviceMsg> {
             any::<u8>(),
             (any::<u32>(), any::<u32>(), any::<u64>())
         )
-            .prop_map(|(state, run_id, temp_c, sp, duty, fault, magnet_on, l, r, (s, o, u))| {
-                DeviceMsg::Status(Status {
-                    state,
-                    run_id,
-                    temp_c,
-                    heater_setpoint_c: sp,
-                    heater_duty: duty,
-                    heater_fault: fault,
-                    magnet_on,
-                    log10_ecr_ohm: l,
-                    ecr_range: r,
-                    samples: s,
-                    overruns: o,
-                    uptime_ms: u,
-                })
-            })
+            .prop_map(
+                |(state, run_id, temp_c, sp, duty, fault, magnet_on, l, r, (s, o, u))| {
+                    DeviceMsg::Status(Status {
+                        state,
+                        run_id,
+                        temp_c,
+                        heater_setpoint_c: sp,
+                        heater_duty: duty,
+                        heater_fault: fault,
+                        magnet_on,
+                        log10_ecr_ohm: l,
+                        ecr_range: r,
+                        samples: s,
+                        overruns: o,
+                        uptime_ms: u,
+                    })
+                }
+            )
             .boxed(),
-        (any::<u32>(), configure(), any_f32(), any::<u64>()).prop_map(
-            |(run_id, config, temp_c, t_us)| DeviceMsg::RunStarted(RunHeader {
-                run_id,
-                config,
-                temp_c,
-                t_us
-            })
-        )
-        .boxed(),
+        (any::<u32>(), configure(), any_f32(), any::<u64>())
+            .prop_map(
+                |(run_id, config, temp_c, t_us)| DeviceMsg::RunStarted(RunHeader {
+                    run_id,
+                    config,
+                    temp_c,
+                    t_us
+                })
+            )
+            .boxed(),
         sample_block().prop_map(DeviceMsg::Samples).boxed(),
         (
-            (any::<u32>(), verdict, any::<u16>(), any_f32(), any_f32(), any_f32()),
+            (
+                any::<u32>(),
+                verdict,
+                any::<u16>(),
+                any_f32(),
+                any_f32(),
+                any_f32()
+            ),
             (estimate(), estimate(), estimate()),
             shape,
             any_f32()
@@ -238,23 +270,28 @@ fn device_msg() -> impl Strategy<Value = DeviceMsg> {
                 }
             )
             .boxed(),
-        (any::<u32>(), any::<u32>(), any::<u32>(), any::<u32>(), reason).prop_map(
-            |(run_id, blocks, samples, overruns, reason)| DeviceMsg::RunEnded(RunEnd {
-                run_id,
-                blocks,
-                samples,
-                overruns,
-                reason
-            })
-        ),
+        (
+            any::<u32>(),
+            any::<u32>(),
+            any::<u32>(),
+            any::<u32>(),
+            reason
+        )
+            .prop_map(
+                |(run_id, blocks, samples, overruns, reason)| DeviceMsg::RunEnded(RunEnd {
+                    run_id,
+                    blocks,
+                    samples,
+                    overruns,
+                    reason
+                })
+            ),
     ]
 }
 
 // ---------------------------------------------------------------- properties
 
-fn decode_stream<M: serde::de::DeserializeOwned>(
-    bytes: &[u8],
-) -> (Vec<Frame<M>>, Vec<FrameError>) {
+fn decode_stream<M: serde::de::DeserializeOwned>(bytes: &[u8]) -> (Vec<Frame<M>>, Vec<FrameError>) {
     let mut d = Decoder::<M>::new();
     let (mut ok, mut bad) = (Vec::new(), Vec::new());
     d.feed(bytes, |r| match r {
@@ -267,8 +304,14 @@ fn decode_stream<M: serde::de::DeserializeOwned>(
 /// 2000 cases per property by default; `PROPTEST_CASES=1000000 cargo test -p tribo-wire --release`
 /// runs the same properties at scale.
 fn config() -> ProptestConfig {
-    let cases = std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(2000);
-    ProptestConfig { cases, ..ProptestConfig::default() }
+    let cases = std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2000);
+    ProptestConfig {
+        cases,
+        ..ProptestConfig::default()
+    }
 }
 
 proptest! {
@@ -379,7 +422,9 @@ proptest! {
 
 #[test]
 fn full_sample_block_fits_in_a_frame() {
-    let counts: Vec<u16> = (0..MAX_BLOCK_COUNTS as u16).map(|i| i.wrapping_mul(977)).collect();
+    let counts: Vec<u16> = (0..MAX_BLOCK_COUNTS as u16)
+        .map(|i| i.wrapping_mul(977))
+        .collect();
     let blk = SampleBlock {
         run_id: u32::MAX,
         block: u32::MAX,
@@ -404,7 +449,10 @@ fn full_sample_block_fits_in_a_frame() {
 
 #[test]
 fn nan_survives_the_wire_bit_for_bit() {
-    let msg = HostMsg::SetHeater(HeaterSetpoint { setpoint_c: f32::NAN, ramp_c_per_min: 1.0 });
+    let msg = HostMsg::SetHeater(HeaterSetpoint {
+        setpoint_c: f32::NAN,
+        ramp_c_per_min: 1.0,
+    });
     let f = decode_one::<HostMsg>(&encode_vec(0, &msg).unwrap()).unwrap();
     match f.msg {
         HostMsg::SetHeater(sp) => {
@@ -420,7 +468,12 @@ fn nan_survives_the_wire_bit_for_bit() {
 fn hello_is_variant_zero_with_protocol_first() {
     // The compatibility rule: a future host must read any firmware's hello. Variant 0, then the
     // protocol number as a varint, whatever else DeviceInfo grows.
-    let info = DeviceInfo { protocol: 300, firmware: [1, 2, 3], serial: 9, max_sample_rate_hz: 1 };
+    let info = DeviceInfo {
+        protocol: 300,
+        firmware: [1, 2, 3],
+        serial: 9,
+        max_sample_rate_hz: 1,
+    };
     let mut buf = [0u8; 64];
     let body = postcard::to_slice(&DeviceMsg::Hello(info), &mut buf).unwrap();
     assert_eq!(&body[..3], &[0, 0xAC, 0x02]);
@@ -431,9 +484,13 @@ fn hello_is_variant_zero_with_protocol_first() {
 #[test]
 fn protocol_mismatch_says_what_to_do() {
     assert!(check_protocol(PROTOCOL_VERSION).is_ok());
-    let newer = check_protocol(PROTOCOL_VERSION + 1).unwrap_err().to_string();
+    let newer = check_protocol(PROTOCOL_VERSION + 1)
+        .unwrap_err()
+        .to_string();
     assert!(newer.contains("update tribo"), "{newer}");
-    let older = check_protocol(PROTOCOL_VERSION - 1).unwrap_err().to_string();
+    let older = check_protocol(PROTOCOL_VERSION - 1)
+        .unwrap_err()
+        .to_string();
     assert!(older.contains("reflash"), "{older}");
 }
 
@@ -494,7 +551,13 @@ fn overlong_garbage_is_reported_once_and_skipped() {
     stream.extend(encode_vec(5, &HostMsg::Arm).unwrap());
     let (ok, bad) = decode_stream::<HostMsg>(&stream);
     assert_eq!(bad, vec![FrameError::Overflow]);
-    assert_eq!(ok, vec![Frame { seq: 5, msg: HostMsg::Arm }]);
+    assert_eq!(
+        ok,
+        vec![Frame {
+            seq: 5,
+            msg: HostMsg::Arm
+        }]
+    );
 }
 
 #[test]

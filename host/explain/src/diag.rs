@@ -66,10 +66,7 @@ pub struct Diagnostics {
 /// Computes the diagnostics of `base` on `data`.
 pub fn diagnose(data: &Prepared, base: &FittedModel, law: LawSpec) -> Diagnostics {
     let sim = simulate_spec(data, &base.spec, &base.p).ok();
-    let (env, _) = sim
-        .as_ref()
-        .map(|s| residuals(data, s))
-        .unwrap_or_default();
+    let (env, _) = sim.as_ref().map(|s| residuals(data, s)).unwrap_or_default();
     let a_rel: Vec<f64> = data.a_meas.iter().map(|a| a / data.a0).collect();
     let band = |sel: &dyn Fn(usize) -> bool, from: f64, to: f64| {
         let v: Vec<f64> = (0..env.len()).filter(|&i| sel(i)).map(|i| env[i]).collect();
@@ -87,7 +84,13 @@ pub fn diagnose(data: &Prepared, base: &FittedModel, law: LawSpec) -> Diagnostic
     let edges = [1.01, 0.8, 0.6, 0.4, 0.2, 0.0];
     let residual_by_amplitude = edges
         .windows(2)
-        .map(|w| band(&|i| a_rel[i] <= w[0] && a_rel[i] > w[1], w[1], w[0].min(1.0)))
+        .map(|w| {
+            band(
+                &|i| a_rel[i] <= w[0] && a_rel[i] > w[1],
+                w[1],
+                w[0].min(1.0),
+            )
+        })
         .collect();
     let n = env.len().max(1) as f64;
     let residual_by_time = (0..3)
@@ -144,7 +147,9 @@ pub fn diagnose(data: &Prepared, base: &FittedModel, law: LawSpec) -> Diagnostic
         };
         let r0 = rss(&s.f_meas);
         // Scan 0..10 ms (or 2 rad) in steps of about 0.1 ms.
-        let max_d = (data.rig.tau_of_t(0.01).min(2.0) / data.dtau).ceil().max(1.0);
+        let max_d = (data.rig.tau_of_t(0.01).min(2.0) / data.dtau)
+            .ceil()
+            .max(1.0);
         let step = (max_d / 100.0).max(0.25);
         let mut best = (0.0, r0);
         let mut d = step;
@@ -157,12 +162,7 @@ pub fn diagnose(data: &Prepared, base: &FittedModel, law: LawSpec) -> Diagnostic
         }
         force_lag_s = Some(data.rig.t_of_tau(best.0 * data.dtau));
         force_lag_gain = Some(1.0 - (best.1 / r0.max(1e-300)).sqrt());
-        let work = |f: &[f64]| -> f64 {
-            f.iter()
-                .zip(&data.ydot)
-                .map(|(a, v)| a * v)
-                .sum::<f64>()
-        };
+        let work = |f: &[f64]| -> f64 { f.iter().zip(&data.ydot).map(|(a, v)| a * v).sum::<f64>() };
         let wm = work(&s.f_meas);
         if wm.abs() > 0.0 {
             dissipation_ratio = Some(work(fm) / wm);
@@ -237,8 +237,13 @@ mod tests {
         let k = 8.0 / 3.0 * s;
         assert!((k - kappa).abs() < 0.1 * kappa, "kappa estimate {k}");
         // A linear spring has no slope.
-        let rec = generate(&sp, &Model::new(FrictionLaw::coulomb_viscous(0.01, 0.002)), Method::dopri(1e-10), None)
-            .unwrap();
+        let rec = generate(
+            &sp,
+            &Model::new(FrictionLaw::coulomb_viscous(0.01, 0.002)),
+            Method::dopri(1e-10),
+            None,
+        )
+        .unwrap();
         let data = Prepared::new(&rec, 400, 3000, None).unwrap();
         assert!(frequency_slope(&data).unwrap().abs() < 0.05 * s);
     }

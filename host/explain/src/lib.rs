@@ -374,7 +374,10 @@ pub fn explain(rec: &Record, opts: &ExplainOptions) -> Result<Explanation, Expla
 }
 
 /// [`explain`] on a prepared record.
-pub fn explain_prepared(data: &Prepared, opts: &ExplainOptions) -> Result<Explanation, ExplainError> {
+pub fn explain_prepared(
+    data: &Prepared,
+    opts: &ExplainOptions,
+) -> Result<Explanation, ExplainError> {
     let powers = base_powers(opts.base)?;
     let spec = Spec::base(powers.clone());
     // Envelope-only fit of tribo-physics first (robust from its own estimators), then the joint
@@ -436,7 +439,12 @@ pub fn explain_prepared(data: &Prepared, opts: &ExplainOptions) -> Result<Explan
                 break;
             }
         }
-        let (e, dbic, m) = best.clone();
+        let (e, _, m) = best.clone();
+        // Polish the winner (candidates are screened with a short iteration budget).
+        let m = fit_spec(data, &m.spec, std::slice::from_ref(&m.p), 3 * opts.max_iter)
+            .filter(|p| p.gap <= m.gap)
+            .unwrap_or(m);
+        let dbic = cur.bic - m.bic;
         steps.push(Step {
             effect: e.name().into(),
             gap_before: cur.gap,

@@ -107,14 +107,25 @@ mod tests {
         let t: Vec<f64> = (0..50).map(|i| i as f64 * 0.1).collect();
         let y: Vec<f64> = t.iter().map(|t| 2.5 * (-0.7 * t).exp()).collect();
         let r = lm(
-            |p| Some(t.iter().zip(&y).map(|(t, y)| p[0] * (-p[1] * t).exp() - y).collect()),
+            |p| {
+                Some(
+                    t.iter()
+                        .zip(&y)
+                        .map(|(t, y)| p[0] * (-p[1] * t).exp() - y)
+                        .collect(),
+                )
+            },
             &[1.0, 0.2],
             &[1.0, 0.1],
             1e-6,
             100,
         )
         .unwrap();
-        assert!((r.p[0] - 2.5).abs() < 1e-6 && (r.p[1] - 0.7).abs() < 1e-6, "{:?}", r.p);
+        assert!(
+            (r.p[0] - 2.5).abs() < 1e-6 && (r.p[1] - 0.7).abs() < 1e-6,
+            "{:?}",
+            r.p
+        );
         assert!(r.cost < 1e-12);
         // An unevaluable start is reported, not a panic.
         assert!(lm(|_| None, &[1.0], &[1.0], 1e-6, 10).is_none());

@@ -347,7 +347,7 @@ impl Prepared {
         let mut tau: Vec<f64> = tau.iter().map(|t| t - t0).collect();
         let mut a_all = tribo_physics::envelope::mark_crandall(&y, &ydot);
         let a0 = a_all[0];
-        if !(a0 > 0.0) {
+        if a0.is_nan() || a0 <= 0.0 {
             return Err(ExplainError(
                 "the record starts at rest at equilibrium: nothing to explain".into(),
             ));
@@ -435,7 +435,7 @@ pub fn linreg(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
     let my = y.iter().sum::<f64>() / n as f64;
     let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
     let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
-    if !(sxx > 0.0) {
+    if sxx.is_nan() || sxx <= 0.0 {
         return None;
     }
     let s = sxy / sxx;
@@ -456,7 +456,8 @@ pub struct Simulated {
 /// Length of the τ segments over which a drifting Coulomb level is held constant.
 const THERMAL_SEGMENT: f64 = 0.5;
 
-/// Integration steps allowed per radian of τ (a well-behaved law needs about ten at rtol 1e-9);
+/// Integration steps allowed per radian of τ at amplitudes up to 2.5 (proportionally more above;
+/// a well-behaved law needs about ten at rtol 1e-8);
 /// beyond, the candidate is rejected as too stiff.
 const STEPS_PER_RAD: f64 = 60.0;
 
@@ -476,7 +477,8 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
         return Err(ExplainError("parameters out of range".into()));
     }
     let span = data.tau.last().copied().unwrap_or(0.0);
-    let budget = (STEPS_PER_RAD * span) as usize + 2000;
+    // Stiffness of memory laws grows with the velocity scale, i.e. with the amplitude.
+    let budget = (STEPS_PER_RAD * (data.a0 / 2.5).max(1.0) * span) as usize + 2000;
     let kappa = spec
         .effect_params(Effect::CubicStiffness, p)
         .map_or(0.0, |k| k[0]);
@@ -541,7 +543,11 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
     if let Some(d) = spec.effect_params(Effect::SensorLag, p) {
         fm = delay(&fm, d[0] / data.dtau);
     }
-    Ok(Simulated { y, ydot, f_meas: fm })
+    Ok(Simulated {
+        y,
+        ydot,
+        f_meas: fm,
+    })
 }
 
 /// Residuals of a simulation against the record: `(envelope, force)`, both divided by the
@@ -631,7 +637,10 @@ mod tests {
         let p = [0.02, 0.002, 0.004, 1e-3, 0.5];
         assert_eq!(s.mu(&p), vec![0.02, 0.002, 0.004]);
         assert_eq!(s.law(&p, 0.0), FrictionLaw::quadratic(0.02, 0.002, 0.004));
-        assert_eq!(s.effect_params(Effect::CubicStiffness, &p), Some(&[1e-3][..]));
+        assert_eq!(
+            s.effect_params(Effect::CubicStiffness, &p),
+            Some(&[1e-3][..])
+        );
         // A polynomial term excludes Stribeck and LuGre, which need a Coulomb–viscous law.
         assert!(!s.can_add(Effect::Stribeck, true, true));
         assert!(!s.can_add(Effect::FrictionalLag, true, true));
@@ -644,7 +653,10 @@ mod tests {
         // LuGre over a Stribeck curve, thermal shift applied to both levels.
         match st.law(&[0.02, 0.002, 0.03, 0.3, 0.5], 0.001) {
             FrictionLaw::LuGre(l) => {
-                assert_eq!((l.mu_c, l.mu_s, l.v_s, l.sigma0, l.sigma2), (0.021, 0.031, 0.3, 0.5, 0.002));
+                assert_eq!(
+                    (l.mu_c, l.mu_s, l.v_s, l.sigma0, l.sigma2),
+                    (0.021, 0.031, 0.3, 0.5, 0.002)
+                );
             }
             other => panic!("expected LuGre, got {other:?}"),
         }
@@ -691,7 +703,9 @@ mod tests {
 
     #[test]
     fn bic_penalises_parameters_and_rewards_fit() {
-        let noise: Vec<f64> = (0..500).map(|i| ((i * 7919) % 101) as f64 / 101.0 - 0.5).collect();
+        let noise: Vec<f64> = (0..500)
+            .map(|i| ((i * 7919) % 101) as f64 / 101.0 - 0.5)
+            .collect();
         let worse: Vec<f64> = noise.iter().map(|v| 1.5 * v).collect();
         assert!(bic(&noise, &[], 2) < bic(&worse, &[], 2));
         assert!(bic(&noise, &[], 2) < bic(&noise, &[], 3));

@@ -2,16 +2,48 @@
 
 use crate::model::{simulate_spec, Prepared, Simulated};
 use crate::{ExplainError, Explanation};
-use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-type Series<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
+/// An RGB colour.
+type Rgb = (u8, u8, u8);
+const BLACK: Rgb = (0, 0, 0);
+const RED: Rgb = (200, 30, 30);
+const BLUE: Rgb = (30, 70, 200);
 
+type Series<'a> = (&'a str, Rgb, Vec<(f64, f64)>);
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+/// Tick positions: about five "nice" values covering `[lo, hi]`.
+fn ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let span = (hi - lo).max(1e-300);
+    let raw = span / 5.0;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * mag);
+    let mut v = Vec::new();
+    let mut t = (lo / step).ceil() * step;
+    while t <= hi + 1e-9 * span && v.len() < 20 {
+        v.push(if t.abs() < 1e-12 * span { 0.0 } else { t });
+        t += step;
+    }
+    v
+}
+
+/// A line chart as a standalone SVG document (no font needed: text is left to the viewer).
 fn plot(path: &Path, title: &str, xl: &str, yl: &str, series: &[Series]) -> Result<(), String> {
-    let pts = series.iter().flat_map(|s| s.2.iter());
+    let (w, h) = (900.0, 420.0);
+    let (ml, mr, mt, mb) = (80.0, 20.0, 36.0, 50.0);
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y) in pts {
+    for &(x, y) in series.iter().flat_map(|s| s.2.iter()) {
         if x.is_finite() && y.is_finite() {
             x0 = x0.min(x);
             x1 = x1.max(x);
@@ -22,42 +54,82 @@ fn plot(path: &Path, title: &str, xl: &str, yl: &str, series: &[Series]) -> Resu
     if x0 > x1 {
         (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
     }
-    if x1 - x0 <= 0.0 {
+    if x1 <= x0 {
         x1 = x0 + 1.0;
     }
-    let pad = ((y1 - y0) * 0.05).max(1e-12);
-    let e = |e: &dyn std::fmt::Display| e.to_string();
-    let root = SVGBackend::new(path, (900, 420)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_desc(xl)
-        .y_desc(yl)
-        .draw()
-        .map_err(|x| e(&x))?;
-    for (name, color, s) in series {
-        let c = *color;
-        chart
-            .draw_series(LineSeries::new(s.iter().copied(), c))
-            .map_err(|x| e(&x))?
-            .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+    let pad = ((y1 - y0) * 0.05).max(1e-12 * y1.abs().max(1.0));
+    let (y0, y1) = (y0 - pad, y1 + pad);
+    let px = |x: f64| ml + (x - x0) / (x1 - x0) * (w - ml - mr);
+    let py = |y: f64| mt + (y1 - y) / (y1 - y0) * (h - mt - mb);
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" \
+         viewBox=\"0 0 {w} {h}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
+         <text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"16\">{}</text>",
+        w / 2.0,
+        esc(title)
+    );
+    let _ = writeln!(
+        s,
+        "<rect x=\"{ml}\" y=\"{mt}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"black\"/>",
+        w - ml - mr,
+        h - mt - mb
+    );
+    for t in ticks(x0, x1) {
+        let x = px(t);
+        let _ = writeln!(
+            s,
+            "<line x1=\"{x:.1}\" y1=\"{mt}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#ddd\"/>\
+             <text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{t:.3}</text>",
+            h - mb,
+            h - mb + 16.0
+        );
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
-    Ok(())
+    for t in ticks(y0, y1) {
+        let y = py(t);
+        let _ = writeln!(
+            s,
+            "<line x1=\"{ml}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#ddd\"/>\
+             <text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{t:.3e}</text>",
+            w - mr,
+            ml - 4.0,
+            y + 4.0
+        );
+    }
+    let _ = writeln!(
+        s,
+        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>\n\
+         <text x=\"14\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 14 {:.1})\">{}</text>",
+        (ml + w - mr) / 2.0,
+        h - 10.0,
+        esc(xl),
+        (mt + h - mb) / 2.0,
+        (mt + h - mb) / 2.0,
+        esc(yl)
+    );
+    for (k, (name, (r, g, b), pts)) in series.iter().enumerate() {
+        let mut d = String::new();
+        for &(x, y) in pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite()) {
+            let _ = write!(d, "{:.2},{:.2} ", px(x), py(y));
+        }
+        let ly = mt + 14.0 + 16.0 * k as f64;
+        let _ = writeln!(
+            s,
+            "<polyline fill=\"none\" stroke=\"rgb({r},{g},{b})\" stroke-width=\"1.2\" points=\"{}\"/>\n\
+             <line x1=\"{:.1}\" y1=\"{ly:.1}\" x2=\"{:.1}\" y2=\"{ly:.1}\" stroke=\"rgb({r},{g},{b})\" stroke-width=\"2\"/>\
+             <text x=\"{:.1}\" y=\"{:.1}\">{}</text>",
+            d.trim_end(),
+            w - mr - 230.0,
+            w - mr - 205.0,
+            w - mr - 200.0,
+            ly + 4.0,
+            esc(name)
+        );
+    }
+    s.push_str("</svg>\n");
+    std::fs::write(path, s).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 /// Writes `envelope.svg`, `residual.svg`, `force.svg` (if the record has a force channel) and
@@ -133,10 +205,7 @@ pub fn write_report(
         let span = ((3.0 * 2.0 * std::f64::consts::PI / data.dtau) as usize).max(8);
         let range = mid..(mid + span).min(n);
         let series = |f: &[f64]| -> Vec<(f64, f64)> {
-            range
-                .clone()
-                .map(|i| (t(i), f[i] * rig.load_n))
-                .collect()
+            range.clone().map(|i| (t(i), f[i] * rig.load_n)).collect()
         };
         plot(
             &fig("force.svg"),
@@ -188,7 +257,11 @@ pub fn write_report(
              <th>parameters</th></tr>\n",
         );
         for s in &ex.steps {
-            let params: Vec<String> = s.params.iter().map(|(k, v)| format!("{k} = {v:.4e}")).collect();
+            let params: Vec<String> = s
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k} = {v:.4e}"))
+                .collect();
             let _ = writeln!(
                 h,
                 "<tr><td>{}</td><td>{:.3e}</td><td>{:.3e}</td><td>{:.0}</td><td>{}</td></tr>",

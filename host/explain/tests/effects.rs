@@ -65,7 +65,12 @@ fn param(e: &Explanation, k: &str) -> f64 {
 }
 
 fn assert_found(e: &Explanation, effect: &str) {
-    assert_eq!(e.missing_effects, vec![effect.to_string()], "{}", e.to_text());
+    assert_eq!(
+        e.missing_effects,
+        vec![effect.to_string()],
+        "{}",
+        e.to_text()
+    );
     let s = &e.steps[0];
     assert!(
         s.gap_after <= 0.5 * s.gap_before,
@@ -115,6 +120,34 @@ fn quadratic_velocity() {
     let e = run(&rec);
     assert_found(&e, "quadratic-velocity");
     close(param(&e, "mu2"), mu2, 0.1, "mu2");
+    // Thesis Tables 6–7: the Coulomb–viscous constants drift from window to window.
+    assert!(
+        e.diagnostics.window_drift.unwrap() > 0.3,
+        "{:?}",
+        e.diagnostics.windows
+    );
+}
+
+#[test]
+fn quadratic_velocity_without_force_channel() {
+    // Dimensionless record `tau,y,ydot` (thesis Table 3 style, Y0 = 10): the envelope alone.
+    let mu = [0.1, 0.04, 0.005];
+    let tau: Vec<f64> = (0..12_000).map(|i| i as f64 * 0.01).collect();
+    let tr = tribo_physics::simulate(
+        &Model::new(FrictionLaw::quadratic(mu[0], mu[1], mu[2])),
+        10.0,
+        0.0,
+        &tau,
+        Method::dopri(1e-10),
+    )
+    .unwrap();
+    let rec = Record::new(tau, tr.y, tr.ydot, Some(Rig::UNIT), Units::Dimensionless);
+    let e = run(&rec);
+    assert!(e.base_model.gap_force.is_none());
+    assert_found(&e, "quadratic-velocity");
+    close(param(&e, "mu2"), mu[2], 0.05, "mu2");
+    close(e.final_model.params["mu0"], mu[0], 0.05, "mu0");
+    close(e.final_model.params["mu1"], mu[1], 0.05, "mu1");
 }
 
 #[test]
@@ -164,6 +197,13 @@ fn cubic_stiffness() {
     let e = run(&rec);
     assert_found(&e, "cubic-stiffness");
     close(param(&e, "k3_n_per_m3"), k3, 0.05, "k3");
+    // The Duffing backbone read off the measured half periods gives κ before any fit.
+    close(
+        e.diagnostics.kappa_estimate.unwrap(),
+        kappa,
+        0.15,
+        "kappa from frequency",
+    );
 }
 
 #[test]
@@ -176,6 +216,14 @@ fn sensor_lag() {
     let e = run(&record(Model::new(base_law()), &s));
     assert_found(&e, "sensor-lag");
     close(param(&e, "delay_s"), lag, 0.05, "delay");
+    // The diagnostic scan already sees the lag, and a pure delay removes almost all the misfit.
+    close(
+        e.diagnostics.force_lag_s.unwrap(),
+        lag,
+        0.1,
+        "diagnostic lag",
+    );
+    assert!(e.diagnostics.force_lag_gain.unwrap() > 0.8);
 }
 
 /// Record whose Coulomb level follows the plane temperature: `μ0(T) = μ0 + γ (T − T0)`.
@@ -186,7 +234,10 @@ fn thermal_record(gamma: f64, th: Thermal, seed: u64) -> Record {
     let t: Vec<f64> = (0..n).map(|i| i as f64 / sp.rate_hz).collect();
     let law_at = |ts: f64| {
         let temp = th.start_c + th.drift_c_per_s * ts;
-        Model::new(FrictionLaw::coulomb_viscous(MU0 + gamma * (temp - th.start_c), MU1))
+        Model::new(FrictionLaw::coulomb_viscous(
+            MU0 + gamma * (temp - th.start_c),
+            MU1,
+        ))
     };
     let method = Method::dopri(1e-10);
     let mut sim = Simulator::new(law_at(0.0), r.y_of_x(sp.x0_m), 0.0, method);

@@ -621,6 +621,38 @@ pub struct WindowFit {
     pub fit: FitResult,
 }
 
+impl WindowFit {
+    /// One JSON object: `{"a_start", "a_end", "tau_start", "tau_end", "fit": {…}}` (amplitudes and
+    /// times dimensionless; `fit` as [`FitResult::to_json`]).
+    pub fn to_json(&self) -> String {
+        format!(
+            "{{\"a_start\": {}, \"a_end\": {}, \"tau_start\": {}, \"tau_end\": {}, \"fit\": {}}}",
+            json_num(self.a_start),
+            json_num(self.a_end),
+            json_num(self.tau_start),
+            json_num(self.tau_end),
+            self.fit.to_json()
+        )
+    }
+}
+
+/// [`windowed_fits`] on a record (SI or dimensionless; each window's `p_si` filled in).
+pub fn fit_windows(
+    rec: &Record,
+    spec: LawSpec,
+    windows: usize,
+    opts: &FitOptions,
+) -> Result<Vec<WindowFit>, FitError> {
+    rec.validate().map_err(|e| FitError(e.0))?;
+    let rig = rec.rig().map_err(|e| FitError(e.0))?;
+    let (tau, y, ydot) = rec.dimensionless().map_err(|e| FitError(e.0))?;
+    let mut w = windowed_fits(&tau, &y, &ydot, spec, windows, opts)?;
+    for x in &mut w {
+        x.fit.p_si = rig.p_of_mu(&x.fit.mu);
+    }
+    Ok(w)
+}
+
 /// Splits the motion (until the envelope falls below 2 % of its start) into `windows` parts of
 /// equal amplitude drop and fits `spec` on each, starting each simulation from the window's
 /// first sample. Constants that drift from window to window mean the law misses something.

@@ -20,8 +20,13 @@ pub enum FrictionLaw {
         /// `μ_j` in order of `j`.
         mu: Vec<f64>,
     },
-    /// Classical exponential Stribeck curve (the usual closed form of ch. 1 eq. 9):
+    /// Exponential Stribeck curve (Armstrong-Hélouvry / Olsson form, the `g(v)` of LuGre eq. 17):
     /// `f = sgn(y') [μ_c + (μ_s − μ_c) exp(−(|y'|/v_s)^δ)] + μ_v y'`.
+    ///
+    /// This is *not* the thesis's ch. 1 eq. 9 (a rational blend of two power laws: see
+    /// [`FrictionLaw::StribeckPower`]). The two share the limits (`f(0+)` = static/boundary
+    /// level, Coulomb + viscous or EHL power law at high speed) but not the mixed-regime shape,
+    /// and neither reduces to the other.
     Stribeck {
         /// Coulomb (dynamic) level.
         mu_c: f64,
@@ -33,6 +38,31 @@ pub enum FrictionLaw {
         delta: f64,
         /// Viscous coefficient.
         mu_v: f64,
+    },
+    /// The thesis's Stribeck law, ch. 1 eq. 7–9, with `y'` standing for `η ẋ` (η, K, h, B lumped
+    /// into the dimensionless constants):
+    /// `μ_EHL = K |y'|^n` (eq. 7), `μ_BL = h |y'|^p` (eq. 8),
+    /// `f = sgn(y') [μ_EHL + (μ_BL − μ_EHL) / (1 + (|y'|/B)^M)]` (eq. 9).
+    ///
+    /// The thesis prints the numerator of eq. 9 as `μ_BL + μ_EHL`; that contradicts its own
+    /// definition of B ("the value of η ẋ below which the boundary regime starts"): with a
+    /// constant EHL level (n = 0) the printed form would give `μ_BL + 2K`, not `μ_BL`, below B.
+    /// The form used here is the weighted blend `(1 − w) μ_EHL + w μ_BL`, `w = 1/(1 + (|y'|/B)^M)`,
+    /// which gives μ_BL below B, μ_EHL above it and their mean at `|y'| = B`. (For n > 0 both
+    /// forms have the same two limits.)
+    StribeckPower {
+        /// EHL power-law coefficient K (eq. 7).
+        k_ehl: f64,
+        /// EHL power-law index n (≥ 0).
+        n_ehl: f64,
+        /// Boundary power-law coefficient h (eq. 8).
+        h_bl: f64,
+        /// Boundary power-law index p (≥ 0; 0 = constant boundary friction, the usual case).
+        p_bl: f64,
+        /// Velocity B where the boundary regime starts (> 0).
+        b: f64,
+        /// Mixed-regime exponent M (> 0).
+        m: f64,
     },
     /// Hess–Soom (ch. 1 eq. 10), Stribeck parameters lumped into dimensionless `c1`, `c2`:
     /// `f = sgn(y') μ_b / (1 + c1 y'^2) + c2 y'`.
@@ -209,6 +239,7 @@ impl FrictionLaw {
                 n => format!("poly:{}", n - 1),
             },
             FrictionLaw::Stribeck { .. } => "stribeck".into(),
+            FrictionLaw::StribeckPower { .. } => "stribeck-power".into(),
             FrictionLaw::HessSoom { .. } => "hess-soom".into(),
             FrictionLaw::Dahl { .. } => "dahl".into(),
             FrictionLaw::LuGre(_) => "lugre".into(),
@@ -230,6 +261,7 @@ impl FrictionLaw {
         match self {
             FrictionLaw::Polynomial { mu } => mu.iter().step_by(2).any(|&m| m != 0.0),
             FrictionLaw::Stribeck { mu_c, mu_s, .. } => *mu_c != 0.0 || *mu_s != 0.0,
+            FrictionLaw::StribeckPower { .. } => self.static_level().is_some_and(|l| l != 0.0),
             FrictionLaw::HessSoom { mu_b, .. } => *mu_b != 0.0,
             FrictionLaw::ModifiedLuGre(p) => p.mu_c != 0.0,
             FrictionLaw::Dahl { .. } | FrictionLaw::LuGre(_) => false,
@@ -242,6 +274,10 @@ impl FrictionLaw {
         match self {
             FrictionLaw::Polynomial { mu } => Some(mu.first().copied().unwrap_or(0.0)),
             FrictionLaw::Stribeck { mu_s, .. } => Some(*mu_s),
+            FrictionLaw::StribeckPower { h_bl, p_bl, .. } => {
+                // f(0+) = μ_BL(0+): h if p = 0, else 0 (the EHL part is weighted out at v → 0).
+                Some(if *p_bl == 0.0 { *h_bl } else { 0.0 })
+            }
             FrictionLaw::HessSoom { mu_b, .. } => Some(*mu_b),
             _ => None,
         }
@@ -294,6 +330,20 @@ impl FrictionLaw {
             } => {
                 let s = sgn_on(v, dir);
                 s * (mu_c + (mu_s - mu_c) * (-(v.abs() / v_s).powf(*delta)).exp()) + mu_v * v
+            }
+            FrictionLaw::StribeckPower {
+                k_ehl,
+                n_ehl,
+                h_bl,
+                p_bl,
+                b,
+                m,
+            } => {
+                let a = v.abs();
+                let pw = |c: f64, e: f64| if e == 0.0 { c } else { c * a.powf(e) };
+                let (ehl, bl) = (pw(*k_ehl, *n_ehl), pw(*h_bl, *p_bl));
+                let w = 1.0 / (1.0 + (a / b).powf(*m));
+                sgn_on(v, dir) * (ehl + (bl - ehl) * w)
             }
             FrictionLaw::HessSoom { mu_b, c1, c2 } => {
                 sgn_on(v, dir) * mu_b / (1.0 + c1 * v * v) + c2 * v
@@ -351,6 +401,23 @@ impl FrictionLaw {
             } => {
                 if !fin(&[*mu_c, *mu_s, *v_s, *delta, *mu_v]) || *v_s <= 0.0 || *delta <= 0.0 {
                     return bad("need finite constants, v_s > 0 and delta > 0");
+                }
+            }
+            FrictionLaw::StribeckPower {
+                k_ehl,
+                n_ehl,
+                h_bl,
+                p_bl,
+                b,
+                m,
+            } => {
+                if !fin(&[*k_ehl, *n_ehl, *h_bl, *p_bl, *b, *m])
+                    || *n_ehl < 0.0
+                    || *p_bl < 0.0
+                    || *b <= 0.0
+                    || *m <= 0.0
+                {
+                    return bad("need finite constants, n >= 0, p >= 0, B > 0 and M > 0");
                 }
             }
             FrictionLaw::HessSoom { mu_b, c1, c2 } => {

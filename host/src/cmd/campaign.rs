@@ -212,6 +212,7 @@ pub struct Args {
     /// Show what would be run and what is already done, and stop.
     #[arg(long)]
     pub dry_run: bool,
+    /// No progress bar or messages.
     #[arg(long, short)]
     pub quiet: bool,
 }

@@ -20,6 +20,7 @@ pub struct Args {
     /// No figures.
     #[arg(long)]
     pub no_report: bool,
+    /// No progress bar or messages.
     #[arg(long, short)]
     pub quiet: bool,
 }
@@ -39,19 +40,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 pub fn demo(args: &Args) -> anyhow::Result<crate::link::session::Outcome> {
     let abort = abort_flag();
     let (port, cfg) = args.rig.start()?;
-    eprintln!(
+    let say = |m: String| {
+        if !args.quiet {
+            eprintln!("{m}")
+        }
+    };
+    say(format!(
         "virtual rig on {} (contact {:?}, load {} N); running through the serial path",
         port.display(),
         cfg.law,
         cfg.load_n
-    );
+    ));
     let mut link = Link::open(&port)?;
     let info = link.hello()?;
-    eprintln!(
+    say(format!(
         "hello: firmware {}, serial {:016x}",
         firmware_version(&info),
         info.serial
-    );
+    ));
     let mut c = Configure::real_rig(cfg.load_n.min(0.7) as f32);
     c.rig.mass_kg = cfg.mass_kg as f32;
     c.rig.stiffness_n_per_m = cfg.stiffness_n_per_m as f32;

@@ -7,7 +7,6 @@ use clap::Parser;
 use std::path::PathBuf;
 use tribo_explain::{report::write_report, Effect, ExplainOptions, Prepared};
 use tribo_physics::identify::LawSpec;
-use tribo_physics::Record;
 
 /// Explain the disagreement between a friction law and a record.
 ///
@@ -65,7 +64,7 @@ pub fn run(args: Args) -> Result<()> {
             })
             .collect::<Result<_>>()?;
     }
-    let record = Record::load(&args.record)?;
+    let record = crate::load_record(&args.record)?;
     let data = Prepared::new(
         &record,
         opts.max_env_points,

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use tribo_physics::envelope::mark_crandall;
 use tribo_physics::identify::{
-    fit, simulated_envelope, EnvelopeData, FitOptions, FitResult, LawSpec,
+    fit, fit_windows, simulated_envelope, EnvelopeData, FitOptions, FitResult, LawSpec, WindowFit,
 };
 use tribo_physics::{Record, Rig};
 
@@ -20,6 +20,11 @@ use tribo_physics::{Record, Rig};
 /// "converged", "shape", "y0", "points"}`: `mu` are the dimensionless constants of seed eq. 10–13 in
 /// order of j, `gap` the RMS envelope difference divided by the initial amplitude, `shape` the
 /// envelope shape (straight/convex/concave/mixed) the fitted law predicts.
+///
+/// `--windows N` also fits the law on N successive windows of equal amplitude drop (thesis
+/// ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains
+/// `"windows": [{"a_start", "a_end", "tau_start", "tau_end", "fit": {…}}, …]`. Constants that
+/// drift from window to window mean the law misses an amplitude-dependent term.
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV).
@@ -45,12 +50,15 @@ pub struct Args {
     /// Known apparatus damping μ_a kept fixed (0 = fit the total damping).
     #[arg(long, default_value_t = 0.0)]
     pub apparatus_mu1: f64,
+    /// Also fit on N amplitude windows (0 = off).
+    #[arg(long, default_value_t = 0)]
+    pub windows: usize,
 }
 
 /// Runs `tribo fit`.
 pub fn run(a: Args) -> Result<()> {
     let spec: LawSpec = a.law.parse().map_err(anyhow::Error::msg)?;
-    let mut rec = Record::load(&a.record)?;
+    let mut rec = crate::load_record(&a.record)?;
     if a.mass_kg.is_some() || a.stiffness.is_some() || a.load_n.is_some() {
         let base = rec.rig.unwrap_or(Rig::REAL);
         rec.rig = Some(
@@ -67,10 +75,24 @@ pub fn run(a: Args) -> Result<()> {
         ..FitOptions::default()
     };
     let r = fit(&rec, spec, &opts)?;
+    let windows = if a.windows > 0 {
+        fit_windows(&rec, spec, a.windows, &opts)?
+    } else {
+        Vec::new()
+    };
     if a.json {
-        println!("{}", r.to_json());
+        let mut j = r.to_json();
+        if a.windows > 0 {
+            let items: Vec<String> = windows.iter().map(WindowFit::to_json).collect();
+            j.pop(); // the closing brace
+            let _ = write!(j, ", \"windows\": [{}]}}", items.join(", "));
+        }
+        println!("{j}");
     } else {
         print!("{}", table(&r));
+        if a.windows > 0 {
+            print!("{}", window_table(&windows));
+        }
     }
     if let Some(p) = &a.plot {
         let svg = figure(&rec, &r, spec, &opts)?;
@@ -102,6 +124,33 @@ fn table(r: &FitResult) -> String {
         },
         r.points
     );
+    s
+}
+
+fn window_table(w: &[WindowFit]) -> String {
+    let mut s =
+        String::from("windows    (constants drifting with amplitude = the law misses a term)\n");
+    let n = w.first().map_or(0, |x| x.fit.mu.len());
+    let _ = write!(
+        s,
+        "{:>9} {:>9} {:>9} {:>9}",
+        "A_start", "A_end", "tau_start", "tau_end"
+    );
+    for j in 0..n {
+        let _ = write!(s, " {:>13}", format!("mu{j}"));
+    }
+    let _ = writeln!(s, " {:>10}", "gap");
+    for x in w {
+        let _ = write!(
+            s,
+            "{:>9.4} {:>9.4} {:>9.2} {:>9.2}",
+            x.a_start, x.a_end, x.tau_start, x.tau_end
+        );
+        for m in &x.fit.mu {
+            let _ = write!(s, " {m:>13.5e}");
+        }
+        let _ = writeln!(s, " {:>10.3e}", x.fit.gap);
+    }
     s
 }
 

@@ -1,15 +1,15 @@
 //! One module per `tribo` subcommand: its clap arguments and the function that runs it.
-pub mod onboard;
 pub mod campaign;
 pub mod demo;
 pub mod devices;
+pub mod explain;
+pub mod fit;
+pub mod onboard;
 pub mod pull;
 pub mod replay;
+pub mod report;
 pub mod rig;
 pub mod run;
 pub mod runs;
-pub mod table;
-pub mod fit;
-pub mod explain;
 pub mod sim;
-pub mod report;
+pub mod table;

@@ -31,7 +31,7 @@ pub struct Args {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let record = Record::load(&args.record)?;
+    let record = crate::load_record(&args.record)?;
     let result = analyse(&record).with_context(|| format!("{}", args.record.display()))?;
     if args.json {
         println!("{}", to_json(&result));

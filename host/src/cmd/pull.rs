@@ -15,6 +15,7 @@ pub struct Args {
     /// Keep the intact part of a corrupt frame log (cut the rest) and fetch what is missing.
     #[arg(long)]
     pub salvage: bool,
+    /// No progress bar or messages.
     #[arg(long, short)]
     pub quiet: bool,
 }

@@ -5,7 +5,7 @@ use crate::link::pty::{make_link, VirtualPort};
 use anyhow::{bail, Context};
 use std::path::PathBuf;
 use std::time::Duration;
-use tribo_rig::{LawConfig, ServeOptions, VirtualRig, VirtualRigConfig};
+use tribo_rig::{LawConfig, ServeOptions, VirtualRigConfig};
 
 /// The simulated rig, from a TOML file and/or flags (flags win).
 #[derive(clap::Args, Debug, Clone)]
@@ -23,6 +23,15 @@ pub struct VirtualArgs {
     /// Viscous constant μ1 of the simulated contact (Coulomb–viscous law).
     #[arg(long)]
     pub mu1: Option<f64>,
+    /// Quadratic constant μ2 of the simulated contact (makes the law quadratic: μ0 + μ1 y' + μ2 y'²).
+    #[arg(long)]
+    pub mu2: Option<f64>,
+    /// Room temperature of the simulated plate, °C.
+    #[arg(long)]
+    pub ambient: Option<f64>,
+    /// Multiplies every sensor noise of the simulated rig (0 = noiseless).
+    #[arg(long)]
+    pub noise: Option<f64>,
     /// Seed of the simulated noise.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -30,6 +39,9 @@ pub struct VirtualArgs {
     /// (by default the virtual knob follows each run's --load, rebuilding the rig between runs).
     #[arg(long)]
     pub fixed_load: bool,
+    /// Press the rig's button this many seconds after each arming (for `tribo run --button`).
+    #[arg(long)]
+    pub button_after: Option<f64>,
     /// Device seconds per wall-clock second (`inf`: as fast as the simulation goes).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
@@ -43,8 +55,12 @@ impl Default for VirtualArgs {
             rig_load: None,
             mu0: None,
             mu1: None,
+            mu2: None,
+            ambient: None,
+            noise: None,
             seed: None,
             fixed_load: false,
+            button_after: None,
             speed: 1.0,
         }
     }
@@ -65,12 +81,30 @@ impl VirtualArgs {
         if let Some(l) = self.rig_load {
             c.load_n = l;
         }
-        if self.mu0.is_some() || self.mu1.is_some() {
-            let (m0, m1) = c.law.coulomb_viscous().unwrap_or((0.02, 0.004));
-            c.law = LawConfig::CoulombViscous {
-                mu0: self.mu0.unwrap_or(m0),
-                mu1: self.mu1.unwrap_or(m1),
+        if self.mu0.is_some() || self.mu1.is_some() || self.mu2.is_some() {
+            let (m0, m1) = match &c.law {
+                LawConfig::Quadratic { mu0, mu1, .. } => (*mu0, *mu1),
+                l => l.coulomb_viscous().unwrap_or((0.02, 0.004)),
             };
+            let (mu0, mu1) = (self.mu0.unwrap_or(m0), self.mu1.unwrap_or(m1));
+            c.law = match self.mu2 {
+                Some(mu2) => LawConfig::Quadratic { mu0, mu1, mu2 },
+                None => LawConfig::CoulombViscous { mu0, mu1 },
+            };
+        }
+        if let Some(t) = self.ambient {
+            c.thermal.ambient_c = t;
+        }
+        if let Some(k) = self.noise {
+            if !(k.is_finite() && k >= 0.0) {
+                bail!("--noise must be a factor ≥ 0 (1 = the default noise, 0 = none)");
+            }
+            let n = &mut c.noise;
+            n.displacement_m *= k;
+            n.velocity_m_s *= k;
+            n.force_n *= k;
+            n.temperature_c *= k;
+            n.ecr_v *= k;
         }
         if let Some(s) = self.seed {
             c.seed = s;
@@ -92,13 +126,12 @@ impl VirtualArgs {
             speed: self.speed,
             max_wait: Duration::from_millis(2),
         };
-        if self.fixed_load {
-            let rig =
-                VirtualRig::new(cfg.clone()).map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
-            port.spawn(rig, opts);
-        } else {
-            port.spawn_following_load(cfg.clone(), opts)?;
+        if let Some(b) = self.button_after {
+            if !(b.is_finite() && b >= 0.0) {
+                bail!("--button-after must be a number of seconds ≥ 0");
+            }
         }
+        port.spawn_with(cfg.clone(), opts, !self.fixed_load, self.button_after)?;
         Ok((path, cfg))
     }
 }

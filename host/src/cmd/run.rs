@@ -309,8 +309,10 @@ pub struct Args {
     /// Free label stored with the run (and in its folder name).
     #[arg(long)]
     pub label: Option<String>,
+    /// Sample (pin/plane materials, finish), stored in the run's metadata.
     #[arg(long)]
     pub sample: Option<String>,
+    /// Lubricant, stored in the run's metadata.
     #[arg(long)]
     pub lubricant: Option<String>,
     /// Wait for the button on the rig instead of releasing from here.
@@ -343,7 +345,7 @@ pub struct Args {
     /// Heater ramp, °C/min.
     #[arg(long, default_value_t = 10.0)]
     pub ramp: f32,
-    /// No progress bar.
+    /// No progress bar or messages.
     #[arg(long, short)]
     pub quiet: bool,
 }

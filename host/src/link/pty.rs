@@ -46,13 +46,17 @@ impl VirtualPort {
     }
 
     /// Serves a virtual rig built from `cfg` on this port on a new thread, until the process ends.
-    /// The simulated load knob follows the load of each `Configure` the rig receives while no run
-    /// is in progress (a virtual rig has no hand on its knob): the rig is rebuilt at the new load,
-    /// as if power-cycled, keeping the plate's temperature.
-    pub fn spawn_following_load(
+    ///
+    /// With `follow_load`, the simulated load knob follows the load of each `Configure` the rig
+    /// receives while no run is in progress (a virtual rig has no hand on its knob): the rig is
+    /// rebuilt at the new load, as if power-cycled, keeping the plate's temperature. With
+    /// `button_after_s`, the rig's button is pressed that long (device time) after it was armed.
+    pub fn spawn_with(
         self,
         cfg: VirtualRigConfig,
         opts: ServeOptions,
+        follow_load: bool,
+        button_after_s: Option<f64>,
     ) -> anyhow::Result<JoinHandle<anyhow::Result<()>>> {
         let rig = VirtualRig::new(cfg.clone()).map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
         let mut reader = File::from(self.master.try_clone()?);
@@ -84,6 +88,7 @@ impl VirtualPort {
                 let mut decoder = Decoder::<HostMsg>::new();
                 let mut start = (Instant::now(), rig.now_us());
                 let fast = !opts.speed.is_finite();
+                let (mut armed_since, mut pressed_at): (Option<u64>, Option<u64>) = (None, None);
                 loop {
                     let wait = if fast { Duration::ZERO } else { opts.max_wait };
                     let mut input = match rx.recv_timeout(wait) {
@@ -106,7 +111,9 @@ impl VirtualPort {
                             }
                         });
                         let idle = !matches!(rig.app().state(), RigState::Running);
-                        if let Some(l) = load.filter(|l| idle && (*l - cfg.load_n).abs() > 1e-9) {
+                        if let Some(l) =
+                            load.filter(|l| follow_load && idle && (*l - cfg.load_n).abs() > 1e-9)
+                        {
                             let temp = rig.hardware().plate_temp_c();
                             let mut c = cfg.clone();
                             c.load_n = l;
@@ -126,6 +133,25 @@ impl VirtualPort {
                             + (start.0.elapsed().as_secs_f64() * opts.speed.max(0.0) * 1e6) as u64
                     };
                     rig.advance_to(target);
+                    if let Some(after) = button_after_s {
+                        // A finger on the button: pressed `after` s into the armed state, held 50 ms.
+                        let now = rig.now_us();
+                        if matches!(rig.app().state(), RigState::Armed) {
+                            let since = *armed_since.get_or_insert(now);
+                            if pressed_at.is_none()
+                                && now.saturating_sub(since) as f64 >= after * 1e6
+                            {
+                                rig.set_button(true);
+                                pressed_at = Some(now);
+                            }
+                        } else {
+                            armed_since = None;
+                        }
+                        if pressed_at.is_some_and(|t| now.saturating_sub(t) >= 50_000) {
+                            rig.set_button(false);
+                            pressed_at = None;
+                        }
+                    }
                     let out = rig.take_output();
                     if !out.is_empty() {
                         writer

@@ -23,7 +23,9 @@ impl Size {
 }
 
 fn u16_at(b: &[u8], o: usize) -> Result<u16, String> {
-    b.get(o..o + 2).map(|s| u16::from_le_bytes([s[0], s[1]])).ok_or_else(|| "truncated ELF".into())
+    b.get(o..o + 2)
+        .map(|s| u16::from_le_bytes([s[0], s[1]]))
+        .ok_or_else(|| "truncated ELF".into())
 }
 
 fn u32_at(b: &[u8], o: usize) -> Result<u32, String> {
@@ -47,7 +49,10 @@ pub fn size(b: &[u8]) -> Result<Size, String> {
         let s = section(i);
         let name_off = strtab + u32_at(b, s)? as usize;
         let tail = b.get(name_off..).ok_or("bad section name")?;
-        let name_end = tail.iter().position(|&c| c == 0).ok_or("bad section name")?;
+        let name_end = tail
+            .iter()
+            .position(|&c| c == 0)
+            .ok_or("bad section name")?;
         let name = std::str::from_utf8(&tail[..name_end]).unwrap_or("");
         let flags = u32_at(b, s + 0x08)?;
         let sz = u32_at(b, s + 0x14)? as u64;

@@ -45,12 +45,17 @@ fn main() -> ExitCode {
 }
 
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().expect("workspace root")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .expect("workspace root")
 }
 
 fn run(cmd: &mut Command) -> Result<(), String> {
     eprintln!("$ {}", show(cmd));
-    let status = cmd.status().map_err(|e| format!("cannot start {}: {e}", show(cmd)))?;
+    let status = cmd
+        .status()
+        .map_err(|e| format!("cannot start {}: {e}", show(cmd)))?;
     if status.success() {
         Ok(())
     } else {
@@ -77,7 +82,14 @@ fn cargo() -> Command {
 fn ci() -> Result<(), String> {
     run(cargo().args(["fmt", "--all", "--", "--check"]))
         .map_err(|e| format!("{e}\n  → run `cargo fmt --all` and commit the result"))?;
-    run(cargo().args(["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"]))?;
+    run(cargo().args([
+        "clippy",
+        "--workspace",
+        "--all-targets",
+        "--",
+        "-D",
+        "warnings",
+    ]))?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     firmware(&[])?;
     Ok(())
@@ -97,7 +109,11 @@ fn rustup_has_target() -> bool {
     match out {
         Ok(o) if o.status.success() => {
             let sysroot = String::from_utf8_lossy(&o.stdout).trim().to_owned();
-            Path::new(&sysroot).join("lib/rustlib").join(TARGET).join("lib").is_dir()
+            Path::new(&sysroot)
+                .join("lib/rustlib")
+                .join(TARGET)
+                .join("lib")
+                .is_dir()
         }
         _ => false,
     }
@@ -125,14 +141,21 @@ fn pick_toolchain() -> Result<Toolchain, String> {
         }
         eprintln!("xtask: {TARGET} is not installed in rustup; installing Debian's toolchain");
         run(Command::new("apt-get").arg("update").arg("-q"))?;
-        run(Command::new("apt-get").args(["install", "-y", "-q"]).args(DEBIAN_PACKAGES))?;
+        run(Command::new("apt-get")
+            .args(["install", "-y", "-q"])
+            .args(DEBIAN_PACKAGES))?;
         if !debian_ready() {
-            return Err("Debian's rust packages installed but incomplete (need /usr/bin/cargo, \
+            return Err(
+                "Debian's rust packages installed but incomplete (need /usr/bin/cargo, \
                         /usr/lib/rustlib/src/rust/library, rust-lld)"
-                .into());
+                    .into(),
+            );
         }
     }
-    Ok(Toolchain::Debian { cargo: "/usr/bin/cargo".into(), rustc: "/usr/bin/rustc".into() })
+    Ok(Toolchain::Debian {
+        cargo: "/usr/bin/cargo".into(),
+        rustc: "/usr/bin/rustc".into(),
+    })
 }
 
 fn is_root() -> bool {
@@ -167,7 +190,15 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         }
     };
     cmd.env("CARGO_TARGET_DIR", &target_dir);
-    cmd.args([if flash { "run" } else { "build" }, "-p", BOARD, "--target", TARGET, "--profile", PROFILE]);
+    cmd.args([
+        if flash { "run" } else { "build" },
+        "-p",
+        BOARD,
+        "--target",
+        TARGET,
+        "--profile",
+        PROFILE,
+    ]);
     run(&mut cmd)?;
     let elf_path = target_dir.join(TARGET).join(PROFILE).join(BOARD);
     let bytes = std::fs::read(&elf_path).map_err(|e| format!("{}: {e}", elf_path.display()))?;

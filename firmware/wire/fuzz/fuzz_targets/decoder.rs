@@ -30,7 +30,13 @@ where
     tail.extend(encode_vec(u32::MAX, &sentinel).unwrap());
     let mut last = None;
     d.feed(&tail, |r| last = r.ok());
-    assert_eq!(last, Some(Frame { seq: u32::MAX, msg: sentinel }));
+    assert_eq!(
+        last,
+        Some(Frame {
+            seq: u32::MAX,
+            msg: sentinel
+        })
+    );
 }
 
 fuzz_target!(|data: &[u8]| {
