@@ -21,7 +21,6 @@
 //! ```
 
 pub mod diag;
-pub mod lm;
 pub mod model;
 pub mod report;
 
@@ -32,7 +31,9 @@ pub use serde_json;
 use model::{bic, gap_of, residuals, rms, simulate_spec, weighted};
 use serde::Serialize;
 use std::collections::BTreeMap;
-use tribo_physics::identify::{estimate_averaging, fit_dimensionless, FitOptions, LawSpec};
+use tribo_physics::identify::{
+    estimate_averaging, fit_dimensionless, levenberg_marquardt_with, FitOptions, LawSpec, LmOptions,
+};
 use tribo_physics::integrate::Method;
 use tribo_physics::Record;
 
@@ -199,16 +200,22 @@ pub fn fit_spec(
     let mut best: Option<FittedModel> = None;
     for p0 in starts {
         let scales = spec.scales();
-        let lm = lm::lm(
+        // A difference step of 1e-3 of each parameter's scale: the default 1e-7 is below the
+        // resolution of the adaptive integrator and of the stick events on long records with
+        // Coulomb friction (a 1e-9 change of μ0 may move the final stop by a half cycle).
+        let lm = levenberg_marquardt_with(
             |p| {
                 let s = simulate_spec(data, spec, p).ok()?;
                 let (e, f) = residuals(data, &s);
                 Some(weighted(&e, &f))
             },
             p0,
-            &scales,
-            1e-3,
-            max_iter,
+            &LmOptions {
+                max_iter,
+                tol: 1e-5,
+                rel_step: 1e-3,
+                scales,
+            },
         );
         let Some(lm) = lm else { continue };
         let Some(m) = evaluate(data, spec, &lm.p) else {

@@ -521,14 +521,60 @@ pub struct LmResult {
     pub converged: bool,
 }
 
+/// How [`levenberg_marquardt_with`] differentiates and when it stops.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LmOptions {
+    /// Iteration limit.
+    pub max_iter: usize,
+    /// Convergence: relative cost decrease (and relative parameter step below `√tol / 100`).
+    pub tol: f64,
+    /// Finite-difference step of parameter `j`: `rel_step · max(|p_j|, scale_j)`.
+    pub rel_step: f64,
+    /// Typical magnitude of each parameter, used for the step when `p_j` is near 0 (missing
+    /// entries: 1e-4).
+    pub scales: Vec<f64>,
+}
+
+impl Default for LmOptions {
+    fn default() -> Self {
+        LmOptions {
+            max_iter: 60,
+            tol: 1e-12,
+            rel_step: 1e-7,
+            scales: Vec::new(),
+        }
+    }
+}
+
 /// Levenberg–Marquardt on residuals `r(p)` (`None` = could not evaluate: treated as a rejected
 /// step), forward-difference Jacobian, Marquardt diagonal scaling. `None` if `r(p0)` fails.
 pub fn levenberg_marquardt(
-    mut r: impl FnMut(&[f64]) -> Option<Vec<f64>>,
+    r: impl FnMut(&[f64]) -> Option<Vec<f64>>,
     p0: &[f64],
     max_iter: usize,
     tol: f64,
 ) -> Option<LmResult> {
+    levenberg_marquardt_with(
+        r,
+        p0,
+        &LmOptions {
+            max_iter,
+            tol,
+            ..LmOptions::default()
+        },
+    )
+}
+
+/// [`levenberg_marquardt`] with the difference step chosen per parameter. A coarser step than the
+/// default 1e-7 is needed when the residuals are only piecewise smooth at fine scales (an adaptive
+/// integrator's steps, the stick events of Coulomb friction on long records). Where the forward
+/// point cannot be evaluated the backward difference is used.
+pub fn levenberg_marquardt_with(
+    mut r: impl FnMut(&[f64]) -> Option<Vec<f64>>,
+    p0: &[f64],
+    opts: &LmOptions,
+) -> Option<LmResult> {
+    let (max_iter, tol) = (opts.max_iter, opts.tol);
     let n = p0.len();
     let mut p = p0.to_vec();
     let mut res = r(&p)?;
@@ -542,11 +588,19 @@ pub fn levenberg_marquardt(
         // Jacobian.
         let mut jac: Vec<Vec<f64>> = Vec::with_capacity(n);
         for j in 0..n {
-            let h = 1e-7 * p[j].abs().max(1e-4);
+            let scale = opts.scales.get(j).copied().unwrap_or(1e-4);
+            let h = opts.rel_step * p[j].abs().max(scale);
             let mut q = p.clone();
             q[j] += h;
-            let rq = r(&q)?;
-            jac.push(rq.iter().zip(&res).map(|(a, b)| (a - b) / h).collect());
+            let col = match r(&q) {
+                Some(rq) => rq.iter().zip(&res).map(|(a, b)| (a - b) / h).collect(),
+                None => {
+                    q[j] = p[j] - h;
+                    let rq = r(&q)?;
+                    rq.iter().zip(&res).map(|(a, b)| (b - a) / h).collect()
+                }
+            };
+            jac.push(col);
         }
         let mut jtj = vec![vec![0.0; n]; n];
         let mut jtr = vec![0.0; n];
@@ -678,10 +732,7 @@ pub fn windowed_fits(
     let mut start = 0usize;
     for w in 1..=windows {
         let level = a0 - (a0 - a_min) * w as f64 / windows as f64;
-        let mut end = a.iter().position(|&v| v <= level).unwrap_or(a.len() - 1);
-        if w == windows {
-            end = end.max(a.len().min(end + 1) - 1);
-        }
+        let end = a.iter().position(|&v| v <= level).unwrap_or(a.len() - 1);
         if end <= start + 8 {
             continue;
         }
