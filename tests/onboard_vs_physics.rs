@@ -17,9 +17,18 @@ fn record(load_n: f64, mu0: f64, mu1: f64, seed: u64) -> tribo_physics::Record {
     let rig = Rig::new(0.04, 1150.0, load_n).unwrap();
     // Long enough for the pin to stop (or for 40 s, the rig's longest run); the pipeline ends the
     // run itself when the pin is at rest.
-    let spec = RecordSpec { rig, x0_m: 667e-6, v0_m_s: 0.0, duration_s: 4.0, rate_hz: 10_000.0 };
+    let spec = RecordSpec {
+        rig,
+        x0_m: 667e-6,
+        v0_m_s: 0.0,
+        duration_s: 4.0,
+        rate_hz: 10_000.0,
+    };
     let model = Model::new(FrictionLaw::coulomb_viscous(mu0, mu1));
-    let sensor = SensorModel { seed, ..SensorModel::default() };
+    let sensor = SensorModel {
+        seed,
+        ..SensorModel::default()
+    };
     generate(&spec, &model, Method::dopri(1e-9), Some(&sensor)).unwrap()
 }
 
@@ -42,9 +51,18 @@ fn onboard_fit_meets_the_thesis_precision_on_simulated_16_bit_records() {
                     continue;
                 }
                 assert_eq!(r.verdict, Verdict::Ok, "N={load} μ0={mu0} μ1={mu1}: {r:?}");
-                let (e0, e1) = ((r.best.mu0 as f64 - mu0).abs(), (r.best.mu1 as f64 - mu1).abs());
-                assert!(e0 <= 0.001, "N={load} μ0={mu0} μ1={mu1}: μ0 off by {e0:.2e} ({r:?})");
-                assert!(e1 <= 0.0002, "N={load} μ0={mu0} μ1={mu1}: μ1 off by {e1:.2e} ({r:?})");
+                let (e0, e1) = (
+                    (r.best.mu0 as f64 - mu0).abs(),
+                    (r.best.mu1 as f64 - mu1).abs(),
+                );
+                assert!(
+                    e0 <= 0.001,
+                    "N={load} μ0={mu0} μ1={mu1}: μ0 off by {e0:.2e} ({r:?})"
+                );
+                assert!(
+                    e1 <= 0.0002,
+                    "N={load} μ0={mu0} μ1={mu1}: μ1 off by {e1:.2e} ({r:?})"
+                );
                 // The estimate's own standard errors must not claim more than it delivers by far.
                 assert!(r.best.mu0_se.is_finite() && r.best.mu1_se.is_finite());
                 worst = (worst.0.max(e0), worst.1.max(e1));
@@ -55,7 +73,10 @@ fn onboard_fit_meets_the_thesis_precision_on_simulated_16_bit_records() {
     // Most of the grid oscillates long enough to be fitted: a pipeline that refused everything
     // would otherwise pass.
     assert!(fitted >= 18, "only {fitted} of 27 runs fitted");
-    eprintln!("{fitted} runs fitted; worst |Δμ0| = {:.2e}, |Δμ1| = {:.2e}", worst.0, worst.1);
+    eprintln!(
+        "{fitted} runs fitted; worst |Δμ0| = {:.2e}, |Δμ1| = {:.2e}",
+        worst.0, worst.1
+    );
 }
 
 #[test]
@@ -70,24 +91,52 @@ fn apparatus_alone_reads_as_purely_viscous() {
     assert_eq!(r.shape, tribo_wire::EnvelopeShape::Convex, "{r:?}");
 }
 
-#[test]
-#[ignore]
-fn scratch_debug() {
-    let rig = Rig::new(0.04, 1150.0, 0.05).unwrap();
-    let spec = RecordSpec { rig, x0_m: 667e-6, v0_m_s: 0.0, duration_s: 4.0, rate_hz: 10_000.0 };
-    let model = Model::new(FrictionLaw::coulomb_viscous(0.05, 0.0011));
-    let base = SensorModel { seed: 5, ..SensorModel::default() };
-    let variants = [
-        ("default", base.clone()),
-        ("no disp noise", SensorModel { disp_noise_m: 0.0, ..base.clone() }),
-        ("no vel noise", SensorModel { vel_noise_m_s: 0.0, ..base.clone() }),
-        ("no noise, 16 bit", SensorModel { vel_noise_m_s: 0.0, disp_noise_m: 0.0, ..base.clone() }),
-        ("noise, no quantisation", SensorModel { bits: None, ..base.clone() }),
-        ("vel noise x0.25", SensorModel { vel_noise_m_s: 5e-6, ..base.clone() }),
-    ];
-    for (name, s) in variants {
-        let rec = generate(&spec, &model, Method::dopri(1e-9), Some(&s)).unwrap();
-        let r = analyse(&rec).unwrap();
-        eprintln!("{name:24} best {:.5} {:.6} avg {:.5} {:.6} dec {:.5} {:.6} cycles {}", r.best.mu0, r.best.mu1, r.averaging.mu0, r.averaging.mu1, r.decrement.mu0, r.decrement.mu1, r.cycles);
+/// The grid of the thesis-precision test with the vibrometer's velocity noise scaled: returns the
+/// number of runs fitted and the worst |Δμ0|, |Δμ1|, asserting the verdicts as it goes.
+fn grid_at_velocity_noise(vel_noise_m_s: f64) -> (usize, f64, f64) {
+    let (mut worst0, mut worst1, mut fitted, mut seed) = (0.0f64, 0.0f64, 0, 100);
+    for &load in &[0.05, 0.3, 0.7] {
+        for &mu0 in &[0.005, 0.05, 0.2] {
+            for &mu1 in &[0.0011, 0.01, 0.03] {
+                seed += 1;
+                let rig = Rig::new(0.04, 1150.0, load).unwrap();
+                let spec = RecordSpec {
+                    rig,
+                    x0_m: 667e-6,
+                    v0_m_s: 0.0,
+                    duration_s: 4.0,
+                    rate_hz: 10_000.0,
+                };
+                let model = Model::new(FrictionLaw::coulomb_viscous(mu0, mu1));
+                let sensor = SensorModel {
+                    seed,
+                    vel_noise_m_s,
+                    ..SensorModel::default()
+                };
+                let rec = generate(&spec, &model, Method::dopri(1e-9), Some(&sensor)).unwrap();
+                let r = analyse(&rec).unwrap();
+                if r.verdict == Verdict::TooFewCycles {
+                    assert!(r.cycles < 5, "refused with {} cycles", r.cycles);
+                    continue;
+                }
+                assert_eq!(r.verdict, Verdict::Ok, "N={load} μ0={mu0} μ1={mu1}: {r:?}");
+                worst0 = worst0.max((r.best.mu0 as f64 - mu0).abs());
+                worst1 = worst1.max((r.best.mu1 as f64 - mu1).abs());
+                fitted += 1;
+            }
+        }
     }
+    (fitted, worst0, worst1)
+}
+
+/// Twice the default vibrometer velocity noise (4e-5 m/s, ≈ 11 counts here): the reversal detector
+/// must measure the noise from the motion (no hold is fed by `analyse`) and arm above it, or the noise
+/// around zero once the pin sticks is counted as reversals and biases both estimators.
+#[test]
+fn onboard_fit_keeps_the_precision_at_twice_the_velocity_noise() {
+    let (fitted, e0, e1) = grid_at_velocity_noise(4e-5);
+    assert!(fitted >= 18, "only {fitted} of 27 runs fitted");
+    assert!(e0 <= 0.001, "worst |Δμ0| = {e0:.2e}");
+    assert!(e1 <= 0.0002, "worst |Δμ1| = {e1:.2e}");
+    eprintln!("4e-5 m/s: {fitted} runs fitted; worst |Δμ0| = {e0:.2e}, |Δμ1| = {e1:.2e}");
 }

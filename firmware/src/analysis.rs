@@ -34,11 +34,18 @@
 //! 1/amplitude), then Ω = ω_d / sqrt(1 − ζ²). The noise variances measured during the hold are taken
 //! out of the envelope's mean square, and the central differences use the nominal half-cycle spacing.
 //!
+//! The velocity noise is also measured from the motion (the second difference of the velocity
+//! counts, its `(ωΔt)⁴ v²` signal part taken out), updated at every reversal: the reversal detector
+//! arms at 8 × the larger of the hold's and the motion's noise, and the envelope's
+//! noise correction uses the larger too. Without it a run released with no (or a quiet) hold armed
+//! within ~1.5 σ of a 16-bit vibrometer's noise, counted the noise around zero after the pin stuck as
+//! reversals, never stopped `AtRest`, and both estimators were biased (μ0 low, μ1 high).
+//!
 //! `cycles` is half the number of velocity reversals seen; below [`MIN_CYCLES`] the verdict is
 //! `TooFewCycles` and every estimate is `NaN`. Saturated displacement or velocity samples after release
 //! give the verdict `Saturated` (the numbers are still filled in, to be read with care).
 //!
-//! Cost: per sample, integer sums and one `f32` calibration (≈ 170 host instructions, see
+//! Cost: per sample, integer sums and one `f32` calibration (≈ 160 host instructions, see
 //! `examples/pipeline_bench.rs`); per half-cycle, one peak fit over ±1 rad; the regressions run once,
 //! in `f64`, in [`Pipeline::finish`].
 //!
@@ -193,6 +200,18 @@ struct State {
     /// Variances of the displacement (m²) and velocity (m²/s²) noise measured during the hold.
     noise_var: (f64, f64),
     detector: ReversalDetector,
+    /// Velocity noise measured during the hold (counts, at least [`MIN_NOISE_COUNTS`]).
+    sv_hold: f64,
+    /// The two previous velocity counts (for the second difference).
+    v_prev: (i32, i32),
+    /// Σ (second difference of the velocity counts)² and its number of terms.
+    d2_sum: i64,
+    d2_n: u32,
+    /// Σ (velocity counts − reference)² over the completed half-cycles and its number of terms.
+    vsq_sum: i64,
+    vsq_n: u32,
+    /// Velocity noise measured from the motion (counts), updated at each reversal.
+    sv_motion: f64,
     fitter: PeakFitter,
     moments: Moments,
     pending: Option<Pending>,
@@ -283,6 +302,13 @@ impl Pipeline {
             noise_x: 0.0,
             noise_var: (0.0, 0.0),
             detector: ReversalDetector::new(f32::MAX),
+            sv_hold: MIN_NOISE_COUNTS,
+            v_prev: (0, 0),
+            d2_sum: 0,
+            d2_n: 0,
+            vsq_sum: 0,
+            vsq_n: 0,
+            sv_motion: 0.0,
             fitter,
             moments: Moments::default(),
             pending: None,
@@ -407,6 +433,7 @@ impl Pipeline {
             s * s
         };
         self.st.noise_var = (var(xi, xc.gain), var(vi, vc.gain));
+        self.st.sv_hold = sv;
         self.st.detector = ReversalDetector::new((ARM_SIGMAS * sv * (vc.gain as f64).abs()) as f32);
         self.st.x_ref = (xc.zero as f64).clamp(0.0, ADC_MAX as f64) as i32;
         self.st.v_ref = (vc.zero as f64).clamp(0.0, ADC_MAX as f64) as i32;
@@ -440,6 +467,15 @@ impl Pipeline {
             self.st.x_release = calib::to_si(self.st.cal[Channel::Displacement as usize], cx);
         }
         self.st.fitter.push(cx);
+        // Second difference of the velocity: white noise of variance σ² gives 6σ², the motion only
+        // (ωΔt)⁴ v², taken out at the reversals (see `update_noise`).
+        let cvi = cv as i32;
+        let d2 = (cvi - 2 * self.st.v_prev.0 + self.st.v_prev.1) as i64;
+        self.st.v_prev = (cvi, self.st.v_prev.0);
+        if idx >= 2 {
+            self.st.d2_sum = self.st.d2_sum.wrapping_add(d2 * d2);
+            self.st.d2_n = self.st.d2_n.wrapping_add(1);
+        }
         let v = calib::to_si(self.st.cal[Channel::Velocity as usize], cv);
         if let Some(rev) = self.st.detector.update(v) {
             self.on_reversal(idx, rev.frac as f64, rev.before);
@@ -465,6 +501,7 @@ impl Pipeline {
             .moments
             .summarise(xc, self.st.x_ref, vc, self.st.v_ref)
             .unwrap_or_default();
+        self.update_noise();
         self.st.moments = Moments::default();
         if let Some(p) = self.st.pending.take() {
             // Two reversals within one window: only garbage does that; keep the raw peak.
@@ -489,6 +526,34 @@ impl Pipeline {
             t: pos / self.st.rate,
             moments: hm,
         });
+    }
+
+    /// Velocity noise from the motion itself (once per half-cycle): a run analysed without a hold
+    /// (or with a hold quieter than the motion, e.g. a vibrometer whose noise grows with speed) would
+    /// otherwise arm the reversal detector within a couple of noise σ, and once the pin stops the
+    /// noise around zero would be counted as reversals: spurious half-cycles that bias both
+    /// estimators and keep the run from ever ending `AtRest`. The arming threshold follows
+    /// `ARM_SIGMAS` × the larger of the hold's and the motion's noise.
+    fn update_noise(&mut self) {
+        self.st.vsq_sum = self.st.vsq_sum.wrapping_add(self.st.moments.sum_sq_v());
+        self.st.vsq_n = self.st.vsq_n.wrapping_add(self.st.moments.len());
+        if self.st.d2_n == 0 || self.st.vsq_n == 0 {
+            return;
+        }
+        let step = PI / self.st.half_period;
+        let s2 = step * step;
+        let d2 = self.st.d2_sum as f64 / self.st.d2_n as f64;
+        let vsq = self.st.vsq_sum as f64 / self.st.vsq_n as f64;
+        let var = (d2 - s2 * s2 * vsq) / 6.0;
+        if !(var.is_finite() && var > 0.0) {
+            return;
+        }
+        self.st.sv_motion = fit::sqrt(var);
+        let sv = self.st.sv_hold.max(self.st.sv_motion);
+        let gain = self.st.cal[Channel::Velocity as usize].gain as f64;
+        self.st
+            .detector
+            .set_threshold((ARM_SIGMAS * sv * gain.abs()) as f32);
     }
 
     fn complete_pending(&mut self, p: Pending) {
@@ -700,6 +765,8 @@ impl Pipeline {
             // measured noise variance taken out of the mean square.
             let r_now = r;
             let (nx, nv) = self.st.noise_var;
+            let gv = self.st.cal[Channel::Velocity as usize].gain as f64;
+            let nv = nv.max(self.st.sv_motion * self.st.sv_motion * gv * gv);
             let noise = nx + nv / (omega * omega);
             let amp = move |j: usize| -> Option<f64> {
                 let centre = offset - self.sign(j) * r_now;
@@ -1004,6 +1071,48 @@ mod tests {
             result: p.finish(7),
             true_half_cycles: truth.half_cycles,
             pipeline_half_cycles: p.half_cycles().len(),
+        }
+    }
+
+    /// Released without any hold sample (as `tribo onboard` does with recorded runs), the velocity
+    /// noise is unknown at first: the detector must measure it from the motion and arm above it.
+    /// Otherwise, once the pin sticks, noise of a few LSB around zero is counted as reversals — the
+    /// run never ends `AtRest` and the spurious half-cycles bias μ0 low and μ1 high.
+    #[test]
+    fn without_a_hold_the_velocity_noise_is_measured_from_the_motion() {
+        for (seed, noise_lsb) in [(3u64, 3.0), (4, 6.0), (5, 12.0)] {
+            let (load, mu0, mu1) = (0.05, 0.05, 0.0011);
+            let cfg = configure(load, 40.0);
+            let mut p = Pipeline::new(&cfg).unwrap();
+            let mut truth = Exact::new(K, M, load, mu0, mu1, X0);
+            let mut noise = Noise(seed);
+            let cal = cfg.calibration;
+            let count = |cal: ChannelCal, si: f64, n: &mut Noise| {
+                calib::to_count(cal, si + noise_lsb * cal.gain as f64 * n.gauss()).unwrap()
+            };
+            p.release();
+            let mut i = 0u64;
+            while !p.is_finished() {
+                let (x, v) = truth.at(i as f64 / RATE as f64);
+                p.push(&[
+                    count(cal[0], x, &mut noise),
+                    count(cal[1], v, &mut noise),
+                    count(cal[2], 0.0, &mut noise),
+                ]);
+                i += 1;
+            }
+            let tag = format!("noise {noise_lsb} LSB: {:?}", p.phase());
+            assert_eq!(p.phase(), Phase::Finished(StopReason::AtRest), "{tag}");
+            let seen = p.half_cycles().len() as i64;
+            assert!(
+                (seen - truth.half_cycles as i64).abs() <= 1,
+                "{tag}: {seen} half-cycles, true {}",
+                truth.half_cycles
+            );
+            let r = p.finish(1);
+            assert_eq!(r.verdict, Verdict::Ok, "{tag}: {r:?}");
+            assert!((r.best.mu0 as f64 - mu0).abs() <= 0.001, "{tag}: {r:?}");
+            assert!((r.best.mu1 as f64 - mu1).abs() <= 0.0002, "{tag}: {r:?}");
         }
     }
 

@@ -47,6 +47,11 @@ impl Moments {
         self.n
     }
 
+    /// Σ(dv)² of the velocity counts relative to their reference.
+    pub fn sum_sq_v(&self) -> i64 {
+        self.svv
+    }
+
     /// True before any sample.
     pub fn is_empty(&self) -> bool {
         self.n == 0

@@ -54,6 +54,19 @@ impl ReversalDetector {
         }
     }
 
+    /// Changes the arming threshold without touching the detector's state (ignored unless finite and
+    /// positive). Used once the velocity noise has been measured from the motion itself.
+    pub fn set_threshold(&mut self, threshold: f32) {
+        if threshold.is_finite() && threshold > 0.0 {
+            self.threshold = threshold;
+        }
+    }
+
+    /// Current arming threshold.
+    pub fn threshold(&self) -> f32 {
+        self.threshold
+    }
+
     /// Feeds one velocity; returns the reversal if the velocity crossed zero since the previous one.
     pub fn update(&mut self, v: f32) -> Option<Reversal> {
         let prev = self.prev;
