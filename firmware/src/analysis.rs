@@ -53,7 +53,7 @@
 //! standard error includes half their difference in quadrature. When they differ by more than the
 //! method's stated precision (μ0 ± 0.001, μ1 ± 0.0002) plus three combined standard errors, the
 //! verdict is `EstimatorsDisagree` (typically: the friction law is not Coulomb–viscous).
-use crate::calib::{self, OffsetCapture, ADC_MAX, CHANNELS};
+use crate::calib::{OffsetCapture, ADC_MAX, CHANNELS};
 use crate::envelope::{HalfCycleMoments, Moments};
 use crate::fit::{self, Ols};
 use crate::peaks::{PeakFitter, ReversalDetector};
@@ -251,9 +251,13 @@ impl Pipeline {
         let rate = cfg.sample_rate_hz as f64;
         let max_duration = positive(cfg.max_duration_s).ok_or(ConfigError::MaxDuration)?;
         let x0 = positive(cfg.initial_amplitude_m).ok_or(ConfigError::InitialAmplitude)?;
-        let slot_x = calib::slot(cfg.channels, Channel::Displacement)
+        let slot_x = cfg
+            .channels
+            .position(Channel::Displacement)
             .ok_or(ConfigError::MissingChannel(Channel::Displacement))?;
-        let slot_v = calib::slot(cfg.channels, Channel::Velocity)
+        let slot_v = cfg
+            .channels
+            .position(Channel::Velocity)
             .ok_or(ConfigError::MissingChannel(Channel::Velocity))?;
         let cal = cfg.calibration;
         if !cal_ok(cal[Channel::Displacement as usize]) {
@@ -365,7 +369,7 @@ impl Pipeline {
         self.st
             .cal
             .get(channel as usize)
-            .map_or(f32::NAN, |c| calib::to_si(*c, count))
+            .map_or(f32::NAN, |c| c.to_si(count))
     }
 
     /// Feeds one sample taken while the magnet holds the pin (counts in the channel-set order).
@@ -464,7 +468,7 @@ impl Pipeline {
         let idx = self.st.n;
         self.st.n = self.st.n.saturating_add(1);
         if idx == 0 {
-            self.st.x_release = calib::to_si(self.st.cal[Channel::Displacement as usize], cx);
+            self.st.x_release = self.st.cal[Channel::Displacement as usize].to_si(cx);
         }
         self.st.fitter.push(cx);
         // Second difference of the velocity: white noise of variance σ² gives 6σ², the motion only
@@ -476,7 +480,7 @@ impl Pipeline {
             self.st.d2_sum = self.st.d2_sum.wrapping_add(d2 * d2);
             self.st.d2_n = self.st.d2_n.wrapping_add(1);
         }
-        let v = calib::to_si(self.st.cal[Channel::Velocity as usize], cv);
+        let v = self.st.cal[Channel::Velocity as usize].to_si(cv);
         if let Some(rev) = self.st.detector.update(v) {
             self.on_reversal(idx, rev.frac as f64, rev.before);
         }
@@ -892,6 +896,7 @@ fn combine(d: &Estimate, a: &Estimate) -> (Verdict, Estimate) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calib;
     use crate::wire::{ChannelSet, RigConstants};
     use proptest::prelude::*;
 

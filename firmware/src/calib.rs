@@ -4,18 +4,13 @@
 //! magnet holds the pin (see [`OffsetCapture`] and `analysis::Pipeline::release`): the pin is at rest,
 //! so the velocity and force channels read their offsets, and the displacement channel reads the
 //! configured initial amplitude `x0`.
-use crate::wire::{Channel, ChannelCal, ChannelSet};
+use crate::wire::ChannelCal;
 
 /// Number of channels of the rig (indexing of `Configure::calibration`).
 pub use crate::wire::CHANNELS;
 
 /// Largest count of the 16-bit converters.
 pub const ADC_MAX: u16 = u16::MAX;
-
-/// SI value of a raw count.
-pub fn to_si(cal: ChannelCal, count: u16) -> f32 {
-    cal.gain * (count as f32 - cal.zero)
-}
 
 /// Count the converter would give for an SI value: rounded to nearest and saturated to
 /// `0..=ADC_MAX` like a real 16-bit ADC (`NaN` reads as 0). `None` for a zero or non-finite gain.
@@ -48,21 +43,6 @@ pub fn spanning(lo: f64, hi: f64) -> Option<ChannelCal> {
     };
     let near = zero.abs() <= 16.0 * ADC_MAX as f64;
     (near && cal.gain.is_finite() && cal.gain > 0.0 && cal.zero.is_finite()).then_some(cal)
-}
-
-/// Position of `channel` in a sample vector ordered like the channel set, or `None` when the set
-/// does not contain it.
-pub fn slot(set: ChannelSet, channel: Channel) -> Option<usize> {
-    let bit = channel as u8;
-    if set.0 & (1 << bit) == 0 {
-        return None;
-    }
-    Some((set.0 & ((1u8 << bit) - 1)).count_ones() as usize)
-}
-
-/// Number of channels in a set (length of one sample vector).
-pub fn width(set: ChannelSet) -> usize {
-    (set.0 & 0x1f).count_ones() as usize
 }
 
 /// Running mean and spread of each channel's counts while the pin is held (exact integer sums).
@@ -124,17 +104,6 @@ mod tests {
     use proptest::prelude::*;
 
     #[test]
-    fn slots_follow_the_channel_order() {
-        let set = ChannelSet(0b10110); // velocity, force, temperature
-        assert_eq!(slot(set, Channel::Displacement), None);
-        assert_eq!(slot(set, Channel::Velocity), Some(0));
-        assert_eq!(slot(set, Channel::Force), Some(1));
-        assert_eq!(slot(set, Channel::Ecr), None);
-        assert_eq!(slot(set, Channel::Temperature), Some(2));
-        assert_eq!(width(set), 3);
-    }
-
-    #[test]
     fn capture_mean_and_std() {
         let mut c = OffsetCapture::default();
         for i in 0..1000u32 {
@@ -175,7 +144,7 @@ mod tests {
             let cal = spanning(lo, hi).unwrap();
             let si = lo + frac * width;
             let c = to_count(cal, si).unwrap();
-            let back = to_si(cal, c) as f64;
+            let back = cal.to_si(c) as f64;
             let step = width / ADC_MAX as f64;
             if (0.0..=1.0).contains(&frac) {
                 prop_assert!((back - si).abs() <= 0.5 * step + 1e-6 * width, "{si} -> {c} -> {back}");

@@ -149,9 +149,13 @@ impl ChannelSet {
         Channel::ALL.into_iter().filter(move |c| self.contains(*c))
     }
 
-    /// Position of `c`'s count within one sample of this set.
-    pub fn position(self, c: Channel) -> Option<usize> {
-        self.iter().position(|x| x == c)
+    /// Position of `c`'s count within one sample of this set: the number of channels of lower
+    /// index in the set.
+    pub const fn position(self, c: Channel) -> Option<usize> {
+        if !self.contains(c) {
+            return None;
+        }
+        Some((self.0 & ((1u8 << c as u8) - 1)).count_ones() as usize)
     }
 }
 

@@ -448,6 +448,25 @@ fn full_sample_block_fits_in_a_frame() {
 }
 
 #[test]
+fn channel_positions_follow_the_channel_order() {
+    let set = ChannelSet(0b10110); // velocity, force, temperature
+    assert_eq!(set.position(Channel::Displacement), None);
+    assert_eq!(set.position(Channel::Velocity), Some(0));
+    assert_eq!(set.position(Channel::Force), Some(1));
+    assert_eq!(set.position(Channel::Ecr), None);
+    assert_eq!(set.position(Channel::Temperature), Some(2));
+    assert_eq!(set.len(), 3);
+    // The constant-time position agrees with the iteration order for every set.
+    for bits in 0..32u8 {
+        let set = ChannelSet(bits);
+        for (i, c) in set.iter().enumerate() {
+            assert_eq!(set.position(c), Some(i));
+        }
+        assert_eq!(set.iter().count(), set.len());
+    }
+}
+
+#[test]
 fn nan_survives_the_wire_bit_for_bit() {
     let msg = HostMsg::SetHeater(HeaterSetpoint {
         setpoint_c: f32::NAN,
