@@ -693,7 +693,7 @@ fn unanalysed(run_id: u32, samples: u32, rate: u32) -> OnboardResult {
     };
     OnboardResult {
         run_id,
-        verdict: Verdict::NoOscillation,
+        verdict: Verdict::NotAnalysed,
         cycles: 0,
         frequency_hz: f32::NAN,
         initial_amplitude_m: f32::NAN,

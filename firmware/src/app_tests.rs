@@ -1027,6 +1027,7 @@ fn an_unloaded_run_runs_to_its_maximum_duration_without_onboard_analysis() {
         res.best.mu0.is_nan() && res.best.mu1.is_nan(),
         "an estimate from no analysis: {res:?}"
     );
+    assert_eq!(res.verdict, Verdict::NotAnalysed, "{res:?}");
     assert!((res.duration_s - 0.5).abs() < 1e-6);
 }
 

@@ -700,6 +700,9 @@ wire_type! {
         /// The two estimators disagree beyond their standard errors.
         EstimatorsDisagree,
         Aborted,
+        /// The on-board analysis did not run: an unloaded run (load 0, the apparatus alone), whose
+        /// dimensionless μ are undefined. Fit the stored record on the host instead.
+        NotAnalysed,
     }
 }
 
@@ -712,6 +715,7 @@ impl Verdict {
             Verdict::Saturated => "saturated",
             Verdict::EstimatorsDisagree => "estimators-disagree",
             Verdict::Aborted => "aborted",
+            Verdict::NotAnalysed => "not-analysed",
         }
     }
 }

@@ -161,6 +161,7 @@ fn device_msg() -> impl Strategy<Value = DeviceMsg> {
         Verdict::Saturated,
         Verdict::EstimatorsDisagree,
         Verdict::Aborted,
+        Verdict::NotAnalysed,
     ]);
     let shape = prop::sample::select(vec![
         EnvelopeShape::Straight,
