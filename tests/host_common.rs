@@ -2,9 +2,10 @@
 #![allow(dead_code)]
 
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 use tribo::link::pty::VirtualPort;
-use tribo::link::session::RunPlan;
+use tribo::link::session::{record_run, Outcome, RunPlan};
 use tribo::link::Link;
 use tribo_rig::{LawConfig, ServeOptions, VirtualRig, VirtualRigConfig};
 use tribo_wire::{Configure, DeviceInfo};
@@ -35,6 +36,20 @@ pub fn connect(port: &std::path::Path) -> (Link, DeviceInfo) {
     let mut link = Link::open(port).expect("open the pty");
     let info = link.hello().expect("hello");
     (link, info)
+}
+
+/// Connects to `port` and records one run of [`plan`] into `store`, without abort or progress.
+pub fn record_plain_run(port: &std::path::Path, store: &std::path::Path) -> Outcome {
+    let (mut link, info) = connect(port);
+    record_run(
+        &mut link,
+        &info,
+        store,
+        &plan(),
+        &AtomicBool::new(false),
+        &mut |_| {},
+    )
+    .expect("a complete run")
 }
 
 /// The thesis's rig at 0.3 N (the virtual rig's knob), runs of at most 8 s.

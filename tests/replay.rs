@@ -4,24 +4,13 @@
 mod host_common;
 
 use host_common::*;
-use std::sync::atomic::AtomicBool;
 use tribo::cmd::replay::{compare, envelope_vs_simulation, replay_pipeline};
-use tribo::link::session::record_run;
 
 #[test]
 fn replay_reproduces_the_onboard_result_and_locates_a_wrong_law() {
     let (port, truth) = virtual_rig(0.02, 0.004, 9, 20.0);
     let store = tempfile::tempdir().unwrap();
-    let (mut link, info) = connect(&port);
-    let o = record_run(
-        &mut link,
-        &info,
-        store.path(),
-        &plan(),
-        &AtomicBool::new(false),
-        &mut |_| {},
-    )
-    .unwrap();
+    let o = record_plain_run(&port, store.path());
     let recorded = *o.run.result().unwrap();
 
     let replayed = replay_pipeline(&o.run).unwrap();

@@ -5,8 +5,7 @@ mod host_common;
 
 use host_common::*;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
-use tribo::link::session::{pull_run, record_run};
+use tribo::link::session::pull_run;
 use tribo_store::log::HEADER_LEN;
 use tribo_store::{ErrorKind, Run};
 
@@ -15,16 +14,7 @@ use tribo_store::{ErrorKind, Run};
 fn recorded() -> (tempfile::TempDir, PathBuf, PathBuf) {
     let (port, _) = virtual_rig(0.02, 0.004, 6, 20.0);
     let store = tempfile::tempdir().unwrap();
-    let (mut link, info) = connect(&port);
-    let o = record_run(
-        &mut link,
-        &info,
-        store.path(),
-        &plan(),
-        &AtomicBool::new(false),
-        &mut |_| {},
-    )
-    .unwrap();
+    let o = record_plain_run(&port, store.path());
     assert_lossless(&o.run);
     let dir = o.run.dir().to_owned();
     (store, dir, port)
