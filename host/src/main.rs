@@ -44,8 +44,23 @@ enum Command {
     Report(tribo::cmd::report::Args),
 }
 
-fn main() -> anyhow::Result<()> {
-    let cli = Cli::parse();
+/// Errors are printed as the chain of their causes, one per line, without a backtrace (which
+/// `anyhow` would add whenever `RUST_BACKTRACE` is set): a lab user needs what went wrong and what to
+/// do next, not the program's stack.
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            for cause in e.chain().skip(1) {
+                eprintln!("  caused by: {cause}");
+            }
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Onboard(a) => tribo::cmd::onboard::run(a),
         Command::Devices(a) => tribo::cmd::devices::run(a),
