@@ -14,6 +14,22 @@ fn encode_vec(seq: u32, msg: &HostMsg) -> Result<Vec<u8>, crate::wire::EncodeErr
 use crate::wire::{ChannelSet, Field, HeaterFault, HeaterSetpoint, BLOCK_LEN};
 use proptest::prelude::*;
 
+/// The run's end frame among the messages, if it came.
+fn run_end<M: core::borrow::Borrow<DeviceMsg>>(msgs: &[M]) -> Option<RunEnd> {
+    msgs.iter().find_map(|m| match m.borrow() {
+        DeviceMsg::RunEnded(e) => Some(*e),
+        _ => None,
+    })
+}
+
+/// The run's on-board result among the messages, if it came.
+fn onboard_result<M: core::borrow::Borrow<DeviceMsg>>(msgs: &[M]) -> Option<OnboardResult> {
+    msgs.iter().find_map(|m| match m.borrow() {
+        DeviceMsg::Result(r) => Some(*r),
+        _ => None,
+    })
+}
+
 /// A rig whose pin, once released, oscillates at 26 Hz with an amplitude decaying linearly to rest
 /// (Coulomb-like) in `stop_s`. The ADC converts on demand up to the time set by the test.
 struct Mock {
@@ -485,26 +501,8 @@ fn a_run_streams_contiguous_blocks_then_result_and_end() {
             }
         })
         .collect();
-    let end = msgs
-        .iter()
-        .find_map(|m| {
-            if let DeviceMsg::RunEnded(e) = m {
-                Some(*e)
-            } else {
-                None
-            }
-        })
-        .unwrap();
-    let result = msgs
-        .iter()
-        .find_map(|m| {
-            if let DeviceMsg::Result(r) = m {
-                Some(*r)
-            } else {
-                None
-            }
-        })
-        .unwrap();
+    let end = run_end(&msgs).unwrap();
+    let result = onboard_result(&msgs).unwrap();
     assert_eq!(
         end.reason,
         EndReason::Stopped,
@@ -577,16 +575,7 @@ fn heater_fault_during_a_run_cuts_the_heater_and_ends_the_run() {
     let msgs = b.msgs();
     assert!(errors(&msgs).contains(&ErrorCode::Heater(HeaterFault::OverTemperature)));
     assert_eq!(b.hw.heater_duty, 0.0);
-    let end = msgs
-        .iter()
-        .find_map(|m| {
-            if let DeviceMsg::RunEnded(e) = m {
-                Some(*e)
-            } else {
-                None
-            }
-        })
-        .unwrap();
+    let end = run_end(&msgs).unwrap();
     assert_eq!(end.reason, EndReason::Fault(HeaterFault::OverTemperature));
     assert_eq!(
         b.app.status().heater_fault,
@@ -631,16 +620,7 @@ fn overrun_is_reported_and_ends_the_run() {
         "{:?}",
         errors(&msgs)
     );
-    let end = msgs
-        .iter()
-        .find_map(|m| {
-            if let DeviceMsg::RunEnded(e) = m {
-                Some(*e)
-            } else {
-                None
-            }
-        })
-        .unwrap();
+    let end = run_end(&msgs).unwrap();
     assert_eq!((end.reason, end.overruns), (EndReason::Overrun, lost));
     // No block reaches past the samples read before the loss was seen: ≈ 100 ms at 10 kS/s.
     assert!(end.samples <= 1100, "{}", end.samples);
@@ -956,26 +936,8 @@ fn abort_keeps_the_run_and_marks_it() {
     assert_eq!(r, Ok(()));
     b.run_for(50);
     msgs.extend(b.msgs());
-    let end = msgs
-        .iter()
-        .find_map(|m| {
-            if let DeviceMsg::RunEnded(e) = m {
-                Some(*e)
-            } else {
-                None
-            }
-        })
-        .unwrap();
-    let res = msgs
-        .iter()
-        .find_map(|m| {
-            if let DeviceMsg::Result(r) = m {
-                Some(*r)
-            } else {
-                None
-            }
-        })
-        .unwrap();
+    let end = run_end(&msgs).unwrap();
+    let res = onboard_result(&msgs).unwrap();
     assert_eq!(
         (end.reason, res.verdict),
         (EndReason::Aborted, Verdict::Aborted)
@@ -1002,26 +964,8 @@ fn an_unloaded_run_runs_to_its_maximum_duration_without_onboard_analysis() {
     b.send(HostMsg::Release);
     b.run_for(700);
     let msgs = b.msgs();
-    let end = msgs
-        .iter()
-        .find_map(|m| {
-            if let DeviceMsg::RunEnded(e) = m {
-                Some(*e)
-            } else {
-                None
-            }
-        })
-        .unwrap();
-    let res = msgs
-        .iter()
-        .find_map(|m| {
-            if let DeviceMsg::Result(r) = m {
-                Some(*r)
-            } else {
-                None
-            }
-        })
-        .unwrap();
+    let end = run_end(&msgs).unwrap();
+    let res = onboard_result(&msgs).unwrap();
     assert_eq!((end.reason, end.samples), (EndReason::MaxDuration, 5000));
     assert!(
         res.best.mu0.is_nan() && res.best.mu1.is_nan(),
