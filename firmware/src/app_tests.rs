@@ -22,6 +22,16 @@ fn run_end<M: core::borrow::Borrow<DeviceMsg>>(msgs: &[M]) -> Option<RunEnd> {
     })
 }
 
+/// Block indices of the sample frames among the messages, in order.
+fn block_indices<'a>(msgs: impl IntoIterator<Item = &'a DeviceMsg>) -> Vec<u32> {
+    msgs.into_iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Samples(s) => Some(s.block),
+            _ => None,
+        })
+        .collect()
+}
+
 /// The run's on-board result among the messages, if it came.
 fn onboard_result<M: core::borrow::Borrow<DeviceMsg>>(msgs: &[M]) -> Option<OnboardResult> {
     msgs.iter().find_map(|m| match m.borrow() {
@@ -862,26 +872,8 @@ fn a_cable_pulled_mid_run_loses_nothing() {
             break;
         }
     }
-    let blocks: Vec<u32> = seen
-        .iter()
-        .filter_map(|f| {
-            if let DeviceMsg::Samples(s) = &f.1.msg {
-                Some(s.block)
-            } else {
-                None
-            }
-        })
-        .collect();
-    let end = seen
-        .iter()
-        .find_map(|f| {
-            if let DeviceMsg::RunEnded(e) = &f.1.msg {
-                Some(*e)
-            } else {
-                None
-            }
-        })
-        .unwrap();
+    let blocks: Vec<u32> = block_indices(seen.iter().map(|f| &f.1.msg));
+    let end = run_end(&seen.iter().map(|f| &f.1.msg).collect::<Vec<_>>()).unwrap();
     assert_eq!(
         blocks,
         (0..end.blocks).collect::<Vec<_>>(),
@@ -906,16 +898,7 @@ fn a_long_run_keeps_its_last_blocks_and_says_which() {
     });
     b.run_for(100);
     let again = b.take();
-    let blocks: Vec<u32> = again
-        .iter()
-        .filter_map(|f| {
-            if let DeviceMsg::Samples(s) = &f.1.msg {
-                Some(s.block)
-            } else {
-                None
-            }
-        })
-        .collect();
+    let blocks: Vec<u32> = block_indices(again.iter().map(|f| &f.1.msg));
     assert_eq!(blocks, (total - 20..total).collect::<Vec<_>>());
     // The held blocks are the very frames first sent.
     for f in again
