@@ -823,18 +823,7 @@ proptest! {
 fn a_pull_replays_the_same_bytes_from_any_block() {
     let mut b = Bench::new();
     let frames = full_run(&mut b);
-    let run_frames: Vec<_> = frames
-        .iter()
-        .filter(|f| {
-            matches!(
-                f.1.msg,
-                DeviceMsg::RunStarted(_)
-                    | DeviceMsg::Samples(_)
-                    | DeviceMsg::Result(_)
-                    | DeviceMsg::RunEnded(_)
-            )
-        })
-        .collect();
+    let run_frames: Vec<_> = frames.iter().filter(|f| f.1.msg.is_run_frame()).collect();
     let n_blocks = run_frames.len() - 3;
     assert!(n_blocks > 20);
     for from in [0, 1, n_blocks / 2, n_blocks - 1, n_blocks + 5] {

@@ -405,6 +405,20 @@ wire_type! {
     }
 }
 
+impl DeviceMsg {
+    /// A frame of a run (header, sample block, result, end): what the rig stores and a
+    /// [`HostMsg::Pull`] sends again, byte for byte.
+    pub fn is_run_frame(&self) -> bool {
+        matches!(
+            self,
+            DeviceMsg::RunStarted(_)
+                | DeviceMsg::Samples(_)
+                | DeviceMsg::Result(_)
+                | DeviceMsg::RunEnded(_)
+        )
+    }
+}
+
 wire_type! {
     /// The rig's identity. `protocol` must stay the first field (see the crate's compatibility rule).
     #[derive(Copy)]

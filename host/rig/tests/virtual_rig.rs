@@ -345,18 +345,8 @@ fn serve_over_a_stream_survives_a_pulled_cable_and_replays_the_run() {
         );
         frames
     });
-    let run: Vec<&(Vec<u8>, Frame<DeviceMsg>)> = first
-        .iter()
-        .filter(|f| {
-            matches!(
-                f.1.msg,
-                DeviceMsg::RunStarted(_)
-                    | DeviceMsg::Samples(_)
-                    | DeviceMsg::Result(_)
-                    | DeviceMsg::RunEnded(_)
-            )
-        })
-        .collect();
+    let run: Vec<&(Vec<u8>, Frame<DeviceMsg>)> =
+        first.iter().filter(|f| f.1.msg.is_run_frame()).collect();
     assert!(matches!(first[0].1.msg, DeviceMsg::Hello(_)));
     assert!(run.len() > 20, "{} run frames", run.len());
     let DeviceMsg::RunStarted(header) = run[0].1.msg else {
