@@ -32,6 +32,18 @@ fn drive(
     out
 }
 
+/// The LuGre contact of these tests: the fixed bristle constants of `LawSpec::LuGre` fits
+/// (σ0 = 200, σ1 = 2, v_s = 1, a = 2) with μc = 0.1, μs = 0.15, σ2 = 0.02.
+const LUGRE: LuGre = LuGre {
+    sigma0: 200.0,
+    sigma1: 2.0,
+    sigma2: 0.02,
+    mu_c: 0.1,
+    mu_s: 0.15,
+    v_s: 1.0,
+    a: 2.0,
+};
+
 #[test]
 fn dahl_follows_its_stress_strain_closed_form_and_saturates_at_mu_c() {
     let (sigma, mu_c) = (50.0, 0.2);
@@ -119,15 +131,7 @@ fn settled_force(law: &FrictionLaw, v: f64, rate: f64) -> f64 {
 
 #[test]
 fn lugre_steady_state_force_is_the_stribeck_curve_g_plus_viscous() {
-    let p = LuGre {
-        sigma0: 200.0,
-        sigma1: 2.0,
-        sigma2: 0.02,
-        mu_c: 0.1,
-        mu_s: 0.15,
-        v_s: 1.0,
-        a: 2.0,
-    };
+    let p = LUGRE;
     let law = FrictionLaw::LuGre(p);
     for v in [-5.0, -1.0, -0.01, 0.01, 0.3, 1.0, 2.0, 5.0] {
         let want = g_lugre(&p, v) * v.signum() + p.sigma2 * v;
@@ -372,15 +376,7 @@ fn energy_residual(model: &Model, tr: &Trajectory, dtau: f64) -> f64 {
 
 #[test]
 fn energy_lost_equals_friction_work_for_every_law() {
-    let lugre = LuGre {
-        sigma0: 200.0,
-        sigma1: 2.0,
-        sigma2: 0.02,
-        mu_c: 0.1,
-        mu_s: 0.15,
-        v_s: 1.0,
-        a: 2.0,
-    };
+    let lugre = LUGRE;
     let cases: Vec<(Model, Method, f64)> = vec![
         (
             Model::new(FrictionLaw::coulomb_viscous(0.1, 0.03)),
