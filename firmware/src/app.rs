@@ -74,9 +74,13 @@ impl AppConfig {
 /// What the run-frame sender wants next.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Want {
-    Header { from_block: u32 },
+    Header {
+        from_block: u32,
+    },
     Blocks(u32),
     End,
+    /// Blocks `.0 .. .1` only ([`HostMsg::PullBlocks`]).
+    Range(u32, u32),
 }
 
 /// The application (see the module docs).
@@ -396,6 +400,29 @@ impl<'a> App<'a> {
                     Err(ErrorCode::NoRun)
                 }
             }
+            HostMsg::PullBlocks {
+                run_id,
+                first,
+                count,
+            } => {
+                if self.store.run_id() == Some(run_id) && run_id != 0 {
+                    self.want = Some(Want::Range(first, first.saturating_add(count)));
+                    Ok(())
+                } else {
+                    Err(ErrorCode::NoRun)
+                }
+            }
+            HostMsg::Heartbeat => Ok(()),
+            HostMsg::Safe => {
+                self.heater.off();
+                hw.set_heater_duty(0.0);
+                self.release.off(hw);
+                if self.state == RigState::Armed {
+                    hw.adc_stop();
+                    self.state = RigState::Configured;
+                }
+                Ok(())
+            }
         };
         self.reply(hw, seq, r);
     }
@@ -644,6 +671,10 @@ impl<'a> App<'a> {
                 Want::Header { .. } => Some(Item::Header),
                 Want::Blocks(k) => self.store.first_from(k),
                 Want::End => self.store.is_finished().then_some(Item::End),
+                Want::Range(k, end) => {
+                    let k = k.max(self.store.oldest_block());
+                    (k < end && k < self.store.blocks()).then_some(Item::Block(k))
+                }
             };
             let Some(item) = item else { return };
             let Some((seq, msg)) = self.store.frame(item) else {
@@ -659,6 +690,7 @@ impl<'a> App<'a> {
                 return;
             }
             self.want = match (want, item) {
+                (Want::Range(_, end), Item::Block(k)) => Some(Want::Range(k + 1, end)),
                 (Want::Header { from_block }, Item::Header) => Some(Want::Blocks(from_block)),
                 (_, Item::Block(k)) => Some(Want::Blocks(k + 1)),
                 (_, Item::Result) => Some(Want::End),

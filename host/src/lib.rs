@@ -4,6 +4,7 @@
 //! this library, found in the module of the same name under [`cmd`].
 
 pub mod cmd;
+pub mod exit;
 pub mod link;
 mod load;
 

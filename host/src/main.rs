@@ -51,11 +51,16 @@ fn main() -> std::process::ExitCode {
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            let status = tribo::exit::status_of(&e);
+            let label = match status {
+                tribo::exit::Status::Incomplete => "incomplete",
+                _ => "error",
+            };
+            eprintln!("{label}: {e}");
             for cause in e.chain().skip(1) {
                 eprintln!("  caused by: {cause}");
             }
-            std::process::ExitCode::FAILURE
+            std::process::ExitCode::from(status.code())
         }
     }
 }

@@ -21,7 +21,7 @@ pub use frame::{Decoder, EncodeError, Encoder, Frame, FrameError};
 pub use msg::*;
 
 /// Version of the message set. Bump it on any change to [`msg`] that changes the encoding.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Checks the protocol number announced by the other side's hello.
 pub fn check_protocol(theirs: u16) -> Result<(), ProtocolMismatch> {

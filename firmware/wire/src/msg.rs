@@ -51,6 +51,16 @@ wire_type! {
         Status,
         /// Send the stored run again, from sample block `from_block` on, then its result and end.
         Pull { run_id: u32, from_block: u32 },
+        // ---- protocol v2 ----
+        /// Renews the host lease (every command does too): while heating or holding the magnet the
+        /// rig needs one at least every [`limits::HOST_LEASE_MS`], or it drives its outputs safe.
+        Heartbeat,
+        /// Drive everything that heats or holds to its safe value now: heater off, magnet off, armed
+        /// state left. A run in progress goes on recording. Always accepted.
+        Safe,
+        /// Send blocks `first .. first + count` of a stored run again, and nothing else (the host
+        /// asks for exactly the blocks it is missing).
+        PullBlocks { run_id: u32, first: u32, count: u32 },
     }
 }
 
@@ -249,6 +259,9 @@ pub mod limits {
     pub const HEATER_RAMP_C_PER_MIN: RangeInclusive<f32> = 0.1..=30.0;
     /// Hard heater cut-off, whatever the setpoint.
     pub const HEATER_CUTOFF_C: f32 = 110.0;
+    /// Longest time without a command or [`super::HostMsg::Heartbeat`] from the host while heating or
+    /// holding the magnet; then the outputs go safe ([`super::FaultReason::LeaseExpired`]).
+    pub const HOST_LEASE_MS: u32 = 3_000;
 }
 
 fn in_range<T: PartialOrd>(v: T, r: core::ops::RangeInclusive<T>, f: Field) -> Result<(), Field> {
@@ -402,6 +415,16 @@ wire_type! {
         Result(OnboardResult),
         /// The run is over: no block of it follows (unless pulled again).
         RunEnded(RunEnd),
+        // ---- protocol v2 ----
+        /// The rig drove outputs to their safe state by itself, and why (unsolicited).
+        Fault(FaultReport),
+        /// Why the rig last reset (power-on, watchdog, panic with its message, ...): sent once after
+        /// boot, in answer to the first `Hello`.
+        Boot(BootReport),
+        /// Run frame: samples of the run that were lost (acquisition overrun), exactly which ones.
+        Gap(Gap),
+        /// Run frame: a compressed sample block (the v2 form of [`DeviceMsg::Samples`]).
+        Packed(PackedBlock),
     }
 }
 
@@ -415,6 +438,8 @@ impl DeviceMsg {
                 | DeviceMsg::Samples(_)
                 | DeviceMsg::Result(_)
                 | DeviceMsg::RunEnded(_)
+                | DeviceMsg::Gap(_)
+                | DeviceMsg::Packed(_)
         )
     }
 }
@@ -792,3 +817,97 @@ wire_type! {
         pub reason: EndReason,
     }
 }
+
+// ---------------------------------------------------------------------------------------------------
+// Protocol v2: faults and boot report (fail-safe rig), gaps and compressed blocks (whole runs)
+// ---------------------------------------------------------------------------------------------------
+
+wire_type! {
+    /// Why the rig drove outputs to their safe state by itself.
+    #[derive(Copy, Eq)]
+    pub enum FaultReason {
+        /// The heater was cut off (thermocouple, temperature or runaway fault).
+        Heater(HeaterFault),
+        /// No command or heartbeat from the host for longer than [`limits::HOST_LEASE_MS`] while
+        /// heating or holding the magnet.
+        LeaseExpired,
+        /// The electromagnet held longer than its limit and was switched off.
+        MagnetHoldTime,
+    }
+}
+
+wire_type! {
+    /// A fault the rig handled by itself: the outputs concerned are already safe when this is sent.
+    #[derive(Copy)]
+    pub struct FaultReport {
+        pub reason: FaultReason,
+        /// Device uptime when the fault was detected.
+        pub uptime_ms: u64,
+        /// Temperature at the time (NaN when unknown).
+        pub temp_c: f32,
+    }
+}
+
+wire_type! {
+    /// Why the MCU last reset.
+    #[derive(Copy, Eq)]
+    pub enum ResetCause {
+        PowerOn,
+        /// The reset pin (NRST button, debugger).
+        Pin,
+        /// A software reset requested by the firmware.
+        Software,
+        /// The independent watchdog was not fed in time: a task was stuck.
+        Watchdog,
+        /// A panic (message in [`BootReport::message`]).
+        Panic,
+        /// A HardFault or other CPU fault (registers in [`BootReport::message`]).
+        CpuFault,
+        Brownout,
+        Unknown,
+    }
+}
+
+/// Longest message a [`BootReport`] carries.
+pub const BOOT_MESSAGE_LEN: usize = 120;
+
+wire_type! {
+    /// The reset cause and, after a panic or fault, what was kept of its message.
+    pub struct BootReport {
+        pub cause: ResetCause,
+        pub message: heapless::String<BOOT_MESSAGE_LEN>,
+    }
+}
+
+wire_type! {
+    /// Samples `first_sample .. first_sample + count` of run `run_id` were lost: the acquisition
+    /// overran. Stored and sent with the run's other frames, so the gap is part of the record.
+    #[derive(Copy)]
+    pub struct Gap {
+        pub run_id: u32,
+        pub first_sample: u32,
+        pub count: u32,
+    }
+}
+
+wire_type! {
+    /// A compressed sample block (filled in by the whole-run work: see `tribo_firmware::codec`).
+    pub struct PackedBlock {
+        pub run_id: u32,
+        /// Index of this block in the run, from 0.
+        pub block: u32,
+        /// Index in the run of the block's first sample.
+        pub first_sample: u32,
+        pub channels: ChannelSet,
+        /// Number of samples in the block.
+        pub samples: u16,
+        pub temp_c: f32,
+        pub log10_ecr_ohm: f32,
+        /// The compressed counts.
+        pub data: heapless::Vec<u8, MAX_PACKED_BYTES>,
+    }
+}
+
+/// Largest compressed payload of a [`PackedBlock`]: the raw size plus one byte per count of worst-case
+/// overhead (the codec falls back to raw counts when compression would not pay).
+pub const MAX_PACKED_BYTES: usize = 2 * MAX_BLOCK_COUNTS + 16;

@@ -571,6 +571,9 @@ fn command_name(m: &HostMsg) -> &'static str {
         HostMsg::Abort => "abort",
         HostMsg::Status => "status",
         HostMsg::Pull { .. } => "pull",
+        HostMsg::Heartbeat => "heartbeat",
+        HostMsg::Safe => "safe",
+        HostMsg::PullBlocks { .. } => "pull-blocks",
     }
 }
 

@@ -1,0 +1,50 @@
+//! The exit statuses of `tribo`, one contract for every command (documented in the README):
+//!
+//! | status | meaning |
+//! |---|---|
+//! | 0 | done, and the data is whole |
+//! | 1 | error: nothing usable was produced (the message says what to do next) |
+//! | 2 | usage: the command line was wrong (clap's own status) |
+//! | 3 | finished, but the data is incomplete or not analysable: the output says exactly what is missing |
+//!
+//! A library function that finished with incomplete data returns [`Incomplete`] as its error (after
+//! printing or storing everything it has); `main` maps it to status 3. Any other error is status 1.
+
+use std::fmt;
+
+/// The statuses `tribo` exits with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    Ok = 0,
+    Error = 1,
+    Usage = 2,
+    Incomplete = 3,
+}
+
+impl Status {
+    pub const fn code(self) -> u8 {
+        self as u8
+    }
+}
+
+/// A command finished but what it produced is incomplete (missing blocks, a gap, a record that cannot
+/// be analysed). The message says what is missing; everything usable was already kept.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Incomplete(pub String);
+
+impl fmt::Display for Incomplete {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Incomplete {}
+
+/// The status an error from a command maps to.
+pub fn status_of(e: &anyhow::Error) -> Status {
+    if e.chain().any(|c| c.downcast_ref::<Incomplete>().is_some()) {
+        Status::Incomplete
+    } else {
+        Status::Error
+    }
+}
