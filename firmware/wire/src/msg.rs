@@ -425,6 +425,9 @@ wire_type! {
         Gap(Gap),
         /// Run frame: a compressed sample block (the v2 form of [`DeviceMsg::Samples`]).
         Packed(PackedBlock),
+        /// Run frame: the ECR transimpedance range changed; samples from `first_sample` on were
+        /// converted on `range`, the first `settling` of them while the amplifier settled.
+        EcrRange(EcrRangeChange),
     }
 }
 
@@ -440,6 +443,7 @@ impl DeviceMsg {
                 | DeviceMsg::RunEnded(_)
                 | DeviceMsg::Gap(_)
                 | DeviceMsg::Packed(_)
+                | DeviceMsg::EcrRange(_)
         )
     }
 }
@@ -887,6 +891,18 @@ wire_type! {
         pub run_id: u32,
         pub first_sample: u32,
         pub count: u32,
+    }
+}
+
+wire_type! {
+    /// From sample `first_sample` of run `run_id` on, the ECR channel was converted on `range`; the
+    /// first `settling` samples of it were taken while the transimpedance amplifier settled.
+    #[derive(Copy)]
+    pub struct EcrRangeChange {
+        pub run_id: u32,
+        pub first_sample: u32,
+        pub range: u8,
+        pub settling: u16,
     }
 }
 
