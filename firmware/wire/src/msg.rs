@@ -262,6 +262,60 @@ pub mod limits {
     /// Longest time without a command or [`super::HostMsg::Heartbeat`] from the host while heating or
     /// holding the magnet; then the outputs go safe ([`super::FaultReason::LeaseExpired`]).
     pub const HOST_LEASE_MS: u32 = 3_000;
+
+    // ---- Fail-safe limits: every interlock's number, in one place (README "Safety") ----
+
+    /// The host sends a [`super::HostMsg::Heartbeat`] this often while it holds the rig (three per
+    /// lease: one lost frame never expires it).
+    pub const HEARTBEAT_MS: u32 = HOST_LEASE_MS / 3;
+    /// Consecutive bad or missing thermocouple reads (one every 100 ms) that make a heater fault. The
+    /// heater is off from the first bad read on; the fault latches at this count.
+    pub const TC_BAD_READS: u8 = 3;
+    /// A converter reading older than this is missing (the converter stopped answering).
+    pub const TC_MAX_AGE_MS: u32 = 250;
+    /// Plausible cold-junction (board) temperature of the MAX31856; outside, its readings are bad.
+    pub const COLD_JUNCTION_C: RangeInclusive<f32> = 5.0..=50.0;
+    /// Lowest plausible plate temperature; below, the reading is bad (reversed or damaged
+    /// thermocouple).
+    pub const PLATE_MIN_C: f32 = -20.0;
+    /// Heating watch: while the plate is more than [`HEATER_BAND_C`] below the (ramped) setpoint it
+    /// must gain at least this much…
+    pub const HEATER_WATCH_GAIN_C: f32 = 2.0;
+    /// …in this time, or the heater is cut off (`HeatingFailed`: the heater does not heat, or the
+    /// thermocouple is not on the plate). Also the window of the runaway rise below.
+    pub const HEATER_WATCH_PERIOD_S: f32 = 60.0;
+    /// The band around the (ramped) setpoint in which the plate is "at setpoint".
+    pub const HEATER_BAND_C: f32 = 5.0;
+    /// Runaway: while no heat is wanted (heater off, faulted, or the plate above the band) the plate
+    /// may not rise this much above its lowest reading of the last [`HEATER_WATCH_PERIOD_S`]
+    /// (`Runaway`: the heater's switch is stuck on).
+    pub const HEATER_RUNAWAY_RISE_C: f32 = 5.0;
+    /// The electromagnet holds at most this long at a stretch…
+    pub const MAGNET_MAX_HOLD_MS: u32 = 120_000;
+    /// …and at most this fraction of the time on average: a budget of [`MAGNET_MAX_HOLD_MS`] that
+    /// holding spends and rest refills at `duty / (1 − duty)` per second. An empty budget switches
+    /// the coil off (`MagnetHoldTime`); it may hold again once half the budget is back (the
+    /// cool-down, 60 s at 50 %).
+    pub const MAGNET_MAX_DUTY: f32 = 0.5;
+    /// Stand-alone mode (button only, no host): a press this long on an idle, configured rig arms it…
+    pub const STANDALONE_PRESS_MS: u32 = 2_000;
+    /// …the magnet then holds at most this long without a release…
+    pub const STANDALONE_HOLD_MS: u32 = 30_000;
+    /// …and the heater (at the host's last setpoint) runs at most this long after the last press.
+    pub const STANDALONE_HEAT_MS: u32 = 1_800_000;
+    /// Hardware watchdog timeout of the board (IWDG), fed only while every task checks in.
+    pub const WATCHDOG_TIMEOUT_MS: u32 = 250;
+    /// Host default: the plate is settled when within this of the setpoint…
+    pub const SETTLE_TOL_C: f32 = 0.5;
+    /// …for this long (`tribo run --settle-secs`, campaign `settle_s`).
+    pub const SETTLE_S: f64 = 30.0;
+    /// Host default: give up heating after this long.
+    pub const SETTLE_TIMEOUT_S: f64 = 1_800.0;
+
+    // The settle tolerance is inside the runaway band: a settled plate cannot trip a fault.
+    const _: () = assert!(SETTLE_TOL_C < HEATER_BAND_C);
+    // One lost heartbeat does not expire the lease.
+    const _: () = assert!(2 * HEARTBEAT_MS < HOST_LEASE_MS);
 }
 
 fn in_range<T: PartialOrd>(v: T, r: core::ops::RangeInclusive<T>, f: Field) -> Result<(), Field> {
@@ -494,6 +548,9 @@ wire_type! {
         Overrun { lost_samples: u32 },
         /// The electromagnet held longer than its duty limit and was switched off.
         HoldTimeExceeded,
+        // ---- protocol v2 ----
+        /// Arm refused: the electromagnet is cooling down after its hold budget ran out.
+        MagnetCooling { wait_ms: u32 },
     }
 }
 
@@ -534,8 +591,22 @@ wire_type! {
         OverTemperature,
         OpenThermocouple,
         ShortedThermocouple,
-        /// The thermocouple converter stopped answering.
+        /// The thermocouple converter stopped answering (no reading, or readings too old).
         NoReading,
+        // ---- protocol v2 ----
+        /// The converter answered garbage: all-zero or all-ones words (stuck MISO, converter absent or
+        /// reset), or a configuration that does not read back.
+        BadConverterData,
+        /// The converter flagged the thermocouple out of its type's range, or the reading is
+        /// implausibly low.
+        ThermocoupleRange,
+        /// The cold-junction (board) temperature is out of the converter's range or implausible.
+        ColdJunction,
+        /// Heating, the plate did not gain the watch's stated amount in the stated time: the heater
+        /// does not heat, or the thermocouple is not on the plate.
+        HeatingFailed,
+        /// The plate warmed while no heat was wanted: the heater's switch is stuck on.
+        Runaway,
     }
 }
 
@@ -569,6 +640,29 @@ wire_type! {
         pub samples: u32,
         pub overruns: u32,
         pub uptime_ms: u64,
+        // ---- protocol v2 ----
+        /// The latest fault the rig handled by itself since boot, if any.
+        pub last_fault: Option<FaultReport>,
+        /// Faults since boot.
+        pub faults: u32,
+        /// Why the rig last reset (the message, if any, comes in [`DeviceMsg::Boot`]).
+        pub reset_cause: ResetCause,
+        /// Whether the lease of a host holds the rig, the rig runs stand-alone (button only), or
+        /// neither.
+        pub control: Control,
+    }
+}
+
+wire_type! {
+    /// Who may keep the rig heating and the magnet holding.
+    #[derive(Copy, Eq)]
+    pub enum Control {
+        /// Nobody: the outputs are off (or go off).
+        None,
+        /// A host, while its lease ([`limits::HOST_LEASE_MS`]) is renewed.
+        Host,
+        /// The technician at the rig (stand-alone mode, its own limits).
+        StandAlone,
     }
 }
 
@@ -837,6 +931,9 @@ wire_type! {
         LeaseExpired,
         /// The electromagnet held longer than its limit and was switched off.
         MagnetHoldTime,
+        /// Stand-alone mode ran out of its time limit (no button press for
+        /// [`limits::STANDALONE_HEAT_MS`]).
+        StandAloneExpired,
     }
 }
 

@@ -73,6 +73,42 @@ fn heater_fault() -> impl Strategy<Value = HeaterFault> {
         HeaterFault::OpenThermocouple,
         HeaterFault::ShortedThermocouple,
         HeaterFault::NoReading,
+        HeaterFault::BadConverterData,
+        HeaterFault::ThermocoupleRange,
+        HeaterFault::ColdJunction,
+        HeaterFault::HeatingFailed,
+        HeaterFault::Runaway,
+    ])
+}
+
+fn fault_report() -> impl Strategy<Value = FaultReport> {
+    (
+        prop_oneof![
+            heater_fault().prop_map(FaultReason::Heater),
+            Just(FaultReason::LeaseExpired),
+            Just(FaultReason::MagnetHoldTime),
+            Just(FaultReason::StandAloneExpired),
+        ],
+        any::<u64>(),
+        any_f32(),
+    )
+        .prop_map(|(reason, uptime_ms, temp_c)| FaultReport {
+            reason,
+            uptime_ms,
+            temp_c,
+        })
+}
+
+fn reset_cause() -> impl Strategy<Value = ResetCause> {
+    prop::sample::select(vec![
+        ResetCause::PowerOn,
+        ResetCause::Pin,
+        ResetCause::Software,
+        ResetCause::Watchdog,
+        ResetCause::Panic,
+        ResetCause::CpuFault,
+        ResetCause::Brownout,
+        ResetCause::Unknown,
     ])
 }
 
@@ -94,6 +130,7 @@ fn error_code() -> impl Strategy<Value = ErrorCode> {
         Just(ErrorCode::NoRun),
         any::<u32>().prop_map(|lost_samples| ErrorCode::Overrun { lost_samples }),
         Just(ErrorCode::HoldTimeExceeded),
+        any::<u32>().prop_map(|wait_ms| ErrorCode::MagnetCooling { wait_ms }),
     ]
 }
 
@@ -124,6 +161,8 @@ fn host_msg() -> impl Strategy<Value = HostMsg> {
         Just(HostMsg::Status),
         (any::<u32>(), any::<u32>())
             .prop_map(|(run_id, from_block)| HostMsg::Pull { run_id, from_block }),
+        Just(HostMsg::Heartbeat),
+        Just(HostMsg::Safe),
     ]
 }
 
@@ -208,10 +247,28 @@ fn device_msg() -> impl Strategy<Value = DeviceMsg> {
             any::<bool>(),
             any_f32(),
             any::<u8>(),
-            (any::<u32>(), any::<u32>(), any::<u64>())
+            (any::<u32>(), any::<u32>(), any::<u64>()),
+            (
+                prop::option::of(fault_report()),
+                any::<u32>(),
+                reset_cause(),
+                prop::sample::select(vec![Control::None, Control::Host, Control::StandAlone])
+            )
         )
             .prop_map(
-                |(state, run_id, temp_c, sp, duty, fault, magnet_on, l, r, (s, o, u))| {
+                |(
+                    state,
+                    run_id,
+                    temp_c,
+                    sp,
+                    duty,
+                    fault,
+                    magnet_on,
+                    l,
+                    r,
+                    (s, o, u),
+                    (last_fault, faults, reset_cause, control),
+                )| {
                     DeviceMsg::Status(Status {
                         state,
                         run_id,
@@ -225,6 +282,10 @@ fn device_msg() -> impl Strategy<Value = DeviceMsg> {
                         samples: s,
                         overruns: o,
                         uptime_ms: u,
+                        last_fault,
+                        faults,
+                        reset_cause,
+                        control,
                     })
                 }
             )
@@ -286,7 +347,20 @@ fn device_msg() -> impl Strategy<Value = DeviceMsg> {
                     overruns,
                     reason
                 })
-            ),
+            )
+            .boxed(),
+        fault_report().prop_map(DeviceMsg::Fault).boxed(),
+        (reset_cause(), "[ -~é]{0,40}")
+            .prop_map(|(cause, m)| {
+                let mut message = heapless::String::new();
+                for ch in m.chars() {
+                    if message.push(ch).is_err() {
+                        break;
+                    }
+                }
+                DeviceMsg::Boot(BootReport { cause, message })
+            })
+            .boxed(),
     ]
 }
 
