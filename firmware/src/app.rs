@@ -23,19 +23,28 @@
 //!
 //! Every command is answered (Ack or Error with its sequence number); a frame that does not decode
 //! is answered by `Error { Malformed }`. Nothing a host sends can make it panic.
+//!
+//! **Fail-safe.** Heating and holding the magnet need someone in charge ([`crate::lease`]): a host
+//! renewing its lease with every frame, or the technician in stand-alone mode (a long press of the
+//! button). When nobody is, and on every heater or magnet fault, the outputs concerned go safe first
+//! and a [`DeviceMsg::Fault`] says why afterwards; the latest fault and the reset cause are in every
+//! [`Status`], and the first `Hello` after boot is answered with the [`DeviceMsg::Boot`] report too.
 
 use crate::acquisition::{select, BlockBuilder};
 use crate::analysis::{ConfigError, Phase, Pipeline, StopReason};
 use crate::ecr::Ecr;
 use crate::hal::{AnalogSample, Hardware, Lamps, MagnetDrive, ANALOG_CHANNELS};
 use crate::heater::{Heater, HeaterConfig};
+use crate::lease::Lease;
 use crate::release::{check_interlocks, Debouncer, MagnetEvent, Release, ReleaseConfig};
 use crate::runstore::{Item, RunStore};
+use crate::thermocouple;
 use crate::wire::frame::MAX_FRAME;
 use crate::wire::{
-    Channel, Configure, Decoder, DeviceError, DeviceInfo, DeviceMsg, Encoder, EndReason,
-    EnvelopeShape, ErrorCode, Estimate, Field, Frame, HostMsg, Interlock, OnboardResult, RigState,
-    RunEnd, RunHeader, SampleBlock, Status, Verdict, CHANNELS, PROTOCOL_VERSION,
+    limits, BootReport, Channel, Configure, Control, Decoder, DeviceError, DeviceInfo, DeviceMsg,
+    Encoder, EndReason, EnvelopeShape, ErrorCode, Estimate, FaultReason, FaultReport, Field, Frame,
+    HeaterSetpoint, HostMsg, Interlock, OnboardResult, ResetCause, RigState, RunEnd, RunHeader,
+    SampleBlock, Status, Verdict, CHANNELS, PROTOCOL_VERSION,
 };
 
 /// Constants of the application.
@@ -50,6 +59,12 @@ pub struct AppConfig {
     pub ecr_period_us: u32,
     /// Most run frames sent per poll (bounds the time a poll takes).
     pub frames_per_poll: u8,
+    /// Host lease, ms ([`limits::HOST_LEASE_MS`]).
+    pub host_lease_ms: u32,
+    /// Stand-alone mode: long press, ms; longest hold, ms; heating after the last press, ms.
+    pub standalone_press_ms: u32,
+    pub standalone_hold_ms: u32,
+    pub standalone_heat_ms: u32,
 }
 
 impl AppConfig {
@@ -67,6 +82,10 @@ impl AppConfig {
             heater_period_us: 100_000,
             ecr_period_us: 100_000,
             frames_per_poll: 32,
+            host_lease_ms: limits::HOST_LEASE_MS,
+            standalone_press_ms: limits::STANDALONE_PRESS_MS,
+            standalone_hold_ms: limits::STANDALONE_HOLD_MS,
+            standalone_heat_ms: limits::STANDALONE_HEAT_MS,
         }
     }
 }
@@ -110,6 +129,17 @@ pub struct App<'a> {
     dropped_frames: u32,
     now_us: u64,
     started: bool,
+    // ---- fail-safe ----
+    lease: Lease,
+    last_fault: Option<FaultReport>,
+    faults: u32,
+    /// The boot report, until a host's `Hello` took it.
+    boot: Option<BootReport>,
+    reset_cause: ResetCause,
+    /// The host's last setpoint (stand-alone mode heats to it).
+    last_setpoint: Option<HeaterSetpoint>,
+    /// The current press of the button already counted as a long press.
+    long_press_done: bool,
 }
 
 macro_rules! info {
@@ -147,7 +177,35 @@ impl<'a> App<'a> {
             dropped_frames: 0,
             now_us: 0,
             started: false,
+            lease: Lease::new(cfg.host_lease_ms, cfg.standalone_heat_ms),
+            last_fault: None,
+            faults: 0,
+            boot: None,
+            reset_cause: ResetCause::Unknown,
+            last_setpoint: None,
+            long_press_done: false,
         }
+    }
+
+    /// Why the rig last reset: told to the first host that says hello, and in every status.
+    pub fn set_boot_report(&mut self, report: BootReport) {
+        self.reset_cause = report.cause;
+        self.boot = Some(report);
+    }
+
+    /// The latest fault handled since boot, if any.
+    pub fn last_fault(&self) -> Option<FaultReport> {
+        self.last_fault
+    }
+
+    /// Faults handled since boot.
+    pub fn faults(&self) -> u32 {
+        self.faults
+    }
+
+    /// Who holds the rig now.
+    pub fn control(&self) -> Control {
+        self.lease.control(self.now_us)
     }
 
     /// The state as reported (a latched heater fault shows as `Fault` outside a run).
@@ -194,6 +252,10 @@ impl<'a> App<'a> {
             samples: self.builder.as_ref().map_or(0, BlockBuilder::samples),
             overruns: self.overruns,
             uptime_ms: self.now_us / 1000,
+            last_fault: self.last_fault,
+            faults: self.faults,
+            reset_cause: self.reset_cause,
+            control: self.control(),
         }
     }
 
@@ -249,14 +311,21 @@ impl<'a> App<'a> {
             hw.set_heater_duty(0.0);
             self.ecr.init(hw);
         }
+        // Nobody in charge of what heats or holds: safe first, then say why.
+        let need = self.heater.heating() || self.release.is_holding();
+        if let Some(reason) = self.lease.expired(now, need) {
+            info!("nobody holds the rig: heater and magnet off");
+            self.make_safe(hw);
+            self.fault(hw, reason);
+        }
         match self.release.poll(hw, now) {
             Some(MagnetEvent::HoldTimeExceeded) => {
                 info!("hold time exceeded: magnet off");
-                self.error(hw, ErrorCode::HoldTimeExceeded, None);
                 if self.state == RigState::Armed {
                     hw.adc_stop();
                     self.state = RigState::Configured;
                 }
+                self.fault(hw, FaultReason::MagnetHoldTime);
             }
             Some(MagnetEvent::Released) | None => {}
         }
@@ -268,12 +337,13 @@ impl<'a> App<'a> {
                 .last_heater_us
                 .map_or(0.0, |t| now.saturating_sub(t) as f32 * 1e-6);
             self.last_heater_us = Some(now);
-            let reading = hw.read_thermocouple();
-            let step = self.heater.step(reading, dt);
+            let read = hw.read_thermocouple();
+            let checked = thermocouple::check(read.as_ref().map(|r| (&r.regs, r.age_us)));
+            let step = self.heater.step(checked, dt);
             hw.set_heater_duty(step.duty);
             if let Some(f) = step.new_fault {
                 info!("heater fault: heater off");
-                self.error(hw, ErrorCode::Heater(f), None);
+                self.fault(hw, FaultReason::Heater(f));
                 if self.state == RigState::Running {
                     self.end_run(hw, EndReason::Fault(f));
                 }
@@ -291,6 +361,9 @@ impl<'a> App<'a> {
         let pressed = hw.button_pressed();
         if self.debouncer.update(pressed, now) {
             info!("button");
+            if self.lease.control(now) == Control::StandAlone {
+                self.lease.press(now);
+            }
             let r = if self.state == RigState::Armed {
                 self.try_release(hw)
             } else {
@@ -299,6 +372,13 @@ impl<'a> App<'a> {
             if let Err(code) = r {
                 self.error(hw, code, None);
             }
+        }
+        let held = self.debouncer.held_us(now);
+        if held == 0 {
+            self.long_press_done = false;
+        } else if !self.long_press_done && held >= self.cfg.standalone_press_ms as u64 * 1000 {
+            self.long_press_done = true;
+            self.stand_alone(hw);
         }
         self.drain(hw);
         self.pump(hw);
@@ -340,12 +420,68 @@ impl<'a> App<'a> {
         }
     }
 
+    /// Drives everything that heats or holds to its safe value: heater off, magnet off, armed state
+    /// left. A run in progress goes on recording.
+    fn make_safe<H: Hardware>(&mut self, hw: &mut H) {
+        self.heater.off();
+        hw.set_heater_duty(0.0);
+        self.release.off(hw, self.now_us);
+        if self.state == RigState::Armed {
+            hw.adc_stop();
+            self.state = RigState::Configured;
+        }
+    }
+
+    /// Records and reports a fault the rig handled by itself (its outputs are already safe).
+    fn fault<H: Hardware>(&mut self, hw: &mut H, reason: FaultReason) {
+        let report = FaultReport {
+            reason,
+            uptime_ms: self.now_us / 1000,
+            temp_c: self.heater.temp_c(),
+        };
+        self.last_fault = Some(report);
+        self.faults = self.faults.saturating_add(1);
+        self.send(hw, &DeviceMsg::Fault(report));
+    }
+
+    /// A long press: stand-alone mode on an idle, configured rig that no host holds. The magnet
+    /// holds (for at most the stand-alone limit) and the heater goes back to the host's last
+    /// setpoint; a short press then releases, as with a host.
+    fn stand_alone<H: Hardware>(&mut self, hw: &mut H) {
+        let now = self.now_us;
+        let idle = matches!(self.state, RigState::Configured | RigState::Finished);
+        if !idle || self.config.is_none() || self.lease.control(now) == Control::Host {
+            return;
+        }
+        info!("stand-alone mode");
+        self.lease.press(now);
+        if let Some(sp) = self.last_setpoint {
+            if self.heater.target() != Some(sp) || self.heater.fault().is_some() {
+                self.heater.set(sp);
+            }
+        }
+        let limit = self.cfg.standalone_hold_ms as u64 * 1000;
+        if let Err(code) = self.arm_for(hw, limit) {
+            self.error(hw, code, None);
+        }
+    }
+
     fn handle<H: Hardware>(&mut self, hw: &mut H, frame: Frame<HostMsg>) {
         let seq = frame.seq;
+        self.lease.renew(self.now_us);
         let r = match frame.msg {
             HostMsg::Hello { protocol } => {
                 let info = self.cfg.device;
                 self.send(hw, &DeviceMsg::Hello(info));
+                if let Some(b) = self.boot.take() {
+                    let msg = DeviceMsg::Boot(b);
+                    if !self.send(hw, &msg) {
+                        // Not delivered: the next hello gets it.
+                        if let DeviceMsg::Boot(b) = msg {
+                            self.boot = Some(b);
+                        }
+                    }
+                }
                 if protocol == PROTOCOL_VERSION {
                     Ok(())
                 } else {
@@ -358,12 +494,14 @@ impl<'a> App<'a> {
             HostMsg::SetHeater(sp) => match sp.validate() {
                 Ok(()) => {
                     self.heater.set(sp);
+                    self.last_setpoint = Some(sp);
                     Ok(())
                 }
                 Err(f) => Err(ErrorCode::OutOfRange(f)),
             },
             HostMsg::HeaterOff => {
                 self.heater.off();
+                self.last_setpoint = None;
                 hw.set_heater_duty(0.0);
                 Ok(())
             }
@@ -414,13 +552,9 @@ impl<'a> App<'a> {
             }
             HostMsg::Heartbeat => Ok(()),
             HostMsg::Safe => {
-                self.heater.off();
-                hw.set_heater_duty(0.0);
-                self.release.off(hw);
-                if self.state == RigState::Armed {
-                    hw.adc_stop();
-                    self.state = RigState::Configured;
-                }
+                info!("safe (host)");
+                self.make_safe(hw);
+                self.last_setpoint = None;
                 Ok(())
             }
         };
@@ -454,13 +588,21 @@ impl<'a> App<'a> {
     }
 
     fn arm<H: Hardware>(&mut self, hw: &mut H) -> Result<(), ErrorCode> {
+        self.arm_for(hw, u64::MAX)
+    }
+
+    /// Arms with the magnet holding for at most `hold_limit_us` (and the coil's own limits).
+    fn arm_for<H: Hardware>(&mut self, hw: &mut H, hold_limit_us: u64) -> Result<(), ErrorCode> {
         let cfg = match (self.state, self.config) {
             (RigState::Running, _) => return Err(ErrorCode::Busy),
             (RigState::Armed, _) => return Ok(()),
             (_, None) => return Err(ErrorCode::NotConfigured),
             (_, Some(c)) => c,
         };
-        self.release.hold(hw, self.now_us);
+        if let Err(wait_us) = self.release.hold(hw, self.now_us, hold_limit_us) {
+            let wait_ms = wait_us.div_ceil(1000).min(u32::MAX as u64) as u32;
+            return Err(ErrorCode::MagnetCooling { wait_ms });
+        }
         match &mut self.pipeline {
             Some(p) => {
                 if p.reset(&cfg).is_err() {

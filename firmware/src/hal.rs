@@ -25,20 +25,20 @@ pub trait Magnet {
     fn magnet_drive(&mut self, drive: MagnetDrive);
 }
 
-/// A thermocouple converter fault (MAX31856 fault register, or no answer).
+/// One read of the thermocouple converter (a MAX31856): its whole register file and how long ago it
+/// was read. The board only moves these bytes; [`crate::thermocouple::check`] decides whether to trust
+/// them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum ThermocoupleFault {
-    Open,
-    Shorted,
-    /// The converter did not answer or answered garbage.
-    NoReading,
+pub struct ConverterRead {
+    pub regs: crate::thermocouple::Registers,
+    /// Time since the converter task read these bytes, µs.
+    pub age_us: u64,
 }
 
 /// The heater's thermocouple, cold-junction compensated by its converter.
 pub trait Thermocouple {
-    /// Latest hot-junction temperature, °C.
-    fn read_thermocouple(&mut self) -> Result<f32, ThermocoupleFault>;
+    /// The converter's latest register file, or `None` if it never answered (SPI error).
+    fn read_thermocouple(&mut self) -> Option<ConverterRead>;
 }
 
 /// The heater's power stage (PWM on a MOSFET).

@@ -22,3 +22,11 @@ pub mod hal;
 pub mod heater;
 pub mod release;
 pub mod runstore;
+
+// The fail-safe rig (issue 12): thermocouple trust, host lease, the safe state as data, the
+// watchdog's liveness bookkeeping, the reset record.
+pub mod lease;
+pub mod reset;
+pub mod safety;
+pub mod thermocouple;
+pub mod watchdog;
