@@ -14,38 +14,118 @@ pub mod config;
 pub mod sim;
 
 pub use config::{EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
-pub use sim::SimHardware;
+pub use sim::{ConverterFault, HeaterStage, SimHardware};
 
 use std::io::{self, Read, Write};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use tribo_firmware::app::{App, AppConfig};
-use tribo_firmware::hal::ThermocoupleFault;
+use tribo_firmware::reset::{self, Record, ResetFlags};
 use tribo_firmware::runstore::{BlockMeta, RunStore, BOARD_BLOCKS, BOARD_COUNTS};
+use tribo_firmware::watchdog::{self, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
+use tribo_wire::{limits, BootReport, Decoder, Frame, HostMsg, ResetCause};
 
-/// A virtual rig: simulated hardware and the firmware application.
+/// A task of the board's firmware, as the virtual rig emulates them (fault injection).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Task {
+    /// The application: stalled, it hogs the core (a busy loop), so no other task runs either and
+    /// only the hardware watchdog gets the rig out.
+    App,
+    /// The acquisition: stalled, it waits forever (a DMA that never completes).
+    Acquisition,
+    /// The thermocouple converter task: stalled, it waits forever (an SPI transfer that never
+    /// completes).
+    Thermocouple,
+}
+
+impl Task {
+    fn index(self) -> usize {
+        match self {
+            Task::App => watchdog::task::APP,
+            Task::Acquisition => watchdog::task::ACQUISITION,
+            Task::Thermocouple => watchdog::task::THERMOCOUPLE,
+        }
+    }
+}
+
+/// Something the rig did that its technician would want to see on its console (`tribo rig
+/// --virtual` prints these).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigEvent {
+    /// Device time, µs.
+    pub t_us: u64,
+    pub what: String,
+}
+
+impl std::fmt::Display for RigEvent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "[{:>10.3} s] {}", self.t_us as f64 * 1e-6, self.what)
+    }
+}
+
+/// A virtual rig: simulated hardware and the firmware application, with the board's watchdog,
+/// panic and fault handling emulated around it.
 pub struct VirtualRig {
     app: App<'static>,
     hw: SimHardware,
+    serial: u64,
     now_us: u64,
     tick_us: u64,
+    // The board around the application: watchdog, reset record, resets.
+    tasks: Liveness<3>,
+    stalled: [bool; 3],
+    next_feed_us: u64,
+    last_pet_us: u64,
+    /// The watchdog task saw a silent task and stopped feeding.
+    starving: bool,
+    noinit: Record,
+    resets: u32,
+    /// The converter task's reads already counted as check-ins.
+    tc_reads_seen: u64,
+    // The console.
+    events: Vec<RigEvent>,
+    decoder: Decoder<HostMsg>,
+    last_host_us: Option<u64>,
+    faults_seen: u32,
+}
+
+fn new_app(serial: u64) -> App<'static> {
+    // The same store size as the board, so that what a host can pull is what it could pull from
+    // the real rig. Leaked: it lives as long as the program (a few hundred KiB per rig and reset).
+    let counts: &'static mut [u16] = Box::leak(vec![0u16; BOARD_COUNTS].into_boxed_slice());
+    let meta: &'static mut [BlockMeta] =
+        Box::leak(vec![BlockMeta::EMPTY; BOARD_BLOCKS].into_boxed_slice());
+    App::new(AppConfig::new(serial), RunStore::new(counts, meta))
 }
 
 impl VirtualRig {
-    /// A rig at time 0, pin held nowhere (magnet off), heater off. Refuses an invalid configuration.
+    /// A rig at time 0, just powered on: pin held nowhere (magnet off), heater off. Refuses an
+    /// invalid configuration.
     pub fn new(cfg: VirtualRigConfig) -> Result<VirtualRig, String> {
         let hw = SimHardware::new(&cfg)?;
-        // The same store size as the board, so that what a host can pull is what it could pull from
-        // the real rig. Leaked: it lives as long as the program (a few hundred KiB per rig).
-        let counts: &'static mut [u16] = Box::leak(vec![0u16; BOARD_COUNTS].into_boxed_slice());
-        let meta: &'static mut [BlockMeta] =
-            Box::leak(vec![BlockMeta::EMPTY; BOARD_BLOCKS].into_boxed_slice());
-        let app = App::new(AppConfig::new(cfg.serial), RunStore::new(counts, meta));
+        let mut app = new_app(cfg.serial);
+        app.set_boot_report(BootReport {
+            cause: ResetCause::PowerOn,
+            message: Default::default(),
+        });
         let mut rig = VirtualRig {
             app,
             hw,
+            serial: cfg.serial,
             now_us: 0,
             tick_us: 1000,
+            tasks: Liveness::new(BOARD_TASKS, 0),
+            stalled: [false; 3],
+            next_feed_us: FEED_PERIOD_MS as u64 * 1000,
+            last_pet_us: 0,
+            starving: false,
+            noinit: reset::EMPTY,
+            resets: 0,
+            tc_reads_seen: 0,
+            events: Vec::new(),
+            decoder: Decoder::new(),
+            last_host_us: None,
+            faults_seen: 0,
         };
         rig.app.poll(&mut rig.hw, 0);
         Ok(rig)
@@ -66,9 +146,21 @@ impl VirtualRig {
         &mut self.hw
     }
 
+    /// Resets of the MCU since power-on (watchdog, panic, CPU fault).
+    pub fn resets(&self) -> u32 {
+        self.resets
+    }
+
     /// Bytes from the host.
     pub fn input(&mut self, bytes: &[u8]) {
-        self.app.on_bytes(&mut self.hw, bytes, self.now_us);
+        if self.stalled[Task::App.index()] {
+            // The core is busy elsewhere: nobody reads the link (the bytes are lost, as a USB
+            // FIFO would drop them).
+            return;
+        }
+        self.journal_commands(bytes);
+        let now = self.now_us;
+        self.guarded(|app, hw| app.on_bytes(hw, bytes, now));
     }
 
     /// Bytes for the host produced so far.
@@ -76,14 +168,181 @@ impl VirtualRig {
         std::mem::take(&mut self.hw.out)
     }
 
+    /// What the rig did since the last call (host commands that change its state, faults,
+    /// resets), for its console.
+    pub fn take_events(&mut self) -> Vec<RigEvent> {
+        std::mem::take(&mut self.events)
+    }
+
+    fn event(&mut self, what: String) {
+        self.events.push(RigEvent {
+            t_us: self.now_us,
+            what,
+        });
+    }
+
     /// Runs the simulation and the application up to `t_us`, polling the application every
-    /// millisecond of device time (as the board's application task does).
+    /// millisecond of device time (as the board's application task does), with the board's
+    /// watchdog task every 50 ms.
     pub fn advance_to(&mut self, t_us: u64) {
         while self.now_us < t_us {
             let next = (self.now_us + self.tick_us).min(t_us);
             self.hw.advance(next);
             self.now_us = next;
-            self.app.poll(&mut self.hw, next);
+            self.board_tick();
+        }
+    }
+
+    /// One tick of the board's tasks: check-ins, the application, the watchdog task, the IWDG.
+    fn board_tick(&mut self) {
+        let now = self.now_us;
+        let ms = (now / 1000) as u32;
+        let hog = self.stalled[Task::App.index()];
+        if !hog {
+            // The executor runs: the acquisition and the converter task check in as they run.
+            if !self.stalled[Task::Acquisition.index()] {
+                self.tasks.check_in(watchdog::task::ACQUISITION, ms);
+            }
+            let reads = self.hw.tc_reads();
+            if reads != self.tc_reads_seen {
+                self.tc_reads_seen = reads;
+                self.tasks.check_in(watchdog::task::THERMOCOUPLE, ms);
+            }
+            self.tasks.check_in(watchdog::task::APP, ms);
+            self.guarded(|app, hw| app.poll(hw, now));
+            self.note_faults();
+            if now >= self.next_feed_us {
+                self.next_feed_us = now + FEED_PERIOD_MS as u64 * 1000;
+                self.watchdog_task(ms);
+            }
+        }
+        if now.saturating_sub(self.last_pet_us) > limits::WATCHDOG_TIMEOUT_MS as u64 * 1000 {
+            self.reset(ResetFlags {
+                independent_watchdog: true,
+                pin: true,
+                ..Default::default()
+            });
+        }
+    }
+
+    /// The board's watchdog task: feed while every task checks in; else safe state, the note, and
+    /// no more feeding.
+    fn watchdog_task(&mut self, ms: u32) {
+        if self.starving {
+            return;
+        }
+        match self.tasks.verdict(ms) {
+            Ok(()) => self.last_pet_us = self.now_us,
+            Err(stuck) => {
+                self.hw.drive_safe();
+                self.noinit = reset::encode(ResetCause::Watchdog, stuck.message().as_bytes());
+                self.starving = true;
+                self.event(format!(
+                    "{}: safe state applied, watchdog no longer fed",
+                    stuck.message()
+                ));
+            }
+        }
+    }
+
+    /// Runs application code as the board does: a panic in it goes to the panic handler, which
+    /// applies the safe state, keeps the message and resets.
+    fn guarded(&mut self, f: impl FnOnce(&mut App<'static>, &mut SimHardware)) {
+        let (app, hw) = (&mut self.app, &mut self.hw);
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(app, hw)));
+        if let Err(payload) = r {
+            let msg = payload
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| payload.downcast_ref::<&str>().copied())
+                .unwrap_or("(no message)");
+            let text = format!("panicked: {msg}");
+            self.hw.drive_safe();
+            self.noinit = reset::encode(ResetCause::Panic, text.as_bytes());
+            self.event(format!("{text}: safe state applied, resetting"));
+            self.reset(ResetFlags {
+                software: true,
+                pin: true,
+                ..Default::default()
+            });
+        }
+    }
+
+    /// A reset of the MCU: a new application, outputs at their reset state, the boot report from
+    /// the reset flags and the record kept in "no-init RAM".
+    fn reset(&mut self, flags: ResetFlags) {
+        self.hw.reset_mcu();
+        let noinit = self.noinit;
+        let report = reset::boot_report(flags, || noinit);
+        self.noinit = reset::EMPTY;
+        self.event(format!(
+            "reset ({:?}{}{})",
+            report.cause,
+            if report.message.is_empty() { "" } else { ": " },
+            report.message
+        ));
+        self.app = new_app(self.serial);
+        self.app.set_boot_report(report);
+        self.stalled = [false; 3];
+        self.starving = false;
+        let ms = (self.now_us / 1000) as u32;
+        self.tasks = Liveness::new(BOARD_TASKS, ms);
+        self.last_pet_us = self.now_us;
+        self.next_feed_us = self.now_us + FEED_PERIOD_MS as u64 * 1000;
+        self.faults_seen = 0;
+        self.decoder.reset();
+        self.resets += 1;
+        let now = self.now_us;
+        self.app.poll(&mut self.hw, now);
+    }
+
+    /// Logs host commands that change the rig's state.
+    fn journal_commands(&mut self, bytes: &[u8]) {
+        let mut seen = Vec::new();
+        self.decoder.feed(bytes, |f| {
+            if let Ok(Frame { msg, .. }) = f {
+                seen.push(msg);
+            }
+        });
+        for msg in seen {
+            self.last_host_us = Some(self.now_us);
+            let what = match msg {
+                HostMsg::Hello { .. } => "host: hello".to_string(),
+                HostMsg::Configure(c) => format!("host: configure (load {} N)", c.rig.load_n),
+                HostMsg::SetHeater(sp) => format!(
+                    "host: heater to {:.1} °C at {} °C/min",
+                    sp.setpoint_c, sp.ramp_c_per_min
+                ),
+                HostMsg::HeaterOff => "host: heater off".into(),
+                HostMsg::Arm => "host: arm".into(),
+                HostMsg::Disarm => "host: disarm".into(),
+                HostMsg::Release => "host: release".into(),
+                HostMsg::Abort => "host: abort".into(),
+                HostMsg::Safe => "host: safe (heater and magnet off)".into(),
+                HostMsg::Status
+                | HostMsg::Heartbeat
+                | HostMsg::Pull { .. }
+                | HostMsg::PullBlocks { .. } => continue,
+            };
+            self.event(what);
+        }
+    }
+
+    /// Logs the faults the application handled since the last look.
+    fn note_faults(&mut self) {
+        if self.app.faults() == self.faults_seen {
+            return;
+        }
+        self.faults_seen = self.app.faults();
+        if let Some(f) = self.app.last_fault() {
+            let silence = self
+                .last_host_us
+                .map(|t| format!(" (last host frame {} ms before)", (self.now_us - t) / 1000))
+                .unwrap_or_default();
+            self.event(format!(
+                "FAULT {:?} at {:.1} °C: outputs safe{silence}",
+                f.reason, f.temp_c
+            ));
         }
     }
 
@@ -92,9 +351,49 @@ impl VirtualRig {
         self.hw.button = pressed;
     }
 
-    /// Makes the thermocouple converter report a fault (or heals it with `None`).
-    pub fn set_thermocouple_fault(&mut self, fault: Option<ThermocoupleFault>) {
+    /// Makes the thermocouple or its converter misbehave (or heals it with `None`).
+    pub fn set_thermocouple_fault(&mut self, fault: Option<ConverterFault>) {
         self.hw.tc_fault = fault;
+    }
+
+    /// Makes the heater's power stage misbehave.
+    pub fn set_heater_stage(&mut self, stage: HeaterStage) {
+        self.hw.heater_stage = stage;
+    }
+
+    /// Stalls a task of the board's firmware (see [`Task`]) until the next reset.
+    pub fn stall_task(&mut self, task: Task) {
+        self.stalled[task.index()] = true;
+        if task == Task::Thermocouple {
+            self.hw.tc_task_stalled = true;
+        }
+    }
+
+    /// The next step of the application panics inside a hardware call, with this message.
+    pub fn inject_panic(&mut self, msg: &str) {
+        self.hw.panic_next = Some(msg.to_string());
+    }
+
+    /// A CPU fault (HardFault) now: the board's handler applies the safe state, keeps the fault
+    /// registers and resets.
+    pub fn inject_cpu_fault(&mut self) {
+        self.hw.drive_safe();
+        // What a bus fault on a read of unmapped memory would leave: precise data bus error,
+        // escalated to HardFault.
+        let m = reset::cpu_fault_message(
+            0x0800_4a1c,
+            0x0800_3f7b,
+            0x0000_8200,
+            0x4000_0000,
+            0xa000_0000,
+        );
+        self.noinit = reset::encode(ResetCause::CpuFault, m.as_bytes());
+        self.event("HardFault: safe state applied, resetting".into());
+        self.reset(ResetFlags {
+            software: true,
+            pin: true,
+            ..Default::default()
+        });
     }
 
     /// Whether the link takes frames (false: the cable is out; frames wait in the firmware).
@@ -119,6 +418,8 @@ pub struct ServeOptions {
     pub speed: f64,
     /// Longest wait for host bytes before the simulation moves on, wall-clock.
     pub max_wait: Duration,
+    /// Print the rig's events ([`VirtualRig::take_events`]) on standard output, one per line.
+    pub log_events: bool,
 }
 
 impl Default for ServeOptions {
@@ -126,6 +427,7 @@ impl Default for ServeOptions {
         ServeOptions {
             speed: 1.0,
             max_wait: Duration::from_millis(2),
+            log_events: false,
         }
     }
 }
@@ -196,6 +498,7 @@ where
             start_dev + (start_wall.elapsed().as_secs_f64() * opts.speed.max(0.0) * 1e6) as u64
         };
         rig.advance_to(target);
+        print_events(rig, opts);
         let out = rig.take_output();
         if !out.is_empty() {
             writer.write_all(&out)?;
@@ -204,6 +507,19 @@ where
         if closed {
             return Ok(());
         }
+    }
+}
+
+/// Prints the rig's events on standard output if `opts` asks for it (else drops them).
+pub fn print_events(rig: &mut VirtualRig, opts: &ServeOptions) {
+    let events = rig.take_events();
+    if opts.log_events && !events.is_empty() {
+        let mut out = io::stdout().lock();
+        for e in events {
+            // The console is best effort: a closed stdout does not stop the rig.
+            let _ = writeln!(out, "{e}");
+        }
+        let _ = out.flush();
     }
 }
 

@@ -7,13 +7,19 @@
 //!   with white noise, force through the charge amplifier's 2nd-order 300 Hz low-pass, ECR as the
 //!   transimpedance output of the range and source the firmware set; 16-bit counts through the board
 //!   front end's calibration (`Configure::real_rig`), into a ring that drops and counts on overflow.
-//! * Heater: first-order thermal model of the plate; thermocouple with noise at the MAX31856's
-//!   resolution (1/128 °C), faults injectable.
+//! * Heater: first-order thermal model of the plate; a dead heater or a switch stuck on injectable.
+//! * Thermocouple: a MAX31856 model, read every 100 ms by a simulated converter task into its whole
+//!   register file (plate with noise at 1/128 °C, cold junction at room temperature), so the
+//!   firmware checks what it checks on the board; every converter fault injectable
+//!   ([`ConverterFault`]).
+//! * Safe state: [`SimHardware::drive_safe`] does what the board's register-level safe state does
+//!   (heater, magnet and ECR source off, the pins taken from their timers until the next reset).
 
 use crate::config::VirtualRigConfig;
 use tribo_firmware::acquisition::Ring;
 use tribo_firmware::ecr::{FULL_SCALE_V, GAIN_V_PER_A, RANGES};
 use tribo_firmware::hal::*;
+use tribo_firmware::thermocouple::{self, sr, Registers};
 use tribo_firmware::wire::{ChannelCal, Configure, CHANNELS};
 use tribo_physics::sensor::Rng;
 use tribo_physics::{FrictionLaw, Method, Model, Rig, Simulator};
@@ -59,6 +65,36 @@ impl Biquad {
     }
 }
 
+/// What can go wrong with the thermocouple and its converter (fault injection).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ConverterFault {
+    /// The thermocouple is open (a wire broke): the converter's OPEN flag.
+    Open,
+    /// The thermocouple touches a supply or ground: the converter's over/under-voltage flag.
+    Shorted,
+    /// MISO stuck low or the converter unpowered: every byte reads 0x00.
+    AllZero,
+    /// MISO stuck high or no converter: every byte reads 0xFF.
+    AllOnes,
+    /// The cold junction reads this temperature (a broken or overheated converter board).
+    ColdJunction(f32),
+    /// The converter stops answering: no new reading arrives (the last one grows old).
+    Stale,
+    /// The converter was reset (brown-out, ESD): its configuration is gone.
+    Reset,
+}
+
+/// What can go wrong with the heater's power stage (fault injection).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HeaterStage {
+    /// Works as driven.
+    Ok,
+    /// Does not heat whatever the duty (element open, fuse blown).
+    Dead,
+    /// Heats at full power whatever the duty (MOSFET shorted).
+    StuckOn,
+}
+
 /// Where the pin is.
 #[derive(Debug, Clone)]
 enum Pin {
@@ -86,7 +122,20 @@ pub struct SimHardware {
     // Heater.
     temp_c: f64,
     heater_duty: f64,
-    pub(crate) tc_fault: Option<ThermocoupleFault>,
+    pub(crate) heater_stage: HeaterStage,
+    // Thermocouple converter: its register file as last read, when, and the next read.
+    tc_regs: Option<Registers>,
+    tc_read_us: u64,
+    tc_next_us: u64,
+    pub(crate) tc_fault: Option<ConverterFault>,
+    /// The converter task is stuck (no reads at all).
+    pub(crate) tc_task_stalled: bool,
+    /// Reads the converter task made (its liveness check-ins).
+    tc_reads: u64,
+    /// The safe state was applied: outputs off and deaf to the application until a reset.
+    outputs_locked: bool,
+    /// The next thermocouple read panics with this message (a panic inside a task).
+    pub(crate) panic_next: Option<String>,
     // ECR.
     ecr_range: u8,
     ecr_source_v: f64,
@@ -120,7 +169,7 @@ impl SimHardware {
         let model = Model::new(law).with_apparatus_damping(cfg.apparatus_mu1);
         model.validate()?;
         let cal = Configure::real_rig(cfg.load_n.min(0.7) as f32).calibration;
-        Ok(SimHardware {
+        let mut hw = SimHardware {
             cfg: cfg.clone(),
             rig,
             model,
@@ -133,7 +182,15 @@ impl SimHardware {
             remanent_since_us: None,
             temp_c: cfg.thermal.ambient_c,
             heater_duty: 0.0,
+            heater_stage: HeaterStage::Ok,
+            tc_regs: None,
+            tc_read_us: 0,
+            tc_next_us: 0,
             tc_fault: None,
+            tc_task_stalled: false,
+            tc_reads: 0,
+            outputs_locked: false,
+            panic_next: None,
             ecr_range: 0,
             ecr_source_v: 0.0,
             ecr_dev: 0.0,
@@ -147,7 +204,11 @@ impl SimHardware {
             lamps: Lamps::default(),
             connected: true,
             out: Vec::new(),
-        })
+        };
+        // The converter task's first read, at power-on.
+        hw.tc_regs = hw.converter_registers();
+        hw.tc_next_us = 100_000;
+        Ok(hw)
     }
 
     /// (μ0, μ1) a Coulomb–viscous fit should find (contact law + apparatus damping).
@@ -171,8 +232,89 @@ impl SimHardware {
         self.temp_c = t;
     }
 
+    /// Duty the heater is driven at (0 once the safe state is applied).
     pub fn heater_duty(&self) -> f64 {
         self.heater_duty
+    }
+
+    /// Heating power actually delivered, as a fraction of full power (what the stage does with
+    /// the duty: a dead stage 0, a stuck one 1).
+    pub fn heater_power(&self) -> f64 {
+        match self.heater_stage {
+            HeaterStage::Ok => self.heater_duty,
+            HeaterStage::Dead => 0.0,
+            HeaterStage::StuckOn => 1.0,
+        }
+    }
+
+    /// The ECR source voltage the firmware set, V.
+    pub fn ecr_source_v(&self) -> f64 {
+        self.ecr_source_v
+    }
+
+    /// Whether heater, magnet and ECR source are all off.
+    pub fn outputs_safe(&self) -> bool {
+        self.heater_duty == 0.0 && self.magnet == MagnetDrive::Off && self.ecr_source_v == 0.0
+    }
+
+    /// Whether the safe state was applied (and holds until the next reset).
+    pub fn safe_state_applied(&self) -> bool {
+        self.outputs_locked
+    }
+
+    /// The board's register-level safe state: heater and magnet off and the ECR source at 0 V, the
+    /// pins taken from their timers, so the application's later writes do not reach them until
+    /// the next reset.
+    pub fn drive_safe(&mut self) {
+        self.outputs_locked = false;
+        self.set_heater_duty(0.0);
+        self.magnet_drive(MagnetDrive::Off);
+        self.set_ecr_source(0.0);
+        self.outputs_locked = true;
+    }
+
+    /// A reset of the MCU: outputs back to their reset state (off), the converter unread, the
+    /// injected faults of the MCU's own tasks gone (the rig's physical state, and injected faults
+    /// of the hardware around it, remain).
+    pub(crate) fn reset_mcu(&mut self) {
+        self.outputs_locked = false;
+        self.set_heater_duty(0.0);
+        self.magnet_drive(MagnetDrive::Off);
+        self.set_ecr_source(0.0);
+        self.adc_on = false;
+        self.ring.clear();
+        self.tc_task_stalled = false;
+        self.panic_next = None;
+        self.tc_regs = None;
+        self.tc_next_us = self.now_us;
+    }
+
+    /// Reads the converter task has made so far.
+    pub(crate) fn tc_reads(&self) -> u64 {
+        self.tc_reads
+    }
+
+    /// The converter's register file now, as the board's SPI read would return it.
+    fn converter_registers(&mut self) -> Option<Registers> {
+        let cj = self.cfg.thermal.ambient_c as f32;
+        let t = self.temp_c + self.cfg.noise.temperature_c * self.rng.normal();
+        let t = t as f32;
+        Some(match self.tc_fault {
+            None => thermocouple::encode(t, cj, 0),
+            Some(ConverterFault::Open) => thermocouple::encode(t, cj, sr::OPEN),
+            Some(ConverterFault::Shorted) => thermocouple::encode(t, cj, sr::OVUV),
+            Some(ConverterFault::AllZero) => [0x00; thermocouple::REGISTERS],
+            Some(ConverterFault::AllOnes) => [0xFF; thermocouple::REGISTERS],
+            Some(ConverterFault::ColdJunction(c)) => thermocouple::encode(t, c, 0),
+            Some(ConverterFault::Stale) => return None,
+            Some(ConverterFault::Reset) => {
+                let mut r = thermocouple::encode(t, cj, 0);
+                // Power-on defaults: normally-off, nothing converted since.
+                r[0] = 0x00;
+                r[12..15].fill(0);
+                r
+            }
+        })
     }
 
     pub fn magnet(&self) -> MagnetDrive {
@@ -220,9 +362,18 @@ impl SimHardware {
         let dt = (t_us - self.now_us) as f64 * 1e-6;
         // Heater: exact step of the first-order plate model.
         let th = self.cfg.thermal;
-        let t_inf = th.ambient_c + th.heater_power_w * self.heater_duty * th.resistance_k_per_w;
+        let t_inf = th.ambient_c + th.heater_power_w * self.heater_power() * th.resistance_k_per_w;
         let a = (-dt / (th.resistance_k_per_w * th.capacity_j_per_k)).exp();
         self.temp_c = t_inf + (self.temp_c - t_inf) * a;
+        // The converter task reads the MAX31856 every 100 ms (a stale converter answers nothing new).
+        while self.tc_next_us <= t_us && !self.tc_task_stalled {
+            self.tc_reads += 1;
+            if let Some(r) = self.converter_registers() {
+                self.tc_regs = Some(r);
+                self.tc_read_us = self.tc_next_us;
+            }
+            self.tc_next_us += 100_000;
+        }
         // Remanence: the pin goes once it has faded.
         if let Some(t0) = self.remanent_since_us {
             let t_go = t0 + (self.cfg.remanence_s * 1e6) as u64;
@@ -326,6 +477,9 @@ impl SimHardware {
 
 impl Magnet for SimHardware {
     fn magnet_drive(&mut self, drive: MagnetDrive) {
+        if self.outputs_locked {
+            return;
+        }
         let was_holding = matches!(self.magnet, MagnetDrive::Hold { .. });
         match drive {
             MagnetDrive::Hold { duty } if duty > 0.2 => {
@@ -352,17 +506,23 @@ impl Magnet for SimHardware {
 }
 
 impl Thermocouple for SimHardware {
-    fn read_thermocouple(&mut self) -> Result<f32, ThermocoupleFault> {
-        if let Some(f) = self.tc_fault {
-            return Err(f);
+    fn read_thermocouple(&mut self) -> Option<ConverterRead> {
+        if let Some(msg) = self.panic_next.take() {
+            // A panic inside a task, injected: the virtual rig's "panic handler" catches it.
+            panic!("{msg}");
         }
-        let t = self.temp_c + self.cfg.noise.temperature_c * self.rng.normal();
-        Ok(((t * 128.0).round() / 128.0) as f32)
+        self.tc_regs.map(|regs| ConverterRead {
+            regs,
+            age_us: self.now_us.saturating_sub(self.tc_read_us),
+        })
     }
 }
 
 impl HeaterOutput for SimHardware {
     fn set_heater_duty(&mut self, duty: f32) {
+        if self.outputs_locked {
+            return;
+        }
         self.heater_duty = if duty.is_finite() {
             duty.clamp(0.0, 1.0) as f64
         } else {
@@ -373,6 +533,9 @@ impl HeaterOutput for SimHardware {
 
 impl EcrFrontEnd for SimHardware {
     fn set_ecr_source(&mut self, volts: f32) {
+        if self.outputs_locked {
+            return;
+        }
         self.ecr_source_v = volts as f64;
     }
     fn set_ecr_range(&mut self, range: u8) {

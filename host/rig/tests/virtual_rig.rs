@@ -40,10 +40,19 @@ impl Host {
         }
     }
 
+    /// Waits `ms` of device time as a live host does: with a heartbeat every second, so that the
+    /// rig's lease holds while it heats or holds the magnet.
     fn wait(&mut self, ms: u64) {
-        let t = self.rig.now_us() + ms * 1000;
-        self.rig.advance_to(t);
-        self.collect();
+        let end = self.rig.now_us() + ms * 1000;
+        let beat = limits::HEARTBEAT_MS as u64 * 1000;
+        while self.rig.now_us() < end {
+            let t = (self.rig.now_us() + beat).min(end);
+            self.rig.advance_to(t);
+            self.collect();
+            if t < end {
+                self.send(HostMsg::Heartbeat);
+            }
+        }
     }
 
     fn answer(&self, seq: u32) -> Option<Result<(), ErrorCode>> {
@@ -187,15 +196,15 @@ fn heater_regulates_the_plate_and_cuts_off_when_it_overheats() {
     h.wait(300);
     assert!(h.frames.iter().any(|f| matches!(
         f.1.msg,
-        DeviceMsg::Error(DeviceError {
-            code: ErrorCode::Heater(HeaterFault::OverTemperature),
-            about_seq: None
+        DeviceMsg::Fault(FaultReport {
+            reason: FaultReason::Heater(HeaterFault::OverTemperature),
+            ..
         })
     )));
     assert_eq!(h.rig.hardware().heater_duty(), 0.0);
     assert_eq!(h.rig.app().state(), RigState::Fault);
     h.rig
-        .set_thermocouple_fault(Some(tribo_firmware::hal::ThermocoupleFault::Open));
+        .set_thermocouple_fault(Some(tribo_rig::ConverterFault::Open));
     assert_eq!(
         h.command(HostMsg::SetHeater(HeaterSetpoint {
             setpoint_c: 45.0,
@@ -203,11 +212,11 @@ fn heater_regulates_the_plate_and_cuts_off_when_it_overheats() {
         })),
         Ok(())
     );
-    h.wait(300);
+    h.wait(400);
     assert!(h.frames.iter().any(|f| matches!(
         f.1.msg,
-        DeviceMsg::Error(DeviceError {
-            code: ErrorCode::Heater(HeaterFault::OpenThermocouple),
+        DeviceMsg::Fault(FaultReport {
+            reason: FaultReason::Heater(HeaterFault::OpenThermocouple),
             ..
         })
     )));
