@@ -27,6 +27,7 @@ pub fn virtual_rig(mu0: f64, mu1: f64, seed: u64, speed: f64) -> (PathBuf, (f64,
         ServeOptions {
             speed,
             max_wait: Duration::from_millis(2),
+            ..Default::default()
         },
     );
     (path, truth)

@@ -19,10 +19,14 @@ enum Command {
     /// List attached rigs: port, USB id, serial number, firmware version.
     Devices(tribo::cmd::devices::Args),
     /// Take a run: configure, settle the heater, arm, release, stream, save, print μ0/μ1.
+    #[command(after_help = tribo::cmd::run::safety_help())]
     Run(tribo::cmd::run::Args),
+    /// The rig's state, temperature, last fault and last reset cause.
+    Status(tribo::cmd::status::Args),
     /// Fetch the rig's last run (or complete a stored one), resuming after the last good block.
     Pull(tribo::cmd::pull::Args),
     /// A series of runs over loads × temperatures × repetitions from PLAN.toml, resumable.
+    #[command(after_help = tribo::cmd::run::safety_help())]
     Campaign(tribo::cmd::campaign::Args),
     /// Start the virtual rig (firmware logic + physics simulator) behind a pseudo-terminal.
     Rig(tribo::cmd::rig::Args),
@@ -70,6 +74,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Onboard(a) => tribo::cmd::onboard::run(a),
         Command::Devices(a) => tribo::cmd::devices::run(a),
         Command::Run(a) => tribo::cmd::run::run(a),
+        Command::Status(a) => tribo::cmd::status::run(a),
         Command::Pull(a) => tribo::cmd::pull::run(a),
         Command::Campaign(a) => tribo::cmd::campaign::run(a),
         Command::Rig(a) => tribo::cmd::rig::run(a),

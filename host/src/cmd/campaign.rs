@@ -11,8 +11,12 @@
 //! # optional: rate_hz, max_duration_s, mass_kg, stiffness_n_per_m, x0_m,
 //! #           ramp_c_per_min, settle_tol_c, settle_s, settle_timeout_s, prompt_load
 //! ```
+//!
+//! The settle defaults are `tribo run`'s (`tribo_wire::limits`: within 0.5 °C for 30 s, giving up
+//! after 1800 s). While the campaign runs, prompts included, a heartbeat keeps the rig's lease; every
+//! way the campaign ends switches heater and magnet off.
 
-use super::run::{abort_flag, print_outcome, LinkArgs, Ui};
+use super::run::{abort_flag, print_outcome, warn_about_reset, LinkArgs, Ui};
 use crate::link::session::{record_run, HeaterPlan, RunPlan};
 use crate::link::{firmware_version, Link};
 use anyhow::{bail, Context};
@@ -71,13 +75,13 @@ fn ramp() -> f32 {
     10.0
 }
 fn tol() -> f32 {
-    0.5
+    tribo_wire::limits::SETTLE_TOL_C
 }
 fn settle() -> f64 {
-    30.0
+    tribo_wire::limits::SETTLE_S
 }
 fn settle_timeout() -> f64 {
-    1800.0
+    tribo_wire::limits::SETTLE_TIMEOUT_S
 }
 fn yes() -> bool {
     true
@@ -252,12 +256,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let port = args.link.port()?;
     let mut link = Link::open(&port)?;
     let info = link.hello()?;
+    // Heartbeats while the campaign runs (prompts included); every exit leaves the rig safe.
+    let _hold = link.hold();
     eprintln!(
         "rig on {}: firmware {}, serial {:016x}",
         link.name(),
         firmware_version(&info),
         info.serial
     );
+    warn_about_reset(&link);
     let mut last_load: Option<f32> = None;
     for (i, p) in todo.iter().enumerate() {
         if abort.load(Ordering::Relaxed) {
@@ -306,7 +313,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 args.plan.display()
             )
         })?;
-        print_outcome(&o);
+        print_outcome(&o)?;
         if o.aborted || o.link_lost.is_some() {
             println!(
                 "campaign interrupted: run `tribo campaign {}` again to resume where it stopped",

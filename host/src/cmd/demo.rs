@@ -80,7 +80,7 @@ pub fn demo(args: &Args) -> anyhow::Result<crate::link::session::Outcome> {
     let wall = ended.map_or(f64::NAN, |e| (e - started).as_secs_f64());
     ui.finish();
     let o = o.context("demo run")?;
-    print_outcome(&o);
+    print_outcome(&o)?;
     let st = link.stats();
     println!(
         "{:<10}{} frames, {} bytes in {wall:.3} s (configure to end of run) through the pseudo-terminal ({:.0} kB/s at ×{} \

@@ -12,4 +12,5 @@ pub mod rig;
 pub mod run;
 pub mod runs;
 pub mod sim;
+pub mod status;
 pub mod table;

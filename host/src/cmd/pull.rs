@@ -34,6 +34,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     ui.finish();
     let o = o?;
-    print_outcome(&o);
+    print_outcome(&o)?;
     Ok(())
 }

@@ -45,6 +45,9 @@ pub struct VirtualArgs {
     /// Device seconds per wall-clock second (`inf`: as fast as the simulation goes).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
+    /// Print the rig's console (state-changing commands, faults, resets) on standard output.
+    #[arg(skip)]
+    pub log_events: bool,
 }
 
 impl Default for VirtualArgs {
@@ -62,6 +65,7 @@ impl Default for VirtualArgs {
             fixed_load: false,
             button_after: None,
             speed: 1.0,
+            log_events: false,
         }
     }
 }
@@ -125,6 +129,7 @@ impl VirtualArgs {
         let opts = ServeOptions {
             speed: self.speed,
             max_wait: Duration::from_millis(2),
+            log_events: self.log_events,
         };
         if let Some(b) = self.button_after {
             if !(b.is_finite() && b >= 0.0) {
@@ -154,7 +159,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.virtual_rig {
         bail!("`tribo rig` starts the virtual rig: add --virtual (a real rig needs no command: plug it in and use --port)");
     }
-    let (path, cfg) = args.rig.start()?;
+    let mut rig = args.rig;
+    rig.log_events = true;
+    let (path, cfg) = rig.start()?;
     make_link(&args.link, &path)?;
     let link = args.link.clone();
     ctrlc::set_handler(move || {
@@ -173,7 +180,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cfg.mass_kg,
         cfg.stiffness_n_per_m,
         cfg.load_n,
-        if args.rig.fixed_load {
+        if rig.fixed_load {
             " (fixed)"
         } else {
             " (follows each run's --load)"
@@ -181,14 +188,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cfg.law,
         cfg.apparatus_mu1,
         cfg.seed,
-        args.rig.speed
+        rig.speed
     );
     println!(
         "  try: tribo run --port {} --load {}",
         args.link.display(),
         cfg.load_n
     );
-    println!("  Ctrl-C stops it");
+    println!("  Ctrl-C stops it; the rig's console follows (commands, faults, resets)");
     loop {
         std::thread::park();
     }

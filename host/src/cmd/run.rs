@@ -73,7 +73,8 @@ impl LinkArgs {
     }
 }
 
-/// Set on Ctrl-C (a second Ctrl-C exits at once).
+/// Set on Ctrl-C, SIGTERM or SIGHUP: the command stops cleanly and the rig is made safe. A second
+/// one exits at once, after sending `Safe` to every rig this process holds.
 pub fn abort_flag() -> Arc<AtomicBool> {
     static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
     FLAG.get_or_init(|| {
@@ -81,7 +82,11 @@ pub fn abort_flag() -> Arc<AtomicBool> {
         let g = f.clone();
         let _ = ctrlc::set_handler(move || {
             if g.swap(true, Ordering::SeqCst) {
-                eprintln!("\ninterrupted twice: exiting now (the run folder stays readable)");
+                crate::link::hold::make_all_safe();
+                eprintln!(
+                    "\ninterrupted twice: exiting now; heater and magnet were switched off (the run folder stays \
+                     readable)"
+                );
                 std::process::exit(130);
             }
             eprintln!("\ninterrupted: aborting the run cleanly (Ctrl-C again to quit at once)…");
@@ -89,6 +94,51 @@ pub fn abort_flag() -> Arc<AtomicBool> {
         f
     })
     .clone()
+}
+
+/// The rig's interlocks, for `--help` (every number from `tribo_wire::limits`).
+pub fn safety_help() -> String {
+    use tribo_wire::limits as l;
+    format!(
+        "Safety: the rig enforces its limits itself, whatever this program does. While it heats or holds \
+         the magnet it needs a word from this program at least every {lease} s (a heartbeat is sent every \
+         {hb} s); without one it switches heater and magnet off. Every exit of this program (end, error, \
+         Ctrl-C, closed pipe) switches them off too. Heater: cut off above {cut} °C, on {bad} bad \
+         thermocouple reads in a row, if heating gains less than {gain} °C in {period} s, or if the plate \
+         rises {rise} °C with no heat asked for; settled within {tol} °C for {settle} s by default. \
+         Magnet: at most {hold} s at a stretch and {duty:.0} % of the time. `tribo status` shows the last \
+         fault and the last reset.",
+        lease = l::HOST_LEASE_MS as f64 / 1000.0,
+        hb = l::HEARTBEAT_MS as f64 / 1000.0,
+        cut = l::HEATER_CUTOFF_C,
+        bad = l::TC_BAD_READS,
+        gain = l::HEATER_WATCH_GAIN_C,
+        period = l::HEATER_WATCH_PERIOD_S,
+        rise = l::HEATER_RUNAWAY_RISE_C,
+        tol = l::SETTLE_TOL_C,
+        settle = l::SETTLE_S,
+        hold = l::MAGNET_MAX_HOLD_MS / 1000,
+        duty = l::MAGNET_MAX_DUTY * 100.0,
+    )
+}
+
+/// Writes to standard output; a closed pipe (`tribo run … | head`) is an error that stops the
+/// command (and so makes the rig safe), not a panic.
+pub fn out(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    o.write_all(text.as_bytes())
+        .and_then(|_| o.flush())
+        .map_err(|e| {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                anyhow::anyhow!(
+                    "standard output was closed (the program reading it ended): stopped here, heater and magnet \
+                     switched off"
+                )
+            } else {
+                anyhow::anyhow!("cannot write to standard output: {e}")
+            }
+        })
 }
 
 /// Progress bar and messages for a run.
@@ -262,11 +312,15 @@ pub fn result_table(run: &Run) -> String {
     s
 }
 
-/// Prints what a recording gave and what to do if it is incomplete.
-pub fn print_outcome(o: &Outcome) {
+/// Prints what a recording gave and what to do if it is incomplete (an error if standard output
+/// is closed).
+pub fn print_outcome(o: &Outcome) -> anyhow::Result<()> {
     let run = &o.run;
     let samples: usize = run.blocks().map(|b| b.samples()).sum();
-    println!(
+    let mut s = String::new();
+    use std::fmt::Write;
+    let _ = writeln!(
+        s,
         "run {} saved in {} ({}, {} blocks, {} samples{})",
         run.id(),
         run.dir().display(),
@@ -280,16 +334,36 @@ pub fn print_outcome(o: &Outcome) {
         }
     );
     if let Some(e) = &o.link_lost {
-        println!("the link was lost: {e}");
-        println!(
+        let _ = writeln!(s, "the link was lost: {e}");
+        let _ = writeln!(
+            s,
             "reconnect the rig and run `tribo pull {}` to fetch the rest",
             run.dir().display()
         );
     }
     if o.aborted {
-        println!("aborted: what was received is kept (status: aborted)");
+        let _ = writeln!(s, "aborted: what was received is kept (status: aborted)");
     }
-    print!("{}", result_table(run));
+    s.push_str(&result_table(run));
+    out(&s)
+}
+
+/// Tells the operator when the rig reset abnormally since the last host spoke to it.
+pub fn warn_about_reset(link: &Link) {
+    use tribo_wire::ResetCause;
+    if let Some(b) = link.boot_report() {
+        if matches!(
+            b.cause,
+            ResetCause::Watchdog | ResetCause::Panic | ResetCause::CpuFault | ResetCause::Brownout
+        ) {
+            eprintln!(
+                "warning: the rig reset by itself since a host last spoke to it: {}{}{} (see `tribo status`)",
+                crate::link::reset_cause_text(b.cause),
+                if b.message.is_empty() { "" } else { ": " },
+                b.message
+            );
+        }
+    }
 }
 
 /// Arguments of `tribo run`.
@@ -334,13 +408,13 @@ pub struct Args {
     #[arg(long, default_value_t = 667e-6)]
     pub x0: f32,
     /// Heater: settled when within this many °C…
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TOL_C)]
     pub settle_tol: f32,
     /// …for this many seconds.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_S)]
     pub settle_secs: f64,
     /// Give up heating after this many seconds.
-    #[arg(long, default_value_t = 1800.0)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TIMEOUT_S)]
     pub settle_timeout: f64,
     /// Heater ramp, °C/min.
     #[arg(long, default_value_t = 10.0)]
@@ -394,12 +468,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let abort = abort_flag();
     let (mut link, info) = args.link.connect()?;
+    // From here on every exit leaves the rig safe (see `link::hold`).
+    let _hold = link.hold();
     eprintln!(
         "rig on {}: firmware {}, serial {:016x}",
         link.name(),
         firmware_version(&info),
         info.serial
     );
+    warn_about_reset(&link);
     let store = args.link.store();
     for k in 1..=args.repeat.max(1) {
         let mut plan = plan.clone();
@@ -412,7 +489,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let o = record_run(&mut link, &info, &store, &plan, &abort, &mut |p| ui.on(p));
         ui.finish();
         let o = o.with_context(|| format!("run {k} on {}", link.name()))?;
-        print_outcome(&o);
+        print_outcome(&o)?;
         if o.aborted || o.link_lost.is_some() {
             break;
         }

@@ -7,8 +7,11 @@
 //! * [`session`]: a whole run (configure, heat, arm, release, stream, resume with `Pull`) and
 //!   `pull` of a run already taken.
 //! * [`pty`]: the virtual rig behind a pseudo-terminal.
+//! * [`hold`]: while a session holds the rig, a heartbeat renews its lease, and every exit the host
+//!   controls sends `Safe`.
 
 pub mod devices;
+pub mod hold;
 pub mod pty;
 pub mod serial;
 pub mod session;
@@ -17,14 +20,15 @@ use std::collections::VecDeque;
 use std::fmt;
 use std::io::{Read, Write};
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tribo_wire::frame::{decode_one, encode_vec, MAX_FRAME};
 use tribo_wire::{
-    check_protocol, DeviceError, DeviceInfo, DeviceMsg, ErrorCode, Field, Frame, FrameError,
-    HeaterFault, HostMsg, Interlock, Status, PROTOCOL_VERSION,
+    check_protocol, BootReport, DeviceError, DeviceInfo, DeviceMsg, ErrorCode, FaultReason,
+    FaultReport, Field, Frame, FrameError, HeaterFault, HostMsg, Interlock, ResetCause, Status,
+    PROTOCOL_VERSION,
 };
 
 /// A frame from the rig, with its bytes exactly as received (closing zero included).
@@ -124,16 +128,7 @@ pub fn explain(code: ErrorCode) -> String {
                 .into(),
             Interlock::MagnetOff => "release refused: the electromagnet is off; check its supply and arm again".into(),
         },
-        ErrorCode::Heater(f) => format!(
-            "heater fault ({}): the heater was cut off; check the thermocouple wiring and the plate, then set the \
-             temperature again",
-            match f {
-                HeaterFault::OverTemperature => "over temperature",
-                HeaterFault::OpenThermocouple => "thermocouple open",
-                HeaterFault::ShortedThermocouple => "thermocouple shorted",
-                HeaterFault::NoReading => "no thermocouple reading",
-            }
-        ),
+        ErrorCode::Heater(f) => format!("heater fault: {}", heater_fault_text(f)),
         ErrorCode::NoRun => "the rig holds no such run (it was power-cycled, or a newer run replaced it)".into(),
         ErrorCode::Overrun { lost_samples } => format!(
             "the rig lost {lost_samples} samples (acquisition overrun): the run cannot be trusted; repeat it at a \
@@ -142,6 +137,114 @@ pub fn explain(code: ErrorCode) -> String {
         ErrorCode::HoldTimeExceeded => "the electromagnet held the pin too long and was switched off to protect it: \
                                         release sooner after arming (or check the release wiring)"
             .into(),
+        ErrorCode::MagnetCooling { wait_ms } => format!(
+            "the electromagnet is cooling down after holding too long (at most {} s at a stretch, {:.0} % of \
+             the time): arm again in {:.0} s",
+            tribo_wire::limits::MAGNET_MAX_HOLD_MS / 1000,
+            tribo_wire::limits::MAGNET_MAX_DUTY * 100.0,
+            (wait_ms as f64 / 1000.0).ceil()
+        ),
+    }
+}
+
+/// What a heater fault means and what to do about it.
+pub fn heater_fault_text(f: HeaterFault) -> String {
+    use tribo_wire::limits as l;
+    match f {
+        HeaterFault::OverTemperature => format!(
+            "the plate went over {} °C and the heater was cut off; let it cool, then check the heater's switch \
+             and the setpoint",
+            l::HEATER_CUTOFF_C
+        ),
+        HeaterFault::OpenThermocouple => {
+            "the thermocouple is open (a wire or the connector is broken): check its wiring".into()
+        }
+        HeaterFault::ShortedThermocouple => {
+            "the thermocouple touches a supply or ground (converter over/under voltage): check its wiring".into()
+        }
+        HeaterFault::NoReading => format!(
+            "no thermocouple reading for {} reads in a row (the converter stopped answering): check the converter \
+             board and its cable",
+            l::TC_BAD_READS
+        ),
+        HeaterFault::BadConverterData => "the thermocouple converter answers garbage (all zeros or all ones, or it \
+                                          lost its configuration): check its cable and supply, then power-cycle the \
+                                          rig"
+            .into(),
+        HeaterFault::ThermocoupleRange => "the thermocouple reads out of range (reversed polarity, wrong type, or \
+                                           damaged): check it"
+            .into(),
+        HeaterFault::ColdJunction => format!(
+            "the converter's own (cold-junction) temperature is outside {}–{} °C: the converter board is damaged or \
+             overheating",
+            l::COLD_JUNCTION_C.start(),
+            l::COLD_JUNCTION_C.end()
+        ),
+        HeaterFault::HeatingFailed => format!(
+            "the plate did not warm as the heater drove it (less than {} °C in {} s): the heater does not heat, or \
+             the thermocouple is off the plate; check both, then set the temperature again",
+            l::HEATER_WATCH_GAIN_C,
+            l::HEATER_WATCH_PERIOD_S
+        ),
+        HeaterFault::Runaway => format!(
+            "the plate warmed by more than {} °C while no heat was asked for: the heater's switch may be stuck on; \
+             switch the heater's supply off",
+            l::HEATER_RUNAWAY_RISE_C
+        ),
+    }
+}
+
+/// A sentence for a fault the rig handled by itself (its outputs are already safe).
+pub fn explain_fault(r: &FaultReport) -> String {
+    let what = match r.reason {
+        FaultReason::Heater(f) => format!("heater fault: {}", heater_fault_text(f)),
+        FaultReason::LeaseExpired => format!(
+            "no word from the host for {:.0} s while heating or holding the magnet: the rig switched both off \
+             (the host program stopped, hung or lost its cable); set the temperature again to go on",
+            tribo_wire::limits::HOST_LEASE_MS as f64 / 1000.0
+        ),
+        FaultReason::MagnetHoldTime => "the electromagnet held too long and was switched off to protect the \
+                                        coil: release sooner after arming"
+            .into(),
+        FaultReason::StandAloneExpired => format!(
+            "stand-alone mode ended ({} min without a button press): heater and magnet off",
+            tribo_wire::limits::STANDALONE_HEAT_MS / 60_000
+        ),
+    };
+    let temp = if r.temp_c.is_finite() {
+        format!(", plate at {:.1} °C", r.temp_c)
+    } else {
+        String::new()
+    };
+    format!("{what} (at {} of rig uptime{temp})", uptime(r.uptime_ms))
+}
+
+/// A duration of rig uptime, as `1 h 02 min 03.4 s`.
+pub fn uptime(ms: u64) -> String {
+    let s = ms as f64 / 1000.0;
+    let h = (s / 3600.0).floor();
+    let m = ((s - h * 3600.0) / 60.0).floor();
+    let sec = s - h * 3600.0 - m * 60.0;
+    if h > 0.0 {
+        format!("{h:.0} h {m:02.0} min {sec:04.1} s")
+    } else if m > 0.0 {
+        format!("{m:.0} min {sec:04.1} s")
+    } else {
+        format!("{sec:.1} s")
+    }
+}
+
+/// What a reset cause means.
+pub fn reset_cause_text(c: ResetCause) -> &'static str {
+    match c {
+        ResetCause::PowerOn => "power-on",
+        ResetCause::Pin => "reset button or debugger",
+        ResetCause::Software => "software reset",
+        ResetCause::Watchdog => "watchdog: a task of the firmware stopped (outputs were made safe)",
+        ResetCause::Panic => "firmware panic (outputs were made safe)",
+        ResetCause::CpuFault => "CPU fault (outputs were made safe)",
+        ResetCause::Brownout => "brown-out: the supply dipped",
+        ResetCause::Unknown => "unknown",
     }
 }
 
@@ -175,13 +278,21 @@ pub struct LinkStats {
     pub frames_out: u64,
 }
 
+/// The writing half of a link, shared with the heartbeat thread and the exit paths ([`hold`]).
+pub(crate) type SharedWriter = Arc<Mutex<Box<dyn Write + Send>>>;
+
 /// A connection to a rig.
 pub struct Link {
     name: String,
-    tx: Box<dyn Write + Send>,
+    tx: SharedWriter,
     rx: Receiver<Event>,
     backlog: VecDeque<Incoming>,
-    seq: u32,
+    /// Sequence numbers of every frame sent on this link, by any thread.
+    seq: Arc<AtomicU32>,
+    /// The rig's boot report, if its answer to our hello carried one.
+    boot: Option<BootReport>,
+    /// Faults the rig reported on this link, oldest first.
+    faults: Vec<FaultReport>,
     stop: Arc<AtomicBool>,
     bytes_in: Arc<AtomicU64>,
     closed: Option<String>,
@@ -303,10 +414,12 @@ impl Link {
         Link {
             reader: join_on_drop.then_some(handle),
             name,
-            tx: Box::new(writer),
+            tx: Arc::new(Mutex::new(Box::new(writer))),
             rx,
             backlog: VecDeque::new(),
-            seq: 0,
+            seq: Arc::new(AtomicU32::new(0)),
+            boot: None,
+            faults: Vec::new(),
             stop,
             bytes_in,
             closed: None,
@@ -347,22 +460,47 @@ impl Link {
 
     /// Sends a command; returns its sequence number.
     pub fn send(&mut self, msg: &HostMsg) -> Result<u32, LinkError> {
-        self.seq = self.seq.wrapping_add(1);
-        let bytes = encode_vec(self.seq, msg).map_err(|_| {
+        let seq = self.seq.fetch_add(1, Ordering::Relaxed).wrapping_add(1);
+        let bytes = encode_vec(seq, msg).map_err(|_| {
             LinkError::new(
                 LinkErrorKind::Refused,
                 "command too large to frame (a bug in tribo)",
             )
         })?;
-        self.tx
-            .write_all(&bytes)
-            .and_then(|_| self.tx.flush())
-            .map_err(|e| {
-                self.closed = Some(format!("write failed: {e}"));
-                self.closed_error()
-            })?;
+        let written = match self.tx.lock() {
+            Ok(mut w) => w.write_all(&bytes).and_then(|_| w.flush()),
+            Err(_) => Err(std::io::Error::other("the writer was poisoned by a panic")),
+        };
+        written.map_err(|e| {
+            self.closed = Some(format!("write failed: {e}"));
+            self.closed_error()
+        })?;
         self.stats.frames_out += 1;
-        Ok(self.seq)
+        Ok(seq)
+    }
+
+    /// The rig's boot report (why it last reset), if it came with the answer to our hello: it is
+    /// sent once after each reset, to the first host that says hello.
+    pub fn boot_report(&self) -> Option<&BootReport> {
+        self.boot.as_ref()
+    }
+
+    /// Faults the rig reported on this link so far, oldest first.
+    pub fn faults(&self) -> &[FaultReport] {
+        &self.faults
+    }
+
+    /// Something that can send `Safe` and heartbeats on this link from another thread.
+    pub(crate) fn handle(&self) -> hold::SafeHandle {
+        hold::SafeHandle::new(self.tx.clone(), self.seq.clone())
+    }
+
+    /// Holds the rig for this session: a heartbeat renews its lease from a thread of its own until
+    /// the returned guard is dropped, which sends `Safe` (heater and magnet off). Ctrl-C that
+    /// quits at once and a panic send it too. A killed program or a lost cable is covered by the
+    /// rig's lease.
+    pub fn hold(&self) -> hold::Hold {
+        hold::Hold::new(self.handle())
     }
 
     /// The next frame, waiting at most `timeout`; `Ok(None)` on timeout, an error when the stream
@@ -380,6 +518,9 @@ impl Link {
             match self.rx.recv_timeout(left) {
                 Ok(Event::Frame(f)) => {
                     self.stats.frames_in += 1;
+                    if let DeviceMsg::Fault(r) = f.frame.msg {
+                        self.faults.push(r);
+                    }
                     return Ok(Some(*f));
                 }
                 Ok(Event::Bad(e)) => {
@@ -426,6 +567,7 @@ impl Link {
                             code: None,
                         })?;
                         self.backlog.clear();
+                        self.after_hello(seq)?;
                         return Ok(info);
                     }
                     DeviceMsg::Error(DeviceError {
@@ -451,6 +593,23 @@ impl Link {
                 self.name, self.timeouts.attempts
             ),
         ))
+    }
+
+    /// After the rig's hello: its boot report, if any, comes before the hello's `Ack`.
+    fn after_hello(&mut self, seq: u32) -> Result<(), LinkError> {
+        let deadline = Instant::now() + self.timeouts.reply;
+        let mut held = Vec::new();
+        while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+            let Some(f) = self.rx_only(left)? else { break };
+            match f.frame.msg {
+                DeviceMsg::Ack { seq: s } if s == seq => break,
+                DeviceMsg::Boot(b) => self.boot = Some(b),
+                DeviceMsg::Ack { .. } | DeviceMsg::Error(_) => {}
+                _ => held.push(f),
+            }
+        }
+        self.backlog.extend(held);
+        Ok(())
     }
 
     /// Sends a command and waits for its `Ack` (or `Error`). Idempotent commands are sent again

@@ -133,6 +133,7 @@ impl VirtualPort {
                             + (start.0.elapsed().as_secs_f64() * opts.speed.max(0.0) * 1e6) as u64
                     };
                     rig.advance_to(target);
+                    tribo_rig::print_events(&mut rig, &opts);
                     if let Some(after) = button_after_s {
                         // A finger on the button: pressed `after` s into the armed state, held 50 ms.
                         let now = rig.now_us();

@@ -2,7 +2,7 @@
 //! stream into the run store with gap detection, and fill gaps with `Pull`; and `pull` of a run the
 //! rig already took.
 
-use super::{explain, firmware_version, Link, LinkError, LinkErrorKind};
+use super::{explain, explain_fault, firmware_version, Link, LinkError, LinkErrorKind};
 use anyhow::{anyhow, bail, Context};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -24,6 +24,21 @@ pub struct HeaterPlan {
     pub settle_s: f64,
     /// Give up after this long.
     pub timeout_s: f64,
+}
+
+impl HeaterPlan {
+    /// Heat to `setpoint_c` at `ramp_c_per_min`, settled by the defaults of
+    /// [`tribo_wire::limits`] (within [`tribo_wire::limits::SETTLE_TOL_C`] for
+    /// [`tribo_wire::limits::SETTLE_S`], giving up after [`tribo_wire::limits::SETTLE_TIMEOUT_S`]).
+    pub fn new(setpoint_c: f32, ramp_c_per_min: f32) -> HeaterPlan {
+        HeaterPlan {
+            setpoint_c,
+            ramp_c_per_min,
+            tolerance_c: tribo_wire::limits::SETTLE_TOL_C,
+            settle_s: tribo_wire::limits::SETTLE_S,
+            timeout_s: tribo_wire::limits::SETTLE_TIMEOUT_S,
+        }
+    }
 }
 
 /// Everything `tribo run` needs to take one run.
@@ -262,6 +277,11 @@ impl Streamer<'_, '_> {
                 self.warnings.push(msg.clone());
                 (self.obs)(Progress::Warning(msg));
             }
+            DeviceMsg::Fault(r) => {
+                let msg = format!("the rig made itself safe: {}", explain_fault(r));
+                self.warnings.push(msg.clone());
+                (self.obs)(Progress::Warning(msg));
+            }
             _ => {}
         }
         Ok(None)
@@ -443,6 +463,15 @@ pub fn settle(
         let s = link.status()?;
         if let Some(f) = s.heater_fault {
             bail!("{}", explain(ErrorCode::Heater(f)));
+        }
+        if s.heater_setpoint_c.is_none() {
+            // Switched off by the rig itself (lease, stand-alone limit) or by another program.
+            bail!(
+                "the rig switched the heater off while it was heating ({}); run again to heat again",
+                s.last_fault
+                    .map(|f| explain_fault(&f))
+                    .unwrap_or_else(|| "no fault reported: another program sent heater-off or safe".into())
+            );
         }
         obs(Progress::Heating {
             temp_c: s.temp_c,
