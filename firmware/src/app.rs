@@ -203,6 +203,12 @@ impl<'a> App<'a> {
         self.faults
     }
 
+    /// Changes the host lease, ms (default [`limits::HOST_LEASE_MS`]).
+    pub fn set_host_lease_ms(&mut self, ms: u32) {
+        self.cfg.host_lease_ms = ms;
+        self.lease.set_host_ms(ms);
+    }
+
     /// Who holds the rig now.
     pub fn control(&self) -> Control {
         self.lease.control(self.now_us)

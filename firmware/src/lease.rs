@@ -34,6 +34,12 @@ impl Lease {
         }
     }
 
+    /// Changes the host lease (a virtual rig running faster than real time stretches it so that a
+    /// real-time host keeps it).
+    pub fn set_host_ms(&mut self, host_ms: u32) {
+        self.host_us = host_ms as u64 * 1000;
+    }
+
     /// A frame from the host arrived: the host holds the rig (and ends stand-alone mode).
     pub fn renew(&mut self, now_us: u64) {
         self.last_host_us = Some(now_us);

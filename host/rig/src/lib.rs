@@ -87,6 +87,7 @@ pub struct VirtualRig {
     decoder: Decoder<HostMsg>,
     last_host_us: Option<u64>,
     faults_seen: u32,
+    host_lease_ms: u32,
 }
 
 fn new_app(serial: u64) -> App<'static> {
@@ -126,6 +127,7 @@ impl VirtualRig {
             decoder: Decoder::new(),
             last_host_us: None,
             faults_seen: 0,
+            host_lease_ms: limits::HOST_LEASE_MS,
         };
         rig.app.poll(&mut rig.hw, 0);
         Ok(rig)
@@ -144,6 +146,14 @@ impl VirtualRig {
     /// The simulated hardware (for inspection and fault injection).
     pub fn hardware(&mut self) -> &mut SimHardware {
         &mut self.hw
+    }
+
+    /// Sets the firmware's host lease, ms of device time (kept across resets). A rig served faster
+    /// than real time stretches it by its speed ([`lease_for_speed`]), so that a host talking in real
+    /// time keeps the lease it would keep with the real rig.
+    pub fn set_host_lease_ms(&mut self, ms: u32) {
+        self.host_lease_ms = ms;
+        self.app.set_host_lease_ms(ms);
     }
 
     /// Resets of the MCU since power-on (watchdog, panic, CPU fault).
@@ -282,6 +292,7 @@ impl VirtualRig {
             report.message
         ));
         self.app = new_app(self.serial);
+        self.app.set_host_lease_ms(self.host_lease_ms);
         self.app.set_boot_report(report);
         self.stalled = [false; 3];
         self.starving = false;
@@ -462,6 +473,7 @@ where
         ));
     }
     rig.app.link_reset();
+    rig.set_host_lease_ms(lease_for_speed(opts.speed));
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
     std::thread::spawn(move || {
         let mut buf = [0u8; 4096];
@@ -507,6 +519,17 @@ where
         if closed {
             return Ok(());
         }
+    }
+}
+
+/// The host lease, ms of device time, of a rig served at `speed` × real time: the firmware's lease
+/// in wall-clock time (device time runs `speed` times faster; never shorter than the firmware's).
+pub fn lease_for_speed(speed: f64) -> u32 {
+    let ms = limits::HOST_LEASE_MS as f64 * speed.max(1.0);
+    if ms.is_finite() && ms < u32::MAX as f64 {
+        ms as u32
+    } else {
+        u32::MAX
     }
 }
 

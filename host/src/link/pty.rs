@@ -58,7 +58,9 @@ impl VirtualPort {
         follow_load: bool,
         button_after_s: Option<f64>,
     ) -> anyhow::Result<JoinHandle<anyhow::Result<()>>> {
-        let rig = VirtualRig::new(cfg.clone()).map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        let mut rig =
+            VirtualRig::new(cfg.clone()).map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        rig.set_host_lease_ms(tribo_rig::lease_for_speed(opts.speed));
         let mut reader = File::from(self.master.try_clone()?);
         let mut writer = File::from(self.master.try_clone()?);
         let (tx, rx) = mpsc::channel::<Vec<u8>>();
@@ -119,6 +121,7 @@ impl VirtualPort {
                             c.load_n = l;
                             if let Ok(mut r) = VirtualRig::new(c.clone()) {
                                 r.hardware().set_plate_temp_c(temp);
+                                r.set_host_lease_ms(tribo_rig::lease_for_speed(opts.speed));
                                 rig = r;
                                 cfg = c;
                                 start = (Instant::now(), rig.now_us());
