@@ -1,0 +1,253 @@
+//! The host-process rows of the fail-safe table (issue 12): `tribo` as its own process against a
+//! virtual rig that is a process of its own (`tribo rig --virtual`), so the rig outlives the host.
+//! What the rig did is read from its console (standard output: commands, faults, with device time).
+//!
+//! * `kill -9` of `tribo run` while it heats: the rig's lease expires and it drives heater and magnet
+//!   off by itself, within the lease of the last frame it heard (real time, default lease).
+//! * `tribo run --temp 40 --repeat 2 | true`: the closed pipe stops `tribo`, which sends `Safe` on
+//!   its way out: the heater is off before any lease runs out.
+//! * SIGTERM while heating: a clean stop, `Safe` sent.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{self, Receiver};
+use std::time::{Duration, Instant};
+use tribo::link::Link;
+use tribo_wire::{limits, FaultReason};
+
+const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
+
+/// A `tribo rig --virtual` process and the lines of its console, with when they were read.
+struct RigProcess {
+    child: Child,
+    lines: Receiver<(Instant, String)>,
+    seen: Vec<(Instant, String)>,
+    link: PathBuf,
+}
+
+impl RigProcess {
+    fn start(dir: &Path, speed: f64) -> RigProcess {
+        let link = dir.join("rig");
+        let mut child = Command::new(TRIBO)
+            .args(["rig", "--virtual", "--speed", &speed.to_string(), "--link"])
+            .arg(&link)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("tribo rig starts");
+        let out = child.stdout.take().unwrap();
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for l in BufReader::new(out).lines() {
+                let Ok(l) = l else { return };
+                if tx.send((Instant::now(), l)).is_err() {
+                    return;
+                }
+            }
+        });
+        let mut r = RigProcess {
+            child,
+            lines,
+            seen: Vec::new(),
+            link,
+        };
+        r.wait_for("listening on", Duration::from_secs(20));
+        r
+    }
+
+    /// Waits for a console line containing `text` (seen before or new); returns it and when.
+    fn wait_for(&mut self, text: &str, timeout: Duration) -> (Instant, String) {
+        if let Some(l) = self.seen.iter().find(|(_, l)| l.contains(text)) {
+            return l.clone();
+        }
+        let deadline = Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(l) => {
+                    self.seen.push(l.clone());
+                    if l.1.contains(text) {
+                        return l;
+                    }
+                }
+                Err(_) => panic!(
+                    "no console line with {text:?} within {timeout:?}; console so far:\n{}",
+                    self.console()
+                ),
+            }
+        }
+    }
+
+    /// Reads the console for `d` more.
+    fn drain(&mut self, d: Duration) {
+        let deadline = Instant::now() + d;
+        while let Ok(l) = self
+            .lines
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            self.seen.push(l);
+        }
+    }
+
+    fn console(&self) -> String {
+        self.seen
+            .iter()
+            .map(|(_, l)| l.as_str())
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    /// A fresh host's look at the rig (this renews the lease, so only once the test is done).
+    fn status(&self) -> tribo_wire::Status {
+        let mut link = Link::open(&self.link).expect("the rig's port opens");
+        link.hello().expect("hello");
+        link.status().expect("status")
+    }
+}
+
+impl Drop for RigProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn tribo_run(rig: &RigProcess, store: &Path, extra: &[&str]) -> Command {
+    let mut c = Command::new(TRIBO);
+    c.args(["run", "--load", "0.3", "--quiet", "--port"])
+        .arg(&rig.link)
+        .arg("--store")
+        .arg(store)
+        .args(extra);
+    c
+}
+
+#[test]
+fn tribo_killed_while_heating_leaves_the_rig_safe_within_the_lease() {
+    // Real time and the real lease: the one end-to-end check of the default numbers.
+    let dir = tempfile::tempdir().unwrap();
+    let mut rig = RigProcess::start(dir.path(), 1.0);
+    let mut host = tribo_run(&rig, &dir.path().join("runs"), &["--temp", "40"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    rig.wait_for("host: heater to 40.0 °C", Duration::from_secs(20));
+    // Heating (and heartbeating): let it go on a moment, then kill -9.
+    std::thread::sleep(Duration::from_millis(1500));
+    host.kill().unwrap();
+    let killed = Instant::now();
+    host.wait().unwrap();
+    let (at, line) = rig.wait_for("FAULT LeaseExpired", Duration::from_secs(10));
+    let after = at.duration_since(killed);
+    // The rig counts the lease from the last frame it heard, at most one heartbeat period (or
+    // a settle status poll) before the kill.
+    assert!(
+        after <= Duration::from_millis(limits::HOST_LEASE_MS as u64 + 1000),
+        "safe {after:?} after the kill: {line}"
+    );
+    let silence: u64 = line
+        .split("last host frame ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(
+        (limits::HOST_LEASE_MS as u64..=limits::HOST_LEASE_MS as u64 + 2).contains(&silence),
+        "{line}"
+    );
+    assert!(!rig.console().contains("host: safe"), "nobody sent safe");
+    let s = rig.status();
+    assert_eq!(s.heater_setpoint_c, None);
+    assert_eq!(s.heater_duty, 0.0);
+    assert!(!s.magnet_on);
+    assert_eq!(
+        s.last_fault.map(|f| f.reason),
+        Some(FaultReason::LeaseExpired)
+    );
+    // `tribo status` tells a technician the same.
+    let out = Command::new(TRIBO)
+        .args(["status", "--port"])
+        .arg(&rig.link)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("heater off"), "{text}");
+    assert!(text.contains("no word from the host"), "{text}");
+    assert!(text.contains("last reset   power-on"), "{text}");
+}
+
+#[test]
+fn tribo_run_into_a_closed_pipe_makes_the_rig_safe_on_its_way_out() {
+    // `tribo run --temp 40 --repeat 2 | true`: the first result line meets a closed pipe.
+    let dir = tempfile::tempdir().unwrap();
+    let mut rig = RigProcess::start(dir.path(), 20.0);
+    let cmd = format!(
+        "set -o pipefail; '{TRIBO}' run --port '{}' --store '{}' --load 0.3 --temp 40 --ramp 30 \
+         --settle-secs 2 --repeat 2 --quiet | true",
+        rig.link.display(),
+        dir.path().join("runs").display()
+    );
+    let out = Command::new("bash")
+        .args(["-c", &cmd])
+        .stdout(Stdio::null())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("standard output was closed"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    // Heated, recorded one run, then stopped: the rig heard `Safe`, and before its lease ran out.
+    rig.wait_for("host: heater to 40.0 °C", Duration::from_secs(5));
+    rig.wait_for("host: release", Duration::from_secs(5));
+    rig.wait_for("host: safe", Duration::from_secs(5));
+    rig.drain(Duration::from_millis(500));
+    assert!(
+        !rig.console().contains("FAULT"),
+        "no fault: {}",
+        rig.console()
+    );
+    assert_eq!(
+        rig.console().matches("host: release").count(),
+        1,
+        "the second repetition never started"
+    );
+    let s = rig.status();
+    assert_eq!((s.heater_setpoint_c, s.heater_duty), (None, 0.0));
+    assert!(!s.magnet_on);
+    assert_eq!(s.last_fault, None);
+}
+
+#[test]
+fn sigterm_while_heating_stops_cleanly_and_makes_the_rig_safe() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rig = RigProcess::start(dir.path(), 1.0);
+    let mut host = tribo_run(&rig, &dir.path().join("runs"), &["--temp", "40"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    rig.wait_for("host: heater to 40.0 °C", Duration::from_secs(20));
+    std::thread::sleep(Duration::from_millis(300));
+    let term = Instant::now();
+    assert!(Command::new("kill")
+        .args(["-TERM", &host.id().to_string()])
+        .status()
+        .unwrap()
+        .success());
+    let status = host.wait().unwrap();
+    let (at, _) = rig.wait_for("host: safe", Duration::from_secs(5));
+    assert!(
+        at.duration_since(term) < Duration::from_millis(limits::HOST_LEASE_MS as u64 / 2),
+        "safe {:?} after SIGTERM",
+        at.duration_since(term)
+    );
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut host.stderr.take().unwrap(), &mut err).unwrap();
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert!(err.contains("interrupted while heating"), "{err}");
+    rig.drain(Duration::from_millis(200));
+    assert!(!rig.console().contains("FAULT"), "{}", rig.console());
+}
