@@ -9,8 +9,13 @@
 //!   and the lamps through [`BoardHw`].
 //! * `acquisition`: ticker-driven 16-bit conversions of the four analog channels into the ring (a
 //!   simpler binding than a timer-triggered ADC with DMA, see the README), overruns counted there.
-//! * `thermocouple`: the MAX31856 over SPI1 every 100 ms.
+//! * `thermocouple`: the MAX31856 over SPI1 every 100 ms: only moves its register file (the library
+//!   checks it, `tribo_firmware::thermocouple`).
+//! * `watchdog`: feeds the IWDG while every periodic task checks in; otherwise drives the outputs
+//!   safe, notes which task and lets the IWDG reset the chip (`tribo_firmware::watchdog`).
 //! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class.
+//!
+//! Panics and HardFaults go to `crate::safety` (safe state, reset record, reset).
 use core::cell::{Cell, RefCell};
 use core::sync::atomic::{AtomicU32, Ordering};
 
@@ -21,11 +26,12 @@ use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, Resolution, 
 use embassy_stm32::dac::{DacChannel, Value};
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::mode::Blocking;
-use embassy_stm32::peripherals::{ADC1, TIM1, TIM4, USB_OTG_FS};
+use embassy_stm32::peripherals::{ADC1, IWDG1, TIM1, TIM4, USB_OTG_FS};
 use embassy_stm32::spi::{self, Spi};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
+use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, usb};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
@@ -33,13 +39,17 @@ use embassy_sync::channel::Channel;
 use embassy_sync::pipe::Pipe;
 use embassy_time::{Duration, Instant, Ticker, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
-use panic_probe as _;
 use static_cell::{ConstStaticCell, StaticCell};
 use tribo_firmware::acquisition::Ring;
 use tribo_firmware::app::{App, AppConfig};
 use tribo_firmware::ecr::FULL_SCALE_V;
 use tribo_firmware::hal::*;
 use tribo_firmware::runstore::{BlockMeta, RunStore, BOARD_BLOCKS, BOARD_COUNTS};
+use tribo_firmware::thermocouple::{self as tc, Registers};
+use tribo_firmware::watchdog::{task, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
+use tribo_firmware::wire::{limits, BootReport, ResetCause};
+
+use crate::safety;
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
@@ -55,10 +65,9 @@ const TX_PIPE: usize = 4096;
 /// ECR source divider: the DAC's 0..3.3 V become 0..3.3 mV across the contact.
 const ECR_DIVIDER: f32 = 1000.0;
 
-/// The latest thermocouple reading and when it was taken (ms of uptime).
-type TcReading = (Result<f32, ThermocoupleFault>, u64);
-/// A reading older than this counts as none: the converter task is stuck.
-const TC_STALE_MS: u64 = 500;
+/// The converter's register file as last read (`None` before any good SPI transfer) and when
+/// (µs of uptime). The application decides how old is too old.
+type TcReading = (Option<Registers>, u64);
 
 /// What the tasks share.
 struct Shared {
@@ -68,15 +77,16 @@ struct Shared {
     /// Latest ECR channel count (converted even when stopped, every 10 ms).
     ecr_count: AtomicU32,
     thermocouple: &'static Mutex<Cs, Cell<TcReading>>,
+    /// The periodic tasks' check-ins, for the watchdog.
+    liveness: Liveness<3>,
     tx: Pipe<Cs, TX_PIPE>,
     rx: Channel<Cs, heapless::Vec<u8, 64>, 8>,
 }
 
 // The thermocouple cell apart: its non-zero initial value would put all of `Shared` (13 KiB of ring
 // and pipe) in `.data`, i.e. in flash too.
-static THERMOCOUPLE: ConstStaticCell<Mutex<Cs, Cell<TcReading>>> = ConstStaticCell::new(
-    Mutex::new(Cell::new((Err(ThermocoupleFault::NoReading), 0))),
-);
+static THERMOCOUPLE: ConstStaticCell<Mutex<Cs, Cell<TcReading>>> =
+    ConstStaticCell::new(Mutex::new(Cell::new((None, 0))));
 static SHARED: StaticCell<Shared> = StaticCell::new();
 static STORE_COUNTS: ConstStaticCell<[u16; BOARD_COUNTS]> = ConstStaticCell::new([0; BOARD_COUNTS]);
 static STORE_META: ConstStaticCell<[BlockMeta; BOARD_BLOCKS]> =
@@ -123,13 +133,12 @@ impl Magnet for BoardHw {
 }
 
 impl Thermocouple for BoardHw {
-    fn read_thermocouple(&mut self) -> Result<f32, ThermocoupleFault> {
-        let (reading, at_ms) = self.shared.thermocouple.lock(|c| c.get());
-        if Instant::now().as_millis().saturating_sub(at_ms) > TC_STALE_MS {
-            Err(ThermocoupleFault::NoReading)
-        } else {
-            reading
-        }
+    fn read_thermocouple(&mut self) -> Option<ConverterRead> {
+        let (regs, at_us) = self.shared.thermocouple.lock(|c| c.get());
+        regs.map(|regs| ConverterRead {
+            regs,
+            age_us: now_us().saturating_sub(at_us),
+        })
     }
 }
 
@@ -218,15 +227,51 @@ fn now_us() -> u64 {
     Instant::now().as_micros()
 }
 
+/// Milliseconds of uptime, wrapping, for the watchdog's check-ins.
+fn now_ms() -> u32 {
+    Instant::now().as_millis() as u32
+}
+
 #[embassy_executor::task]
-async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64) {
+async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64, boot: BootReport) {
     let store = RunStore::new(STORE_COUNTS.take(), STORE_META.take());
     let mut app = App::new(AppConfig::new(serial), store);
+    app.set_boot_report(boot);
     let mut ticker = Ticker::every(Duration::from_millis(1));
     loop {
         match select(shared.rx.receive(), ticker.next()).await {
             Either::First(bytes) => app.on_bytes(&mut hw, &bytes, now_us()),
             Either::Second(()) => app.poll(&mut hw, now_us()),
+        }
+        shared.liveness.check_in(task::APP, now_ms());
+    }
+}
+
+/// Feeds the IWDG only while every periodic task checks in. A silent task: the outputs go safe at
+/// once, the reset record names it, and the IWDG, no longer fed, resets the chip within its
+/// timeout. (A core stuck in one task never runs this: the IWDG resets it all the same.)
+#[embassy_executor::task]
+async fn watchdog_task(shared: &'static Shared, mut wdg: IndependentWatchdog<'static, IWDG1>) {
+    wdg.unleash();
+    let mut ticker = Ticker::every(Duration::from_millis(FEED_PERIOD_MS as u64));
+    loop {
+        ticker.next().await;
+        match shared.liveness.verdict(now_ms()) {
+            Ok(()) => wdg.pet(),
+            Err(stuck) => {
+                safety::safe_state();
+                safety::record(ResetCause::Watchdog, stuck.message().as_bytes());
+                defmt::error!(
+                    "task {} silent for {} ms: outputs safe, watchdog no longer fed",
+                    stuck.name,
+                    stuck.silent_ms
+                );
+                loop {
+                    // Starve the IWDG; keep the outputs safe whatever the other tasks write.
+                    ticker.next().await;
+                    safety::safe_state();
+                }
+            }
         }
     }
 }
@@ -239,6 +284,7 @@ async fn acquisition_task(
 ) {
     const SAMPLE: SampleTime = SampleTime::CYCLES32_5;
     loop {
+        shared.liveness.check_in(task::ACQUISITION, now_ms());
         let rate = shared.rate_hz.load(Ordering::Relaxed);
         if rate == 0 {
             let e = adc.blocking_read(&mut ch[3], SAMPLE);
@@ -249,6 +295,7 @@ async fn acquisition_task(
         let mut ticker = Ticker::every(Duration::from_hz(rate as u64));
         while shared.rate_hz.load(Ordering::Relaxed) == rate {
             ticker.next().await;
+            shared.liveness.check_in(task::ACQUISITION, now_ms());
             let mut s: AnalogSample = [0; ANALOG_CHANNELS];
             for (v, c) in s.iter_mut().zip(ch.iter_mut()) {
                 *v = adc.blocking_read(c, SAMPLE);
@@ -259,46 +306,46 @@ async fn acquisition_task(
     }
 }
 
-/// MAX31856: auto-conversion, type K, read every 100 ms with its fault register.
+/// MAX31856: configured as the library says, then its whole register file read every 100 ms and
+/// handed over as bytes; configured again when the configuration does not read back (a converter
+/// reset by a glitch), at most once a second. Whether to trust a read is the application's call.
 #[embassy_executor::task]
 async fn thermocouple_task(
     shared: &'static Shared,
     mut spi: Spi<'static, Blocking, spi::mode::Master>,
     mut cs: Output<'static>,
 ) {
-    // CR0 (0x00, write 0x80): automatic conversions, open-circuit detection; CR1 (0x01): type K.
-    let mut init = [0x80u8, 0x90];
-    cs.set_low();
-    let _ = spi.blocking_transfer_in_place(&mut init);
-    cs.set_high();
-    let mut init = [0x81u8, 0x03];
-    cs.set_low();
-    let _ = spi.blocking_transfer_in_place(&mut init);
-    cs.set_high();
+    fn configure(spi: &mut Spi<'static, Blocking, spi::mode::Master>, cs: &mut Output<'static>) {
+        for (reg, value) in tc::CONFIG_WRITES {
+            let mut w = [0x80 | reg, value];
+            cs.set_low();
+            let _ = spi.blocking_transfer_in_place(&mut w);
+            cs.set_high();
+        }
+    }
+    configure(&mut spi, &mut cs);
+    let mut last_config_ms = now_ms();
     loop {
         Timer::after_millis(100).await;
-        // Read LTCBH, LTCBM, LTCBL, SR from 0x0C.
-        let mut buf = [0x0Cu8, 0, 0, 0, 0];
+        shared.liveness.check_in(task::THERMOCOUPLE, now_ms());
+        // Address 0x00 (read), then the 16 registers 0x00..=0x0F.
+        let mut buf = [0u8; 1 + tc::REGISTERS];
         cs.set_low();
         let ok = spi.blocking_transfer_in_place(&mut buf).is_ok();
         cs.set_high();
-        let reading = if !ok {
-            Err(ThermocoupleFault::NoReading)
-        } else {
-            let sr = buf[4];
-            if sr & 0x01 != 0 {
-                Err(ThermocoupleFault::Open)
-            } else if sr & 0x02 != 0 {
-                Err(ThermocoupleFault::Shorted)
-            } else {
-                // 19-bit two's complement, 1/128 °C, left-aligned in 24 bits.
-                let raw =
-                    ((buf[1] as i32) << 24 | (buf[2] as i32) << 16 | (buf[3] as i32) << 8) >> 13;
-                Ok(raw as f32 / 128.0)
-            }
-        };
-        let at_ms = Instant::now().as_millis();
-        shared.thermocouple.lock(|c| c.set((reading, at_ms)));
+        if !ok {
+            // Nothing new: the reading ages, and the application counts it missing.
+            continue;
+        }
+        let mut regs: Registers = [0; tc::REGISTERS];
+        regs.copy_from_slice(&buf[1..]);
+        let at = now_us();
+        shared.thermocouple.lock(|c| c.set((Some(regs), at)));
+        if !tc::config_ok(&regs) && now_ms().wrapping_sub(last_config_ms) >= 1000 {
+            defmt::warn!("MAX31856 configuration lost: configuring again");
+            configure(&mut spi, &mut cs);
+            last_config_ms = now_ms();
+        }
     }
 }
 
@@ -384,7 +431,12 @@ macro_rules! spawn {
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    // Why the last reset (read before anything else touches RCC_RSR or the record).
+    let boot = safety::boot_report();
     let p = embassy_stm32::init(clocks());
+    safety::check_table();
+    safety::freeze_watchdog_when_halted();
+    defmt::info!("last reset: {}", boot.cause);
     defmt::info!(
         "tribo-board, protocol v{}",
         tribo_firmware::wire::PROTOCOL_VERSION
@@ -394,6 +446,7 @@ async fn main(spawner: Spawner) {
         rate_hz: AtomicU32::new(0),
         ecr_count: AtomicU32::new(0),
         thermocouple: THERMOCOUPLE.take(),
+        liveness: Liveness::new(BOARD_TASKS, now_ms()),
         tx: Pipe::new(),
         rx: Channel::new(),
     });
@@ -499,5 +552,8 @@ async fn main(spawner: Spawner) {
     spawn!(spawner, usb_rx_task(shared, rx));
     spawn!(spawner, thermocouple_task(shared, spi, cs));
     spawn!(spawner, acquisition_task(shared, adc, channels));
-    spawn!(spawner, app_task(shared, hw, serial));
+    spawn!(spawner, app_task(shared, hw, serial, boot));
+    // Last: every task is running when the watchdog starts counting.
+    let wdg = IndependentWatchdog::new(p.IWDG1, limits::WATCHDOG_TIMEOUT_MS * 1000);
+    spawn!(spawner, watchdog_task(shared, wdg));
 }
