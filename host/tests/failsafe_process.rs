@@ -7,6 +7,8 @@
 //! * `tribo run --temp 40 --repeat 2 | true`: the closed pipe stops `tribo`, which sends `Safe` on
 //!   its way out: the heater is off before any lease runs out.
 //! * SIGTERM while heating: a clean stop, `Safe` sent.
+//! * A held session (in-process rig, real time): the heartbeat thread alone keeps the lease through
+//!   a silence longer than it; dropping the hold sends `Safe`; without it the lease expires.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -250,4 +252,57 @@ fn sigterm_while_heating_stops_cleanly_and_makes_the_rig_safe() {
     assert!(err.contains("interrupted while heating"), "{err}");
     rig.drain(Duration::from_millis(200));
     assert!(!rig.console().contains("FAULT"), "{}", rig.console());
+}
+
+#[test]
+fn a_held_session_keeps_the_lease_through_silence_and_leaves_the_rig_safe() {
+    // In-process rig at real time and the real lease: the session says nothing for longer than
+    // the lease while the heater is on; only the heartbeat thread speaks.
+    let rig = tribo_rig::VirtualRig::new(tribo_rig::VirtualRigConfig::default()).unwrap();
+    let port = tribo::link::pty::VirtualPort::open().unwrap();
+    let path = port.path().to_owned();
+    port.spawn(rig, tribo_rig::ServeOptions::default());
+    let mut link = Link::open(&path).unwrap();
+    link.hello().unwrap();
+    let hold = link.hold();
+    link.command(tribo_wire::HostMsg::SetHeater(tribo_wire::HeaterSetpoint {
+        setpoint_c: 40.0,
+        ramp_c_per_min: 30.0,
+    }))
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(
+        limits::HOST_LEASE_MS as u64 + limits::HEARTBEAT_MS as u64,
+    ));
+    assert!(hold.heartbeats() >= 3, "{}", hold.heartbeats());
+    let s = link.status().unwrap();
+    assert_eq!(s.last_fault, None, "the lease held");
+    assert_eq!(s.heater_setpoint_c, Some(40.0));
+    assert!(s.heater_duty > 0.0);
+    // The session ends: Safe, at once.
+    drop(hold);
+    let s = link.status().unwrap();
+    assert_eq!((s.heater_setpoint_c, s.heater_duty), (None, 0.0));
+    assert_eq!(
+        s.last_fault, None,
+        "made safe by the host, not by the lease"
+    );
+    // Without the heartbeat, the same silence expires the lease.
+    link.command(tribo_wire::HostMsg::SetHeater(tribo_wire::HeaterSetpoint {
+        setpoint_c: 40.0,
+        ramp_c_per_min: 30.0,
+    }))
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(
+        limits::HOST_LEASE_MS as u64 + limits::HEARTBEAT_MS as u64,
+    ));
+    let s = link.status().unwrap();
+    assert_eq!(
+        s.last_fault.map(|f| f.reason),
+        Some(FaultReason::LeaseExpired)
+    );
+    assert_eq!(s.heater_setpoint_c, None);
+    assert!(link
+        .faults()
+        .iter()
+        .any(|f| f.reason == FaultReason::LeaseExpired));
 }
