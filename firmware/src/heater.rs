@@ -23,6 +23,9 @@ use crate::wire::{limits, HeaterFault, HeaterSetpoint};
 pub struct ThermalLimits {
     pub cutoff_c: f32,
     pub bad_reads: u8,
+    /// Bad reads before this time since start do not latch a fault (the converter's first
+    /// conversion).
+    pub startup_grace_s: f32,
     pub watch_gain_c: f32,
     pub watch_period_s: f32,
     pub band_c: f32,
@@ -34,6 +37,7 @@ impl Default for ThermalLimits {
         ThermalLimits {
             cutoff_c: limits::HEATER_CUTOFF_C,
             bad_reads: limits::TC_BAD_READS,
+            startup_grace_s: limits::TC_STARTUP_GRACE_MS as f32 / 1000.0,
             watch_gain_c: limits::HEATER_WATCH_GAIN_C,
             watch_period_s: limits::HEATER_WATCH_PERIOD_S,
             band_c: limits::HEATER_BAND_C,
@@ -199,7 +203,7 @@ impl Heater {
             Err(bad) => {
                 self.bad = self.bad.saturating_add(1);
                 self.last_bad = Some(bad);
-                if self.bad >= lim.bad_reads.max(1) {
+                if self.bad >= lim.bad_reads.max(1) && self.t_s >= lim.startup_grace_s {
                     self.temp_c = f32::NAN;
                     self.watch = None;
                     self.rest = None;
@@ -475,7 +479,8 @@ mod tests {
             (BadRead::Missing { age_ms: 400 }, HeaterFault::NoReading),
         ] {
             let mut h = Heater::new(HeaterConfig::default());
-            h.step(ok(30.0), 0.1);
+            // Past the start-up grace.
+            h.step(ok(30.0), 2.0);
             h.set(sp(90.0, 30.0));
             assert!(h.step(ok(30.0), 0.1).duty > 0.0);
             for _ in 1..limits::TC_BAD_READS {
@@ -508,6 +513,32 @@ mod tests {
             assert_eq!(s.new_fault, None);
             assert_eq!(s.duty > 0.0, i % 2 == 1);
         }
+    }
+
+    #[test]
+    fn bad_reads_at_start_up_wait_for_the_converter_then_count() {
+        let lim = ThermalLimits::default();
+        // A converter that is still converting its first reading: no fault.
+        let mut h = Heater::new(HeaterConfig::default());
+        assert_eq!(h.step(Err(BadRead::StuckWord), 0.0).new_fault, None);
+        assert_eq!(h.step(Err(BadRead::StuckWord), 0.1).new_fault, None);
+        assert_eq!(h.step(Err(BadRead::StuckWord), 0.1).new_fault, None);
+        assert_eq!(h.step(ok(23.0), 0.1).new_fault, None);
+        assert_eq!(h.fault(), None);
+        // One that never answers: the fault at the end of the grace.
+        let mut h = Heater::new(HeaterConfig::default());
+        let mut t = 0.0;
+        let at = loop {
+            let s = h.step(Err(BadRead::Missing { age_ms: u32::MAX }), 0.1);
+            assert_eq!(s.duty, 0.0);
+            if s.new_fault.is_some() {
+                break t;
+            }
+            t += 0.1;
+            assert!(t < 5.0);
+        };
+        assert!((at - lim.startup_grace_s).abs() < 0.15, "{at}");
+        assert_eq!(h.fault(), Some(HeaterFault::NoReading));
     }
 
     #[test]

@@ -325,27 +325,30 @@ async fn thermocouple_task(
     }
     configure(&mut spi, &mut cs);
     let mut last_config_ms = now_ms();
+    // The first read at once (the application's first heater steps find a reading), then every
+    // 100 ms.
+    let mut ticker = Ticker::every(Duration::from_millis(100));
     loop {
-        Timer::after_millis(100).await;
         shared.liveness.check_in(task::THERMOCOUPLE, now_ms());
         // Address 0x00 (read), then the 16 registers 0x00..=0x0F.
         let mut buf = [0u8; 1 + tc::REGISTERS];
         cs.set_low();
         let ok = spi.blocking_transfer_in_place(&mut buf).is_ok();
         cs.set_high();
-        if !ok {
-            // Nothing new: the reading ages, and the application counts it missing.
-            continue;
+        // On an SPI error nothing new is published: the reading ages, and the application counts
+        // it missing.
+        if ok {
+            let mut regs: Registers = [0; tc::REGISTERS];
+            regs.copy_from_slice(&buf[1..]);
+            let at = now_us();
+            shared.thermocouple.lock(|c| c.set((Some(regs), at)));
+            if !tc::config_ok(&regs) && now_ms().wrapping_sub(last_config_ms) >= 1000 {
+                defmt::warn!("MAX31856 configuration lost: configuring again");
+                configure(&mut spi, &mut cs);
+                last_config_ms = now_ms();
+            }
         }
-        let mut regs: Registers = [0; tc::REGISTERS];
-        regs.copy_from_slice(&buf[1..]);
-        let at = now_us();
-        shared.thermocouple.lock(|c| c.set((Some(regs), at)));
-        if !tc::config_ok(&regs) && now_ms().wrapping_sub(last_config_ms) >= 1000 {
-            defmt::warn!("MAX31856 configuration lost: configuring again");
-            configure(&mut spi, &mut cs);
-            last_config_ms = now_ms();
-        }
+        ticker.next().await;
     }
 }
 

@@ -273,6 +273,9 @@ pub mod limits {
     pub const TC_BAD_READS: u8 = 3;
     /// A converter reading older than this is missing (the converter stopped answering).
     pub const TC_MAX_AGE_MS: u32 = 250;
+    /// Bad reads in the first second after boot do not make a fault yet (the converter's first
+    /// conversion takes ~150 ms after it is configured); the heater is off for them all the same.
+    pub const TC_STARTUP_GRACE_MS: u32 = 1_000;
     /// Plausible cold-junction (board) temperature of the MAX31856; outside, its readings are bad.
     pub const COLD_JUNCTION_C: RangeInclusive<f32> = 5.0..=50.0;
     /// Lowest plausible plate temperature; below, the reading is bad (reversed or damaged
