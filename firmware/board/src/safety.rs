@@ -21,7 +21,7 @@ use tribo_firmware::reset::{self, MessageBuf, Record, ResetFlags, RECORD_WORDS};
 use tribo_firmware::safety;
 use tribo_firmware::wire::{BootReport, ResetCause};
 
-/// The reset record: in `.reset_record` (`memory.x`: the last KiB of DTCM, not initialised by the
+/// The reset record: in `.reset_record` (`memory.x`: the last KiB of SRAM4, not initialised by the
 /// start-up code, kept across every reset but a power cycle).
 #[link_section = ".reset_record"]
 static mut RECORD: MaybeUninit<Record> = MaybeUninit::uninit();
