@@ -25,7 +25,7 @@
 //! is answered by `Error { Malformed }`. Nothing a host sends can make it panic.
 //!
 //! **Fail-safe.** Heating and holding the magnet need someone in charge ([`crate::lease`]): a host
-//! renewing its lease with every frame, or the technician in stand-alone mode (a long press of the
+//! renewing its lease with its commands and heartbeats, or the technician in stand-alone mode (a long press of the
 //! button). When nobody is, and on every heater or magnet fault, the outputs concerned go safe first
 //! and a [`DeviceMsg::Fault`] says why afterwards; the latest fault and the reset cause are in every
 //! [`Status`], and the first `Hello` after boot is answered with the [`DeviceMsg::Boot`] report too.
@@ -474,7 +474,9 @@ impl<'a> App<'a> {
 
     fn handle<H: Hardware>(&mut self, hw: &mut H, frame: Frame<HostMsg>) {
         let seq = frame.seq;
-        self.lease.renew(self.now_us);
+        if crate::lease::renews(&frame.msg) {
+            self.lease.renew(self.now_us);
+        }
         let r = match frame.msg {
             HostMsg::Hello { protocol } => {
                 let info = self.cfg.device;

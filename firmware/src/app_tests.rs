@@ -1099,7 +1099,8 @@ fn heartbeats_and_any_command_keep_the_lease() {
         let cmd = if i % 2 == 0 {
             HostMsg::Heartbeat
         } else {
-            HostMsg::Status
+            // A command that acts (here refused: the rig is armed) renews it too.
+            HostMsg::Configure(Configure::real_rig(0.3))
         };
         b.send(cmd);
     }
@@ -1113,6 +1114,21 @@ fn heartbeats_and_any_command_keep_the_lease() {
         b.app.on_bytes(&mut b.hw, &[1, 2, 3, 0], now);
     }
     assert_eq!(faults(&b.msgs()), vec![FaultReason::LeaseExpired]);
+    // Nor is a program that only looks: status polls (and hellos, pulls) do not hold the rig.
+    let mut b = Bench::new();
+    b.heating_and_armed();
+    for i in 0..4 {
+        b.run_for(limits::HEARTBEAT_MS as u64);
+        b.send(if i % 2 == 0 {
+            HostMsg::Status
+        } else {
+            HostMsg::Hello {
+                protocol: PROTOCOL_VERSION,
+            }
+        });
+    }
+    assert_eq!(faults(&b.msgs()), vec![FaultReason::LeaseExpired]);
+    assert_eq!(b.hw.heater_duty, 0.0);
 }
 
 #[test]
@@ -1282,6 +1298,12 @@ fn a_host_takes_over_stand_alone_mode_and_a_held_rig_ignores_long_presses() {
     assert_eq!(b.app.state(), RigState::Armed);
     assert_eq!(b.app.control(), Control::StandAlone);
     b.send(HostMsg::Status);
+    assert_eq!(
+        b.app.control(),
+        Control::StandAlone,
+        "a look does not take over"
+    );
+    b.send(HostMsg::Heartbeat);
     assert_eq!(b.app.control(), Control::Host);
     // The host now holds it, under its lease: silent, the magnet goes off.
     b.take();

@@ -1,16 +1,27 @@
 //! Who may keep the rig heating and the magnet holding.
 //!
-//! * **A host**, while it holds a lease: every frame it sends that decodes (any command, or a
-//!   [`crate::wire::HostMsg::Heartbeat`]) renews it for [`limits::HOST_LEASE_MS`]. A host that dies,
-//!   hangs or loses its cable stops renewing; the application then drives heater and magnet safe and
-//!   says why ([`FaultReason::LeaseExpired`]).
+//! * **A host**, while it holds a lease: every command it sends that acts on the rig, and
+//!   [`crate::wire::HostMsg::Heartbeat`], renews it for [`limits::HOST_LEASE_MS`] ([`renews`]). A
+//!   host that dies, hangs or loses its cable stops renewing; the application then drives heater and
+//!   magnet safe and says why ([`FaultReason::LeaseExpired`]). Queries (`Hello`, `Status`, `Pull`,
+//!   `PullBlocks`) do not renew it: a second program that only looks at a rig whose host died (a
+//!   status poller, `tribo status`) must not keep it heating.
 //! * **The technician at the rig** (stand-alone mode, button only): a long press
 //!   ([`limits::STANDALONE_PRESS_MS`]) on an idle, configured rig that no host holds. Each press
 //!   renews it for [`limits::STANDALONE_HEAT_MS`]; then the outputs go safe
 //!   ([`FaultReason::StandAloneExpired`]). A host that speaks takes over.
 //! * **Nobody**: nothing may heat or hold.
 
-use crate::wire::{limits, Control, FaultReason};
+use crate::wire::{limits, Control, FaultReason, HostMsg};
+
+/// Whether a frame from the host renews its lease: commands that act on the rig and heartbeats do,
+/// queries do not.
+pub fn renews(msg: &HostMsg) -> bool {
+    !matches!(
+        msg,
+        HostMsg::Hello { .. } | HostMsg::Status | HostMsg::Pull { .. } | HostMsg::PullBlocks { .. }
+    )
+}
 
 /// The lease bookkeeping (times in µs of device time).
 #[derive(Debug, Clone, PartialEq)]

@@ -150,7 +150,7 @@ fn tribo_killed_while_heating_leaves_the_rig_safe_within_the_lease() {
         "safe {after:?} after the kill: {line}"
     );
     let silence: u64 = line
-        .split("last host frame ")
+        .split("last host command ")
         .nth(1)
         .and_then(|s| s.split(' ').next())
         .and_then(|s| s.parse().ok())

@@ -52,8 +52,10 @@ wire_type! {
         /// Send the stored run again, from sample block `from_block` on, then its result and end.
         Pull { run_id: u32, from_block: u32 },
         // ---- protocol v2 ----
-        /// Renews the host lease (every command does too): while heating or holding the magnet the
-        /// rig needs one at least every [`limits::HOST_LEASE_MS`], or it drives its outputs safe.
+        /// Renews the host lease (so does every command that acts on the rig; the queries `Hello`,
+        /// `Status`, `Pull` and `PullBlocks` do not: a program that only looks does not keep the rig
+        /// heating): while heating or holding the magnet the rig needs one at least every
+        /// [`limits::HOST_LEASE_MS`], or it drives its outputs safe.
         Heartbeat,
         /// Drive everything that heats or holds to its safe value now: heater off, magnet off, armed
         /// state left. A run in progress goes on recording. Always accepted.

@@ -316,7 +316,9 @@ impl VirtualRig {
             }
         });
         for msg in seen {
-            self.last_host_us = Some(self.now_us);
+            if tribo_firmware::lease::renews(&msg) {
+                self.last_host_us = Some(self.now_us);
+            }
             let what = match msg {
                 HostMsg::Hello { .. } => "host: hello".to_string(),
                 HostMsg::Configure(c) => format!("host: configure (load {} N)", c.rig.load_n),
@@ -348,7 +350,12 @@ impl VirtualRig {
         if let Some(f) = self.app.last_fault() {
             let silence = self
                 .last_host_us
-                .map(|t| format!(" (last host frame {} ms before)", (self.now_us - t) / 1000))
+                .map(|t| {
+                    format!(
+                        " (last host command {} ms before)",
+                        (self.now_us - t) / 1000
+                    )
+                })
                 .unwrap_or_default();
             self.event(format!(
                 "FAULT {:?} at {:.1} °C: outputs safe{silence}",

@@ -2,9 +2,9 @@
 //! controls leaves the rig safe.
 //!
 //! The rig keeps heating and holding its magnet only while a host renews its lease
-//! ([`limits::HOST_LEASE_MS`]): any command does, and between commands (a long fit, a prompt, a
-//! slow terminal) the heartbeat thread of a [`Hold`] sends [`HostMsg::Heartbeat`] every
-//! [`limits::HEARTBEAT_MS`]. The exits:
+//! ([`limits::HOST_LEASE_MS`]): commands that act on the rig do, queries (status polls) do not, so
+//! the heartbeat thread of a [`Hold`] sends [`HostMsg::Heartbeat`] every [`limits::HEARTBEAT_MS`]
+//! for as long as the session holds the rig (long fits, prompts, settling included). The exits:
 //!
 //! | exit | what makes the rig safe |
 //! |---|---|
