@@ -28,12 +28,14 @@ pub fn render(s: &Status, boot_message: Option<&str>) -> String {
     let mut t = String::new();
     let mut line = |k: &str, v: String| t.push_str(&format!("{k:<13}{v}\n"));
     line("state", state_name(s.state).to_string());
+    let active = s.heater_setpoint_c.is_some() || s.magnet_on;
     line(
         "held by",
-        match s.control {
-            Control::Host => "a host (its lease is renewed)".into(),
-            Control::StandAlone => "the technician at the rig (stand-alone mode)".into(),
-            Control::None => "nobody: nothing heats or holds".into(),
+        match (active, s.control) {
+            (_, Control::StandAlone) => "the technician at the rig (stand-alone mode)".into(),
+            (false, _) => "nobody needs to: nothing heats or holds".into(),
+            (true, Control::Host) => "a host (it renews its lease)".into(),
+            (true, Control::None) => "nobody: heater and magnet are going off".into(),
         },
     );
     let plate = if s.temp_c.is_finite() {
@@ -99,4 +101,67 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     out(&text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tribo_wire::{FaultReason, FaultReport, HeaterFault, ResetCause};
+
+    fn status() -> Status {
+        Status {
+            state: RigState::Configured,
+            run_id: 4,
+            temp_c: 41.25,
+            heater_setpoint_c: None,
+            heater_duty: 0.0,
+            heater_fault: None,
+            magnet_on: false,
+            log10_ecr_ohm: 7.0,
+            ecr_range: 2,
+            samples: 0,
+            overruns: 0,
+            uptime_ms: 3_723_400,
+            last_fault: Some(FaultReport {
+                reason: FaultReason::LeaseExpired,
+                uptime_ms: 62_500,
+                temp_c: 40.0,
+            }),
+            faults: 1,
+            reset_cause: ResetCause::Watchdog,
+            control: Control::None,
+        }
+    }
+
+    #[test]
+    fn the_status_says_what_is_on_the_last_fault_and_the_last_reset() {
+        let t = render(
+            &status(),
+            Some("watchdog: task thermocouple silent for 312 ms"),
+        );
+        assert!(t.contains("plate        41.2 °C, heater off"), "{t}");
+        assert!(t.contains("nothing heats or holds"), "{t}");
+        assert!(
+            t.contains("no word from the host")
+                && t.contains("1 min 02.5 s")
+                && t.contains("(1 since boot)"),
+            "{t}"
+        );
+        assert!(
+            t.contains("last reset   watchdog: a task of the firmware stopped (outputs were made safe): watchdog: task thermocouple silent for 312 ms"),
+            "{t}"
+        );
+        assert!(t.contains("uptime       1 h 02 min 03.4 s"), "{t}");
+        let mut s = status();
+        s.heater_setpoint_c = Some(60.0);
+        s.heater_duty = 0.5;
+        s.heater_fault = Some(HeaterFault::Runaway);
+        s.control = Control::Host;
+        s.last_fault = None;
+        let t = render(&s, None);
+        assert!(t.contains("heating to 60.0 °C (duty 50 %)"), "{t}");
+        assert!(t.contains("a host (it renews its lease)"), "{t}");
+        assert!(t.contains("switch may be stuck on"), "{t}");
+        assert!(t.contains("none since boot"), "{t}");
+    }
 }
