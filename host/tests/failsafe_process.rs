@@ -7,6 +7,7 @@
 //! * `tribo run --temp 40 --repeat 2 | true`: the closed pipe stops `tribo`, which sends `Safe` on
 //!   its way out: the heater is off before any lease runs out.
 //! * SIGTERM while heating: a clean stop, `Safe` sent.
+//! * A rig that resets (HardFault) while `tribo` settles the heater: settling stops with the reason.
 //! * A held session (in-process rig, real time): the heartbeat thread alone keeps the lease through
 //!   a silence longer than it; dropping the hold sends `Safe`; without it the lease expires.
 
@@ -305,4 +306,54 @@ fn a_held_session_keeps_the_lease_through_silence_and_leaves_the_rig_safe() {
         .faults()
         .iter()
         .any(|f| f.reason == FaultReason::LeaseExpired));
+}
+
+#[test]
+fn a_rig_that_resets_while_heating_stops_the_settling_with_the_reason() {
+    use std::io::{Read, Write};
+    use std::os::unix::net::UnixStream;
+    // A rig served in real time on a socket pair, which takes a HardFault one second in.
+    let (host_end, mut rig_end) = UnixStream::pair().unwrap();
+    rig_end
+        .set_read_timeout(Some(Duration::from_millis(2)))
+        .unwrap();
+    std::thread::spawn(move || {
+        let mut rig = tribo_rig::VirtualRig::new(tribo_rig::VirtualRigConfig::default()).unwrap();
+        let start = Instant::now();
+        let mut faulted = false;
+        let mut buf = [0u8; 4096];
+        loop {
+            match rig_end.read(&mut buf) {
+                Ok(0) => return,
+                Ok(n) => rig.input(&buf[..n]),
+                Err(_) => {}
+            }
+            rig.advance_to(start.elapsed().as_micros() as u64);
+            if !faulted && start.elapsed() > Duration::from_secs(1) {
+                rig.inject_cpu_fault();
+                faulted = true;
+            }
+            if rig_end.write_all(&rig.take_output()).is_err() {
+                return;
+            }
+        }
+    });
+    let mut link = Link::from_stream("socket", host_end.try_clone().unwrap(), host_end);
+    link.hello().unwrap();
+    let _hold = link.hold();
+    let plan = tribo::link::session::HeaterPlan::new(40.0, 10.0);
+    let t0 = Instant::now();
+    let e = tribo::link::session::settle(
+        &mut link,
+        &plan,
+        &std::sync::atomic::AtomicBool::new(false),
+        &mut |_| {},
+    )
+    .unwrap_err();
+    let msg = format!("{e:#}");
+    assert!(
+        msg.contains("reset itself") && msg.contains("CPU fault"),
+        "{msg}"
+    );
+    assert!(t0.elapsed() < Duration::from_secs(3), "{:?}", t0.elapsed());
 }

@@ -455,6 +455,7 @@ pub fn settle(
     link.command(HostMsg::SetHeater(sp))?;
     let start = Instant::now();
     let mut stable_since: Option<Instant> = None;
+    let mut first: Option<tribo_wire::Status> = None;
     loop {
         if abort.load(Ordering::Relaxed) {
             let _ = link.command(HostMsg::HeaterOff);
@@ -463,6 +464,14 @@ pub fn settle(
         let s = link.status()?;
         if let Some(f) = s.heater_fault {
             bail!("{}", explain(ErrorCode::Heater(f)));
+        }
+        let before = *first.get_or_insert(s);
+        if s.uptime_ms < before.uptime_ms || s.reset_cause != before.reset_cause {
+            bail!(
+                "the rig reset itself while heating ({}): it is safe, with the heater off; `tribo status` \
+                 says more, then run again",
+                super::reset_cause_text(s.reset_cause)
+            );
         }
         if s.heater_setpoint_c.is_none() {
             // Switched off by the rig itself (lease, stand-alone limit) or by another program.
