@@ -26,6 +26,7 @@ struct RigProcess {
     child: Child,
     lines: Receiver<(Instant, String)>,
     seen: Vec<(Instant, String)>,
+    /// What `--port` takes to reach it (printed by the rig: "virtual rig listening on …").
     link: PathBuf,
 }
 
@@ -55,7 +56,14 @@ impl RigProcess {
             seen: Vec::new(),
             link,
         };
-        r.wait_for("listening on", Duration::from_secs(20));
+        let (_, line) = r.wait_for("listening on", Duration::from_secs(20));
+        if let Some(addr) = line
+            .split("listening on ")
+            .nth(1)
+            .and_then(|s| s.split_whitespace().next())
+        {
+            r.link = PathBuf::from(addr);
+        }
         r
     }
 
