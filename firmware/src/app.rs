@@ -25,8 +25,9 @@
 //! is answered by `Error { Malformed }`. Nothing a host sends can make it panic.
 //!
 //! **Fail-safe.** Heating and holding the magnet need someone in charge ([`crate::lease`]): a host
-//! renewing its lease with its commands and heartbeats, or the technician in stand-alone mode (a long press of the
-//! button). When nobody is, and on every heater or magnet fault, the outputs concerned go safe first
+//! renewing its lease with its commands and heartbeats, or the technician in stand-alone mode (a
+//! long press of the button). When nobody is, and on every heater or magnet fault, the outputs
+//! concerned go safe first
 //! and a [`DeviceMsg::Fault`] says why afterwards; the latest fault and the reset cause are in every
 //! [`Status`], and the first `Hello` after boot is answered with the [`DeviceMsg::Boot`] report too.
 
