@@ -176,17 +176,6 @@ fn warm_up(mode: Mode, n: usize) -> usize {
     }
 }
 
-/// Bits of one residual under parameter `k`.
-#[inline]
-fn rice_bits(u: u16, k: u32) -> u32 {
-    let q = (u as u32) >> k;
-    if q < ESCAPE {
-        q + 1 + k
-    } else {
-        ESCAPE + 16
-    }
-}
-
 /// The plan for one channel: predictor, base and Rice parameter.
 #[derive(Debug, Clone, Copy)]
 struct Plan {
@@ -213,7 +202,8 @@ impl Histogram {
         self.n += 1;
     }
 
-    /// Estimated bits of the residuals under `k` (exact when no bucket straddles the escape).
+    /// Bits of the residuals under `k`, over-estimated by less than one per residual whose
+    /// quotient is not zero.
     fn bits(&self, k: u32) -> u32 {
         let mut bits = 0;
         for b in 0..17u32 {
@@ -221,6 +211,12 @@ impl Histogram {
             if cnt == 0 {
                 continue;
             }
+            if b <= k {
+                // Quotient 0: a zero and k bits each.
+                bits += cnt * (1 + k);
+                continue;
+            }
+            // Σ⌊u / 2^k⌋ ≤ ⌊Σu / 2^k⌋ < Σ⌊u / 2^k⌋ + cnt.
             let plain = cnt * (1 + k) + (self.sum[b as usize] >> k);
             let qmin = if b == 0 { 0 } else { (1u32 << (b - 1)) >> k };
             let qmax = ((1u32 << b) - 1) >> k;
@@ -617,6 +613,40 @@ mod tests {
         len
     }
 
+    /// Bits of one residual under parameter `k`.
+    #[inline]
+    fn rice_bits(u: u16, k: u32) -> u32 {
+        let q = (u as u32) >> k;
+        if q < ESCAPE {
+            q + 1 + k
+        } else {
+            ESCAPE + 16
+        }
+    }
+
+    #[test]
+    fn the_histogram_prices_every_parameter_within_a_bit_per_residual() {
+        let mut x = 77u32;
+        for spread in [0u32, 1, 5, 40, 300, 5000, 65535] {
+            let us: Vec<u16> = (0..200)
+                .map(|_| {
+                    x = x.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                    ((x >> 8) % (spread + 1)) as u16
+                })
+                .collect();
+            let mut h = Histogram::default();
+            us.iter().for_each(|&u| h.add(u));
+            for k in 0..=K_MAX {
+                let exact: u32 = us.iter().map(|&u| rice_bits(u, k)).sum();
+                let est = h.bits(k);
+                assert!(
+                    exact <= est && est <= exact + us.len() as u32,
+                    "spread {spread} k {k}: estimate {est}, exact {exact}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn zigzag_is_a_bijection_on_16_bits() {
         for r in 0..=u16::MAX {
@@ -645,7 +675,11 @@ mod tests {
         // Each residual 6 → zig-zag 12: k = 3, 5 bits (a zero and 4 bits)... or k = 2 with a
         // quotient of 3: 6 bits. Header 2 + 32 + 4 bits.
         let len = round_trip(&counts, BLOCK_LEN, 1);
-        assert_eq!(len, 1 + (2 + 32 + 4 + 62 * 5 + 7) / 8, "{len} bytes");
+        assert_eq!(
+            len,
+            1 + (2 + 32 + 4 + 62 * 5usize).div_ceil(8),
+            "{len} bytes"
+        );
     }
 
     #[test]
