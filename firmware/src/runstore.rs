@@ -32,6 +32,12 @@ use crate::wire::{DeviceMsg, BLOCK_LEN};
 
 pub mod memflash;
 
+/// The RAM ring on the board, by buffer: 384 KiB of the AXI SRAM, SRAM1 and SRAM2 (128 KiB each),
+/// and the 48 KiB of the DTCM the block index leaves (see `firmware/README.md` for the memory map).
+/// 688 KiB: the last ~25 s of a five-channel run at 10 kS/s, and far more than the 2.2 s of data a
+/// sector erase (at most) keeps waiting.
+pub const BOARD_RING_BYTES: [usize; 4] = [384 * 1024, 128 * 1024, 128 * 1024, 48 * 1024];
+
 /// Largest header, result or end frame (they are ~100 bytes).
 pub const SLOT: usize = 256;
 /// Blocks of the longest run the protocol allows (60 s at 20 kS/s): what the block index must hold.

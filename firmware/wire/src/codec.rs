@@ -35,7 +35,7 @@
 //! The decoder accepts exactly that grammar: a truncated stream, a wrong length, padding that is not
 //! zero, trailing bytes or an unknown format byte are errors ([`CodecError`]), never a panic.
 
-use crate::msg::{ChannelSet, Counts, PackedBlock, SampleBlock, BLOCK_LEN, CHANNELS};
+use crate::msg::{ChannelSet, Counts, DeviceMsg, PackedBlock, SampleBlock, BLOCK_LEN, CHANNELS};
 
 /// A Rice quotient this large or larger is sent as an escape and the value in 16 bits.
 pub const ESCAPE: u32 = 16;
@@ -596,6 +596,19 @@ impl PackedBlock {
             temp_c: self.temp_c,
             counts: Counts::from_slice(&counts[..n * c]).ok_or(CodecError::Shape)?,
         })
+    }
+}
+
+impl DeviceMsg {
+    /// The sample block this frame carries, whichever its form: a v1 [`DeviceMsg::Samples`] as is,
+    /// a v2 [`DeviceMsg::Packed`] unpacked (an error if its data does not decode). `None` for other
+    /// messages.
+    pub fn sample_block(&self) -> Option<Result<SampleBlock, CodecError>> {
+        match self {
+            DeviceMsg::Samples(b) => Some(Ok(b.clone())),
+            DeviceMsg::Packed(p) => Some(p.unpack()),
+            _ => None,
+        }
     }
 }
 
