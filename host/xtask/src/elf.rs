@@ -16,10 +16,6 @@ impl Size {
     pub fn flash(&self) -> u64 {
         self.vectors + self.text + self.rodata + self.data
     }
-    /// Static RAM: `.data`, `.bss` and `.uninit` (stack and heap not counted).
-    pub fn ram(&self) -> u64 {
-        self.data + self.bss + self.uninit
-    }
 }
 
 fn u16_at(b: &[u8], o: usize) -> Result<u16, String> {

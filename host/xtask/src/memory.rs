@@ -71,12 +71,7 @@ pub fn regions(memory_x: &str) -> Result<Vec<Region>, String> {
             number(v).ok_or_else(|| format!("memory.x: `{line}`: bad {key}"))
         };
         out.push(Region {
-            name: name
-                .trim()
-                .split_whitespace()
-                .next()
-                .unwrap_or("")
-                .to_string(),
+            name: name.split_whitespace().next().unwrap_or("").to_string(),
             origin: field("ORIGIN")?,
             length: field("LENGTH")?,
         });
