@@ -128,42 +128,28 @@ impl Mode {
     }
 }
 
-/// Counts of channel position `c` of `counts` (interleaved, `stride` per sample).
-#[derive(Clone, Copy)]
-struct Lane<'a> {
-    counts: &'a [u16],
-    stride: usize,
-    c: usize,
-    n: usize,
-}
-
-impl Lane<'_> {
-    #[inline]
-    fn get(&self, i: usize) -> u16 {
-        // In range by construction (n * stride <= counts.len()); never panics anyway.
-        self.counts
-            .get(i * self.stride + self.c)
-            .copied()
-            .unwrap_or(0)
-    }
-
-    /// Residual `i` (for `i` past the warm-up) of `mode`, modulo 2^16.
-    #[inline]
-    fn residual(&self, mode: Mode, base: u16, i: usize) -> u16 {
-        let x = self.get(i);
-        match mode {
-            Mode::Level => x.wrapping_sub(base),
-            Mode::Slope => x.wrapping_sub(self.get(i - 1)),
-            Mode::Curve => {
-                let p = self
-                    .get(i - 1)
-                    .wrapping_mul(2)
-                    .wrapping_sub(self.get(i - 2));
-                x.wrapping_sub(p)
+/// The zig-zagged residuals of `mode` for the lane `x` (those past the warm-up), modulo 2^16,
+/// into `out`; returns how many.
+fn residuals(x: &[u16], mode: Mode, base: u16, out: &mut [u16; BLOCK_LEN]) -> usize {
+    match mode {
+        Mode::Level => {
+            for (o, &v) in out.iter_mut().zip(x) {
+                *o = zigzag(v.wrapping_sub(base));
             }
-            Mode::Verbatim => x,
         }
+        Mode::Slope => {
+            for (o, w) in out.iter_mut().zip(x.windows(2)) {
+                *o = zigzag(w[1].wrapping_sub(w[0]));
+            }
+        }
+        Mode::Curve => {
+            for (o, w) in out.iter_mut().zip(x.windows(3)) {
+                *o = zigzag(w[2].wrapping_sub(w[1].wrapping_mul(2).wrapping_sub(w[0])));
+            }
+        }
+        Mode::Verbatim => return 0,
     }
+    x.len() - warm_up(mode, x.len())
 }
 
 /// Counts sent verbatim before the residuals of `mode` start (the base of `Level` aside).
@@ -186,27 +172,32 @@ struct Plan {
 
 /// Residuals of one predictor summarised by bit length: `count[b]` residuals of `b` significant
 /// bits (`b = 0` for zero), `sum[b]` their total. Enough to price any Rice parameter closely.
-#[derive(Default)]
+#[derive(Default, Clone, Copy)]
 struct Histogram {
     count: [u32; 17],
     sum: [u32; 17],
     n: u32,
+    total: u32,
+    /// Highest bucket used.
+    hi: u32,
 }
 
 impl Histogram {
     #[inline]
     fn add(&mut self, u: u16) {
-        let b = (16 - u.leading_zeros()) as usize;
-        self.count[b] += 1;
-        self.sum[b] += u as u32;
+        let b = 16 - u.leading_zeros();
+        self.count[b as usize] += 1;
+        self.sum[b as usize] += u as u32;
         self.n += 1;
+        self.total += u as u32;
+        self.hi = self.hi.max(b);
     }
 
     /// Bits of the residuals under `k`, over-estimated by less than one per residual whose
     /// quotient is not zero.
     fn bits(&self, k: u32) -> u32 {
         let mut bits = 0;
-        for b in 0..17u32 {
+        for b in 0..=self.hi {
             let cnt = self.count[b as usize];
             if cnt == 0 {
                 continue;
@@ -218,7 +209,7 @@ impl Histogram {
             }
             // Σ⌊u / 2^k⌋ ≤ ⌊Σu / 2^k⌋ < Σ⌊u / 2^k⌋ + cnt.
             let plain = cnt * (1 + k) + (self.sum[b as usize] >> k);
-            let qmin = if b == 0 { 0 } else { (1u32 << (b - 1)) >> k };
+            let qmin = (1u32 << (b - 1)) >> k;
             let qmax = ((1u32 << b) - 1) >> k;
             bits += if qmin >= ESCAPE {
                 cnt * (ESCAPE + 16)
@@ -231,7 +222,8 @@ impl Histogram {
         bits
     }
 
-    /// The best parameter and its cost (header included).
+    /// The best parameter and its cost (header included): from the mean's bit length, a local
+    /// search (the cost is unimodal in k for these distributions; a worse pick only costs bits).
     fn best(&self) -> (u32, u32) {
         if self.n == 0 {
             return (K_ZERO, 0);
@@ -239,58 +231,102 @@ impl Histogram {
         if self.count[0] == self.n {
             return (K_ZERO, 4);
         }
-        let mut best = (0, u32::MAX);
-        for k in 0..=K_MAX {
-            let b = self.bits(k);
-            if b < best.1 {
-                best = (k, b);
+        let mean = self.total / self.n;
+        let mut k = (u32::BITS - mean.leading_zeros()).min(K_MAX);
+        let mut bits = self.bits(k);
+        while k > 0 {
+            let b = self.bits(k - 1);
+            if b > bits {
+                break;
             }
+            k -= 1;
+            bits = b;
         }
-        (best.0, 4 + best.1)
+        while k < K_MAX {
+            let b = self.bits(k + 1);
+            if b >= bits {
+                break;
+            }
+            k += 1;
+            bits = b;
+        }
+        (k, 4 + bits)
     }
 }
 
-/// Picks the cheapest predictor and parameter for a lane.
-fn plan(lane: &Lane) -> Plan {
-    let n = lane.n;
-    // Mean of the lane, for the level predictor.
-    let sum: u32 = (0..n).map(|i| lane.get(i) as u32).sum();
+/// Rough bits of `n` residuals summing to `sum` under the Rice parameter their mean suggests: what
+/// the predictors are compared by.
+fn rough_bits(sum: u32, n: u32) -> u32 {
+    if n == 0 {
+        return 0;
+    }
+    if sum == 0 {
+        return 4;
+    }
+    let k = (u32::BITS - (sum / n).leading_zeros())
+        .saturating_sub(1)
+        .min(K_MAX);
+    4 + n * (1 + k) + (sum >> k)
+}
+
+/// Picks the cheapest predictor (by the sums of its residuals) and its Rice parameter (by their
+/// histogram), and leaves its residuals in `r` (how many: the second value). Four passes over the
+/// lane's counts.
+fn plan(x: &[u16], r: &mut [u16; BLOCK_LEN]) -> (Plan, usize) {
+    let n = x.len();
+    // Pass 1: the lane's sum (for the level's base), and the slope and curve residuals.
+    let mut sum = 0u32;
+    let mut s = [0u32; 3];
+    let (mut p1, mut p2) = (0u16, 0u16);
+    for (i, &v) in x.iter().enumerate() {
+        sum += v as u32;
+        if i >= 1 {
+            s[1] += zigzag(v.wrapping_sub(p1)) as u32;
+        }
+        if i >= 2 {
+            s[2] += zigzag(v.wrapping_sub(p1.wrapping_mul(2).wrapping_sub(p2))) as u32;
+        }
+        p2 = p1;
+        p1 = v;
+    }
     let base = if n == 0 {
         0
     } else {
         ((sum + n as u32 / 2) / n as u32) as u16
     };
-    // The residuals of each predictor, in one pass.
-    let mut h = [
-        Histogram::default(),
-        Histogram::default(),
-        Histogram::default(),
-    ];
-    for i in 0..n {
-        h[0].add(zigzag(lane.residual(Mode::Level, base, i)));
-        if i >= 1 {
-            h[1].add(zigzag(lane.residual(Mode::Slope, base, i)));
-        }
-        if i >= 2 {
-            h[2].add(zigzag(lane.residual(Mode::Curve, base, i)));
+    // Pass 2: the level residuals.
+    s[0] = x.iter().map(|&v| zigzag(v.wrapping_sub(base)) as u32).sum();
+    let mut mode = Mode::Verbatim;
+    let mut least = 16 * n as u32;
+    for (m, sum) in [Mode::Level, Mode::Slope, Mode::Curve].into_iter().zip(s) {
+        let warm = warm_up(m, n);
+        let fixed = 16 * warm as u32 + if m == Mode::Level { 16 } else { 0 };
+        let bits = fixed + rough_bits(sum, (n - warm) as u32);
+        if bits < least {
+            least = bits;
+            mode = m;
         }
     }
-    let mut best = Plan {
+    let verbatim = Plan {
         mode: Mode::Verbatim,
         base,
         k: 0,
     };
-    let mut best_bits = 16 * n as u32;
-    for (mode, h) in [Mode::Level, Mode::Slope, Mode::Curve].into_iter().zip(&h) {
-        let warm = warm_up(mode, n);
-        let fixed = 16 * warm as u32 + if mode == Mode::Level { 16 } else { 0 };
-        let (k, bits) = h.best();
-        if fixed + bits < best_bits {
-            best_bits = fixed + bits;
-            best = Plan { mode, base, k };
-        }
+    if mode == Mode::Verbatim {
+        return (verbatim, 0);
     }
-    best
+    // Pass 3: the residuals and, from their histogram (robust to a few spikes), the parameter.
+    let m = residuals(x, mode, base, r);
+    let mut h = Histogram::default();
+    for &u in &r[..m] {
+        h.add(u);
+    }
+    let (k, bits) = h.best();
+    let fixed = 16 * warm_up(mode, n) as u32 + if mode == Mode::Level { 16 } else { 0 };
+    if fixed + bits >= 16 * n as u32 {
+        return (verbatim, 0);
+    }
+    (Plan { mode, base, k }, m)
 }
 
 /// Writes bits most significant first into a byte slice; refuses to overrun it.
@@ -327,12 +363,6 @@ impl<'a> BitWriter<'a> {
             self.pos += 1;
         }
         Ok(())
-    }
-
-    /// Appends `q` (< [`ESCAPE`]) one bits and a zero.
-    fn unary(&mut self, q: u32) -> Result<(), CodecError> {
-        // q ones then a zero: (2^q − 1) << 1.
-        self.put(((1u32 << q) - 1) << 1, q + 1)
     }
 
     /// Pads with zeros to the byte boundary; returns the bytes written.
@@ -444,21 +474,22 @@ fn encode_rice(
     out: &mut [u8],
 ) -> Result<usize, CodecError> {
     let mut w = BitWriter::new(out);
+    let mut lane = [0u16; BLOCK_LEN];
+    let mut r = [0u16; BLOCK_LEN];
     for c in 0..channels {
-        let lane = Lane {
-            counts,
-            stride: channels,
-            c,
-            n,
-        };
-        let p = plan(&lane);
+        // De-interleave (the caller checked counts.len() == n * channels).
+        for (x, &v) in lane.iter_mut().zip(counts.iter().skip(c).step_by(channels)) {
+            *x = v;
+        }
+        let x = &lane[..n];
+        let (p, m) = plan(x, &mut r);
         w.put(p.mode as u32, 2)?;
         let warm = warm_up(p.mode, n);
         if p.mode == Mode::Level {
             w.put(p.base as u32, 16)?;
         }
-        for i in 0..warm {
-            w.put(lane.get(i) as u32, 16)?;
+        for &v in &x[..warm] {
+            w.put(v as u32, 16)?;
         }
         if p.mode == Mode::Verbatim || warm == n && p.mode != Mode::Level {
             continue;
@@ -468,12 +499,12 @@ fn encode_rice(
             continue;
         }
         let mask = (1u32 << p.k) - 1;
-        for i in warm..n {
-            let u = zigzag(lane.residual(p.mode, p.base, i)) as u32;
+        for &u in &r[..m] {
+            let u = u as u32;
             let q = u >> p.k;
             if q < ESCAPE {
-                w.unary(q)?;
-                w.put(u & mask, p.k)?;
+                // q ones, a zero, then the k low bits: one write of q + 1 + k ≤ 31 bits.
+                w.put((((1u32 << q) - 1) << (1 + p.k)) | (u & mask), q + 1 + p.k)?;
             } else {
                 w.put((1 << ESCAPE) - 1, ESCAPE)?;
                 w.put(u, 16)?;
