@@ -8,7 +8,7 @@
 //! ECR range changes) in the order they happened, then the result and the end. A record is the
 //! frame's length (u16, little-endian) followed by the frame; the frame's own CRC-32 checks it.
 //!
-//! * **RAM**: a ring over a few large buffers (on the board: AXI SRAM and SRAM1–2) holds the most
+//! * **RAM**: a ring over a few large buffers (on the board: AXI SRAM, SRAM1–2, DTCM) holds the most
 //!   recent records, the header, result and end are also kept apart. The live stream and pulls are
 //!   sent from here, byte for byte.
 //! * **Flash** (bank 2 on the board, behind [`RunFlash`]): the same records, written as they
