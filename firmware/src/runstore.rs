@@ -129,62 +129,51 @@ impl<'a> Ring<'a> {
         pos >= self.lo && pos.checked_add(len).is_some_and(|e| e <= self.hi)
     }
 
-    /// Calls `f(segment, offset, n)` for the pieces of `len` bytes at stream position `pos`.
-    fn pieces(&self, pos: u32, len: usize, mut f: impl FnMut(usize, usize, usize, usize)) {
+    /// Buffer and offset in it of ring offset `off` (< `cap`).
+    fn locate(&self, off: usize) -> (usize, usize) {
+        let mut start = 0;
+        for (i, s) in self.segs.iter().enumerate() {
+            if off < start + s.len() {
+                return (i, off - start);
+            }
+            start += s.len();
+        }
+        (0, 0)
+    }
+
+    /// Copies `out.len()` bytes from stream position `pos` (the caller checked they are held).
+    fn read(&self, pos: u32, out: &mut [u8]) {
         if self.cap == 0 {
             return;
         }
+        let cap = self.cap as usize;
         let mut off = (pos % self.cap) as usize;
         let mut done = 0;
-        while done < len {
-            // Locate `off` in the segments.
-            let mut seg = 0;
-            let mut start = 0;
-            while seg < self.segs.len() && off >= start + self.segs[seg].len() {
-                start += self.segs[seg].len();
-                seg += 1;
-            }
-            if seg == self.segs.len() {
-                off = 0;
-                continue;
-            }
-            let in_seg = off - start;
-            let n = (self.segs[seg].len() - in_seg).min(len - done);
-            f(seg, in_seg, done, n);
+        while done < out.len() {
+            let (s, o) = self.locate(off);
+            let seg = &self.segs[s];
+            let n = (seg.len() - o).min(out.len() - done);
+            out[done..done + n].copy_from_slice(&seg[o..o + n]);
             done += n;
-            off += n;
-            if off >= self.cap as usize {
-                off = 0;
-            }
-        }
-    }
-
-    fn read(&self, pos: u32, out: &mut [u8]) {
-        let mut parts = [(0usize, 0usize, 0usize, 0usize); 8];
-        let mut k = 0;
-        self.pieces(pos, out.len(), |s, o, d, n| {
-            if k < parts.len() {
-                parts[k] = (s, o, d, n);
-                k += 1;
-            }
-        });
-        for &(s, o, d, n) in &parts[..k] {
-            out[d..d + n].copy_from_slice(&self.segs[s][o..o + n]);
+            off = (off + n) % cap;
         }
     }
 
     /// Appends at `hi` (the caller made room).
     fn append(&mut self, bytes: &[u8]) {
-        let mut parts = [(0usize, 0usize, 0usize, 0usize); 8];
-        let mut k = 0;
-        self.pieces(self.hi, bytes.len(), |s, o, d, n| {
-            if k < parts.len() {
-                parts[k] = (s, o, d, n);
-                k += 1;
-            }
-        });
-        for &(s, o, d, n) in &parts[..k] {
-            self.segs[s][o..o + n].copy_from_slice(&bytes[d..d + n]);
+        if self.cap == 0 {
+            return;
+        }
+        let cap = self.cap as usize;
+        let mut off = (self.hi % self.cap) as usize;
+        let mut done = 0;
+        while done < bytes.len() {
+            let (s, o) = self.locate(off);
+            let seg = &mut self.segs[s];
+            let n = (seg.len() - o).min(bytes.len() - done);
+            seg[o..o + n].copy_from_slice(&bytes[done..done + n]);
+            done += n;
+            off = (off + n) % cap;
         }
         self.hi += bytes.len() as u32;
     }
@@ -299,8 +288,10 @@ pub struct RunStore<'a> {
 }
 
 impl<'a> RunStore<'a> {
-    /// A store over RAM `buffers` (taken as one ring; together at least a few frames) and a block
-    /// `index` of [`MAX_RUN_BLOCKS`] entries (a shorter index keeps fewer blocks of a long run).
+    /// A store over RAM `buffers` (taken as one ring) and a block `index` of [`MAX_RUN_BLOCKS`]
+    /// entries (a shorter index keeps fewer blocks of a long run). The ring must hold what arrives
+    /// while a sector is erased (up to 2.2 s of the stream), and at least two frames and a flash
+    /// word, or the flash copy stops ([`FlashState::Failed`]) and the run lives in RAM only.
     pub fn new(buffers: impl IntoIterator<Item = &'a mut [u8]>, index: &'a mut [u32]) -> Self {
         RunStore {
             ring: Ring::new(buffers),

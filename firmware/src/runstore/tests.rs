@@ -536,3 +536,98 @@ fn settle_partly(s: &mut RunStore, f: &mut MemFlash<Vec<u8>>, now: &mut u64) {
         f.advance(*now);
     }
 }
+
+#[test]
+fn a_ring_of_many_small_buffers_keeps_records_whole() {
+    // Four buffers of 200 bytes: every block record (~250 bytes) spans two or three of them. (The
+    // ring must hold two records and a flash word: the word a record ends in is written only once
+    // the next record fills it.)
+    let bufs: Vec<&'static mut [u8]> = (0..4)
+        .map(|_| -> &'static mut [u8] { Box::leak(vec![0u8; 200].into_boxed_slice()) })
+        .collect();
+    let index: &'static mut [u32] = Box::leak(vec![0u32; MAX_RUN_BLOCKS].into_boxed_slice());
+    let mut s = RunStore::new(bufs, index);
+    assert_eq!(s.ram_capacity(), 800);
+    let mut f = flash(SMALL);
+    let run = test_run(12, 30, 4);
+    // The flash keeps up (it must: the ring holds about three records).
+    assert!(s.begin(&f, run.run_id, &run.header));
+    for r in &run.records {
+        match r {
+            Rec::Block(k, b) => assert!(s.push_block(*k, b)),
+            Rec::Event(b) => assert!(s.push_event(b)),
+        }
+        for _ in 0..4 {
+            s.service(&mut f);
+        }
+    }
+    s.set_result(&run.result);
+    s.set_end(&run.end);
+    let mut now = 0;
+    settle(&mut s, &mut f, &mut now);
+    assert_eq!(s.flash_state(), FlashState::Done);
+    // The last record is still in RAM, split over buffers; all of them read back from RAM or flash.
+    assert_eq!(stream(&s, &mut f), all(&run));
+    let mut buf = [0u8; MAX_FRAME];
+    let last = s.block_pos(29).unwrap();
+    assert!(last >= s.ring.lo, "block 29 is in RAM");
+    let Read::Frame { len, .. } = s.read(&mut f, last, &mut buf) else {
+        panic!()
+    };
+    assert_eq!(&buf[..len], run.records.last().unwrap().bytes());
+}
+
+#[test]
+fn header_result_and_end_frames_fit_their_slots_at_worst() {
+    let worst = f32::MIN_POSITIVE;
+    let mut c = Configure::real_rig(0.7);
+    c.sample_rate_hz = u32::MAX;
+    c.max_duration_s = worst;
+    let h = encode_vec(
+        u32::MAX,
+        &DeviceMsg::RunStarted(RunHeader {
+            run_id: u32::MAX,
+            config: c,
+            temp_c: worst,
+            t_us: u64::MAX,
+        }),
+    )
+    .unwrap();
+    let e = Estimate {
+        mu0: worst,
+        mu1: worst,
+        mu0_se: worst,
+        mu1_se: worst,
+    };
+    let r = encode_vec(
+        u32::MAX,
+        &DeviceMsg::Result(OnboardResult {
+            run_id: u32::MAX,
+            verdict: Verdict::NotAnalysed,
+            cycles: u16::MAX,
+            frequency_hz: worst,
+            initial_amplitude_m: worst,
+            duration_s: worst,
+            best: e,
+            averaging: e,
+            decrement: e,
+            shape: EnvelopeShape::Mixed,
+            curvature: worst,
+        }),
+    )
+    .unwrap();
+    let end = encode_vec(
+        u32::MAX,
+        &DeviceMsg::RunEnded(RunEnd {
+            run_id: u32::MAX,
+            blocks: u32::MAX,
+            samples: u32::MAX,
+            overruns: u32::MAX,
+            reason: EndReason::Fault(crate::wire::HeaterFault::OverTemperature),
+        }),
+    )
+    .unwrap();
+    for (what, f) in [("header", &h), ("result", &r), ("end", &end)] {
+        assert!(f.len() <= SLOT, "{what}: {} bytes", f.len());
+    }
+}

@@ -173,6 +173,21 @@ fn a_run_survives_a_power_loss_after_it_and_is_pulled_bit_identical() {
     assert_eq!((status.state, status.run_id), (RigState::Idle, 1));
     let pulled = h.pull(1);
     assert_eq!(run_frames(&pulled), live, "every frame, byte for byte");
+    // The blocks a host would be missing, from flash too.
+    let (r, mut got) = h.command(HostMsg::PullBlocks {
+        run_id: 1,
+        first: 5,
+        count: 3,
+    });
+    assert_eq!(r, Ok(()));
+    got.extend(h.wait(20));
+    assert_eq!(blocks(&got), vec![5, 6, 7]);
+    let packed: Vec<&Vec<u8>> = got
+        .iter()
+        .filter(|f| matches!(f.1.msg, DeviceMsg::Packed(_)))
+        .map(|f| &f.0)
+        .collect();
+    assert_eq!(packed, live[6..9].to_vec(), "blocks 5–7 as first sent");
     assert_eq!(h.rig.hardware().flash().violations(), 0);
 }
 
