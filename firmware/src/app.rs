@@ -38,14 +38,14 @@ use crate::hal::{AnalogSample, Hardware, Lamps, MagnetDrive, ANALOG_CHANNELS};
 use crate::heater::{Heater, HeaterConfig};
 use crate::lease::Lease;
 use crate::release::{check_interlocks, Debouncer, MagnetEvent, Release, ReleaseConfig};
-use crate::runstore::{Item, RunStore};
+use crate::runstore::{Read, RunStore};
 use crate::thermocouple;
 use crate::wire::frame::MAX_FRAME;
 use crate::wire::{
     limits, BootReport, Channel, Configure, Control, Decoder, DeviceError, DeviceInfo, DeviceMsg,
     Encoder, EndReason, EnvelopeShape, ErrorCode, Estimate, FaultReason, FaultReport, Field, Frame,
-    HeaterSetpoint, HostMsg, Interlock, OnboardResult, ResetCause, RigState, RunEnd, RunHeader,
-    SampleBlock, Status, Verdict, CHANNELS, PROTOCOL_VERSION,
+    HeaterSetpoint, HostMsg, Interlock, OnboardResult, PackedBlock, ResetCause, RigState, RunEnd,
+    RunHeader, SampleBlock, Status, Verdict, CHANNELS, PROTOCOL_VERSION,
 };
 
 /// Constants of the application.
@@ -91,16 +91,19 @@ impl AppConfig {
     }
 }
 
-/// What the run-frame sender wants next.
+/// What the run-frame sender wants next (the live stream, or a [`HostMsg::Pull`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Want {
+    /// The header, then the records from block `from_block` on.
     Header {
         from_block: u32,
     },
+    /// The records from just after block `.0 − 1` on (found once the flash allows).
     Blocks(u32),
+    /// The records from this position of the run's stream on, then the result and the end.
+    From(u32),
+    Result,
     End,
-    /// Blocks `.0 .. .1` only ([`HostMsg::PullBlocks`]).
-    Range(u32, u32),
 }
 
 /// The application (see the module docs).
@@ -123,6 +126,8 @@ pub struct App<'a> {
     run_start_us: u64,
     run_overruns: u32,
     want: Option<Want>,
+    /// Blocks `.0 .. .1` asked for by [`HostMsg::PullBlocks`], sent before the rest.
+    range: Option<(u32, u32)>,
     last_heater_us: Option<u64>,
     last_ecr_us: Option<u64>,
     lost_seen: u32,
@@ -171,6 +176,7 @@ impl<'a> App<'a> {
             run_start_us: 0,
             run_overruns: 0,
             want: None,
+            range: None,
             last_heater_us: None,
             last_ecr_us: None,
             lost_seen: 0,
@@ -295,9 +301,15 @@ impl<'a> App<'a> {
         }
     }
 
+    /// Whether run frames are waiting to be sent (a stream or pull under way).
+    pub fn sending(&self) -> bool {
+        self.want.is_some() || self.range.is_some()
+    }
+
     /// Feeds bytes received from the host; handles every complete frame.
     pub fn on_bytes<H: Hardware>(&mut self, hw: &mut H, bytes: &[u8], now_us: u64) {
         self.now_us = self.now_us.max(now_us);
+        self.start(hw);
         for &b in bytes {
             match self.decoder.push(b) {
                 Some(Ok(frame)) => self.handle(hw, frame),
@@ -312,12 +324,7 @@ impl<'a> App<'a> {
     pub fn poll<H: Hardware>(&mut self, hw: &mut H, now_us: u64) {
         self.now_us = self.now_us.max(now_us);
         let now = self.now_us;
-        if !self.started {
-            self.started = true;
-            hw.magnet_drive(MagnetDrive::Off);
-            hw.set_heater_duty(0.0);
-            self.ecr.init(hw);
-        }
+        self.start(hw);
         // Nobody in charge of what heats or holds: safe first, then say why.
         let need = self.heater.heating() || self.release.is_holding();
         if let Some(reason) = self.lease.expired(now, need) {
@@ -388,9 +395,28 @@ impl<'a> App<'a> {
             self.stand_alone(hw);
         }
         self.drain(hw);
+        self.store.service(hw);
         self.pump(hw);
         let lamps = self.lamps(now);
         hw.set_lamps(lamps);
+    }
+
+    /// First call after reset: outputs to their safe values, and the last run back from flash.
+    fn start<H: Hardware>(&mut self, hw: &mut H) {
+        if self.started {
+            return;
+        }
+        self.started = true;
+        hw.magnet_drive(MagnetDrive::Off);
+        hw.set_heater_duty(0.0);
+        self.ecr.init(hw);
+        if let Some(r) = self.store.recover(hw) {
+            info!(
+                "run {} recovered from flash: {} blocks, finished: {}",
+                r.run_id, r.blocks, r.finished
+            );
+            self.run_id = r.run_id;
+        }
     }
 
     fn next_seq(&mut self) -> u32 {
@@ -553,7 +579,7 @@ impl<'a> App<'a> {
                 count,
             } => {
                 if self.store.run_id() == Some(run_id) && run_id != 0 {
-                    self.want = Some(Want::Range(first, first.saturating_add(count)));
+                    self.range = Some((first, first.saturating_add(count)));
                     Ok(())
                 } else {
                     Err(ErrorCode::NoRun)
@@ -669,8 +695,14 @@ impl<'a> App<'a> {
             t_us: now,
         };
         let seq = self.next_seq();
-        self.store.begin(seq, header);
+        if let Ok(frame) = self
+            .encoder
+            .encode(seq, &DeviceMsg::RunStarted(header), &mut self.out)
+        {
+            self.store.begin(hw, self.run_id, frame);
+        }
         self.want = Some(Want::Header { from_block: 0 });
+        self.range = None;
         self.state = RigState::Running;
         info!("released: run {}", self.run_id);
         Ok(())
@@ -773,7 +805,16 @@ impl<'a> App<'a> {
         blk.log10_ecr_ohm = self.ecr.update(v, hw);
         blk.temp_c = self.heater.temp_c();
         let seq = self.next_seq();
-        self.store.push_block(seq, &blk);
+        // Cannot fail for a block the builder made (consistent, at most BLOCK_LEN samples).
+        if let Ok(p) = PackedBlock::pack(&blk) {
+            let k = p.block;
+            if let Ok(frame) = self
+                .encoder
+                .encode(seq, &DeviceMsg::Packed(p), &mut self.out)
+            {
+                self.store.push_block(k, frame);
+            }
+        }
     }
 
     fn end_run<H: Hardware>(&mut self, hw: &mut H, reason: EndReason) {
@@ -800,7 +841,12 @@ impl<'a> App<'a> {
             result.verdict = Verdict::Aborted;
         }
         let seq = self.next_seq();
-        self.store.set_result(seq, result);
+        if let Ok(frame) = self
+            .encoder
+            .encode(seq, &DeviceMsg::Result(result), &mut self.out)
+        {
+            self.store.set_result(frame);
+        }
         let end = RunEnd {
             run_id: self.run_id,
             blocks,
@@ -809,44 +855,91 @@ impl<'a> App<'a> {
             reason,
         };
         let seq = self.next_seq();
-        self.store.set_end(seq, end);
+        if let Ok(frame) = self
+            .encoder
+            .encode(seq, &DeviceMsg::RunEnded(end), &mut self.out)
+        {
+            self.store.set_end(frame);
+        }
         self.state = RigState::Finished;
         info!("run {} ended", self.run_id);
     }
 
-    /// Sends run frames from the store while the link takes them.
+    /// Sends run frames from the store while the link takes them: first the blocks a
+    /// [`HostMsg::PullBlocks`] asked for, then the stream (live, or a [`HostMsg::Pull`]). At most
+    /// `frames_per_poll` records are looked at per call; every frame is sent as stored, so this is
+    /// copying only.
     fn pump<H: Hardware>(&mut self, hw: &mut H) {
         for _ in 0..self.cfg.frames_per_poll {
+            if let Some((k, end)) = self.range {
+                if k >= end || k >= self.store.blocks() {
+                    self.range = None;
+                    continue;
+                }
+                let Some(pos) = self.store.block_pos(k) else {
+                    self.range = None;
+                    continue;
+                };
+                match self.store.read(hw, pos, &mut self.out) {
+                    Read::Frame { len, .. } => {
+                        if !hw.send_frame(&self.out[..len]) {
+                            return;
+                        }
+                        self.range = Some((k + 1, end));
+                    }
+                    Read::Busy => return,
+                    Read::Lost { .. } | Read::End => self.range = Some((k + 1, end)),
+                }
+                continue;
+            }
             let Some(want) = self.want else { return };
-            let item = match want {
-                Want::Header { .. } => Some(Item::Header),
-                Want::Blocks(k) => self.store.first_from(k),
-                Want::End => self.store.is_finished().then_some(Item::End),
-                Want::Range(k, end) => {
-                    let k = k.max(self.store.oldest_block());
-                    (k < end && k < self.store.blocks()).then_some(Item::Block(k))
+            let (len, next) = match want {
+                Want::Header { from_block } => {
+                    let Some(h) = self.store.header() else {
+                        self.want = None;
+                        return;
+                    };
+                    self.out[..h.len()].copy_from_slice(h);
+                    (h.len(), Some(Want::Blocks(from_block)))
+                }
+                Want::Blocks(k) => {
+                    match self.store.start_of_block(hw, k) {
+                        Some(pos) => self.want = Some(Want::From(pos)),
+                        None => return,
+                    }
+                    continue;
+                }
+                Want::From(pos) => match self.store.read(hw, pos, &mut self.out) {
+                    Read::Frame { len, next } => (len, Some(Want::From(next))),
+                    Read::Busy => return,
+                    Read::Lost { next } => {
+                        self.want = Some(Want::From(next));
+                        continue;
+                    }
+                    Read::End => {
+                        if self.store.result().is_none() {
+                            // More may come (a run in progress).
+                            return;
+                        }
+                        self.want = Some(Want::Result);
+                        continue;
+                    }
+                },
+                Want::Result => {
+                    let Some(r) = self.store.result() else { return };
+                    self.out[..r.len()].copy_from_slice(r);
+                    (r.len(), Some(Want::End))
+                }
+                Want::End => {
+                    let Some(e) = self.store.end() else { return };
+                    self.out[..e.len()].copy_from_slice(e);
+                    (e.len(), None)
                 }
             };
-            let Some(item) = item else { return };
-            let Some((seq, msg)) = self.store.frame(item) else {
-                self.want = None;
-                return;
-            };
-            let sent = match self.encoder.encode(seq, &msg, &mut self.out) {
-                Ok(bytes) => hw.send_frame(bytes),
-                // Cannot happen for stored frames; skip rather than stall.
-                Err(_) => true,
-            };
-            if !sent {
+            if !hw.send_frame(&self.out[..len]) {
                 return;
             }
-            self.want = match (want, item) {
-                (Want::Range(_, end), Item::Block(k)) => Some(Want::Range(k + 1, end)),
-                (Want::Header { from_block }, Item::Header) => Some(Want::Blocks(from_block)),
-                (_, Item::Block(k)) => Some(Want::Blocks(k + 1)),
-                (_, Item::Result) => Some(Want::End),
-                _ => None,
-            };
+            self.want = next;
         }
     }
 }

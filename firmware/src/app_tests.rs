@@ -2,7 +2,8 @@
 
 use super::*;
 use crate::hal::*;
-use crate::runstore::BlockMeta;
+use crate::runstore::memflash::MemFlash;
+use crate::runstore::{FlashState, MAX_RUN_BLOCKS};
 use crate::wire::frame::decode_one;
 
 fn encode_vec(seq: u32, msg: &HostMsg) -> Result<Vec<u8>, crate::wire::EncodeError> {
@@ -11,7 +12,7 @@ fn encode_vec(seq: u32, msg: &HostMsg) -> Result<Vec<u8>, crate::wire::EncodeErr
     out.truncate(n);
     Ok(out)
 }
-use crate::wire::{ChannelSet, Field, HeaterFault, HeaterSetpoint, BLOCK_LEN};
+use crate::wire::{ChannelSet, Field, HeaterFault, HeaterSetpoint};
 use proptest::prelude::*;
 
 /// The run's end frame among the messages, if it came.
@@ -27,9 +28,25 @@ fn block_indices<'a>(msgs: impl IntoIterator<Item = &'a DeviceMsg>) -> Vec<u32> 
     msgs.into_iter()
         .filter_map(|m| match m {
             DeviceMsg::Samples(s) => Some(s.block),
+            DeviceMsg::Packed(p) => Some(p.block),
             _ => None,
         })
         .collect()
+}
+
+/// The sample blocks among the messages (packed ones unpacked), in order.
+fn sample_blocks<'a>(msgs: impl IntoIterator<Item = &'a DeviceMsg>) -> Vec<SampleBlock> {
+    msgs.into_iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Samples(s) => Some(s.clone()),
+            DeviceMsg::Packed(p) => Some(p.unpack().expect("the rig packs blocks that unpack")),
+            _ => None,
+        })
+        .collect()
+}
+
+fn is_block(m: &DeviceMsg) -> bool {
+    matches!(m, DeviceMsg::Samples(_) | DeviceMsg::Packed(_))
 }
 
 /// The run's on-board result among the messages, if it came.
@@ -62,6 +79,7 @@ struct Mock {
     out: Vec<u8>,
     lamps: Lamps,
     stop_s: f64,
+    flash: MemFlash<Vec<u8>>,
 }
 
 impl Mock {
@@ -86,6 +104,7 @@ impl Mock {
             out: Vec::new(),
             lamps: Lamps::default(),
             stop_s: 0.5,
+            flash: MemFlash::new(vec![0; 1 << 20], FlashGeometry::H743_BANK2).with_h743_timing(),
         }
     }
 
@@ -100,8 +119,9 @@ impl Mock {
         (a * (w * t).cos(), -a * w * (w * t).sin())
     }
 
-    /// Converts every sample due up to `now_us` into the ring.
+    /// Converts every sample due up to `now_us` into the ring (and lets the flash work that long).
     fn convert(&mut self) {
+        self.flash.advance(self.now_us);
         if !self.adc_on {
             return;
         }
@@ -218,26 +238,49 @@ impl Link for Mock {
     }
 }
 
+impl RunFlash for Mock {
+    fn flash_geometry(&self) -> FlashGeometry {
+        self.flash.flash_geometry()
+    }
+    fn flash_busy(&mut self) -> bool {
+        self.flash.flash_busy()
+    }
+    fn flash_erase(&mut self, sector: u32) -> bool {
+        self.flash.flash_erase(sector)
+    }
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
+        self.flash.flash_program(offset, data)
+    }
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
+        self.flash.flash_read(offset, out)
+    }
+    fn flash_take_error(&mut self) -> bool {
+        self.flash.flash_take_error()
+    }
+}
+
 struct Bench {
     app: App<'static>,
     hw: Mock,
     seq: u32,
 }
 
-fn store(counts: usize) -> RunStore<'static> {
-    let c = Box::leak(vec![0u16; counts].into_boxed_slice());
-    let m = Box::leak(vec![BlockMeta::default(); counts / (2 * BLOCK_LEN) + 1].into_boxed_slice());
-    RunStore::new(c, m)
+/// A run store with `ram` bytes of RAM (in two buffers, as on the board).
+fn store(ram: usize) -> RunStore<'static> {
+    let a: &'static mut [u8] = Box::leak(vec![0u8; ram / 2].into_boxed_slice());
+    let b: &'static mut [u8] = Box::leak(vec![0u8; ram - ram / 2].into_boxed_slice());
+    let index = Box::leak(vec![0u32; MAX_RUN_BLOCKS].into_boxed_slice());
+    RunStore::new([a, b], index)
 }
 
 impl Bench {
     fn new() -> Self {
-        Self::with_store(200_000)
+        Self::with_store(256 * 1024)
     }
 
-    fn with_store(counts: usize) -> Self {
+    fn with_store(ram: usize) -> Self {
         let mut b = Bench {
-            app: App::new(AppConfig::new(42), store(counts)),
+            app: App::new(AppConfig::new(42), store(ram)),
             hw: Mock::new(),
             seq: 100,
         };
@@ -529,16 +572,7 @@ fn a_run_streams_contiguous_blocks_then_result_and_end() {
             }
         })
         .unwrap();
-    let blocks: Vec<&SampleBlock> = msgs
-        .iter()
-        .filter_map(|m| {
-            if let DeviceMsg::Samples(s) = m {
-                Some(s)
-            } else {
-                None
-            }
-        })
-        .collect();
+    let blocks = sample_blocks(msgs.iter().copied());
     let end = run_end(&msgs).unwrap();
     let result = onboard_result(&msgs).unwrap();
     assert_eq!(
@@ -577,10 +611,7 @@ fn a_run_streams_contiguous_blocks_then_result_and_end() {
     assert_eq!(end.overruns, 0);
     // Result and end close the run, in that order, after every block.
     let pos = |f: &dyn Fn(&DeviceMsg) -> bool| msgs.iter().position(|m| f(m)).unwrap();
-    let last_block = msgs
-        .iter()
-        .rposition(|m| matches!(m, DeviceMsg::Samples(_)))
-        .unwrap();
+    let last_block = msgs.iter().rposition(|m| is_block(m)).unwrap();
     assert!(last_block < pos(&|m| matches!(m, DeviceMsg::Result(_))));
     assert!(
         pos(&|m| matches!(m, DeviceMsg::Result(_))) < pos(&|m| matches!(m, DeviceMsg::RunEnded(_)))
@@ -809,7 +840,7 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
     #[test]
     fn random_bytes_never_panic_and_every_reply_decodes(chunks in prop::collection::vec(prop::collection::vec(any::<u8>(), 0..300), 1..8)) {
-        let mut b = Bench::with_store(20_000);
+        let mut b = Bench::with_store(16 * 1024);
         b.ready();
         for c in &chunks {
             let now = b.hw.now_us;
@@ -827,7 +858,7 @@ proptest! {
 
     #[test]
     fn random_commands_never_panic(cmds in prop::collection::vec(0u8..10, 1..30), k in any::<u32>()) {
-        let mut b = Bench::with_store(20_000);
+        let mut b = Bench::with_store(16 * 1024);
         for c in cmds {
             let msg = match c {
                 0 => HostMsg::Configure(Configure::real_rig(0.3)),
@@ -898,32 +929,140 @@ fn a_cable_pulled_mid_run_loses_nothing() {
     );
 }
 
+/// Runs `b` until the flash holds everything of the finished run.
+fn settle_flash(b: &mut Bench) {
+    for _ in 0..20_000 {
+        if b.app.store().flash_state() == FlashState::Done {
+            return;
+        }
+        b.run_for(1);
+    }
+    panic!("flash copy not done: {:?}", b.app.store().flash_state());
+}
+
 #[test]
-fn a_long_run_keeps_its_last_blocks_and_says_which() {
-    // Room for 20 blocks of the 5-channel run.
-    let mut b = Bench::with_store(20 * 5 * BLOCK_LEN);
+fn a_run_longer_than_ram_is_pulled_whole_from_flash() {
+    // RAM for a few packed blocks; the run has over 60. (RAM this small cannot ride out an erase
+    // of the real 1.1 s: the flash here is instant.)
+    let mut b = Bench::with_store(2 * 1024);
+    b.hw.flash = MemFlash::new(vec![0; 1 << 20], FlashGeometry::H743_BANK2);
     let frames = full_run(&mut b);
-    let total = frames
+    let run_frames: Vec<&Vec<u8>> = frames
         .iter()
-        .filter(|f| matches!(f.1.msg, DeviceMsg::Samples(_)))
-        .count() as u32;
-    assert!(total > 40);
-    assert_eq!(b.app.store().oldest_block(), total - 20);
+        .filter(|f| f.1.msg.is_run_frame())
+        .map(|f| &f.0)
+        .collect();
+    let total = frames.iter().filter(|f| is_block(&f.1.msg)).count() as u32;
+    assert!(total > 60);
+    settle_flash(&mut b);
+    assert!(b.app.store().first_block_in_ram() > total / 2);
+    b.take();
     b.send(HostMsg::Pull {
         run_id: 1,
         from_block: 0,
     });
-    b.run_for(100);
-    let again = b.take();
-    let blocks: Vec<u32> = block_indices(again.iter().map(|f| &f.1.msg));
-    assert_eq!(blocks, (total - 20..total).collect::<Vec<_>>());
-    // The held blocks are the very frames first sent.
-    for f in again
+    b.run_for(200);
+    let mut again = b.take();
+    assert!(matches!(again.remove(0).1.msg, DeviceMsg::Ack { .. }));
+    let got: Vec<&Vec<u8>> = again.iter().map(|f| &f.0).collect();
+    assert_eq!(got, run_frames, "the very frames first sent, all of them");
+    assert_eq!(b.hw.flash.violations(), 0);
+}
+
+#[test]
+fn after_a_power_cut_the_rig_offers_the_last_run_from_flash() {
+    let mut b = Bench::new();
+    let frames = full_run(&mut b);
+    let run_frames: Vec<Vec<u8>> = frames
         .iter()
-        .filter(|f| matches!(f.1.msg, DeviceMsg::Samples(_)))
-    {
-        assert!(frames.iter().any(|g| g.0 == f.0));
+        .filter(|f| f.1.msg.is_run_frame())
+        .map(|f| f.0.clone())
+        .collect();
+    settle_flash(&mut b);
+    // Power cut: the application and its RAM are gone; the flash (in the hardware) stays.
+    b.hw.flash.power_cut();
+    b.app = App::new(AppConfig::new(42), store(256 * 1024));
+    b.poll();
+    assert_eq!(
+        b.app.status().run_id,
+        1,
+        "the recovered run is the rig's last run"
+    );
+    assert_eq!(b.app.state(), RigState::Idle);
+    b.take();
+    b.send(HostMsg::Pull {
+        run_id: 1,
+        from_block: 0,
+    });
+    b.run_for(300);
+    let mut again = b.take();
+    assert!(matches!(again.remove(0).1.msg, DeviceMsg::Ack { .. }));
+    let got: Vec<Vec<u8>> = again.into_iter().map(|f| f.0).collect();
+    assert_eq!(got, run_frames, "bit-identical from flash");
+    // The next run gets the next number.
+    b.ready();
+    b.take();
+    b.send(HostMsg::Release);
+    b.run_for(20);
+    let msgs = b.msgs();
+    assert!(
+        msgs.iter()
+            .any(|m| matches!(m, DeviceMsg::RunStarted(h) if h.run_id == 2)),
+        "{msgs:?}"
+    );
+}
+
+#[test]
+fn pull_blocks_sends_those_blocks_only_then_the_live_stream_goes_on() {
+    let mut b = Bench::new();
+    b.ready();
+    b.take();
+    b.send(HostMsg::Release);
+    b.run_for(100);
+    let first = b.take();
+    let seen = block_indices(first.iter().map(|f| &f.1.msg));
+    assert!(seen.len() > 10);
+    let (r, msgs) = b.command(HostMsg::PullBlocks {
+        run_id: 1,
+        first: 2,
+        count: 3,
+    });
+    assert_eq!(r, Ok(()));
+    let mut rest = msgs;
+    for _ in 0..3000 {
+        b.run_for(1);
+        rest.extend(b.msgs());
+        if b.app.state() == RigState::Finished && !b.app.sending() {
+            break;
+        }
     }
+    let blocks = block_indices(rest.iter());
+    assert_eq!(&blocks[..3], &[2, 3, 4], "the asked blocks first");
+    let live: Vec<u32> = blocks[3..].to_vec();
+    let end = run_end(&rest).unwrap();
+    assert_eq!(
+        seen.iter().chain(live.iter()).copied().collect::<Vec<_>>(),
+        (0..end.blocks).collect::<Vec<_>>(),
+        "the live stream resumed where it was"
+    );
+    // Out of range: nothing but the Ack.
+    let (r, msgs) = b.command(HostMsg::PullBlocks {
+        run_id: 1,
+        first: end.blocks + 10,
+        count: u32::MAX,
+    });
+    assert_eq!(r, Ok(()));
+    b.run_for(20);
+    assert!(block_indices(msgs.iter().chain(b.msgs().iter())).is_empty());
+    assert_eq!(
+        b.command(HostMsg::PullBlocks {
+            run_id: 2,
+            first: 0,
+            count: 1
+        })
+        .0,
+        Err(ErrorCode::NoRun)
+    );
 }
 
 #[test]
@@ -1154,7 +1293,7 @@ fn the_safe_command_turns_everything_off_at_once() {
     assert_eq!(b.command(HostMsg::Safe).0, Ok(()));
     assert_eq!(b.app.state(), RigState::Running);
     b.run_for(100);
-    assert!(b.msgs().iter().any(|m| matches!(m, DeviceMsg::Samples(_))));
+    assert!(b.msgs().iter().any(is_block));
 }
 
 #[test]

@@ -102,6 +102,56 @@ pub trait Link {
     fn send_frame(&mut self, frame: &[u8]) -> bool;
 }
 
+/// Shape of the flash that keeps runs across power loss: bank 2 of the STM32H743 is 8 sectors of
+/// 128 KiB, programmed in 32-byte flash words (each written once after an erase: the ECC covers the
+/// whole word).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FlashGeometry {
+    pub sector_bytes: u32,
+    pub sectors: u32,
+}
+
+impl FlashGeometry {
+    /// Bank 2 of the STM32H743 (0x0810_0000, 1 MiB).
+    pub const H743_BANK2: FlashGeometry = FlashGeometry {
+        sector_bytes: 128 * 1024,
+        sectors: 8,
+    };
+
+    pub const fn bytes(&self) -> u32 {
+        self.sector_bytes * self.sectors
+    }
+}
+
+/// Programming unit of [`RunFlash`]: a 256-bit flash word.
+pub const FLASH_WORD: usize = 32;
+/// Most bytes one [`RunFlash::flash_program`] takes (whole words).
+pub const FLASH_MAX_PROGRAM: usize = 256;
+
+/// The flash the run store writes (bank 2 on the board; a model of it on the host).
+///
+/// Erase and program only *start* an operation, which runs while the application goes on; meanwhile
+/// [`RunFlash::flash_busy`] is true and every call but `flash_busy` is refused (on the STM32H7 a read
+/// of the bank being written would stall the CPU for the whole erase). Offsets are from the start of
+/// the flash.
+pub trait RunFlash {
+    fn flash_geometry(&self) -> FlashGeometry;
+    /// An erase or program is under way.
+    fn flash_busy(&mut self) -> bool;
+    /// Starts erasing sector `sector` (every byte to 0xFF). False, nothing started, when busy or
+    /// out of range.
+    fn flash_erase(&mut self, sector: u32) -> bool;
+    /// Starts programming `data` at `offset`: both multiples of [`FLASH_WORD`], at most
+    /// [`FLASH_MAX_PROGRAM`] bytes, inside one sector, every word erased since it was last
+    /// programmed. False, nothing started, when busy or refused.
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool;
+    /// Reads `out.len()` bytes at `offset`. False when busy or out of range.
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool;
+    /// Whether the last finished erase or program failed (reading it clears it).
+    fn flash_take_error(&mut self) -> bool;
+}
+
 /// A monotonic clock, microseconds.
 pub trait Clock {
     fn now_us(&self) -> u64;
@@ -109,12 +159,20 @@ pub trait Clock {
 
 /// Everything the application drives.
 pub trait Hardware:
-    Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link
+    Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link + RunFlash
 {
 }
 
 impl<
-        T: Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link,
+        T: Magnet
+            + Thermocouple
+            + HeaterOutput
+            + EcrFrontEnd
+            + SampleSource
+            + Button
+            + Led
+            + Link
+            + RunFlash,
     > Hardware for T
 {
 }

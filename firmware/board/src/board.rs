@@ -11,19 +11,23 @@
 //!   simpler binding than a timer-triggered ADC with DMA, see the README), overruns counted there.
 //! * `thermocouple`: the MAX31856 over SPI1 every 100 ms: only moves its register file (the library
 //!   checks it, `tribo_firmware::thermocouple`).
+//! * `flash`: erases and programs bank 2 for the run store, one operation at a time as the
+//!   application asks ([`FlashLink`]), interrupt-driven, so the application keeps running meanwhile.
 //! * `watchdog`: feeds the IWDG while every periodic task checks in; otherwise drives the outputs
-//!   safe, notes which task and lets the IWDG reset the chip (`tribo_firmware::watchdog`).
+//!   safe, notes which task and lets the IWDG reset the chip (`tribo_firmware::watchdog`). The flash
+//!   task waits on the flash controller and does not check in.
 //! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class.
 //!
 //! Panics and HardFaults go to `crate::safety` (safe state, reset record, reset).
 use core::cell::{Cell, RefCell};
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, Either};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, Resolution, SampleTime};
 use embassy_stm32::dac::{DacChannel, Value};
+use embassy_stm32::flash::{Async, Bank2Region, Flash};
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::mode::Blocking;
 use embassy_stm32::peripherals::{ADC1, IWDG1, TIM1, TIM4, USB_OTG_FS};
@@ -37,6 +41,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::pipe::Pipe;
+use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use static_cell::{ConstStaticCell, StaticCell};
@@ -44,15 +49,17 @@ use tribo_firmware::acquisition::Ring;
 use tribo_firmware::app::{App, AppConfig};
 use tribo_firmware::ecr::FULL_SCALE_V;
 use tribo_firmware::hal::*;
-use tribo_firmware::runstore::{BlockMeta, RunStore, BOARD_BLOCKS, BOARD_COUNTS};
+use tribo_firmware::runstore::RunStore;
 use tribo_firmware::thermocouple::{self as tc, Registers};
 use tribo_firmware::watchdog::{task, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
 use tribo_firmware::wire::{limits, BootReport, ResetCause};
 
+use crate::memory;
 use crate::safety;
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
+    FLASH => embassy_stm32::flash::InterruptHandler;
 });
 
 type Cs = CriticalSectionRawMutex;
@@ -88,18 +95,40 @@ struct Shared {
 static THERMOCOUPLE: ConstStaticCell<Mutex<Cs, Cell<TcReading>>> =
     ConstStaticCell::new(Mutex::new(Cell::new((None, 0))));
 static SHARED: StaticCell<Shared> = StaticCell::new();
-static STORE_COUNTS: ConstStaticCell<[u16; BOARD_COUNTS]> = ConstStaticCell::new([0; BOARD_COUNTS]);
-static STORE_META: ConstStaticCell<[BlockMeta; BOARD_BLOCKS]> =
-    ConstStaticCell::new([BlockMeta::EMPTY; BOARD_BLOCKS]);
+static FLASH_LINK: StaticCell<FlashLink> = StaticCell::new();
 static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static CONTROL_BUF: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
 static CDC_STATE: StaticCell<State> = StaticCell::new();
 
+/// An operation on bank 2, asked by the application, run by the flash task.
+#[derive(Clone)]
+enum FlashOp {
+    Erase {
+        sector: u32,
+    },
+    Program {
+        offset: u32,
+        len: usize,
+        data: [u8; FLASH_MAX_PROGRAM],
+    },
+}
+
+/// Bank 2 between the application (which asks and reads) and the flash task (which erases and
+/// programs, awaiting the flash interrupt).
+struct FlashLink {
+    region: embassy_sync::mutex::Mutex<Cs, Bank2Region<'static, Async>>,
+    op: Signal<Cs, FlashOp>,
+    /// An operation was asked and is not finished.
+    busy: AtomicBool,
+    failed: AtomicBool,
+}
+
 /// The hardware the application task drives directly.
 struct BoardHw {
     shared: &'static Shared,
+    flash: &'static FlashLink,
     magnet_hold: SimplePwmChannel<'static, TIM1>,
     magnet_reverse: SimplePwmChannel<'static, TIM1>,
     heater: SimplePwmChannel<'static, TIM4>,
@@ -223,6 +252,60 @@ impl Link for BoardHw {
     }
 }
 
+impl RunFlash for BoardHw {
+    fn flash_geometry(&self) -> FlashGeometry {
+        FlashGeometry::H743_BANK2
+    }
+    fn flash_busy(&mut self) -> bool {
+        self.flash.busy.load(Ordering::Acquire)
+    }
+    fn flash_erase(&mut self, sector: u32) -> bool {
+        if self.flash_busy() || sector >= FlashGeometry::H743_BANK2.sectors {
+            return false;
+        }
+        self.flash.busy.store(true, Ordering::Release);
+        self.flash.op.signal(FlashOp::Erase { sector });
+        true
+    }
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
+        let g = FlashGeometry::H743_BANK2;
+        let w = FLASH_WORD as u32;
+        let len = data.len() as u32;
+        if self.flash_busy()
+            || !offset.is_multiple_of(w)
+            || len == 0
+            || !len.is_multiple_of(w)
+            || data.len() > FLASH_MAX_PROGRAM
+            || offset + len > g.bytes()
+            || offset / g.sector_bytes != (offset + len - 1) / g.sector_bytes
+        {
+            return false;
+        }
+        let mut buf = [0xFF; FLASH_MAX_PROGRAM];
+        buf[..data.len()].copy_from_slice(data);
+        self.flash.busy.store(true, Ordering::Release);
+        self.flash.op.signal(FlashOp::Program {
+            offset,
+            len: data.len(),
+            data: buf,
+        });
+        true
+    }
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
+        // Never while bank 2 is erased or programmed: the read would stall the CPU until it ends.
+        if self.flash_busy() {
+            return false;
+        }
+        match self.flash.region.try_lock() {
+            Ok(mut region) => region.blocking_read(offset, out).is_ok(),
+            Err(_) => false,
+        }
+    }
+    fn flash_take_error(&mut self) -> bool {
+        self.flash.failed.swap(false, Ordering::AcqRel)
+    }
+}
+
 fn now_us() -> u64 {
     Instant::now().as_micros()
 }
@@ -234,7 +317,11 @@ fn now_ms() -> u32 {
 
 #[embassy_executor::task]
 async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64, boot: BootReport) {
-    let store = RunStore::new(STORE_COUNTS.take(), STORE_META.take());
+    let Some(mem) = memory::take() else {
+        defmt::error!("run store memory already taken");
+        return;
+    };
+    let store = RunStore::new(mem.ring, mem.index);
     let mut app = App::new(AppConfig::new(serial), store);
     app.set_boot_report(boot);
     let mut ticker = Ticker::every(Duration::from_millis(1));
@@ -349,6 +436,32 @@ async fn thermocouple_task(
             }
         }
         ticker.next().await;
+    }
+}
+
+/// Runs the application's flash operations on bank 2, one at a time.
+#[embassy_executor::task]
+async fn flash_task(link: &'static FlashLink) {
+    const SECTOR: u32 = FlashGeometry::H743_BANK2.sector_bytes;
+    loop {
+        let op = link.op.wait().await;
+        let ok = {
+            let mut region = link.region.lock().await;
+            match op {
+                FlashOp::Erase { sector } => region
+                    .erase(sector * SECTOR, (sector + 1) * SECTOR)
+                    .await
+                    .is_ok(),
+                FlashOp::Program { offset, len, data } => {
+                    region.write(offset, &data[..len]).await.is_ok()
+                }
+            }
+        };
+        if !ok {
+            defmt::warn!("bank 2 operation failed");
+            link.failed.store(true, Ordering::Release);
+        }
+        link.busy.store(false, Ordering::Release);
     }
 }
 
@@ -487,8 +600,19 @@ async fn main(spawner: Spawner) {
     heater_ch.set_duty_cycle_fully_off();
     heater_ch.enable();
 
+    // Bank 2 of the flash: the run store's (bank 1 holds this program).
+    let flash: &'static FlashLink = FLASH_LINK.init(FlashLink {
+        region: embassy_sync::mutex::Mutex::new(
+            Flash::new(p.FLASH, Irqs).into_regions().bank2_region,
+        ),
+        op: Signal::new(),
+        busy: AtomicBool::new(false),
+        failed: AtomicBool::new(false),
+    });
+
     let hw = BoardHw {
         shared,
+        flash,
         magnet_hold,
         magnet_reverse,
         heater: heater_ch,
@@ -555,6 +679,7 @@ async fn main(spawner: Spawner) {
     spawn!(spawner, usb_rx_task(shared, rx));
     spawn!(spawner, thermocouple_task(shared, spi, cs));
     spawn!(spawner, acquisition_task(shared, adc, channels));
+    spawn!(spawner, flash_task(flash));
     spawn!(spawner, app_task(shared, hw, serial, boot));
     // Last: every task is running when the watchdog starts counting.
     let wdg = IndependentWatchdog::new(p.IWDG1, limits::WATCHDOG_TIMEOUT_MS * 1000);

@@ -1,10 +1,11 @@
 //! The board's fail-safe: the one safe state reached from everywhere, the panic and HardFault
 //! handlers, the reset record kept across resets, and the reset cause read at boot.
 //!
-//! The only module of the firmware with `unsafe`, each block with its `// SAFETY:` reason. What it
-//! writes is data from the library ([`tribo_firmware::safety::H743_SAFE_STATE`], the reset record's
-//! words from [`tribo_firmware::reset`]), tested there on the host and in QEMU; this module only
-//! moves it to the registers and to the no-init RAM.
+//! One of the two board modules with `unsafe` (with `memory.rs`), each block with its `// SAFETY:`
+//! reason. What it writes is data from the library ([`tribo_firmware::safety::H743_SAFE_STATE`], the
+//! reset record's words from [`tribo_firmware::reset`]), tested there (on the host; the same
+//! functions run unchanged on the target); this module only moves it to the registers and to the
+//! no-init RAM.
 //!
 //! Order on every fatal path: the outputs go safe first (register writes, no lock, no allocation,
 //! nothing that can fail), then the reason is kept, then the chip resets. Reset puts every pin in

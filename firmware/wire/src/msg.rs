@@ -1009,23 +1009,28 @@ wire_type! {
 }
 
 wire_type! {
-    /// A compressed sample block (filled in by the whole-run work: see `tribo_firmware::codec`).
+    /// A compressed sample block: the v2 form of [`SampleBlock`], every field the same, the counts
+    /// packed by [`crate::codec`] ([`PackedBlock::pack`], [`PackedBlock::unpack`]).
     pub struct PackedBlock {
         pub run_id: u32,
         /// Index of this block in the run, from 0.
         pub block: u32,
         /// Index in the run of the block's first sample.
         pub first_sample: u32,
+        /// Device time of the block's first sample.
+        pub t_us: u64,
         pub channels: ChannelSet,
         /// Number of samples in the block.
         pub samples: u16,
+        /// ECR transimpedance range during the block.
+        pub ecr_range: u8,
         pub temp_c: f32,
         pub log10_ecr_ohm: f32,
-        /// The compressed counts.
+        /// The compressed counts ([`crate::codec`] describes the format).
         pub data: heapless::Vec<u8, MAX_PACKED_BYTES>,
     }
 }
 
-/// Largest compressed payload of a [`PackedBlock`]: the raw size plus one byte per count of worst-case
-/// overhead (the codec falls back to raw counts when compression would not pay).
+/// Largest compressed payload of a [`PackedBlock`]: the raw form (a format byte and two bytes per
+/// count), which the codec falls back to when compression would not pay, plus a little room.
 pub const MAX_PACKED_BYTES: usize = 2 * MAX_BLOCK_COUNTS + 16;

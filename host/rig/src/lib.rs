@@ -21,7 +21,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use tribo_firmware::app::{App, AppConfig};
 use tribo_firmware::reset::{self, Record, ResetFlags};
-use tribo_firmware::runstore::{BlockMeta, RunStore, BOARD_BLOCKS, BOARD_COUNTS};
+use tribo_firmware::runstore::{RunStore, BOARD_RING_BYTES, MAX_RUN_BLOCKS};
 use tribo_firmware::watchdog::{self, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
 use tribo_wire::{limits, BootReport, Decoder, Frame, HostMsg, ResetCause};
 
@@ -90,13 +90,18 @@ pub struct VirtualRig {
     host_lease_ms: u32,
 }
 
+/// A run store with the board's RAM (ring buffers and block index), so that what a host can pull
+/// from the virtual rig is what it could pull from the real one. Leaked: it lives as long as the
+/// program (761 KiB per rig, and per reset or power cycle).
+fn board_store() -> RunStore<'static> {
+    let ring = BOARD_RING_BYTES
+        .map(|n| -> &'static mut [u8] { Box::leak(vec![0u8; n].into_boxed_slice()) });
+    let index: &'static mut [u32] = Box::leak(vec![0u32; MAX_RUN_BLOCKS].into_boxed_slice());
+    RunStore::new(ring, index)
+}
+
 fn new_app(serial: u64) -> App<'static> {
-    // The same store size as the board, so that what a host can pull is what it could pull from
-    // the real rig. Leaked: it lives as long as the program (a few hundred KiB per rig and reset).
-    let counts: &'static mut [u16] = Box::leak(vec![0u16; BOARD_COUNTS].into_boxed_slice());
-    let meta: &'static mut [BlockMeta] =
-        Box::leak(vec![BlockMeta::EMPTY; BOARD_BLOCKS].into_boxed_slice());
-    App::new(AppConfig::new(serial), RunStore::new(counts, meta))
+    App::new(AppConfig::new(serial), board_store())
 }
 
 impl VirtualRig {
@@ -146,6 +151,22 @@ impl VirtualRig {
     /// The simulated hardware (for inspection and fault injection).
     pub fn hardware(&mut self) -> &mut SimHardware {
         &mut self.hw
+    }
+
+    /// Cuts the power and turns it on again: the firmware restarts with empty RAM (an operation the
+    /// flash was doing is torn, the reset record is gone), the flash keeps what it holds, the
+    /// physical rig stays where it is (the magnet lets go, the heater stops). The application
+    /// recovers the last run from flash on its first poll, as the board does, and reports a
+    /// power-on reset.
+    pub fn power_cycle(&mut self) {
+        self.hw.flash.power_cut();
+        self.noinit = reset::EMPTY;
+        self.reset(ResetFlags {
+            power_on: true,
+            brownout: true,
+            pin: true,
+            ..Default::default()
+        });
     }
 
     /// Sets the firmware's host lease, ms of device time (kept across resets). A rig served faster

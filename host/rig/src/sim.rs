@@ -19,6 +19,7 @@ use crate::config::VirtualRigConfig;
 use tribo_firmware::acquisition::Ring;
 use tribo_firmware::ecr::{FULL_SCALE_V, GAIN_V_PER_A, RANGES};
 use tribo_firmware::hal::*;
+use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::thermocouple::{self, sr, Registers};
 use tribo_firmware::wire::{ChannelCal, Configure, CHANNELS};
 use tribo_physics::sensor::Rng;
@@ -153,6 +154,8 @@ pub struct SimHardware {
     lamps: Lamps,
     pub(crate) connected: bool,
     pub(crate) out: Vec<u8>,
+    /// Bank 2: kept across a rig reset (power loss), with the STM32H743's erase and program times.
+    pub(crate) flash: MemFlash<Vec<u8>>,
 }
 
 impl SimHardware {
@@ -204,11 +207,21 @@ impl SimHardware {
             lamps: Lamps::default(),
             connected: true,
             out: Vec::new(),
+            flash: MemFlash::new(
+                vec![0xFF; FlashGeometry::H743_BANK2.bytes() as usize],
+                FlashGeometry::H743_BANK2,
+            )
+            .with_h743_timing(),
         };
         // The converter task's first read, at power-on.
         hw.tc_regs = hw.converter_registers();
         hw.tc_next_us = 100_000;
         Ok(hw)
+    }
+
+    /// The run store's flash (to inspect or damage it).
+    pub fn flash(&mut self) -> &mut MemFlash<Vec<u8>> {
+        &mut self.flash
     }
 
     /// (μ0, μ1) a Coulomb–viscous fit should find (contact law + apparatus damping).
@@ -359,6 +372,7 @@ impl SimHardware {
         if t_us <= self.now_us {
             return;
         }
+        self.flash.advance(t_us);
         let dt = (t_us - self.now_us) as f64 * 1e-6;
         // Heater: exact step of the first-order plate model.
         let th = self.cfg.thermal;
@@ -573,6 +587,27 @@ impl SampleSource for SimHardware {
     }
     fn adc_lost(&self) -> u32 {
         self.ring.lost()
+    }
+}
+
+impl RunFlash for SimHardware {
+    fn flash_geometry(&self) -> FlashGeometry {
+        self.flash.flash_geometry()
+    }
+    fn flash_busy(&mut self) -> bool {
+        self.flash.flash_busy()
+    }
+    fn flash_erase(&mut self, sector: u32) -> bool {
+        self.flash.flash_erase(sector)
+    }
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
+        self.flash.flash_program(offset, data)
+    }
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
+        self.flash.flash_read(offset, out)
+    }
+    fn flash_take_error(&mut self) -> bool {
+        self.flash.flash_take_error()
     }
 }
 

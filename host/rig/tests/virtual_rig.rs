@@ -96,7 +96,9 @@ impl Host {
         for f in &self.frames {
             match &f.1.msg {
                 DeviceMsg::RunStarted(h) => header = Some(*h),
-                DeviceMsg::Samples(b) => blocks.push(b.clone()),
+                DeviceMsg::Samples(_) | DeviceMsg::Packed(_) => {
+                    blocks.push(f.1.msg.sample_block().unwrap().expect("blocks unpack"))
+                }
                 DeviceMsg::Result(r) => result = Some(*r),
                 DeviceMsg::RunEnded(e) => end = Some(*e),
                 _ => {}

@@ -169,9 +169,9 @@ fn lost_blocks_message(missing: &[u32]) -> String {
         i = j + 1;
     }
     format!(
-        "{} sample blocks ({}) are no longer held by the rig: its memory keeps only the most recent part of a long \
-         run (about 1.5 s with all five channels at 10 kS/s), so they are lost and the run is stored incomplete; \
-         keep the cable in during runs, or record fewer channels",
+        "{} sample blocks ({}) are no longer held by the rig, so they are lost and the run is stored incomplete: \
+         the rig keeps a whole run in RAM and flash (about 60 s with all five channels at 10 kS/s; after a power \
+         cut, what its flash held, about the first 35 s), and this one was longer or the power went during it",
         missing.len(),
         ranges.join(", ")
     )
@@ -218,42 +218,19 @@ impl Streamer<'_, '_> {
                     });
                 }
             }
-            DeviceMsg::Samples(b) => {
-                let Some(w) = self.writer.as_mut() else {
-                    return Ok(None);
-                }; // before its header: pulled later
-                if let Some(old) = w.block(b.block) {
-                    if !same(old, b) {
-                        self.mismatch(&format!(
-                            "its block {} differs from the stored one",
-                            b.block
-                        ))?;
-                    }
-                    return Ok(None);
+            DeviceMsg::Samples(b) => return self.file_block(&f.raw, b),
+            DeviceMsg::Packed(p) => match p.unpack() {
+                Ok(b) => return self.file_block(&f.raw, &b),
+                Err(e) => {
+                    let msg = format!(
+                        "sample block {} of run {} arrived intact but its counts do not decode ({e}): \
+                         is this tribo older than the rig's firmware?",
+                        p.block, p.run_id
+                    );
+                    self.warnings.push(msg.clone());
+                    (self.obs)(Progress::Warning(msg));
                 }
-                let next = w.resume_from();
-                let last_seen = w.blocks() as u32;
-                w.append_frame(&f.raw)?;
-                if self.pulling {
-                    self.pulled += 1;
-                }
-                if b.block > next && b.block >= last_seen && !self.pulling {
-                    (self.obs)(Progress::Gap {
-                        from: next,
-                        to: b.block,
-                    });
-                }
-                if let Some(h) = w.header().copied() {
-                    let samples = (b.first_sample as u64) + b.samples() as u64;
-                    let env = envelope(&h, b);
-                    (self.obs)(Progress::Block {
-                        block: b,
-                        envelope_m: env,
-                        samples,
-                        expected: h.config.max_samples() as u64,
-                    });
-                }
-            }
+            },
             DeviceMsg::Result(r) => {
                 if let Some(old) = self.writer.as_ref().and_then(|w| w.onboard().copied()) {
                     if !same(old, *r) {
@@ -283,6 +260,45 @@ impl Streamer<'_, '_> {
                 (self.obs)(Progress::Warning(msg));
             }
             _ => {}
+        }
+        Ok(None)
+    }
+
+    /// Files a sample block (from a v1 `Samples` or an unpacked v2 `Packed` frame, `raw`).
+    fn file_block(&mut self, raw: &[u8], b: &SampleBlock) -> anyhow::Result<Option<StreamEnd>> {
+        let Some(w) = self.writer.as_mut() else {
+            return Ok(None);
+        }; // before its header: pulled later
+        if let Some(old) = w.block(b.block) {
+            if !same(old, b) {
+                self.mismatch(&format!(
+                    "its block {} differs from the stored one",
+                    b.block
+                ))?;
+            }
+            return Ok(None);
+        }
+        let next = w.resume_from();
+        let last_seen = w.blocks() as u32;
+        w.append_frame(raw)?;
+        if self.pulling {
+            self.pulled += 1;
+        }
+        if b.block > next && b.block >= last_seen && !self.pulling {
+            (self.obs)(Progress::Gap {
+                from: next,
+                to: b.block,
+            });
+        }
+        if let Some(h) = w.header().copied() {
+            let samples = (b.first_sample as u64) + b.samples() as u64;
+            let env = envelope(&h, b);
+            (self.obs)(Progress::Block {
+                block: b,
+                envelope_m: env,
+                samples,
+                expected: h.config.max_samples() as u64,
+            });
         }
         Ok(None)
     }

@@ -215,7 +215,7 @@ struct Assembled {
     blocks: BTreeMap<u32, SampleBlock>,
     result: Option<OnboardResult>,
     end: Option<RunEnd>,
-    /// Records that were not frames of this protocol (count).
+    /// Records that were not frames of this protocol, or packed blocks that did not unpack (count).
     undecodable: usize,
     /// Blocks received twice with different contents.
     conflicts: Vec<u32>,
@@ -225,12 +225,16 @@ impl Assembled {
     fn add(&mut self, msg: DeviceMsg) {
         match msg {
             DeviceMsg::RunStarted(h) if self.header.is_none() => self.header = Some(h),
-            DeviceMsg::Samples(b) => match self.blocks.get(&b.block) {
-                Some(old) if *old != b => self.conflicts.push(b.block),
-                Some(_) => {}
-                None => {
-                    self.blocks.insert(b.block, b);
-                }
+            DeviceMsg::Samples(_) | DeviceMsg::Packed(_) => match msg.sample_block() {
+                Some(Ok(b)) => match self.blocks.get(&b.block) {
+                    Some(old) if *old != b => self.conflicts.push(b.block),
+                    Some(_) => {}
+                    None => {
+                        self.blocks.insert(b.block, b);
+                    }
+                },
+                // A packed block whose counts do not decode (a CRC-valid frame from a newer codec).
+                _ => self.undecodable += 1,
             },
             DeviceMsg::Result(r) => self.result = Some(r),
             DeviceMsg::RunEnded(e) => self.end = Some(e),
