@@ -159,7 +159,6 @@ impl VirtualRig {
     /// recovers the last run from flash on its first poll, as the board does, and reports a
     /// power-on reset.
     pub fn power_cycle(&mut self) {
-        self.hw.flash.power_cut();
         self.noinit = reset::EMPTY;
         self.reset(ResetFlags {
             power_on: true,
@@ -302,6 +301,8 @@ impl VirtualRig {
     /// A reset of the MCU: a new application, outputs at their reset state, the boot report from
     /// the reset flags and the record kept in "no-init RAM".
     fn reset(&mut self, flags: ResetFlags) {
+        // A reset aborts a flash operation in progress just as a power cut does.
+        self.hw.flash.power_cut();
         self.hw.reset_mcu();
         let noinit = self.noinit;
         let report = reset::boot_report(flags, || noinit);
