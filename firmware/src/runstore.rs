@@ -11,7 +11,8 @@
 //! stored encoded, which keeps ~2 bytes per count.
 
 use crate::wire::{
-    ChannelSet, Counts, DeviceMsg, OnboardResult, RunEnd, RunHeader, SampleBlock, BLOCK_LEN,
+    ChannelSet, Counts, DeviceMsg, EcrRangeChange, Gap, OnboardResult, RunEnd, RunHeader,
+    SampleBlock, BLOCK_LEN,
 };
 
 /// Counts the board keeps for the last run (144 KiB of the 256 KiB static RAM budget): the last 1.47 s
@@ -24,6 +25,9 @@ pub const BOARD_BLOCKS: usize = BOARD_COUNTS / (2 * BLOCK_LEN);
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BlockMeta {
     pub seq: u32,
+    /// Index in the run of the block's first sample (blocks after a gap start further on than
+    /// `block × BLOCK_LEN`).
+    pub first_sample: u32,
     pub t_us: u64,
     pub ecr_range: u8,
     pub log10_ecr_ohm: f32,
@@ -35,6 +39,7 @@ pub struct BlockMeta {
 impl BlockMeta {
     pub const EMPTY: BlockMeta = BlockMeta {
         seq: 0,
+        first_sample: 0,
         t_us: 0,
         ecr_range: 0,
         log10_ecr_ohm: 0.0,
@@ -61,6 +66,44 @@ pub struct RunStore<'a> {
     slots: usize,
     /// Blocks pushed so far.
     blocks: u32,
+    /// The run's events (see [`RunEvent`]).
+    events: heapless::Vec<StoredEvent, MAX_EVENTS>,
+}
+
+// ---- Run events -----------------------------------------------------------------------------------
+// Self-contained on purpose (the block storage around it may change): a short list of run frames
+// that are not sample blocks, each kept whole with its sequence number and its place among the
+// blocks, so that the live stream and a Pull send them in the same order, byte for byte.
+
+/// Most events a run keeps: a run that would need more is ended by the application (a gap) or
+/// stops autoranging (an ECR range change), see `app.rs`.
+pub const MAX_EVENTS: usize = 128;
+
+/// A run frame that is not a sample block: what the acquisition reports about the samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RunEvent {
+    /// Samples that were lost (acquisition overrun).
+    Gap(Gap),
+    /// The ECR range changed (and its settling samples).
+    EcrRange(EcrRangeChange),
+}
+
+impl RunEvent {
+    pub fn to_msg(self) -> DeviceMsg {
+        match self {
+            RunEvent::Gap(g) => DeviceMsg::Gap(g),
+            RunEvent::EcrRange(e) => DeviceMsg::EcrRange(e),
+        }
+    }
+}
+
+/// An event as stored: its frame's sequence number, and the number of blocks stored before it
+/// (it is sent after those blocks and before the next).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StoredEvent {
+    pub seq: u32,
+    pub before_block: u32,
+    pub event: RunEvent,
 }
 
 /// One item of a stored run, in the order it is sent.
@@ -68,6 +111,8 @@ pub struct RunStore<'a> {
 pub enum Item {
     Header,
     Block(u32),
+    /// Event `.0` of the run, in the order pushed.
+    Event(u32),
     Result,
     End,
 }
@@ -85,6 +130,7 @@ impl<'a> RunStore<'a> {
             channels: ChannelSet::EMPTY,
             slots: 0,
             blocks: 0,
+            events: heapless::Vec::new(),
         }
     }
 
@@ -97,6 +143,7 @@ impl<'a> RunStore<'a> {
         self.header = Some((seq, header));
         self.result = None;
         self.end = None;
+        self.events.clear();
     }
 
     pub fn run_id(&self) -> Option<u32> {
@@ -139,6 +186,7 @@ impl<'a> RunStore<'a> {
         self.counts[slot * span..slot * span + n].copy_from_slice(&b.counts[..n]);
         self.meta[slot] = BlockMeta {
             seq,
+            first_sample: b.first_sample,
             t_us: b.t_us,
             ecr_range: b.ecr_range,
             log10_ecr_ohm: b.log10_ecr_ohm,
@@ -172,7 +220,7 @@ impl<'a> RunStore<'a> {
             SampleBlock {
                 run_id: h.run_id,
                 block: k,
-                first_sample: k * BLOCK_LEN as u32,
+                first_sample: m.first_sample,
                 t_us: m.t_us,
                 channels: self.channels,
                 ecr_range: m.ecr_range,
@@ -188,9 +236,51 @@ impl<'a> RunStore<'a> {
         match item {
             Item::Header => self.header.map(|(s, h)| (s, DeviceMsg::RunStarted(h))),
             Item::Block(k) => self.block(k).map(|(s, b)| (s, DeviceMsg::Samples(b))),
+            Item::Event(i) => self
+                .events
+                .get(i as usize)
+                .map(|e| (e.seq, e.event.to_msg())),
             Item::Result => self.result.map(|(s, r)| (s, DeviceMsg::Result(r))),
             Item::End => self.end.map(|(s, e)| (s, DeviceMsg::RunEnded(e))),
         }
+    }
+
+    /// Stores an event of the run in progress, after the blocks stored so far. False (nothing
+    /// stored) when no run is open or the event list is full.
+    pub fn push_event(&mut self, seq: u32, event: RunEvent) -> bool {
+        if self.header.is_none() || self.end.is_some() {
+            return false;
+        }
+        self.events
+            .push(StoredEvent {
+                seq,
+                before_block: self.blocks,
+                event,
+            })
+            .is_ok()
+    }
+
+    /// Events stored for this run.
+    pub fn events(&self) -> &[StoredEvent] {
+        &self.events
+    }
+
+    /// Room left for events.
+    pub fn events_free(&self) -> usize {
+        MAX_EVENTS - self.events.len()
+    }
+
+    /// What to send next when blocks before `block` and events before `event` were sent: event
+    /// `event` if it comes before block `block` (or before the oldest block still held), else that
+    /// block, else the result and the end once they exist.
+    pub fn next_item(&self, block: u32, event: u32) -> Option<Item> {
+        let block = block.max(self.oldest_block());
+        if let Some(e) = self.events.get(event as usize) {
+            if e.before_block <= block {
+                return Some(Item::Event(event));
+            }
+        }
+        self.first_from(block)
     }
 
     /// The first item at or after block `k` that exists now.
@@ -205,5 +295,115 @@ impl<'a> RunStore<'a> {
         } else {
             None
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::{Configure, SampleClock};
+
+    fn header() -> RunHeader {
+        RunHeader {
+            run_id: 3,
+            config: Configure::real_rig(0.3),
+            temp_c: 25.0,
+            t_us: 0,
+            clock: SampleClock::exact(10_000),
+        }
+    }
+
+    fn block(k: u32, first: u32) -> SampleBlock {
+        let ch = Configure::real_rig(0.3).channels;
+        let mut counts = Counts::default();
+        for i in 0..ch.len() * 3 {
+            let _ = counts.push(i as u16);
+        }
+        SampleBlock {
+            run_id: 3,
+            block: k,
+            first_sample: first,
+            t_us: first as u64 * 100,
+            channels: ch,
+            ecr_range: 1,
+            log10_ecr_ohm: 7.0,
+            temp_c: 25.0,
+            counts,
+        }
+    }
+
+    /// Everything a sender starting at (`block`, `event`) sends, in order.
+    fn send_all(st: &RunStore, mut block: u32, mut event: u32) -> Vec<DeviceMsg> {
+        let mut out = Vec::new();
+        while let Some(item) = st.next_item(block, event) {
+            out.push(st.frame(item).unwrap().1);
+            match item {
+                Item::Event(e) => event = e + 1,
+                Item::Block(k) => block = k + 1,
+                Item::Result | Item::End | Item::Header => break,
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn events_keep_their_place_among_the_blocks_and_their_first_samples() {
+        let mut c = vec![0u16; 10_000];
+        let mut m = vec![BlockMeta::EMPTY; 40];
+        let mut st = RunStore::new(&mut c, &mut m);
+        assert!(!st.push_event(
+            1,
+            RunEvent::Gap(Gap {
+                run_id: 3,
+                first_sample: 0,
+                count: 1
+            })
+        ));
+        st.begin(10, header());
+        let range = |first| {
+            RunEvent::EcrRange(EcrRangeChange {
+                run_id: 3,
+                first_sample: first,
+                range: 2,
+                settling: 3,
+            })
+        };
+        assert!(st.push_event(11, range(0)));
+        assert!(st.push_block(12, &block(0, 0)));
+        assert!(st.push_event(
+            13,
+            RunEvent::Gap(Gap {
+                run_id: 3,
+                first_sample: 3,
+                count: 40
+            })
+        ));
+        assert!(st.push_block(14, &block(1, 43)));
+        assert!(st.push_event(15, range(50)));
+        let order: Vec<String> = send_all(&st, 0, 0)
+            .iter()
+            .map(|m| match m {
+                DeviceMsg::Samples(b) => format!("b{}@{}", b.block, b.first_sample),
+                DeviceMsg::Gap(g) => format!("gap{}+{}", g.first_sample, g.count),
+                DeviceMsg::EcrRange(e) => format!("r{}", e.first_sample),
+                other => format!("{other:?}"),
+            })
+            .collect();
+        assert_eq!(order, ["r0", "b0@0", "gap3+40", "b1@43", "r50"]);
+        // A pull from block 1 still sends every event first that belongs before block 1.
+        let from1 = send_all(&st, 1, 0);
+        assert_eq!(from1.len(), 4);
+        assert!(matches!(from1[2], DeviceMsg::Samples(ref b) if b.block == 1));
+        // Sequence numbers are the ones the events were stored with.
+        assert_eq!(st.frame(Item::Event(1)).map(|f| f.0), Some(13));
+        // A new run forgets the old events.
+        st.begin(20, header());
+        assert!(st.events().is_empty() && st.next_item(0, 0).is_none());
+        // A full list refuses, and says so.
+        for i in 0..MAX_EVENTS as u32 {
+            assert!(st.push_event(i, range(i)));
+        }
+        assert_eq!(st.events_free(), 0);
+        assert!(!st.push_event(0, range(0)));
     }
 }
