@@ -191,6 +191,12 @@ impl<'a> App<'a> {
         self.run_id
     }
 
+    /// Index in the converter's stream of the current or last run's sample 0 (run sample `i` is
+    /// stream sample `run_first_index() + i`).
+    pub fn run_first_index(&self) -> u64 {
+        self.run_base
+    }
+
     pub fn store(&self) -> &RunStore<'a> {
         &self.store
     }

@@ -7,6 +7,10 @@
 
 use crate::wire::SampleClock;
 
+/// Kernel clock of the board's sample timer (TIM6 on APB1: timer clocks run at twice the 100 MHz
+/// bus clock), Hz. The virtual rig models the same timer; the board checks the clock tree gives it.
+pub const BOARD_TIMER_HZ: u32 = 200_000_000;
+
 /// Largest divider of a 16-bit prescaler or auto-reload register (`PSC + 1`, `ARR + 1`).
 pub const MAX_DIVIDER: u32 = 1 << 16;
 /// Fewest timer ticks per sample (a reload of 0 stops a basic timer).
