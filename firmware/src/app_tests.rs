@@ -722,6 +722,33 @@ fn a_reader_stall_is_a_gap_frame_with_the_exact_missing_samples_and_the_run_goes
 }
 
 #[test]
+fn a_poll_takes_a_bounded_number_of_samples_and_a_backlog_drains_over_the_next_polls() {
+    let mut b = Bench::new();
+    b.hw.stop_s = 1.0;
+    b.ready();
+    assert_eq!(b.command(HostMsg::Release).0, Ok(()));
+    b.run_for(50);
+    // 150 ms without reading: 1500 samples wait in the 2048-scan ring (none lost).
+    b.hw.adc.stall_reader(b.hw.now_us + 150_000);
+    b.run_for(150);
+    let taken = |b: &Bench| b.app.builder.as_ref().unwrap().samples();
+    let before = taken(&b);
+    b.run_for(1);
+    let per_poll = b.app.cfg.samples_per_poll as u32;
+    assert_eq!(
+        taken(&b) - before,
+        per_poll,
+        "one poll takes at most samples_per_poll"
+    );
+    // Taking 128 a poll while 10 arrive, the backlog is gone within 13 polls, nothing lost.
+    b.run_for(14);
+    assert_eq!(b.app.next_index, b.hw.adc.next_index());
+    let msgs = b.msgs();
+    assert!(!msgs.iter().any(|m| matches!(m, DeviceMsg::Gap(_))));
+    assert_eq!(b.app.status().overruns, 0);
+}
+
+#[test]
 fn an_adc_overrun_restarts_the_converter_and_is_a_gap_not_a_shift() {
     let mut b = Bench::new();
     b.hw.stop_s = 0.6;

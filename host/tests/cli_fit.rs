@@ -186,6 +186,11 @@ fn a_record_with_a_hole_is_refused_unless_the_longest_clean_stretch_is_asked_for
         err.contains("--longest-clean-stretch") && err.contains("jumps 1 time"),
         "{err}"
     );
+    // `tribo explain` refuses the same way.
+    let out = tribo(&["explain", rec_s]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("--longest-clean-stretch"), "{err}");
     let out = tribo(&["fit", "--longest-clean-stretch", "--json", rec_s]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
