@@ -269,9 +269,9 @@ impl Assembled {
     fn from_records(records: &[Vec<u8>]) -> Assembled {
         let mut a = Assembled::default();
         for r in records {
-            match decode_one::<DeviceMsg>(r) {
-                Ok(f) => a.add(f.msg),
-                Err(_) => a.undecodable += 1,
+            match decode_record(r) {
+                Some(m) => a.add(m),
+                None => a.undecodable += 1,
             }
         }
         a
@@ -296,6 +296,50 @@ impl Assembled {
             next += 1;
         }
         next
+    }
+}
+
+/// Protocol v1 run headers, which had no sample clock: logs recorded before it stay readable (their
+/// samples are at the configured rate, as v1 assumed).
+pub(crate) mod v1 {
+    use serde::{Deserialize, Serialize};
+    use tribo_wire::{Configure, DeviceError, DeviceInfo, Status};
+
+    #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+    pub struct RunHeader {
+        pub run_id: u32,
+        pub config: Configure,
+        pub temp_c: f32,
+        pub t_us: u64,
+    }
+
+    /// The first variants of v1's `DeviceMsg`, in its order, up to the run header.
+    #[derive(Debug, Clone, Serialize, Deserialize)]
+    #[allow(clippy::large_enum_variant, dead_code)]
+    pub enum DeviceMsg {
+        Hello(DeviceInfo),
+        Ack { seq: u32 },
+        Error(DeviceError),
+        Status(Status),
+        RunStarted(RunHeader),
+    }
+}
+
+/// A logged frame's message: this protocol's, or a v1 run header (given the exact configured rate
+/// as its clock).
+fn decode_record(raw: &[u8]) -> Option<DeviceMsg> {
+    if let Ok(f) = decode_one::<DeviceMsg>(raw) {
+        return Some(f.msg);
+    }
+    match decode_one::<v1::DeviceMsg>(raw).ok()?.msg {
+        v1::DeviceMsg::RunStarted(h) => Some(DeviceMsg::RunStarted(RunHeader {
+            run_id: h.run_id,
+            config: h.config,
+            temp_c: h.temp_c,
+            t_us: h.t_us,
+            clock: SampleClock::exact(h.config.sample_rate_hz),
+        })),
+        _ => None,
     }
 }
 
@@ -734,22 +778,25 @@ impl RunWriter {
     /// Logs one raw wire frame (as received) and files the message it holds. Frames that do not
     /// decode are refused (the link layer asks again for them).
     pub fn append_frame(&mut self, raw: &[u8]) -> Result<()> {
-        let frame = decode_one::<DeviceMsg>(raw).map_err(|e| {
-            StoreError::new(
-                ErrorKind::Invalid,
-                format!("refusing to log a bad frame: {e}"),
-            )
-        })?;
-        let is_header = matches!(frame.msg, DeviceMsg::RunStarted(_));
-        let is_end = matches!(frame.msg, DeviceMsg::RunEnded(_) | DeviceMsg::Result(_));
-        if let DeviceMsg::RunStarted(h) = &frame.msg {
+        let msg = match decode_one::<DeviceMsg>(raw) {
+            Ok(f) => f.msg,
+            Err(e) => decode_record(raw).ok_or_else(|| {
+                StoreError::new(
+                    ErrorKind::Invalid,
+                    format!("refusing to log a bad frame: {e}"),
+                )
+            })?,
+        };
+        let is_header = matches!(msg, DeviceMsg::RunStarted(_));
+        let is_end = matches!(msg, DeviceMsg::RunEnded(_) | DeviceMsg::Result(_));
+        if let DeviceMsg::RunStarted(h) = &msg {
             self.meta.device_run_id = Some(h.run_id);
             if h.temp_c.is_finite() {
                 self.meta.temp_c = Some(clean(h.temp_c));
             }
         }
         self.log.append(raw)?;
-        self.data.add(frame.msg);
+        self.data.add(msg);
         if is_header {
             // The rig's run id is how `tribo pull` finds this folder again, even if this process
             // is killed before `finish`.

@@ -498,3 +498,32 @@ fn a_catalog_from_before_the_gap_column_is_migrated() {
     // Opening it again leaves it as it is.
     Catalog::open(d.path()).unwrap();
 }
+
+#[test]
+fn a_v1_log_s_header_without_a_clock_still_reads() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let mut frames = run_frames(&cfg, 3, 0.02);
+    let h = match decode_one::<DeviceMsg>(&frames[0]).unwrap().msg {
+        DeviceMsg::RunStarted(h) => h,
+        _ => unreachable!(),
+    };
+    // The v1 header: the same fields, no clock (as firmware v1 wrote it).
+    let v1 = crate::run::v1::DeviceMsg::RunStarted(crate::run::v1::RunHeader {
+        run_id: h.run_id,
+        config: h.config,
+        temp_c: h.temp_c,
+        t_us: h.t_us,
+    });
+    frames[0] = encode_vec(1, &v1).unwrap();
+    assert!(
+        decode_one::<DeviceMsg>(&frames[0]).is_err(),
+        "not a v2 frame"
+    );
+    let run = record(d.path(), &cfg, &frames, |_| {});
+    assert_eq!(run.undecodable_records(), 0);
+    let hh = run.header().unwrap();
+    assert_eq!((hh.run_id, hh.t_us), (h.run_id, h.t_us));
+    assert_eq!(run.clock(), SampleClock::exact(10_000));
+    assert_eq!(run.samples_si().unwrap().t[10], 0.001);
+}
