@@ -7,7 +7,7 @@
 //! ```text
 //!   Idle ──Configure──▶ Configured ──Arm──▶ Armed ──Release / button──▶ Running ──▶ Finished
 //!                          ▲   ◀──Disarm / hold-time limit──┘                 │ stop, max duration,
-//!                          └──────────────────Configure / Arm ◀───────────────┘ abort, fault, overrun
+//!                          └──────────────────Configure / Arm ◀───────────────┘ abort, fault, gap list full
 //! ```
 //!
 //! * **Arm** energises the magnet (the pin is held at x0) and starts the converter; samples taken while
