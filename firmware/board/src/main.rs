@@ -7,6 +7,8 @@
 mod board;
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod memory;
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+mod sampling;
 
 #[cfg(not(all(target_arch = "arm", target_os = "none")))]
 fn main() {

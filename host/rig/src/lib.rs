@@ -13,7 +13,7 @@
 pub mod config;
 pub mod sim;
 
-pub use config::{EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
+pub use config::{AcquisitionFaults, EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
 pub use sim::SimHardware;
 
 use std::io::{self, Read, Write};
