@@ -342,8 +342,6 @@ fn row(
     }
 }
 
-const ACQ_TASK_SILENCE_MS: u64 =
-    BOARD_TASKS[tribo_firmware::watchdog::task::ACQUISITION].max_silence_ms as u64;
 const TC_TASK_SILENCE_MS: u64 =
     BOARD_TASKS[tribo_firmware::watchdog::task::THERMOCOUPLE].max_silence_ms as u64;
 
@@ -362,11 +360,6 @@ rows! {
             Told::Boot(ResetCause::Watchdog, "task thermocouple silent"),
             TC_TASK_SILENCE_MS + 100 + FEED_PERIOD_MS as u64 + limits::WATCHDOG_TIMEOUT_MS as u64 + 1),
         inject: |b: &mut Bench| b.rig.stall_task(Task::Thermocouple);
-    stuck_acquisition_task:
-        row(heating_armed, Outputs::Board, ACQ_TASK_SILENCE_MS + FEED_PERIOD_MS as u64 + 1,
-            Told::Boot(ResetCause::Watchdog, "task acquisition silent"),
-            ACQ_TASK_SILENCE_MS + 2 * FEED_PERIOD_MS as u64 + limits::WATCHDOG_TIMEOUT_MS as u64 + 1),
-        inject: |b: &mut Bench| b.rig.stall_task(Task::Acquisition);
     stuck_task_hogging_the_core_is_reset_by_the_hardware_watchdog:
         // Nothing runs: the outputs hold until the IWDG resets the chip into its safe reset state.
         row(heating_armed, Outputs::Board, FEED_PERIOD_MS as u64 + limits::WATCHDOG_TIMEOUT_MS as u64 + 1,

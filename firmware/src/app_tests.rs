@@ -57,6 +57,9 @@ fn onboard_result<M: core::borrow::Borrow<DeviceMsg>>(msgs: &[M]) -> Option<Onbo
     })
 }
 
+/// What the mock's ECR output reads while its amplifier settles (no contact reads exactly this).
+const SETTLING_V: f32 = 1.2345;
+
 /// A rig whose pin, once released, oscillates at 26 Hz with an amplitude decaying linearly to rest
 /// (Coulomb-like) in `stop_s`. The ADC converts on demand up to the time set by the test.
 struct Mock {
@@ -69,11 +72,12 @@ struct Mock {
     ecr_r: f32,
     ecr_range: u8,
     ecr_source: f32,
+    /// Model the transimpedance amplifier's settling: for `SETTLE_US` of the range after a change
+    /// of range or source, the output reads [`SETTLING_V`].
+    ecr_settles: bool,
+    ecr_changed_us: u64,
     adc_ok: bool,
-    adc_on: bool,
-    rate: u32,
-    next_sample_us: f64,
-    ring: crate::acquisition::Ring<4096>,
+    adc: crate::acquisition::ConverterModel,
     button: bool,
     connected: bool,
     out: Vec<u8>,
@@ -94,11 +98,10 @@ impl Mock {
             ecr_r: 1e7,
             ecr_range: 0,
             ecr_source: 0.0,
+            ecr_settles: false,
+            ecr_changed_us: 0,
             adc_ok: true,
-            adc_on: false,
-            rate: 0,
-            next_sample_us: 0.0,
-            ring: crate::acquisition::Ring::new(),
+            adc: crate::acquisition::ConverterModel::new(200_000_000),
             button: false,
             connected: true,
             out: Vec::new(),
@@ -122,20 +125,48 @@ impl Mock {
     /// Converts every sample due up to `now_us` into the ring (and lets the flash work that long).
     fn convert(&mut self) {
         self.flash.advance(self.now_us);
-        if !self.adc_on {
-            return;
-        }
-        let dt = 1e6 / self.rate as f64;
-        while self.next_sample_us <= self.now_us as f64 {
-            let (x, v) = self.x_v(self.next_sample_us);
+        while let Some(t) = self.adc.due(self.now_us) {
+            let (x, v) = self.x_v(t as f64);
             let s = [
                 self.cal[0].to_count(x as f32),
                 self.cal[1].to_count(v as f32),
                 self.cal[2].to_count(0.01),
-                self.cal[3].to_count(self.ecr_out()),
+                self.cal[3].to_count(self.ecr_at(t)),
             ];
-            self.ring.push(s);
-            self.next_sample_us += dt;
+            self.adc.convert(&s);
+        }
+    }
+
+    /// Asserts that every sample of `blk` holds the displacement and velocity of its own instant:
+    /// run sample `i` is stream sample `base + i`, converted at that trigger's time.
+    fn check_block(&self, blk: &SampleBlock, base: u64) {
+        let (px, pv) = (
+            blk.channels.position(Channel::Displacement).unwrap(),
+            blk.channels.position(Channel::Velocity).unwrap(),
+        );
+        for i in 0..blk.samples() {
+            let k = base + blk.first_sample as u64 + i as u64;
+            let (x, v) = self.x_v(self.adc.trigger_time_us(k) as f64);
+            let s = blk.sample(i).unwrap();
+            assert_eq!(
+                (s[px], s[pv]),
+                (
+                    self.cal[0].to_count(x as f32),
+                    self.cal[1].to_count(v as f32)
+                ),
+                "block {} sample {i} (stream {k})",
+                blk.block
+            );
+        }
+    }
+
+    /// The ECR output converted at device time `t_us`.
+    fn ecr_at(&self, t_us: u64) -> f32 {
+        let settle = crate::ecr::SETTLE_US[self.ecr_range as usize] as u64;
+        if self.ecr_settles && t_us < self.ecr_changed_us + settle {
+            SETTLING_V
+        } else {
+            self.ecr_out()
         }
     }
 
@@ -185,9 +216,15 @@ impl HeaterOutput for Mock {
 }
 impl EcrFrontEnd for Mock {
     fn set_ecr_source(&mut self, v: f32) {
+        if v != self.ecr_source {
+            self.ecr_changed_us = self.now_us;
+        }
         self.ecr_source = v;
     }
     fn set_ecr_range(&mut self, r: u8) {
+        if r != self.ecr_range {
+            self.ecr_changed_us = self.now_us;
+        }
         self.ecr_range = r;
     }
     fn read_ecr_output(&mut self) -> f32 {
@@ -195,28 +232,28 @@ impl EcrFrontEnd for Mock {
     }
 }
 impl SampleSource for Mock {
-    fn adc_start(&mut self, rate_hz: u32) -> bool {
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
+        self.adc.clock_for(rate_hz)
+    }
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
         if !self.adc_ok {
-            return false;
+            return None;
         }
-        self.adc_on = true;
-        self.rate = rate_hz;
-        self.next_sample_us = self.now_us as f64;
-        self.ring.clear();
-        true
+        self.adc.start(rate_hz, self.now_us)
     }
     fn adc_stop(&mut self) {
-        self.adc_on = false;
+        self.adc.stop();
     }
     fn adc_running(&self) -> bool {
-        self.adc_on
+        self.adc.is_running()
     }
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize {
+    fn adc_next_index(&mut self) -> u64 {
         self.convert();
-        self.ring.pop_into(out)
+        self.adc.next_index()
     }
-    fn adc_lost(&self) -> u32 {
-        self.ring.lost()
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
+        self.convert();
+        self.adc.read(out)
     }
 }
 impl Button for Mock {
@@ -494,7 +531,7 @@ fn hold_time_limit_disarms_and_is_reported() {
     assert!(faults(&b.msgs()).contains(&FaultReason::MagnetHoldTime));
     assert_eq!(b.hw.magnet(), MagnetDrive::Off);
     assert!(
-        !b.hw.adc_on,
+        !b.hw.adc.is_running(),
         "sampling left running after the magnet was cut"
     );
     assert_eq!(
@@ -590,8 +627,10 @@ fn a_run_streams_contiguous_blocks_then_result_and_end() {
             (header.run_id, k as u32, next_sample)
         );
         assert_eq!(blk.t_us, header.t_us + blk.first_sample as u64 * 100);
-        // The autoranger starts cold at arming (least gain, low source): a few blocks to settle.
-        if k >= 8 {
+        // The autoranger starts cold at arming (least gain, low source): it climbs a range per block
+        // and waits out each change's settling (20 ms on the highest range, three blocks), so
+        // a dozen blocks go by before it reads.
+        if k >= 14 {
             assert!(
                 (blk.log10_ecr_ohm - 7.0).abs() < 0.01,
                 "ECR of a 1e7 Ω contact read as {}",
@@ -672,28 +711,239 @@ fn heater_fault_during_a_run_cuts_the_heater_and_ends_the_run() {
 }
 
 #[test]
-fn overrun_is_reported_and_ends_the_run() {
+fn a_reader_stall_is_a_gap_frame_with_the_exact_missing_samples_and_the_run_goes_on() {
     let mut b = Bench::new();
+    b.hw.stop_s = 1.0;
     b.ready();
     assert_eq!(b.command(HostMsg::Release).0, Ok(()));
     b.run_for(100);
-    // The consumer stalls for 0.5 s: 5000 samples for a 4096-sample ring.
-    b.hw.now_us += 500_000;
-    b.hw.convert();
-    let lost = b.hw.ring.lost();
-    assert!(lost > 800, "{lost}");
-    b.poll();
+    // Every sample due so far was read; the reader then stops for 300 ms (3000 samples, for a
+    // ring of 2048), while the converter goes on.
+    let stall_from = b.hw.adc.next_index();
+    b.hw.adc.stall_reader(b.hw.now_us + 300_000);
+    b.run_for(299);
+    let before_resume = b.hw.adc.next_index();
+    b.run_for(1);
+    // At the poll that resumed reading, the ring held the last RING_SCANS samples.
+    let resumed_at = b.hw.adc.next_index() - crate::acquisition::RING_SCANS as u64;
+    assert!(before_resume < b.hw.adc.next_index());
+    b.run_for(1500);
     let msgs = b.msgs();
-    assert!(
-        errors(&msgs).contains(&ErrorCode::Overrun { lost_samples: lost }),
-        "{:?}",
-        errors(&msgs)
+    let base = b.app.run_base;
+    let gaps: Vec<Gap> = msgs
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Gap(g) => Some(*g),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        gaps,
+        [Gap {
+            run_id: 1,
+            first_sample: (stall_from - base) as u32,
+            count: (resumed_at - stall_from) as u32,
+        }]
     );
     let end = run_end(&msgs).unwrap();
-    assert_eq!((end.reason, end.overruns), (EndReason::Overrun, lost));
-    // No block reaches past the samples read before the loss was seen: ≈ 100 ms at 10 kS/s.
-    assert!(end.samples <= 1100, "{}", end.samples);
-    assert_eq!(b.app.status().overruns, lost);
+    assert_eq!(end.reason, EndReason::Stopped, "the run went on to its end");
+    assert_eq!(end.overruns, gaps[0].count);
+    assert_eq!(b.app.status().overruns, gaps[0].count);
+    // Blocks: numbered on, each of consecutive samples, the one after the gap starting at its end,
+    // and every sample holding the displacement of its own instant.
+    let blocks = sample_blocks(&msgs);
+    assert_eq!(
+        blocks.iter().map(|k| k.block).collect::<Vec<_>>(),
+        (0..blocks.len() as u32).collect::<Vec<_>>()
+    );
+    let mut next = 0;
+    for k in &blocks {
+        if k.first_sample != next {
+            assert_eq!(
+                (next, k.first_sample),
+                (gaps[0].first_sample, gaps[0].first_sample + gaps[0].count)
+            );
+        }
+        next = k.first_sample + k.samples() as u32;
+        b.hw.check_block(k, base);
+    }
+    assert_eq!(next, end.samples + end.overruns);
+}
+
+#[test]
+fn a_poll_takes_a_bounded_number_of_samples_and_a_backlog_drains_over_the_next_polls() {
+    let mut b = Bench::new();
+    b.hw.stop_s = 1.0;
+    b.ready();
+    assert_eq!(b.command(HostMsg::Release).0, Ok(()));
+    b.run_for(50);
+    // 150 ms without reading: 1500 samples wait in the 2048-scan ring (none lost).
+    b.hw.adc.stall_reader(b.hw.now_us + 150_000);
+    b.run_for(150);
+    let taken = |b: &Bench| b.app.builder.as_ref().unwrap().samples();
+    let before = taken(&b);
+    b.run_for(1);
+    let per_poll = b.app.cfg.samples_per_poll as u32;
+    assert_eq!(
+        taken(&b) - before,
+        per_poll,
+        "one poll takes at most samples_per_poll"
+    );
+    // Taking 128 a poll while 10 arrive, the backlog is gone within 13 polls, nothing lost.
+    b.run_for(14);
+    assert_eq!(b.app.next_index, b.hw.adc.next_index());
+    let msgs = b.msgs();
+    assert!(!msgs.iter().any(|m| matches!(m, DeviceMsg::Gap(_))));
+    assert_eq!(b.app.status().overruns, 0);
+}
+
+#[test]
+fn an_adc_overrun_restarts_the_converter_and_is_a_gap_not_a_shift() {
+    let mut b = Bench::new();
+    b.hw.stop_s = 0.6;
+    b.ready();
+    assert_eq!(b.command(HostMsg::Release).0, Ok(()));
+    b.run_for(200);
+    let at = b.hw.adc.next_index();
+    b.hw.adc.inject_overrun();
+    b.run_for(1000);
+    let msgs = b.msgs();
+    let base = b.app.run_base;
+    let gaps: Vec<Gap> = msgs
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Gap(g) => Some(*g),
+            _ => None,
+        })
+        .collect();
+    // The scan the overrun struck and those converted until the next read (one 1 ms poll: ten).
+    assert_eq!(gaps.len(), 1);
+    assert_eq!(gaps[0].first_sample as u64, at - base);
+    assert!((1..=11).contains(&gaps[0].count), "{:?}", gaps);
+    // After it, the samples are those of their own instants: nothing shifted by the lost ones.
+    for k in &sample_blocks(&msgs) {
+        b.hw.check_block(k, base);
+    }
+    assert_eq!(run_end(&msgs).unwrap().overruns, gaps[0].count);
+}
+
+#[test]
+fn a_rate_the_timer_cannot_make_is_run_at_the_nearest_and_recorded() {
+    let mut b = Bench::new();
+    let mut cfg = Configure::real_rig(0.3);
+    cfg.sample_rate_hz = 9_999;
+    assert_eq!(b.command(HostMsg::Configure(cfg)).0, Ok(()));
+    assert_eq!(b.command(HostMsg::Arm).0, Ok(()));
+    b.run_for(300);
+    let (r, mut msgs) = b.command(HostMsg::Release);
+    assert_eq!(r, Ok(()));
+    b.run_for(700);
+    msgs.extend(b.msgs());
+    let header = msgs
+        .iter()
+        .find_map(|m| match m {
+            DeviceMsg::RunStarted(h) => Some(*h),
+            _ => None,
+        })
+        .unwrap();
+    // 200 MHz / 20 002 = 9 999.0001 S/s: the rate used, not the one asked for.
+    assert_eq!(
+        header.clock,
+        SampleClock {
+            timer_hz: 200_000_000,
+            ticks_per_sample: 20_002
+        }
+    );
+    assert_eq!(header.config.sample_rate_hz, 9_999);
+    let base = b.app.run_base;
+    for k in &sample_blocks(&msgs) {
+        assert_eq!(
+            k.t_us,
+            header.t_us + header.clock.time_us(k.first_sample as u64)
+        );
+        b.hw.check_block(k, base);
+    }
+}
+
+#[test]
+fn ecr_range_changes_flag_exactly_the_settling_samples_and_no_reading_uses_them() {
+    let mut b = Bench::new();
+    b.hw.stop_s = 1.0;
+    b.hw.ecr_settles = true;
+    b.ready();
+    // Armed long enough for the autoranger to find 1e7 Ω (range 3) and settle.
+    b.run_for(1500);
+    assert_eq!(b.app.ecr.range(), 3);
+    let (r, mut msgs) = b.command(HostMsg::Release);
+    assert_eq!(r, Ok(()));
+    b.run_for(100);
+    // The contact drops to 10 Ω: the autoranger steps down to range 0, one change per block.
+    b.hw.ecr_r = 10.0;
+    b.run_for(1400);
+    msgs.extend(b.msgs());
+    let clock = msgs
+        .iter()
+        .find_map(|m| match m {
+            DeviceMsg::RunStarted(h) => Some(h.clock),
+            _ => None,
+        })
+        .unwrap();
+    let changes: Vec<EcrRangeChange> = msgs
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMsg::EcrRange(e) => Some(*e),
+            _ => None,
+        })
+        .collect();
+    let ranges: Vec<u8> = changes.iter().map(|c| c.range).collect();
+    assert_eq!(ranges, [3, 2, 1, 0], "{changes:?}");
+    // The run starts settled on range 3; each change settles for its range's stated time.
+    assert_eq!((changes[0].first_sample, changes[0].settling), (0, 0));
+    for c in &changes[1..] {
+        assert_eq!(c.settling, crate::ecr::settling_samples(c.range, clock));
+    }
+    assert!(changes
+        .windows(2)
+        .all(|w| w[0].first_sample < w[1].first_sample));
+    // What the frames say about sample i: its range and whether it settles.
+    let range_of = |i: u32| changes.iter().rev().find(|c| c.first_sample <= i).unwrap();
+    let settling = |i: u32| {
+        let c = range_of(i);
+        i < c.first_sample + c.settling as u32
+    };
+    let blocks = sample_blocks(&msgs);
+    let pos = Channel::Ecr.index() - 1; // after displacement and velocity; force is counted too
+    let pos = blocks[0].channels.position(Channel::Ecr).unwrap_or(pos);
+    let garbage = b.hw.cal[3].to_count(SETTLING_V);
+    let mut flagged_garbage = 0;
+    for k in &blocks {
+        // The range a block declares is the one its first sample was converted on.
+        assert_eq!(
+            k.ecr_range,
+            range_of(k.first_sample).range,
+            "block {}",
+            k.block
+        );
+        for i in 0..k.samples() {
+            let idx = k.first_sample + i as u32;
+            if k.sample(i).unwrap()[pos] == garbage {
+                // Every sample taken while the amplifier settled is flagged as settling.
+                assert!(settling(idx), "sample {idx} unsettled but not flagged");
+                flagged_garbage += 1;
+            }
+        }
+        // No reading is made of settling samples or of samples from two ranges: each one is the
+        // contact's resistance before or after the step.
+        let l = k.log10_ecr_ohm;
+        assert!(
+            l.is_nan() || (l - 7.0).abs() < 0.01 || (l - 1.0).abs() < 0.01,
+            "block {}: log10 R = {l}",
+            k.block
+        );
+    }
+    assert!(flagged_garbage > 0, "the settling was exercised");
+    let last = blocks.last().unwrap();
+    assert!((last.log10_ecr_ohm - 1.0).abs() < 0.01);
 }
 
 #[test]
@@ -883,8 +1133,11 @@ fn a_pull_replays_the_same_bytes_from_any_block() {
     let mut b = Bench::new();
     let frames = full_run(&mut b);
     let run_frames: Vec<_> = frames.iter().filter(|f| f.1.msg.is_run_frame()).collect();
-    let n_blocks = run_frames.len() - 3;
+    let n_blocks = run_frames.iter().filter(|f| is_block(&f.1.msg)).count();
     assert!(n_blocks > 20);
+    assert!(run_frames
+        .iter()
+        .any(|f| matches!(f.1.msg, DeviceMsg::EcrRange(_))));
     for from in [0, 1, n_blocks / 2, n_blocks - 1, n_blocks + 5] {
         b.send(HostMsg::Pull {
             run_id: 1,
@@ -893,8 +1146,17 @@ fn a_pull_replays_the_same_bytes_from_any_block() {
         b.run_for(200);
         let mut again = b.take();
         assert!(matches!(again.remove(0).1.msg, DeviceMsg::Ack { .. }));
-        let expect: Vec<&Vec<u8>> = std::iter::once(&run_frames[0].0)
-            .chain(run_frames[1 + from.min(n_blocks)..].iter().map(|f| &f.0))
+        // The header, then the live order from just after block `from − 1`: the events between
+        // blocks `from − 1` and `from` come along, each in its place (those before were received
+        // with the blocks before them).
+        let after = run_frames
+            .iter()
+            .rposition(|f| matches!(&f.1.msg, DeviceMsg::Packed(p) if (p.block as usize) < from))
+            .map_or(1, |i| i + 1);
+        let expect: Vec<&Vec<u8>> = run_frames[..1]
+            .iter()
+            .chain(&run_frames[after..])
+            .map(|f| &f.0)
             .collect();
         let got: Vec<&Vec<u8>> = again.iter().map(|f| &f.0).collect();
         assert_eq!(got, expect, "pull from block {from}");
@@ -1081,7 +1343,7 @@ fn abort_keeps_the_run_and_marks_it() {
         (end.reason, res.verdict),
         (EndReason::Aborted, Verdict::Aborted)
     );
-    assert!(!b.hw.adc_on);
+    assert!(!b.hw.adc.is_running());
     assert_eq!(
         b.command(HostMsg::Pull {
             run_id: 1,
@@ -1206,7 +1468,7 @@ fn host_silence_while_heating_and_holding_makes_the_rig_safe_and_says_why() {
     );
     assert_eq!(b.hw.heater_duty, 0.0);
     assert_eq!(b.hw.magnet(), MagnetDrive::Off);
-    assert!(!b.hw.adc_on);
+    assert!(!b.hw.adc.is_running());
     let f = fault_reports(&b.msgs());
     assert_eq!(f.len(), 1);
     assert_eq!(f[0].reason, FaultReason::LeaseExpired);
@@ -1279,7 +1541,7 @@ fn the_safe_command_turns_everything_off_at_once() {
     // Within the same call that read the command: no poll needed.
     assert_eq!(b.hw.heater_duty, 0.0);
     assert_eq!(b.hw.magnet(), MagnetDrive::Off);
-    assert!(!b.hw.adc_on);
+    assert!(!b.hw.adc.is_running());
     assert!(faults(&msgs).is_empty(), "asked for, not a fault");
     b.run_for(10_000);
     assert!(faults(&b.msgs()).is_empty());

@@ -8,6 +8,9 @@
 //! Every method is non-blocking: the application is a state machine polled with the time, and a
 //! slow peripheral (SPI thermocouple, USB) is served by its own task that these methods only talk to.
 
+pub use crate::acquisition::Batch;
+pub use crate::wire::SampleClock;
+
 /// Drive of the release electromagnet (an H-bridge on the board: PWM duty and polarity).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -65,16 +68,29 @@ pub const ANALOG_CHANNELS: usize = 4;
 /// One conversion of every analog channel, 16-bit counts.
 pub type AnalogSample = [u16; ANALOG_CHANNELS];
 
-/// Timer-triggered conversions of the analog channels into a ring the application drains.
+/// Timer-triggered scans of the analog channels, written by DMA round a ring the application reads.
+///
+/// Every sample has an index in the converter's stream (0 = the first conversion after
+/// [`SampleSource::adc_start`]) that comes from where the DMA wrote it, never from counting reads;
+/// samples that could not be read (the reader fell a whole ring behind, or the ADC overran and was
+/// restarted) show as a jump in index between two reads, so the caller knows exactly which are
+/// missing.
 pub trait SampleSource {
-    /// Starts converting at `rate_hz`. Returns false if the converter could not start.
-    fn adc_start(&mut self, rate_hz: u32) -> bool;
+    /// The sample clock the converter would run at for `rate_hz`: the timer's nearest rate to it
+    /// (`None`: no setting comes near).
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock>;
+    /// Starts a new stream at the rate of [`SampleSource::adc_clock`]; returns that clock, or
+    /// `None` if the converter could not start.
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock>;
     fn adc_stop(&mut self);
     fn adc_running(&self) -> bool;
-    /// Moves the oldest converted samples into `out`; returns how many.
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize;
-    /// Samples lost so far because the ring was full (cumulative since the last start).
-    fn adc_lost(&self) -> u32;
+    /// Index of the first sample whose conversion has not begun: whatever the rig changes now (an
+    /// ECR range, the magnet) acts on samples from this index on.
+    fn adc_next_index(&mut self) -> u64;
+    /// Copies the oldest samples not yet read into `out` (at most `out.len()`); the batch says the
+    /// index of the first. A batch starting after the index that followed the previous one means the
+    /// samples in between are lost (an empty batch still carries where reading goes on).
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch;
 }
 
 /// The user button (raw level; the application debounces).

@@ -26,16 +26,12 @@ pub struct TaskSpec {
     pub max_silence_ms: u32,
 }
 
-/// The board's periodic tasks: the application (polled every 1 ms), the acquisition (every 10 ms
-/// when idle, every sample when converting) and the thermocouple converter (every 100 ms).
-pub const BOARD_TASKS: [TaskSpec; 3] = [
+/// The board's periodic tasks: the application (polled every 1 ms; it also reads the sampler's DMA
+/// ring, so a stuck reader is a stuck application) and the thermocouple converter (every 100 ms).
+pub const BOARD_TASKS: [TaskSpec; 2] = [
     TaskSpec {
         name: "app",
         max_silence_ms: 50,
-    },
-    TaskSpec {
-        name: "acquisition",
-        max_silence_ms: 100,
     },
     TaskSpec {
         name: "thermocouple",
@@ -46,8 +42,7 @@ pub const BOARD_TASKS: [TaskSpec; 3] = [
 /// Index of each board task in [`BOARD_TASKS`].
 pub mod task {
     pub const APP: usize = 0;
-    pub const ACQUISITION: usize = 1;
-    pub const THERMOCOUPLE: usize = 2;
+    pub const THERMOCOUPLE: usize = 1;
 }
 
 // The worst case from a task stopping to the outputs going safe is its silence plus one feed period,
@@ -145,12 +140,9 @@ mod tests {
     #[test]
     fn fed_only_while_every_task_checks_in() {
         let l = Liveness::new(BOARD_TASKS, 0);
-        // Every task on its own period: app 1 ms, acquisition 10 ms, thermocouple 100 ms (+ SPI).
+        // Every task on its own period: app 1 ms, thermocouple 100 ms (+ SPI).
         for t in 1..=2_000u32 {
             l.check_in(task::APP, t);
-            if t % 10 == 0 {
-                l.check_in(task::ACQUISITION, t);
-            }
             if t % 100 == 3 {
                 l.check_in(task::THERMOCOUPLE, t);
             }
@@ -162,9 +154,6 @@ mod tests {
         let mut first = None;
         for t in 2_001..=3_000u32 {
             l.check_in(task::APP, t);
-            if t % 10 == 0 {
-                l.check_in(task::ACQUISITION, t);
-            }
             if t % FEED_PERIOD_MS == 0 && first.is_none() {
                 if let Err(s) = l.verdict(t) {
                     first = Some((t, s));
@@ -186,7 +175,6 @@ mod tests {
     fn wrapping_clocks_and_unknown_tasks() {
         let l = Liveness::new(BOARD_TASKS, u32::MAX - 10);
         l.check_in(task::APP, 5);
-        l.check_in(task::ACQUISITION, 5);
         l.check_in(task::THERMOCOUPLE, 5);
         l.check_in(7, 5);
         assert_eq!(l.verdict(40), Ok(()));

@@ -5,51 +5,54 @@
 //! primitives and atomics.
 //!
 //! * `app`: the rig's state machine (`tribo_firmware::app::App`), polled every millisecond and on
-//!   every USB packet; it owns the magnet and heater PWM, the ECR DAC and range switches, the button
-//!   and the lamps through [`BoardHw`].
-//! * `acquisition`: ticker-driven 16-bit conversions of the four analog channels into the ring (a
-//!   simpler binding than a timer-triggered ADC with DMA, see the README), overruns counted there.
+//!   every USB packet; it owns the magnet and heater PWM, the ECR DAC and range switches, the button,
+//!   the lamps and the sampler (TIM6 → ADC1 scans → DMA ring, [`crate::sampling`]: it reads the ring
+//!   by the DMA's position at every poll) through [`BoardHw`].
 //! * `thermocouple`: the MAX31856 over SPI1 every 100 ms: only moves its register file (the library
 //!   checks it, `tribo_firmware::thermocouple`).
 //! * `flash`: erases and programs bank 2 for the run store, one operation at a time as the
 //!   application asks ([`FlashLink`]), interrupt-driven, so the application keeps running meanwhile.
-//! * `watchdog`: feeds the IWDG while every periodic task checks in; otherwise drives the outputs
-//!   safe, notes which task and lets the IWDG reset the chip (`tribo_firmware::watchdog`). The flash
-//!   task waits on the flash controller and does not check in.
-//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class.
+//! * `watchdog`: feeds the IWDG while the periodic tasks (app, thermocouple) check in; otherwise
+//!   drives the outputs safe, notes which task and lets the IWDG reset the chip
+//!   (`tribo_firmware::watchdog`). The flash and USB tasks wait on their peripherals and do not
+//!   check in; the sampler is hardware (its reader is the app task).
+//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. Each (re)connection of the
+//!   host starts clean: bytes queued before it are dropped, the application forgets any
+//!   half-received frame, and frames are refused (they wait in the run store) while no host is
+//!   connected.
 //!
 //! Panics and HardFaults go to `crate::safety` (safe state, reset record, reset).
-use core::cell::{Cell, RefCell};
-use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use core::cell::Cell;
+use core::sync::atomic::{AtomicBool, Ordering};
 
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, Either};
-use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, Resolution, SampleTime};
+use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, Resolution};
 use embassy_stm32::dac::{DacChannel, Value};
 use embassy_stm32::flash::{Async, Bank2Region, Flash};
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::mode::Blocking;
-use embassy_stm32::peripherals::{ADC1, IWDG1, TIM1, TIM4, USB_OTG_FS};
+use embassy_stm32::peripherals::{ADC1, DMA1_CH0, IWDG1, TIM1, TIM4, USB_OTG_FS};
 use embassy_stm32::spi::{self, Spi};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, usb};
+use embassy_stm32::{bind_interrupts, dma, usb};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
-use embassy_time::{Duration, Instant, Ticker, Timer};
+use embassy_time::{Duration, Instant, Ticker};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use static_cell::{ConstStaticCell, StaticCell};
-use tribo_firmware::acquisition::Ring;
 use tribo_firmware::app::{App, AppConfig};
-use tribo_firmware::ecr::FULL_SCALE_V;
+use tribo_firmware::ecr::{count_to_volts, FULL_SCALE_V};
 use tribo_firmware::hal::*;
 use tribo_firmware::runstore::RunStore;
+
 use tribo_firmware::thermocouple::{self as tc, Registers};
 use tribo_firmware::watchdog::{task, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
 use tribo_firmware::wire::{limits, BootReport, ResetCause};
@@ -57,16 +60,17 @@ use tribo_firmware::wire::{limits, BootReport, ResetCause};
 use crate::memory;
 use crate::safety;
 
-bind_interrupts!(struct Irqs {
+use crate::sampling::Sampler;
+
+bind_interrupts!(pub(crate) struct Irqs {
     OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
     FLASH => embassy_stm32::flash::InterruptHandler;
+    DMA1_STREAM0 => dma::InterruptHandler<DMA1_CH0>;
 });
 
 type Cs = CriticalSectionRawMutex;
 type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
 
-/// Samples the converter ring holds: 100 ms at 10 kS/s (the application drains it every 1 ms).
-const RING: usize = 1024;
 /// Bytes of frames waiting for the USB sender.
 const TX_PIPE: usize = 4096;
 /// ECR source divider: the DAC's 0..3.3 V become 0..3.3 mV across the contact.
@@ -78,20 +82,17 @@ type TcReading = (Option<Registers>, u64);
 
 /// What the tasks share.
 struct Shared {
-    ring: Mutex<Cs, RefCell<Ring<RING>>>,
-    /// Conversion rate, Hz; 0 = stopped.
-    rate_hz: AtomicU32,
-    /// Latest ECR channel count (converted even when stopped, every 10 ms).
-    ecr_count: AtomicU32,
     thermocouple: &'static Mutex<Cs, Cell<TcReading>>,
     /// The periodic tasks' check-ins, for the watchdog.
-    liveness: Liveness<3>,
+    liveness: Liveness<{ BOARD_TASKS.len() }>,
+    /// A host is connected (the CDC class is configured): frames may be queued for it.
+    connected: AtomicBool,
     tx: Pipe<Cs, TX_PIPE>,
     rx: Channel<Cs, heapless::Vec<u8, 64>, 8>,
 }
 
-// The thermocouple cell apart: its non-zero initial value would put all of `Shared` (13 KiB of ring
-// and pipe) in `.data`, i.e. in flash too.
+// The thermocouple cell apart: its non-zero initial value would put all of `Shared` (4 KiB of
+// pipe) in `.data`, i.e. in flash too.
 static THERMOCOUPLE: ConstStaticCell<Mutex<Cs, Cell<TcReading>>> =
     ConstStaticCell::new(Mutex::new(Cell::new((None, 0))));
 static SHARED: StaticCell<Shared> = StaticCell::new();
@@ -136,6 +137,7 @@ struct BoardHw {
     ecr_range: [Output<'static>; 3],
     button: Input<'static>,
     lamps: [Output<'static>; 3],
+    sampler: Sampler,
 }
 
 fn fraction(duty: f32) -> u32 {
@@ -193,27 +195,31 @@ impl EcrFrontEnd for BoardHw {
         }
     }
     fn read_ecr_output(&mut self) -> f32 {
-        self.shared.ecr_count.load(Ordering::Relaxed) as f32 / 65535.0 * FULL_SCALE_V
+        // The sampler always runs (at its idle rate between runs): the latest scan's ECR channel.
+        self.sampler
+            .latest_ecr()
+            .map_or(f32::NAN, |c| count_to_volts(c as f32))
     }
 }
 
 impl SampleSource for BoardHw {
-    fn adc_start(&mut self, rate_hz: u32) -> bool {
-        self.shared.ring.lock(|r| r.borrow_mut().clear());
-        self.shared.rate_hz.store(rate_hz, Ordering::Relaxed);
-        rate_hz > 0
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
+        self.sampler.clock_for(rate_hz)
+    }
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
+        self.sampler.start(rate_hz)
     }
     fn adc_stop(&mut self) {
-        self.shared.rate_hz.store(0, Ordering::Relaxed);
+        self.sampler.stop();
     }
     fn adc_running(&self) -> bool {
-        self.shared.rate_hz.load(Ordering::Relaxed) != 0
+        self.sampler.is_acquiring()
     }
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize {
-        self.shared.ring.lock(|r| r.borrow_mut().pop_into(out))
+    fn adc_next_index(&mut self) -> u64 {
+        self.sampler.next_index()
     }
-    fn adc_lost(&self) -> u32 {
-        self.shared.ring.lock(|r| r.borrow().lost())
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
+        self.sampler.read(out)
     }
 }
 
@@ -237,7 +243,11 @@ impl Led for BoardHw {
 
 impl Link for BoardHw {
     fn send_frame(&mut self, frame: &[u8]) -> bool {
-        if self.shared.tx.free_capacity() < frame.len() {
+        // No host: refused, so that run frames wait in the store rather than in a pipe that is
+        // emptied when the next host connects.
+        if !self.shared.connected.load(Ordering::Acquire)
+            || self.shared.tx.free_capacity() < frame.len()
+        {
             return false;
         }
         // Only this task writes the pipe, so the free space cannot shrink meanwhile.
@@ -310,11 +320,6 @@ fn now_us() -> u64 {
     Instant::now().as_micros()
 }
 
-/// Milliseconds of uptime, wrapping, for the watchdog's check-ins.
-fn now_ms() -> u32 {
-    Instant::now().as_millis() as u32
-}
-
 #[embassy_executor::task]
 async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64, boot: BootReport) {
     let Some(mem) = memory::take() else {
@@ -327,11 +332,19 @@ async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64, boot: B
     let mut ticker = Ticker::every(Duration::from_millis(1));
     loop {
         match select(shared.rx.receive(), ticker.next()).await {
+            // The receiver's mark of a new host connection: no half frame of the previous one is
+            // completed by the new host's bytes, which come after it.
+            Either::First(bytes) if bytes.is_empty() => app.link_reset(),
             Either::First(bytes) => app.on_bytes(&mut hw, &bytes, now_us()),
             Either::Second(()) => app.poll(&mut hw, now_us()),
         }
         shared.liveness.check_in(task::APP, now_ms());
     }
+}
+
+/// Milliseconds of uptime, wrapping, for the watchdog's check-ins.
+fn now_ms() -> u32 {
+    Instant::now().as_millis() as u32
 }
 
 /// Feeds the IWDG only while every periodic task checks in. A silent task: the outputs go safe at
@@ -363,39 +376,10 @@ async fn watchdog_task(shared: &'static Shared, mut wdg: IndependentWatchdog<'st
     }
 }
 
-#[embassy_executor::task]
-async fn acquisition_task(
-    shared: &'static Shared,
-    mut adc: Adc<'static, ADC1>,
-    mut ch: [AnyAdcChannel<'static, ADC1>; 4],
-) {
-    const SAMPLE: SampleTime = SampleTime::CYCLES32_5;
-    loop {
-        shared.liveness.check_in(task::ACQUISITION, now_ms());
-        let rate = shared.rate_hz.load(Ordering::Relaxed);
-        if rate == 0 {
-            let e = adc.blocking_read(&mut ch[3], SAMPLE);
-            shared.ecr_count.store(e as u32, Ordering::Relaxed);
-            Timer::after_millis(10).await;
-            continue;
-        }
-        let mut ticker = Ticker::every(Duration::from_hz(rate as u64));
-        while shared.rate_hz.load(Ordering::Relaxed) == rate {
-            ticker.next().await;
-            shared.liveness.check_in(task::ACQUISITION, now_ms());
-            let mut s: AnalogSample = [0; ANALOG_CHANNELS];
-            for (v, c) in s.iter_mut().zip(ch.iter_mut()) {
-                *v = adc.blocking_read(c, SAMPLE);
-            }
-            shared.ecr_count.store(s[3] as u32, Ordering::Relaxed);
-            shared.ring.lock(|r| r.borrow_mut().push(s));
-        }
-    }
-}
-
-/// MAX31856: configured as the library says, then its whole register file read every 100 ms and
-/// handed over as bytes; configured again when the configuration does not read back (a converter
-/// reset by a glitch), at most once a second. Whether to trust a read is the application's call.
+/// MAX31856: configured as the library says, then its whole register file read at once and every
+/// 100 ms and handed over as bytes; configured again when the configuration does not read back (a
+/// converter reset by a glitch), at most once a second. Whether to trust a read is the
+/// application's call.
 #[embassy_executor::task]
 async fn thermocouple_task(
     shared: &'static Shared,
@@ -412,8 +396,6 @@ async fn thermocouple_task(
     }
     configure(&mut spi, &mut cs);
     let mut last_config_ms = now_ms();
-    // The first read at once (the application's first heater steps find a reading), then every
-    // 100 ms.
     let mut ticker = Ticker::every(Duration::from_millis(100));
     loop {
         shared.liveness.check_in(task::THERMOCOUPLE, now_ms());
@@ -475,12 +457,19 @@ async fn usb_tx_task(shared: &'static Shared, mut tx: Sender<'static, UsbDriver>
     let mut buf = [0u8; 64];
     loop {
         tx.wait_connection().await;
+        // A clean start: bytes queued for a host that went away (a frame cut by the cable pull)
+        // are dropped; what the application must resend, it resends from its run store.
+        shared.tx.clear();
+        shared.connected.store(true, Ordering::Release);
+        defmt::info!("usb: host connected");
         loop {
             let n = shared.tx.read(&mut buf).await;
             if tx.write_packet(&buf[..n]).await.is_err() {
                 break;
             }
         }
+        shared.connected.store(false, Ordering::Release);
+        defmt::info!("usb: host gone");
     }
 }
 
@@ -489,36 +478,51 @@ async fn usb_rx_task(shared: &'static Shared, mut rx: Receiver<'static, UsbDrive
     let mut buf = [0u8; 64];
     loop {
         rx.wait_connection().await;
+        // Packets of a previous connection not yet taken by the application are stale; the empty
+        // packet tells the application a new connection starts here.
+        shared.rx.clear();
+        shared.rx.send(heapless::Vec::new()).await;
         while let Ok(n) = rx.read_packet(&mut buf).await {
+            if n == 0 {
+                continue;
+            }
             let bytes = heapless::Vec::from_slice(&buf[..n]).unwrap_or_default();
             shared.rx.send(bytes).await;
         }
     }
 }
 
+/// The clock tree (written down in `firmware/README.md`): HSE in bypass from the ST-LINK's 8 MHz
+/// MCO (crystal-accurate) → PLL1 400 MHz core, PLL2P 25 MHz ADC kernel clock; AHB 200 MHz, APB
+/// 100 MHz, so the APB1 timers (TIM6: the sample clock) run at 200 MHz; HSI48 synchronised on the
+/// USB SOF by the CRS for USB.
 fn clocks() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
+    config.rcc.hse = Some(Hse {
+        freq: Hertz(8_000_000),
+        mode: HseMode::Bypass,
+    });
     config.rcc.hsi = Some(HSIPrescaler::DIV1);
     config.rcc.csi = true;
     config.rcc.hsi48 = Some(Hsi48Config {
         sync_from_usb: true,
     });
-    // 64 MHz HSI / 4 × 50 = 800 MHz VCO: 400 MHz core, 100 MHz for SPI1.
+    // 8 MHz / 4 × 400 = 800 MHz VCO: 400 MHz core (P / 2), 100 MHz for SPI1 (Q / 8).
     config.rcc.pll1 = Some(Pll {
-        source: PllSource::HSI,
+        source: PllSource::HSE,
         prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL50,
+        mul: PllMul::MUL400,
         fracn: None,
         divp: Some(PllDiv::DIV2),
         divq: Some(PllDiv::DIV8),
         divr: None,
     });
-    // 64 MHz / 8 × 50 = 400 MHz VCO / 16: 25 MHz ADC kernel clock.
+    // 8 MHz / 4 × 200 = 400 MHz VCO / 16: 25 MHz ADC kernel clock.
     config.rcc.pll2 = Some(Pll {
-        source: PllSource::HSI,
-        prediv: PllPreDiv::DIV8,
-        mul: PllMul::MUL50,
+        source: PllSource::HSE,
+        prediv: PllPreDiv::DIV4,
+        mul: PllMul::MUL200,
         fracn: None,
         divp: Some(PllDiv::DIV16),
         divq: None,
@@ -549,20 +553,28 @@ macro_rules! spawn {
 async fn main(spawner: Spawner) {
     // Why the last reset (read before anything else touches RCC_RSR or the record).
     let boot = safety::boot_report();
+    // The DMA ring non-cacheable, then the caches on (before anything uses DMA).
+    if let Some(mut cp) = cortex_m::Peripherals::take() {
+        crate::sampling::configure_mpu_and_caches(&mut cp.MPU, &mut cp.SCB, &mut cp.CPUID);
+    } else {
+        defmt::error!("core peripherals already taken: caches left off");
+    }
     let p = embassy_stm32::init(clocks());
     safety::check_table();
     safety::freeze_watchdog_when_halted();
     defmt::info!("last reset: {}", boot.cause);
+    // SRAM3 (the DMA ring) allocated to the CPU's domain, so D2 stays on while the CPU runs.
+    embassy_stm32::pac::RCC
+        .ahb2enr()
+        .modify(|w| w.set_sram3en(true));
     defmt::info!(
         "tribo-board, protocol v{}",
         tribo_firmware::wire::PROTOCOL_VERSION
     );
     let shared: &'static Shared = SHARED.init(Shared {
-        ring: Mutex::new(RefCell::new(Ring::new())),
-        rate_hz: AtomicU32::new(0),
-        ecr_count: AtomicU32::new(0),
         thermocouple: THERMOCOUPLE.take(),
         liveness: Liveness::new(BOARD_TASKS, now_ms()),
+        connected: AtomicBool::new(false),
         tx: Pipe::new(),
         rx: Channel::new(),
     });
@@ -610,8 +622,26 @@ async fn main(spawner: Spawner) {
         failed: AtomicBool::new(false),
     });
 
+    // ADC1, 16 bits, calibrated by the driver; scans of displacement PA3, velocity PC0, force PB1,
+    // ECR PF11 (pins set analog by `degrade_adc`), triggered by TIM6, DMA1 stream 0 into the ring.
+    let adc = Adc::new_with_config(
+        p.ADC1,
+        AdcConfig {
+            resolution: Some(Resolution::BITS16),
+            averaging: None,
+        },
+    );
+    let channels: [AnyAdcChannel<'static, ADC1>; 4] = [
+        p.PA3.degrade_adc(),
+        p.PC0.degrade_adc(),
+        p.PB1.degrade_adc(),
+        p.PF11.degrade_adc(),
+    ];
+    let sampler = Sampler::new(adc, p.DMA1_CH0, channels);
+
     let hw = BoardHw {
         shared,
+        sampler,
         flash,
         magnet_hold,
         magnet_reverse,
@@ -630,21 +660,6 @@ async fn main(spawner: Spawner) {
         ],
     };
 
-    // ADC1, 16 bits: displacement PA3, velocity PC0, force PB1, ECR PF11.
-    let adc = Adc::new_with_config(
-        p.ADC1,
-        AdcConfig {
-            resolution: Some(Resolution::BITS16),
-            averaging: None,
-        },
-    );
-    let channels: [AnyAdcChannel<'static, ADC1>; 4] = [
-        p.PA3.degrade_adc(),
-        p.PC0.degrade_adc(),
-        p.PB1.degrade_adc(),
-        p.PF11.degrade_adc(),
-    ];
-
     // MAX31856 on SPI1 (mode 1, 1 MHz), chip select PD14.
     let mut spi_cfg = spi::Config::default();
     spi_cfg.mode = spi::MODE_1;
@@ -659,7 +674,8 @@ async fn main(spawner: Spawner) {
     let mut config = embassy_usb::Config::new(0x1209, 0x0001);
     config.manufacturer = Some("tribo");
     config.product = Some("oscillating tribometer");
-    config.serial_number = Some("tribo-h743");
+    // The chip's unique id: two rigs on one host are told apart by `tribo devices`.
+    config.serial_number = Some(embassy_stm32::uid::uid_hex());
     config.max_power = 100;
     config.max_packet_size_0 = 64;
     let mut builder = embassy_usb::Builder::new(
@@ -678,7 +694,6 @@ async fn main(spawner: Spawner) {
     spawn!(spawner, usb_tx_task(shared, tx));
     spawn!(spawner, usb_rx_task(shared, rx));
     spawn!(spawner, thermocouple_task(shared, spi, cs));
-    spawn!(spawner, acquisition_task(shared, adc, channels));
     spawn!(spawner, flash_task(flash));
     spawn!(spawner, app_task(shared, hw, serial, boot));
     // Last: every task is running when the watchdog starts counting.

@@ -9,6 +9,8 @@ mod board;
 mod memory;
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod safety;
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+mod sampling;
 
 #[cfg(not(all(target_arch = "arm", target_os = "none")))]
 fn main() {

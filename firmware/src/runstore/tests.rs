@@ -64,6 +64,7 @@ fn test_run(run_id: u32, blocks: u32, event_every: u32) -> TestRun {
             config: Configure::real_rig(0.3),
             temp_c: 25.0,
             t_us: 1_000_000,
+            clock: crate::wire::SampleClock::exact(10_000),
         }),
     )
     .unwrap();
@@ -590,6 +591,10 @@ fn header_result_and_end_frames_fit_their_slots_at_worst() {
             config: c,
             temp_c: worst,
             t_us: u64::MAX,
+            clock: crate::wire::SampleClock {
+                timer_hz: u32::MAX,
+                ticks_per_sample: u32::MAX,
+            },
         }),
     )
     .unwrap();

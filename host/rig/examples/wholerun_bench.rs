@@ -294,6 +294,7 @@ fn cost() {
             config: Configure::real_rig(0.0),
             temp_c: 25.0,
             t_us: 0,
+            clock: tribo_wire::SampleClock::exact(10_000),
         }),
     )
     .unwrap();

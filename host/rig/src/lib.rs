@@ -13,7 +13,7 @@
 pub mod config;
 pub mod sim;
 
-pub use config::{EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
+pub use config::{AcquisitionFaults, EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
 pub use sim::{ConverterFault, HeaterStage, SimHardware};
 
 use std::io::{self, Read, Write};
@@ -31,8 +31,6 @@ pub enum Task {
     /// The application: stalled, it hogs the core (a busy loop), so no other task runs either and
     /// only the hardware watchdog gets the rig out.
     App,
-    /// The acquisition: stalled, it waits forever (a DMA that never completes).
-    Acquisition,
     /// The thermocouple converter task: stalled, it waits forever (an SPI transfer that never
     /// completes).
     Thermocouple,
@@ -42,7 +40,6 @@ impl Task {
     fn index(self) -> usize {
         match self {
             Task::App => watchdog::task::APP,
-            Task::Acquisition => watchdog::task::ACQUISITION,
             Task::Thermocouple => watchdog::task::THERMOCOUPLE,
         }
     }
@@ -72,8 +69,8 @@ pub struct VirtualRig {
     now_us: u64,
     tick_us: u64,
     // The board around the application: watchdog, reset record, resets.
-    tasks: Liveness<3>,
-    stalled: [bool; 3],
+    tasks: Liveness<{ BOARD_TASKS.len() }>,
+    stalled: [bool; BOARD_TASKS.len()],
     next_feed_us: u64,
     last_pet_us: u64,
     /// The watchdog task saw a silent task and stopped feeding.
@@ -121,7 +118,7 @@ impl VirtualRig {
             now_us: 0,
             tick_us: 1000,
             tasks: Liveness::new(BOARD_TASKS, 0),
-            stalled: [false; 3],
+            stalled: [false; BOARD_TASKS.len()],
             next_feed_us: FEED_PERIOD_MS as u64 * 1000,
             last_pet_us: 0,
             starving: false,
@@ -229,10 +226,7 @@ impl VirtualRig {
         let ms = (now / 1000) as u32;
         let hog = self.stalled[Task::App.index()];
         if !hog {
-            // The executor runs: the acquisition and the converter task check in as they run.
-            if !self.stalled[Task::Acquisition.index()] {
-                self.tasks.check_in(watchdog::task::ACQUISITION, ms);
-            }
+            // The executor runs: the converter task checks in as it runs.
             let reads = self.hw.tc_reads();
             if reads != self.tc_reads_seen {
                 self.tc_reads_seen = reads;
@@ -316,7 +310,7 @@ impl VirtualRig {
         self.app = new_app(self.serial);
         self.app.set_host_lease_ms(self.host_lease_ms);
         self.app.set_boot_report(report);
-        self.stalled = [false; 3];
+        self.stalled = [false; BOARD_TASKS.len()];
         self.starving = false;
         let ms = (self.now_us / 1000) as u32;
         self.tasks = Liveness::new(BOARD_TASKS, ms);

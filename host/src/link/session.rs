@@ -9,8 +9,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use tribo_store::{Catalog, DeviceMeta, HostFit, Results, Run, RunMeta, RunWriter};
 use tribo_wire::{
-    Configure, DeviceInfo, DeviceMsg, ErrorCode, HeaterSetpoint, HostMsg, Interlock, RigState,
-    RunEnd, RunHeader, SampleBlock,
+    Configure, DeviceInfo, DeviceMsg, ErrorCode, Gap, HeaterSetpoint, HostMsg, Interlock, RigState,
+    RunEnd, RunHeader, SampleBlock, SampleClock,
 };
 
 /// Heat the plate to a setpoint and wait until it holds it.
@@ -100,6 +100,13 @@ pub enum Progress<'a> {
     },
     Pulling {
         from_block: u32,
+    },
+    /// The rig lost these samples (an acquisition gap); the run goes on.
+    Lost(&'a Gap),
+    /// The rig's sample clock is not exactly the rate asked for (the timer cannot make it).
+    RateUsed {
+        asked_hz: u32,
+        clock: SampleClock,
     },
     Warning(String),
     Ended(&'a RunEnd),
@@ -216,6 +223,31 @@ impl Streamer<'_, '_> {
                         header: h,
                         dir: &dir,
                     });
+                    if h.clock.is_valid() && !h.clock.is_exactly(h.config.sample_rate_hz) {
+                        (self.obs)(Progress::RateUsed {
+                            asked_hz: h.config.sample_rate_hz,
+                            clock: h.clock,
+                        });
+                    }
+                }
+            }
+            DeviceMsg::Gap(_) | DeviceMsg::EcrRange(_) => {
+                // Run events: stored with the run once (a Pull sends them again).
+                let Some(w) = self.writer.as_mut() else {
+                    return Ok(None);
+                };
+                if !w.has_event(&f.frame.msg) {
+                    if w.is_complete() {
+                        // A run stored whole gets no new events: this is another run.
+                        self.mismatch(
+                            "it reports an acquisition event the stored run does not have",
+                        )?;
+                        return Ok(None);
+                    }
+                    w.append_frame(&f.raw)?;
+                    if let DeviceMsg::Gap(g) = &f.frame.msg {
+                        (self.obs)(Progress::Lost(g));
+                    }
                 }
             }
             DeviceMsg::Samples(b) => return self.file_block(&f.raw, b),
@@ -808,6 +840,16 @@ pub fn find_run(store: &Path, serial: &str, run_id: u32) -> anyhow::Result<Optio
 /// The host's Coulomb–viscous fit of a run (Levenberg–Marquardt on the envelope).
 pub fn host_fit(run: &Run) -> Result<HostFit, String> {
     use tribo_physics::identify::{fit, FitOptions};
+    if run.gaps().next().is_some() {
+        return Err(format!(
+            "the rig lost {} samples in {} acquisition gap(s): not fitted across them; \
+             `tribo fit {} {}` fits the longest stretch without one",
+            run.lost_samples(),
+            run.gaps().count(),
+            crate::LONGEST_CLEAN_STRETCH_FLAG,
+            run.dir().display()
+        ));
+    }
     let rec = run.record().map_err(|e| e.msg)?;
     rec.validate().map_err(|e| e.0)?;
     let r = fit(
