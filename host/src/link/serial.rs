@@ -1,6 +1,7 @@
 //! Serial ports, through the `serialport` crate on Linux, macOS and Windows: the rig's USB CDC-ACM
 //! port opened the way it needs, raw (8 data bits, no parity, one stop bit, no flow control, no
-//! echo, no line editing, no CR/LF translation), exclusively, with DTR asserted (the rig's USB
+//! echo, no line editing, no CR/LF translation), exclusively (the crate's default on Unix; Windows
+//! opens a port for one program only), with DTR asserted (the rig's USB
 //! stack then knows a host opened the port), stale input discarded, and reads that time out.
 
 use super::{LinkError, LinkErrorKind};
@@ -27,7 +28,6 @@ pub fn open(name: &str) -> Result<Halves, LinkError> {
         .stop_bits(StopBits::One)
         .flow_control(FlowControl::None)
         .dtr_on_open(true)
-        .exclusive(true)
         .timeout(READ_TIMEOUT)
         .open()
         .map_err(|e| LinkError::new(LinkErrorKind::Open, open_error(name, &e)))?;
