@@ -37,40 +37,39 @@ impl LinkArgs {
             .unwrap_or_else(tribo_store::default_store_dir)
     }
 
-    /// The port to use: `Ok((port, chosen))`, `chosen` false when no rig was named nor found and
-    /// the default virtual rig's address is tried. An error lists what to do.
-    pub fn port(&self) -> anyhow::Result<(Address, bool)> {
+    /// The port to use, and, when no rig was named nor found and the default virtual rig's address
+    /// is tried instead, why. An error lists what to do.
+    pub fn port(&self) -> anyhow::Result<(Address, Option<String>)> {
         if let Some(p) = &self.port {
-            return Ok((p.clone(), true));
+            return Ok((p.clone(), None));
         }
         if let Some(p) = std::env::var_os("TRIBO_PORT").filter(|p| !p.is_empty()) {
             let p = Address::parse(&p.to_string_lossy())
                 .map_err(|e| anyhow::anyhow!("$TRIBO_PORT: {e}"))?;
-            return Ok((p, true));
+            return Ok((p, None));
         }
-        // A rig that cannot be listed is as good as absent: fall through to the virtual rig.
-        let rigs = devices::rigs().unwrap_or_default();
-        match rigs.len() {
-            1 => return Ok((Address::Serial(rigs[0].name.clone()), true)),
-            0 => {}
-            _ => bail!(
+        let why = match devices::rigs() {
+            Ok(rigs) if rigs.len() == 1 => return Ok((Address::Serial(rigs[0].name.clone()), None)),
+            Ok(rigs) if rigs.len() > 1 => bail!(
                 "several rigs are attached ({}): choose one with --port (`tribo devices` shows their serial numbers)",
                 rigs.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", ")
             ),
-        }
-        Ok((Address::Tcp(DEFAULT_VIRTUAL_RIG.into()), false))
+            Ok(_) => "no USB serial port with the rig's id 1209:0001".to_string(),
+            Err(e) => e,
+        };
+        Ok((Address::Tcp(DEFAULT_VIRTUAL_RIG.into()), Some(why)))
     }
 
     /// Opens the link and says hello.
     pub fn connect(&self) -> anyhow::Result<(Link, tribo_wire::DeviceInfo)> {
-        let (port, chosen) = self.port()?;
-        let mut link = match Link::open(&port) {
-            Ok(l) => l,
-            Err(e) if !chosen && e.kind == LinkErrorKind::Open => bail!(
-                "no rig found: attach one (see `tribo devices`) and give --port, or start a virtual rig with \
-                 `tribo rig --virtual` in another terminal"
+        let (port, fallback) = self.port()?;
+        let mut link = match (Link::open(&port), fallback) {
+            (Ok(l), _) => l,
+            (Err(e), Some(why)) if e.kind == LinkErrorKind::Open => bail!(
+                "no rig found ({why}; no virtual rig at {port}): attach one (see `tribo devices`) and give \
+                 --port, or start a virtual rig with `tribo rig --virtual` in another terminal"
             ),
-            Err(e) => return Err(e.into()),
+            (Err(e), _) => return Err(e.into()),
         };
         let info = link.hello()?;
         Ok((link, info))

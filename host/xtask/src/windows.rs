@@ -239,7 +239,9 @@ fn smoke(exe: &Path) -> Result<(), String> {
         .arg(&src)
         .arg("-ladvapi32"))?;
 
-    // One Wine server for all the steps (each would otherwise start its own, ~3 s apiece).
+    // One Wine server for all the steps (each would otherwise start its own, ~3 s apiece); the
+    // first step fills the prefix.
+    std::fs::create_dir_all(&wine.prefix).map_err(|e| format!("{}: {e}", wine.prefix.display()))?;
     let _ = Command::new("wineserver")
         .arg("-p")
         .env("WINEPREFIX", &wine.prefix)
