@@ -576,3 +576,14 @@ fn a_run_through_a_pseudo_terminal_goes_through_the_serial_port_code() {
     let (_link, again) = connect(&port);
     assert_eq!(again.serial, info.serial);
 }
+
+#[test]
+fn a_second_host_is_turned_away_with_an_error_that_says_why() {
+    let (port, _) = virtual_rig(0.02, 0.004, 13, 1.0);
+    let (_first, _) = connect(&port);
+    let mut second = Link::open(&port).expect("the connection itself is accepted");
+    let e = second.hello().unwrap_err();
+    // Closed by the rig (not left to time out without an answer), with the reason.
+    assert_eq!(e.kind, LinkErrorKind::Closed, "{e}");
+    assert!(e.msg.contains("one host at a time"), "{e}");
+}
