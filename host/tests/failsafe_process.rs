@@ -12,11 +12,11 @@
 //!   a silence longer than it; dropping the hold sends `Safe`; without it the lease expires.
 
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::{self, Receiver};
 use std::time::{Duration, Instant};
-use tribo::link::Link;
+use tribo::link::{Address, Link};
 use tribo_wire::{limits, FaultReason};
 
 const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
@@ -27,15 +27,20 @@ struct RigProcess {
     lines: Receiver<(Instant, String)>,
     seen: Vec<(Instant, String)>,
     /// What `--port` takes to reach it (printed by the rig: "virtual rig listening on …").
-    link: PathBuf,
+    addr: String,
 }
 
 impl RigProcess {
-    fn start(dir: &Path, speed: f64) -> RigProcess {
-        let link = dir.join("rig");
+    fn start(speed: f64) -> RigProcess {
         let mut child = Command::new(TRIBO)
-            .args(["rig", "--virtual", "--speed", &speed.to_string(), "--link"])
-            .arg(&link)
+            .args([
+                "rig",
+                "--virtual",
+                "--listen",
+                "127.0.0.1:0",
+                "--speed",
+                &speed.to_string(),
+            ])
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -54,16 +59,15 @@ impl RigProcess {
             child,
             lines,
             seen: Vec::new(),
-            link,
+            addr: String::new(),
         };
         let (_, line) = r.wait_for("listening on", Duration::from_secs(20));
-        if let Some(addr) = line
+        r.addr = line
             .split("listening on ")
             .nth(1)
             .and_then(|s| s.split_whitespace().next())
-        {
-            r.link = PathBuf::from(addr);
-        }
+            .unwrap_or_else(|| panic!("no address in {line:?}"))
+            .to_string();
         r
     }
 
@@ -111,7 +115,8 @@ impl RigProcess {
 
     /// A fresh host's look at the rig (this renews the lease, so only once the test is done).
     fn status(&self) -> tribo_wire::Status {
-        let mut link = Link::open(&self.link).expect("the rig's port opens");
+        let addr = Address::parse(&self.addr).expect("the rig's address");
+        let mut link = Link::open(&addr).expect("the rig's port opens");
         link.hello().expect("hello");
         link.status().expect("status")
     }
@@ -126,8 +131,7 @@ impl Drop for RigProcess {
 
 fn tribo_run(rig: &RigProcess, store: &Path, extra: &[&str]) -> Command {
     let mut c = Command::new(TRIBO);
-    c.args(["run", "--load", "0.3", "--quiet", "--port"])
-        .arg(&rig.link)
+    c.args(["run", "--load", "0.3", "--quiet", "--port", &rig.addr])
         .arg("--store")
         .arg(store)
         .args(extra);
@@ -138,7 +142,7 @@ fn tribo_run(rig: &RigProcess, store: &Path, extra: &[&str]) -> Command {
 fn tribo_killed_while_heating_leaves_the_rig_safe_within_the_lease() {
     // Real time and the real lease: the one end-to-end check of the default numbers.
     let dir = tempfile::tempdir().unwrap();
-    let mut rig = RigProcess::start(dir.path(), 1.0);
+    let mut rig = RigProcess::start(1.0);
     let mut host = tribo_run(&rig, &dir.path().join("runs"), &["--temp", "40"])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
@@ -179,8 +183,7 @@ fn tribo_killed_while_heating_leaves_the_rig_safe_within_the_lease() {
     );
     // `tribo status` tells a technician the same.
     let out = Command::new(TRIBO)
-        .args(["status", "--port"])
-        .arg(&rig.link)
+        .args(["status", "--port", &rig.addr])
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
@@ -194,11 +197,11 @@ fn tribo_killed_while_heating_leaves_the_rig_safe_within_the_lease() {
 fn tribo_run_into_a_closed_pipe_makes_the_rig_safe_on_its_way_out() {
     // `tribo run --temp 40 --repeat 2 | true`: the first result line meets a closed pipe.
     let dir = tempfile::tempdir().unwrap();
-    let mut rig = RigProcess::start(dir.path(), 20.0);
+    let mut rig = RigProcess::start(20.0);
     let cmd = format!(
         "set -o pipefail; '{TRIBO}' run --port '{}' --store '{}' --load 0.3 --temp 40 --ramp 30 \
          --settle-secs 2 --repeat 2 --quiet | true",
-        rig.link.display(),
+        rig.addr,
         dir.path().join("runs").display()
     );
     let out = Command::new("bash")
@@ -234,7 +237,7 @@ fn tribo_run_into_a_closed_pipe_makes_the_rig_safe_on_its_way_out() {
 #[test]
 fn sigterm_while_heating_stops_cleanly_and_makes_the_rig_safe() {
     let dir = tempfile::tempdir().unwrap();
-    let mut rig = RigProcess::start(dir.path(), 1.0);
+    let mut rig = RigProcess::start(1.0);
     let mut host = tribo_run(&rig, &dir.path().join("runs"), &["--temp", "40"])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -268,10 +271,9 @@ fn a_held_session_keeps_the_lease_through_silence_and_leaves_the_rig_safe() {
     // In-process rig at real time and the real lease: the session says nothing for longer than
     // the lease while the heater is on; only the heartbeat thread speaks.
     let rig = tribo_rig::VirtualRig::new(tribo_rig::VirtualRigConfig::default()).unwrap();
-    let port = tribo::link::pty::VirtualPort::open().unwrap();
-    let path = port.path().to_owned();
-    port.spawn(rig, tribo_rig::ServeOptions::default());
-    let mut link = Link::open(&path).unwrap();
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let tcp = tribo_rig::TcpRig::spawn(rig, l, tribo_rig::ServeOptions::default(), |_| {}).unwrap();
+    let mut link = Link::open(&Address::from(tcp.addr())).unwrap();
     link.hello().unwrap();
     let hold = link.hold();
     link.command(tribo_wire::HostMsg::SetHeater(tribo_wire::HeaterSetpoint {

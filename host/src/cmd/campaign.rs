@@ -17,8 +17,8 @@
 //! way the campaign ends switches heater and magnet off.
 
 use super::run::{abort_flag, print_outcome, warn_about_reset, LinkArgs, Ui};
+use crate::link::firmware_version;
 use crate::link::session::{record_run, HeaterPlan, RunPlan};
-use crate::link::{firmware_version, Link};
 use anyhow::{bail, Context};
 use serde::Deserialize;
 use std::io::IsTerminal;
@@ -253,9 +253,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let abort = abort_flag();
-    let port = args.link.port()?;
-    let mut link = Link::open(&port)?;
-    let info = link.hello()?;
+    let (mut link, info) = args.link.connect()?;
     // Heartbeats while the campaign runs (prompts included); every exit leaves the rig safe.
     let _hold = link.hold();
     eprintln!(
