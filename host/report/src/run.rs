@@ -321,7 +321,7 @@ fn envelope_figure(
     p.series
         .push(Series::line("measured", 7, decimate(&measured, bins)).with_style(Style::Line(3)));
     let data = EnvelopeData::new(&v.tau, &v.y, &v.ydot, bins.max(50))
-        .map_err(|e| ReportError::Input(e.0))?;
+        .map_err(|e| ReportError::Input(e.to_string()))?;
     for (i, f) in fits.iter().enumerate() {
         match identify::simulated_envelope(&data, f.friction_law(), fit_opts) {
             Ok(env) => p.series.push(

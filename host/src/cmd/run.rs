@@ -236,7 +236,16 @@ pub fn result_table(run: &Run) -> String {
     let (o0, o1) = ob.map_or(("—".into(), "—".into()), |r| {
         (pm(r.best.mu0, r.best.mu0_se), pm(r.best.mu1, r.best.mu1_se))
     });
-    let (h0, h1) = host.map_or(("—".into(), "—".into()), |h| (num(h.mu0), num(h.mu1)));
+    let pm64 = |v: f64, se: f64| {
+        if se.is_finite() && se > 0.0 {
+            format!("{} ± {:.1e}", num(v), se)
+        } else {
+            num(v)
+        }
+    };
+    let (h0, h1) = host.map_or(("—".into(), "—".into()), |h| {
+        (pm64(h.mu0, h.mu0_se), pm64(h.mu1, h.mu1_se))
+    });
     s.push_str(&format!("{:<10}{:<26}{}\n", "μ0", o0, h0));
     s.push_str(&format!("{:<10}{:<26}{}\n", "μ1", o1, h1));
     if let Some(r) = ob {

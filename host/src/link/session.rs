@@ -761,13 +761,16 @@ pub fn host_fit(run: &Run) -> Result<HostFit, String> {
         tribo_physics::LawSpec::CoulombViscous,
         &FitOptions::default(),
     )
-    .map_err(|e| e.0)?;
+    .map_err(|e| e.to_string())?;
     Ok(HostFit {
         law: r.law.clone(),
         mu0: r.mu.first().copied().unwrap_or(f64::NAN),
         mu1: r.mu.get(1).copied().unwrap_or(f64::NAN),
         gap: r.gap,
         converged: r.converged,
+        mu0_se: r.mu_se.first().copied().unwrap_or(f64::NAN),
+        mu1_se: r.mu_se.get(1).copied().unwrap_or(f64::NAN),
+        verdict: Some(r.verdict.name().into()),
     })
 }
 

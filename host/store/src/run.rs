@@ -170,6 +170,18 @@ pub struct HostFit {
     /// RMS envelope misfit relative to the initial amplitude.
     pub gap: f64,
     pub converged: bool,
+    /// Standard errors of μ0 and μ1 (`NaN` in results written before they were recorded).
+    #[serde(default = "nan")]
+    pub mu0_se: f64,
+    #[serde(default = "nan")]
+    pub mu1_se: f64,
+    /// The fit's verdict (`adequate`, `inadequate`, `not-converged`); `None` in older results.
+    #[serde(default)]
+    pub verdict: Option<String>,
+}
+
+fn nan() -> f64 {
+    f64::NAN
 }
 
 /// `result.toml`.
