@@ -361,9 +361,9 @@ mod tests {
         let a = vec![vec![1e-8, 2e-6], vec![2e-6, 1e-3]];
         let inv = invert(&a).unwrap();
         let p = matmul(&a, &inv);
-        for i in 0..2 {
-            for j in 0..2 {
-                assert!((p[i][j] - if i == j { 1.0 } else { 0.0 }).abs() < 1e-9);
+        for (i, row) in p.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-9);
             }
         }
         assert!(invert(&[vec![1.0, 1.0], vec![1.0, 1.0]]).is_none());
