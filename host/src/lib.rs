@@ -6,7 +6,8 @@
 pub mod cmd;
 pub mod exit;
 pub mod link;
-mod load;
+pub mod load;
+pub mod out;
 
 pub use load::load_record;
 

@@ -212,8 +212,8 @@ pub struct Args {
     /// Show what would be run and what is already done, and stop.
     #[arg(long)]
     pub dry_run: bool,
-    /// No progress bar or messages.
-    #[arg(long, short)]
+    /// No progress bar or messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
     pub quiet: bool,
 }
 
@@ -252,12 +252,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let port = args.link.port()?;
     let mut link = Link::open(&port)?;
     let info = link.hello()?;
-    eprintln!(
-        "rig on {}: firmware {}, serial {:016x}",
-        link.name(),
-        firmware_version(&info),
-        info.serial
-    );
+    if !args.quiet {
+        eprintln!(
+            "rig on {}: firmware {}, serial {:016x}",
+            link.name(),
+            firmware_version(&info),
+            info.serial
+        );
+    }
     let mut last_load: Option<f32> = None;
     for (i, p) in todo.iter().enumerate() {
         if abort.load(Ordering::Relaxed) {
@@ -273,15 +275,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             std::io::stdin().read_line(&mut s)?;
         }
         last_load = Some(p.load_n);
-        eprintln!(
-            "[{}/{}] load {} N, {}, repetition {}/{}",
-            i + 1,
-            todo.len(),
-            p.load_n,
-            p.temp_c.map_or("heater off".into(), |t| format!("{t} °C")),
-            p.repeat,
-            plan.repeats
-        );
+        if !args.quiet {
+            eprintln!(
+                "[{}/{}] load {} N, {}, repetition {}/{}",
+                i + 1,
+                todo.len(),
+                p.load_n,
+                p.temp_c.map_or("heater off".into(), |t| format!("{t} °C")),
+                p.repeat,
+                plan.repeats
+            );
+        }
         let mut rp = RunPlan::new(plan.config(p.load_n));
         rp.heater = p.temp_c.map(|t| HeaterPlan {
             setpoint_c: t,

@@ -40,6 +40,9 @@ pub struct Args {
     /// At most this many effects are added.
     #[arg(long, default_value_t = 3)]
     pub max_steps: usize,
+    /// No progress messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
+    pub quiet: bool,
 }
 
 /// Runs the subcommand.

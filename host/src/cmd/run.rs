@@ -312,8 +312,8 @@ pub struct Args {
     /// Heat the plate to this temperature first, °C (15–100; default: heater off).
     #[arg(long)]
     pub temp: Option<f32>,
-    /// Runs to take in a row.
-    #[arg(long, default_value_t = 1)]
+    /// Runs to take in a row (at least 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub repeat: u32,
     /// Free label stored with the run (and in its folder name).
     #[arg(long)]
@@ -354,8 +354,8 @@ pub struct Args {
     /// Heater ramp, °C/min.
     #[arg(long, default_value_t = 10.0)]
     pub ramp: f32,
-    /// No progress bar or messages.
-    #[arg(long, short)]
+    /// No progress bar or messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
     pub quiet: bool,
 }
 
@@ -403,19 +403,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let abort = abort_flag();
     let (mut link, info) = args.link.connect()?;
-    eprintln!(
-        "rig on {}: firmware {}, serial {:016x}",
-        link.name(),
-        firmware_version(&info),
-        info.serial
-    );
+    if !args.quiet {
+        eprintln!(
+            "rig on {}: firmware {}, serial {:016x}",
+            link.name(),
+            firmware_version(&info),
+            info.serial
+        );
+    }
     let store = args.link.store();
     for k in 1..=args.repeat.max(1) {
         let mut plan = plan.clone();
         if args.repeat > 1 {
             plan.repeat = Some(k);
             plan.keep_heater = k < args.repeat;
-            eprintln!("repetition {k}/{}", args.repeat);
+            if !args.quiet {
+                eprintln!("repetition {k}/{}", args.repeat);
+            }
         }
         let mut ui = Ui::new(args.quiet);
         let o = record_run(&mut link, &info, &store, &plan, &abort, &mut |p| ui.on(p));

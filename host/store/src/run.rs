@@ -35,6 +35,14 @@ pub enum RunStatus {
 }
 
 impl RunStatus {
+    /// Every status, in the order a run goes through them.
+    pub const ALL: [RunStatus; 4] = [
+        RunStatus::Recording,
+        RunStatus::Complete,
+        RunStatus::Aborted,
+        RunStatus::Incomplete,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             RunStatus::Recording => "recording",
@@ -42,6 +50,24 @@ impl RunStatus {
             RunStatus::Aborted => "aborted",
             RunStatus::Incomplete => "incomplete",
         }
+    }
+}
+
+impl std::str::FromStr for RunStatus {
+    type Err = StoreError;
+    fn from_str(s: &str) -> Result<RunStatus> {
+        RunStatus::ALL
+            .into_iter()
+            .find(|x| x.name() == s)
+            .ok_or_else(|| {
+                StoreError::new(
+                    ErrorKind::Invalid,
+                    format!(
+                        "unknown run status {s:?}: use {}",
+                        RunStatus::ALL.map(RunStatus::name).join(", ")
+                    ),
+                )
+            })
     }
 }
 
