@@ -277,6 +277,129 @@ pub fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// [`hac_covariance`] for residuals made of independent blocks (channels): the HAC "meat" is summed
+/// block by block (each with its own bandwidth), with no correlation across blocks. `blocks` are
+/// ranges of `r` (and of each Jacobian column) that cover it.
+pub fn hac_covariance_blocks(
+    jac: &Jacobian,
+    r: &[f64],
+    blocks: &[std::ops::Range<usize>],
+) -> Option<Vec<Vec<f64>>> {
+    let p = jac.len();
+    let n = r.len();
+    if p == 0 || n <= p || jac.iter().any(|c| c.len() != n) {
+        return None;
+    }
+    let mut jtj = vec![vec![0.0; p]; p];
+    for a in 0..p {
+        for b in 0..p {
+            jtj[a][b] = jac[a].iter().zip(&jac[b]).map(|(x, y)| x * y).sum();
+        }
+    }
+    let bread = invert(&jtj)?;
+    let mut meat = vec![vec![0.0; p]; p];
+    for blk in blocks {
+        let rb = &r[blk.clone()];
+        let m = rb.len();
+        if m == 0 {
+            continue;
+        }
+        let g: Vec<Vec<f64>> = (0..p)
+            .map(|a| {
+                jac[a][blk.clone()]
+                    .iter()
+                    .zip(rb)
+                    .map(|(j, e)| j * e)
+                    .collect()
+            })
+            .collect();
+        let rho1 = autocorrelation(rb, 1).get(1).copied().unwrap_or(0.0);
+        let l = bandwidth(m, rho1);
+        for lag in 0..=l.min(m - 1) {
+            let w = 1.0 - lag as f64 / (l + 1) as f64;
+            for a in 0..p {
+                for b in 0..p {
+                    let s: f64 = (0..m - lag).map(|i| g[a][i] * g[b][i + lag]).sum();
+                    if lag == 0 {
+                        meat[a][b] += s;
+                    } else {
+                        meat[a][b] += w * s;
+                        meat[b][a] += w * s;
+                    }
+                }
+            }
+        }
+    }
+    let dof = n as f64 / (n - p) as f64;
+    let mut cov = matmul(&matmul(&bread, &meat), &bread);
+    cov.iter_mut().flatten().for_each(|v| *v *= dof);
+    cov.iter().flatten().all(|v| v.is_finite()).then_some(cov)
+}
+
+/// Quantile of the standard normal distribution (Acklam's rational approximation, relative error
+/// below 1.2e-9), for `0 < p < 1`.
+pub fn normal_quantile(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.38357751867269e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549732539343734,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
+    let p = p.clamp(1e-300, 1.0 - 1e-16);
+    let lo = 0.02425;
+    if p < lo {
+        let q = (-2.0 * p.ln()).sqrt();
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    } else if p <= 1.0 - lo {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    } else {
+        -normal_quantile(1.0 - p)
+    }
+}
+
+/// The value a χ² variable with `k` degrees of freedom exceeds with probability `alpha`: exact for
+/// k = 1 (`z²`, z the normal quantile of `1 − α/2`) and k = 2 (`−2 ln α`), Wilson–Hilferty above.
+pub fn chi2_upper_quantile(k: usize, alpha: f64) -> f64 {
+    match k {
+        0 => 0.0,
+        1 => normal_quantile(1.0 - alpha / 2.0).powi(2),
+        2 => -2.0 * alpha.ln(),
+        _ => {
+            let k = k as f64;
+            let z = normal_quantile(1.0 - alpha);
+            let c = 2.0 / (9.0 * k);
+            k * (1.0 - c + z * c.sqrt()).powi(3)
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -354,6 +477,17 @@ mod tests {
             mean(&hac)
         );
         assert!(mean(&iid) < 0.5 * sd, "iid {} sd {sd}", mean(&iid));
+    }
+
+    #[test]
+    fn chi2_quantiles_match_tables() {
+        // χ²₁ at 5 % is 3.841, at 0.1 % 10.83; χ²₂ at 1 % 9.210; χ²₃ at 5 % 7.815.
+        assert!((chi2_upper_quantile(1, 0.05) - 3.841).abs() < 2e-3);
+        assert!((chi2_upper_quantile(1, 1e-3) - 10.828).abs() < 2e-3);
+        assert!((chi2_upper_quantile(2, 0.01) - 9.210).abs() < 2e-3);
+        // Wilson–Hilferty: within 1 %.
+        assert!((chi2_upper_quantile(3, 0.05) - 7.815).abs() < 0.08);
+        assert!((normal_quantile(0.975) - 1.959964).abs() < 1e-6);
     }
 
     #[test]
