@@ -47,6 +47,16 @@ pub fn load_for_analysis(path: &Path) -> anyhow::Result<Record> {
     })
 }
 
+/// The rig constants a run folder's metadata says a default stood in for (empty for a CSV file).
+pub fn recorded_defaults(path: &Path) -> Vec<String> {
+    if !path.is_dir() {
+        return Vec::new();
+    }
+    tribo_store::Run::open(path)
+        .map(|r| r.meta().defaults.clone())
+        .unwrap_or_default()
+}
+
 /// Where a rig constant of a result came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -110,7 +120,7 @@ impl RigUsed {
         let d = self.defaults();
         if !d.is_empty() {
             s.push_str(&format!(
-                " — the real rig's default stood in for {} (neither the record nor a flag gave it)",
+                " — the real rig's default stood in for {} (neither the record's source nor a flag gave it)",
                 d.join(", ")
             ));
         }
@@ -134,9 +144,14 @@ impl RigFlags {
 
 /// Applies the flags to the record's rig constants: a flag overrides the record; a constant that
 /// neither gives takes the real rig's value ([`Rig::REAL`]) when at least one flag was given, and
-/// the result records that it did. A record with no constants and no flag is an error that says
-/// which flags to pass.
-pub fn apply_rig_flags(rec: &mut Record, flags: RigFlags) -> anyhow::Result<RigUsed> {
+/// the result records that it did (as it does for the constants in `recorded_defaults`, those a run
+/// was taken with by default: [`recorded_defaults`]). A record with no constants and no flag is an
+/// error that says which flags to pass.
+pub fn apply_rig_flags(
+    rec: &mut Record,
+    flags: RigFlags,
+    recorded_defaults: &[String],
+) -> anyhow::Result<RigUsed> {
     if rec.units == Units::Dimensionless {
         if flags.any() {
             anyhow::bail!(
@@ -152,8 +167,14 @@ pub fn apply_rig_flags(rec: &mut Record, flags: RigFlags) -> anyhow::Result<RigU
             load_n_from: Source::Dimensionless,
         });
     }
-    let pick = |flag: Option<f64>, rec: Option<f64>, default: f64| match (flag, rec) {
+    let was_default = |name: &str| {
+        recorded_defaults
+            .iter()
+            .any(|d| d == name || d.starts_with(&format!("{name}=")))
+    };
+    let pick = |flag: Option<f64>, rec: Option<f64>, default: f64, name: &str| match (flag, rec) {
         (Some(v), _) => (v, Source::Flag),
+        (None, Some(v)) if was_default(name) => (v, Source::Default),
         (None, Some(v)) => (v, Source::Record),
         (None, None) => (default, Source::Default),
     };
@@ -164,13 +185,24 @@ pub fn apply_rig_flags(rec: &mut Record, flags: RigFlags) -> anyhow::Result<RigU
         );
     }
     let r = rec.rig;
-    let (m, mf) = pick(flags.mass_kg, r.map(|r| r.mass_kg), Rig::REAL.mass_kg);
+    let (m, mf) = pick(
+        flags.mass_kg,
+        r.map(|r| r.mass_kg),
+        Rig::REAL.mass_kg,
+        "mass_kg",
+    );
     let (k, kf) = pick(
         flags.stiffness_n_per_m,
         r.map(|r| r.stiffness_n_per_m),
         Rig::REAL.stiffness_n_per_m,
+        "stiffness_n_per_m",
     );
-    let (n, nf) = pick(flags.load_n, r.map(|r| r.load_n), Rig::REAL.load_n);
+    let (n, nf) = pick(
+        flags.load_n,
+        r.map(|r| r.load_n),
+        Rig::REAL.load_n,
+        "load_n",
+    );
     rec.rig = Some(Rig::new(m, k, n).map_err(anyhow::Error::msg)?);
     Ok(RigUsed {
         mass_kg: m,

@@ -2,7 +2,7 @@
 //! every constant, the record's noise floor and a verdict.
 
 use crate::exit::Incomplete;
-use crate::load::{apply_rig_flags, load_for_analysis, RigFlags, RigUsed};
+use crate::load::{apply_rig_flags, load_for_analysis, recorded_defaults, RigFlags, RigUsed};
 use crate::{out, outln};
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -93,6 +93,7 @@ pub fn run(a: Args) -> Result<()> {
             stiffness_n_per_m: a.stiffness,
             load_n: a.load_n,
         },
+        &recorded_defaults(&a.record),
     )?;
     let opts = FitOptions {
         apparatus_mu1: a.apparatus_mu1,

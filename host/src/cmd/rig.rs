@@ -183,6 +183,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cfg.seed,
         args.rig.speed
     );
+    if let Some(p) = &args.rig.config {
+        let d = std::fs::read_to_string(p)
+            .map_err(|e| e.to_string())
+            .and_then(|t| VirtualRigConfig::defaulted(&t))
+            .unwrap_or_default();
+        if !d.is_empty() {
+            println!(
+                "  {} does not give {}: the thesis's rig stands in (values above)",
+                p.display(),
+                d.join(", ")
+            );
+        }
+    }
     println!(
         "  try: tribo run --port {} --load {}",
         args.link.display(),

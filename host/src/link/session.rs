@@ -41,6 +41,8 @@ pub struct RunPlan {
     pub lubricant: Option<String>,
     pub campaign: Option<String>,
     pub repeat: Option<u32>,
+    /// Rig constants a default stood in for (recorded in the run's metadata).
+    pub defaults: Vec<String>,
 }
 
 impl RunPlan {
@@ -55,6 +57,7 @@ impl RunPlan {
             lubricant: None,
             campaign: None,
             repeat: None,
+            defaults: Vec::new(),
         }
     }
 }
@@ -540,6 +543,7 @@ pub fn record_run(
         meta.lubricant = plan.lubricant.clone();
         meta.campaign = plan.campaign.clone();
         meta.repeat = plan.repeat;
+        meta.defaults = plan.defaults.clone();
         meta.temp_setpoint_c = plan.heater.map(|h| h.setpoint_c as f64);
         meta.device = Some(device_meta(info, &port));
         Ok(RunWriter::create(store, meta)?)

@@ -123,6 +123,10 @@ pub struct RunMeta {
     pub device_run_id: Option<u32>,
     /// The full configuration sent to the rig.
     pub config: Configure,
+    /// Rig constants (`mass_kg`, `stiffness_n_per_m`, `x0_m`, …) that no plan or flag gave, for
+    /// which a default stood in (a campaign plan that leaves them out takes the real rig's).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub defaults: Vec<String>,
 }
 
 impl RunMeta {
@@ -148,6 +152,7 @@ impl RunMeta {
             device: None,
             device_run_id: None,
             config,
+            defaults: Vec::new(),
         }
     }
 
