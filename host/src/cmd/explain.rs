@@ -3,7 +3,7 @@
 //! lives in the `tribo-explain` crate.
 
 use crate::exit::Incomplete;
-use crate::load::load_for_analysis;
+use crate::load::load_analysable_for_fit;
 use crate::{out, outln};
 use anyhow::{bail, Result};
 use clap::Parser;
@@ -52,6 +52,9 @@ fn effect(s: &str) -> Result<Effect, String> {
 /// initial amplitude, extended to the force channel as √(gap_envelope² + gap_force²).
 ///
 /// Exit status 3 (and nothing explained) for a record that cannot be analysed.
+///
+/// A record with holes (samples the rig lost, blocks not received, a time axis that jumps) is
+/// refused; `--longest-clean-stretch` explains the longest stretch of consecutive samples instead.
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` with rig constants, or `tau,y,ydot`).
@@ -78,6 +81,10 @@ pub struct Args {
     /// No progress messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]
     pub quiet: bool,
+    /// If the record has holes (samples the rig lost, blocks not received), use the longest
+    /// stretch of consecutive samples instead of refusing.
+    #[arg(long)]
+    pub longest_clean_stretch: bool,
 }
 
 /// Runs the subcommand.
@@ -92,7 +99,12 @@ pub fn run(args: Args) -> Result<()> {
     if !args.only.is_empty() {
         opts.candidates = args.only.clone();
     }
-    let record = load_for_analysis(&args.record)?;
+    let holes = if args.longest_clean_stretch {
+        crate::Holes::LongestCleanStretch
+    } else {
+        crate::Holes::Refuse
+    };
+    let record = load_analysable_for_fit(&args.record, holes)?;
     let not_analysable = |e: tribo_explain::ExplainError| -> anyhow::Error {
         if e.is_not_analysable() {
             Incomplete(format!(

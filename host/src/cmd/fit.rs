@@ -2,7 +2,7 @@
 //! every constant, the record's noise floor and a verdict.
 
 use crate::exit::Incomplete;
-use crate::load::{apply_rig_flags, load_for_analysis, recorded_defaults, RigFlags, RigUsed};
+use crate::load::{apply_rig_flags, load_analysable_for_fit, recorded_defaults, RigFlags, RigUsed};
 use crate::{out, outln};
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -52,6 +52,10 @@ pub fn law_spec(s: &str) -> Result<LawSpec, String> {
 /// ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains
 /// `"windows": [{"a_start", "a_end", "tau_start", "tau_end", "fit": {…}}, …]`. Constants that
 /// drift from window to window mean the law misses an amplitude-dependent term.
+///
+/// A record with holes is refused: a run whose rig lost samples (its acquisition gaps), a run with
+/// blocks not received, a CSV whose time axis jumps. `--longest-clean-stretch` fits the longest
+/// stretch of consecutive samples instead (and says which on stderr).
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV, or a run folder).
@@ -80,12 +84,21 @@ pub struct Args {
     /// Also fit on N amplitude windows (0 = off).
     #[arg(long, default_value_t = 0)]
     pub windows: usize,
+    /// If the record has holes (samples the rig lost, blocks not received), fit the longest
+    /// stretch of consecutive samples instead of refusing.
+    #[arg(long)]
+    pub longest_clean_stretch: bool,
 }
 
 /// Runs `tribo fit`.
 pub fn run(a: Args) -> Result<()> {
     let spec = a.law;
-    let mut rec = load_for_analysis(&a.record)?;
+    let holes = if a.longest_clean_stretch {
+        crate::Holes::LongestCleanStretch
+    } else {
+        crate::Holes::Refuse
+    };
+    let mut rec = load_analysable_for_fit(&a.record, holes)?;
     let rig = apply_rig_flags(
         &mut rec,
         RigFlags {

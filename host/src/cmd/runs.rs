@@ -4,7 +4,8 @@ use crate::outln;
 use std::path::PathBuf;
 use tribo_store::{Catalog, Filter, RunStatus};
 
-/// Arguments of `tribo runs`.
+/// Arguments of `tribo runs`. The `lost` column counts the samples a run's rig lost (acquisition
+/// gaps: the run went on, and fits will not cross them).
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
@@ -123,11 +124,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         outln!("no run matches (try `tribo runs --reindex` if folders were copied in by hand)")?;
         return Ok(());
     }
+    let any_lost = rows.iter().any(|r| r.lost_samples > 0);
     let opt = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.5}"));
     outln!(
-        "{:<44} {:<10} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
+        "{:<44} {:<10} {:>6} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
         "run",
         "status",
+        "lost",
         "load N",
         "°C",
         "campaign",
@@ -139,9 +142,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     for r in rows {
         outln!(
-            "{:<44} {:<10} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
+            "{:<44} {:<10} {:>6} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
             r.id,
             r.status,
+            if r.lost_samples > 0 {
+                r.lost_samples.to_string()
+            } else {
+                "—".into()
+            },
             r.load_n,
             r.temp_c.map_or("—".into(), |t| format!("{t:.1}")),
             r.campaign.as_deref().unwrap_or("—"),
@@ -150,6 +158,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             opt(r.onboard_mu1),
             opt(r.host_mu0),
             opt(r.host_mu1),
+        )?;
+    }
+    if any_lost {
+        outln!(
+            "lost: samples the rig's acquisition lost (its gap frames); fits refuse to cross a gap: \
+             `tribo fit --longest-clean-stretch RUN` fits the longest stretch without one"
         )?;
     }
     Ok(())
