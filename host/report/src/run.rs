@@ -689,7 +689,7 @@ fn pm(v: f64, se: f64) -> String {
     }
     let digits = (1 - se.log10().floor() as i32).max(0) as usize;
     if digits > 8 || !v.is_finite() {
-        format!("{v:.4e} ± {se:.1e}")
+        format!("{} ± {se:.1e}", num(v))
     } else {
         format!("{v:.digits$} ± {se:.digits$}")
     }
