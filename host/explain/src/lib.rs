@@ -407,7 +407,7 @@ impl Explanation {
             self.noise_floor
         );
         for (k, v) in &self.base_model.params {
-            if k.starts_with("mu") {
+            if k.starts_with("mu") || k == "apparatus_mu1" {
                 let se = self
                     .base_model
                     .params_se
@@ -561,6 +561,9 @@ pub fn named_params(data: &Prepared, spec: &Spec, p: &[f64]) -> BTreeMap<String,
         m.insert(format!("mu{j}"), a);
         m.insert(format!("p{j}_si"), b);
     }
+    if spec.apparatus {
+        m.insert("apparatus_mu1".into(), spec.apparatus_mu1(p));
+    }
     for e in &spec.effects {
         m.extend(effect_params(data, spec, p, *e));
     }
@@ -696,7 +699,9 @@ pub fn explain_with_progress(
     progress: Progress,
 ) -> Result<(Explanation, Prepared), ExplainError> {
     let powers = base_powers(opts.base)?;
-    let spec = Spec::base(powers.clone());
+    let mut spec = Spec::base(powers.clone());
+    spec.apparatus = data.has_force();
+    let spec = spec;
     progress("fitting the base law", 0, 1);
     // Envelope-only fit of tribo-physics first (robust from its own estimators, and it screens
     // the record), then the joint envelope + force fit from there.

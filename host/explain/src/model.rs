@@ -3,7 +3,9 @@
 //!
 //! Parameter vector layout: the base law's `μ_j` (for [`Spec::powers`]), the initial amplitude's
 //! relative correction `s` (the simulation starts from `(1 + s)` × the first sample's state: that
-//! sample is as noisy as any other), then each effect's parameters in the order of
+//! sample is as noisy as any other), the apparatus damping `μ_a` when [`Spec::apparatus`] (the
+//! blades' own damping slows the motion but the force sensor, under the contact, does not see it:
+//! with a force channel the two are told apart), then each effect's parameters in the order of
 //! [`Spec::effects`] (see [`Effect::param_names`]).
 
 use tribo_physics::integrate::{Method, SimError, Simulator};
@@ -87,6 +89,8 @@ pub struct Spec {
     pub powers: Vec<usize>,
     /// Added effects, in the order they were added.
     pub effects: Vec<Effect>,
+    /// Whether the apparatus damping `μ_a` is a parameter (records with a force channel).
+    pub apparatus: bool,
 }
 
 impl Spec {
@@ -95,12 +99,16 @@ impl Spec {
         Spec {
             powers,
             effects: Vec::new(),
+            apparatus: false,
         }
     }
 
     /// Number of parameters.
     pub fn n_params(&self) -> usize {
-        self.powers.len() + 1 + self.effects.iter().map(|e| e.n_params()).sum::<usize>()
+        self.powers.len()
+            + 1
+            + usize::from(self.apparatus)
+            + self.effects.iter().map(|e| e.n_params()).sum::<usize>()
     }
 
     /// Highest polynomial power of the law (base plus any quadratic-velocity terms).
@@ -143,6 +151,7 @@ impl Spec {
     pub fn offset(&self, i: usize) -> usize {
         self.powers.len()
             + 1
+            + usize::from(self.apparatus)
             + self.effects[..i]
                 .iter()
                 .map(|e| e.n_params())
@@ -190,6 +199,7 @@ impl Spec {
             }
         }) && self.mu(p).iter().all(|m| m.abs() < 1.0)
             && self.start_scale(p).abs() < 0.1
+            && (-0.01..=0.1).contains(&self.apparatus_mu1(p))
     }
 
     /// The initial amplitude's relative correction `s` in `p`.
@@ -197,16 +207,29 @@ impl Spec {
         p.get(self.powers.len()).copied().unwrap_or(0.0)
     }
 
-    /// `p` of the law's constants followed by a zero initial correction (a start for a fit).
+    /// The apparatus damping `μ_a` in `p` (0 when not a parameter).
+    pub fn apparatus_mu1(&self, p: &[f64]) -> f64 {
+        if self.apparatus {
+            p.get(self.powers.len() + 1).copied().unwrap_or(0.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// `p` of the law's constants followed by a zero initial correction and apparatus damping (a
+    /// start for a fit).
     pub fn start(&self, law_params: &[f64]) -> Vec<f64> {
         let mut p = law_params.to_vec();
         p.push(0.0);
+        if self.apparatus {
+            p.push(0.0);
+        }
         p
     }
 
     /// Typical magnitude of every parameter (finite-difference steps near 0).
     pub fn scales(&self) -> Vec<f64> {
-        let mut s = vec![1e-3; self.powers.len() + 1];
+        let mut s = vec![1e-3; self.powers.len() + 1 + usize::from(self.apparatus)];
         for e in &self.effects {
             s.extend_from_slice(match e {
                 Effect::QuadraticVelocity => &[1e-3][..],
@@ -224,6 +247,9 @@ impl Spec {
     pub fn param_names(&self) -> Vec<String> {
         let mut names: Vec<String> = self.powers.iter().map(|j| format!("mu{j}")).collect();
         names.push("start_scale".into());
+        if self.apparatus {
+            names.push("apparatus_mu1".into());
+        }
         let mut next = self.powers.iter().copied().max().unwrap_or(0);
         for e in &self.effects {
             if *e == Effect::QuadraticVelocity {
@@ -311,6 +337,11 @@ pub struct Prepared {
 /// The rig's charge-amplifier low-pass (Hz): what a force channel that does not state its own has
 /// if it is filtered at all.
 pub const RIG_FORCE_CUTOFF_HZ: f64 = 300.0;
+
+/// The force channel is compared from this long after the first sample on (s): longer than the
+/// largest sensor lag considered (3 rad of τ ≈ 18 ms on the real rig) and the charge amplifier's
+/// settling, so that the force before the record (the magnet's hold) does not matter.
+pub const FORCE_SETTLE_S: f64 = 0.02;
 
 /// Smallest noise level of a channel (relative to the initial amplitude): the resolution of the
 /// simulations compared with the record (Dormand–Prince at rtol 1e-8), so that a noiseless record
@@ -419,8 +450,12 @@ impl Prepared {
             (Some(f), _) => Some(f[..n].iter().map(|v| v / rig.load_n).collect::<Vec<f64>>()),
             _ => None,
         };
+        // The force channel's first moments carry what happened before the record (the magnet's
+        // hold, the charge amplifier's state, a lag that still shows the force before the
+        // release): not compared.
+        let f_start = (rig.tau_of_t(FORCE_SETTLE_S) / rig.tau_of_t(dt)).ceil() as usize;
         let f_idx: Vec<usize> = if f_meas.is_some() {
-            (0..n).step_by(stride(n, max_force)).collect()
+            (f_start.min(n)..n).step_by(stride(n, max_force)).collect()
         } else {
             Vec::new()
         };
@@ -571,7 +606,12 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
     let kappa = spec
         .effect_params(Effect::CubicStiffness, p)
         .map_or(0.0, |k| k[0]);
-    let model_at = |dmu0: f64| Model::new(spec.law(p, dmu0)).with_cubic(kappa);
+    let mu_a = spec.apparatus_mu1(p);
+    let model_at = |dmu0: f64| {
+        Model::new(spec.law(p, dmu0))
+            .with_cubic(kappa)
+            .with_apparatus_damping(mu_a)
+    };
     let (y0, v0) = data.initial_state();
     let (y0, v0) = (
         y0 * (1.0 + spec.start_scale(p)),

@@ -358,15 +358,15 @@ pub struct Screening {
     pub envelope_noise: f64,
 }
 
-/// Length of the longest run of samples equal to the channel's maximum or minimum (and its start),
-/// counting only runs where `moving(i)` holds somewhere.
-fn flat_extreme_run(c: &[f64], moving: impl Fn(usize) -> bool) -> Option<(usize, usize)> {
+/// Runs of consecutive samples equal to the channel's maximum or minimum (start, length), counting
+/// only runs where `moving(i)` holds somewhere, longest first.
+fn flat_extreme_runs(c: &[f64], moving: impl Fn(usize) -> bool) -> Vec<(usize, usize)> {
     let hi = c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let lo = c.iter().copied().fold(f64::INFINITY, f64::min);
     if hi <= lo || hi.is_nan() || lo.is_nan() {
-        return None;
+        return Vec::new();
     }
-    let mut best: Option<(usize, usize)> = None;
+    let mut runs = Vec::new();
     for ext in [hi, lo] {
         let mut i = 0;
         while i < c.len() {
@@ -375,21 +375,30 @@ fn flat_extreme_run(c: &[f64], moving: impl Fn(usize) -> bool) -> Option<(usize,
                 while i < c.len() && c[i] == ext {
                     i += 1;
                 }
-                let len = i - start;
-                if (start..i).any(&moving) && best.is_none_or(|b| len > b.1) {
-                    best = Some((start, len));
+                if (start..i).any(&moving) {
+                    runs.push((start, i - start));
                 }
             } else {
                 i += 1;
             }
         }
     }
-    best
+    runs.sort_by_key(|r| std::cmp::Reverse(r.1));
+    runs
 }
 
-/// Shortest flat run at a channel's extreme that counts as saturation (samples). A quantised
-/// sinusoid sampled 60+ times a cycle stays on its extreme code for one or two samples.
-const SATURATION_RUN: usize = 4;
+/// A channel is saturated when it stays on its extreme value (the converter's rail) while the pin
+/// moves, for at least one long run (`long` samples) or for two runs of [`SATURATION_RUN`]: a
+/// quantised noisy sinusoid sampled 60+ times a cycle sits on its extreme code for one to four
+/// samples, once (seen on 1 record in 200 at the rig's noise for four).
+fn saturated(runs: &[(usize, usize)], long: usize) -> Option<(usize, usize)> {
+    let first = *runs.first()?;
+    let repeated = runs.iter().filter(|r| r.1 >= SATURATION_RUN).count() >= 2;
+    (first.1 >= long || repeated).then_some(first)
+}
+
+/// Shortest flat run at a channel's extreme that counts, when it recurs.
+const SATURATION_RUN: usize = 3;
 
 /// Checks that dimensionless samples can be fitted: finite, not saturated, oscillating at the natural
 /// half period π (in τ) above the noise for at least [`MIN_HALF_CYCLES`] half cycles.
@@ -412,43 +421,46 @@ pub fn screen(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<Screening, NotAnal
     // A displacement flat at its extreme while the velocity says the pin moves fast (not the
     // magnet's hold before the release, when both are still).
     let moving = |i: usize| ydot[i].abs() > 0.05 * vmax;
-    if let Some((sample, samples)) = flat_extreme_run(y, moving) {
-        if samples >= SATURATION_RUN {
-            return Err(NotAnalysable::Saturated {
-                channel: "displacement",
-                sample,
-                samples,
-            });
-        }
+    // A long run: a fortieth of a cycle (9 samples at the rig's 10 kHz), at least 6.
+    let dtau = (tau[n - 1] - tau[0]) / (n - 1) as f64;
+    let long = ((2.0 * PI / dtau / 40.0).ceil() as usize).max(6);
+    if let Some((sample, samples)) = saturated(&flat_extreme_runs(y, moving), long) {
+        return Err(NotAnalysable::Saturated {
+            channel: "displacement",
+            sample,
+            samples,
+        });
     }
-    if let Some((sample, samples)) = flat_extreme_run(ydot, |i| ydot[i] != 0.0) {
-        if samples >= SATURATION_RUN {
-            return Err(NotAnalysable::Saturated {
-                channel: "velocity",
-                sample,
-                samples,
-            });
-        }
+    if let Some((sample, samples)) = saturated(&flat_extreme_runs(ydot, |i| ydot[i] != 0.0), long) {
+        return Err(NotAnalysable::Saturated {
+            channel: "velocity",
+            sample,
+            samples,
+        });
     }
     let a = mark_crandall(y, ydot);
     let noise = noise_sigma(&a).unwrap_or(0.0);
-    // Extrema: displacement (signed) at each velocity sign change, at least π/2 apart. A half cycle
-    // swings from one side to the other by more than 10 × the noise; after the stop the noise only
-    // dithers about the rest position.
+    // Extrema: displacement (signed) at each velocity sign change, at least π/8 apart (the noise
+    // dithers the sign of the velocity about each reversal). A half cycle swings from one side to
+    // the other by more than 10 × the noise; after the stop the noise only dithers about the rest
+    // position.
     let mut ext: Vec<(f64, f64)> = Vec::new();
     for i in 1..n {
         let (p, q) = (ydot[i - 1], ydot[i]);
         if (p > 0.0 && q <= 0.0) || (p < 0.0 && q >= 0.0) {
             let j = if p.abs() < q.abs() { i - 1 } else { i };
-            if ext.last().is_none_or(|e| tau[j] - e.0 >= 0.5 * PI) {
+            if ext.last().is_none_or(|e| tau[j] - e.0 >= PI / 8.0) {
                 ext.push((tau[j], y[j]));
             }
         }
     }
-    if ydot[0] == 0.0 && ext.first().is_none_or(|e| e.0 - tau[0] >= 0.5 * PI) {
+    // A record that starts at rest (the release) starts at an extremum.
+    if ydot[0].abs() <= 0.05 * vmax && ext.first().is_none_or(|e| e.0 - tau[0] >= PI / 8.0) {
         ext.insert(0, (tau[0], y[0]));
     }
-    let level = 10.0 * noise;
+    // The swing is a displacement: compare it with the displacement's own noise (the envelope's
+    // mixes in the velocity's, and a large ripple when the rig constants are wrong).
+    let level = 10.0 * noise_sigma(y).unwrap_or(0.0);
     let (mut regular, mut significant) = (0usize, Vec::new());
     for w in ext.windows(2) {
         let swing = (w[1].1 - w[0].1).abs();

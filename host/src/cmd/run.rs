@@ -278,10 +278,14 @@ pub fn result_table(run: &Run) -> String {
     }
     if let Some(h) = host {
         s.push_str(&format!(
-            "{:<10}envelope misfit {:.2e} of A0{}\n",
+            "{:<10}envelope misfit {:.2e} of A0, {}\n",
             "host",
             h.gap,
-            if h.converged { "" } else { " (not converged)" }
+            h.verdict.as_deref().unwrap_or(if h.converged {
+                "converged"
+            } else {
+                "not converged"
+            })
         ));
     } else if let Some(e) = &run.results.host_error {
         s.push_str(&format!("{:<10}no fit: {e}\n", "host"));
