@@ -44,8 +44,10 @@ enum Command {
     /// Simulate the rig's free response from a friction law and write a record (CSV).
     Sim(tribo::cmd::sim::Args),
     /// Fit a friction law (coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre) to a record.
+    #[command(long_about = tribo::cmd::fit::LONG_ABOUT)]
     Fit(tribo::cmd::fit::Args),
     /// Find what a friction law misses in a record, add it, and show the gap shrink.
+    #[command(long_about = tribo::cmd::explain::LONG_ABOUT)]
     Explain(tribo::cmd::explain::Args),
     /// Figures (SVG/PNG) and a self-contained HTML page of a run, a record or a campaign.
     Report(tribo::cmd::report::Args),

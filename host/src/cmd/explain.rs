@@ -32,29 +32,32 @@ fn effect(s: &str) -> Result<Effect, String> {
     })
 }
 
-/// Explain the disagreement between a friction law and a record.
-///
-/// Fits the base law to every channel (envelope from displacement and velocity; friction force when
-/// `ft_n` exists; temperature when `temp_c` exists), measures where it disagrees, then tries each
-/// candidate effect — quadratic-velocity, stribeck, frictional-lag, cubic-stiffness, thermal-drift,
-/// sensor-lag. An effect is named only if adding it shrinks the misfit by more than chance would,
-/// judged with a noise model of the residuals that includes their correlation (an effective sample
-/// count per channel), and removes a material part of the misfit above the noise floor. The best one
-/// is added, the model refitted, and the search repeats. If a misfit well above the noise floor
-/// remains, the answer is "unexplained: N % of the gap remains; not one of the known effects" —
-/// never a guess.
-///
-/// `--json` prints one object: `conclusion` (base-adequate, explained, partly-explained,
-/// unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_before`,
-/// `gap_after`, `evidence`, `params` and `params_se`), `gap_initial`, `gap_final`, `noise_floor`,
-/// `unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source`, the base and final models,
-/// every round's candidates and the diagnostics. The gap is RMS(measured − fitted envelope) /
-/// initial amplitude, extended to the force channel as √(gap_envelope² + gap_force²).
-///
-/// Exit status 3 (and nothing explained) for a record that cannot be analysed.
-///
-/// A record with holes (samples the rig lost, blocks not received, a time axis that jumps) is
-/// refused; `--longest-clean-stretch` explains the longest stretch of consecutive samples instead.
+/// The long `--help` of the command.
+pub const LONG_ABOUT: &str = "Explain the disagreement between a friction law and a record.
+
+Fits the base law to every channel (envelope from displacement and velocity; friction force when
+`ft_n` exists; temperature when `temp_c` exists), measures where it disagrees, then tries each
+candidate effect — quadratic-velocity, stribeck, frictional-lag, cubic-stiffness, thermal-drift,
+sensor-lag. An effect is named only if adding it shrinks the misfit by more than chance would,
+judged with a noise model of the residuals that includes their correlation (an effective sample
+count per channel), and removes a material part of the misfit above the noise floor. The best one
+is added, the model refitted, and the search repeats. If a misfit well above the noise floor
+remains, the answer is \"unexplained: N % of the gap remains; not one of the known effects\" —
+never a guess.
+
+`--json` prints one object: `conclusion` (base-adequate, explained, partly-explained,
+unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_before`,
+`gap_after`, `evidence`, `params` and `params_se`), `gap_initial`, `gap_final`, `noise_floor`,
+`unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source`, the base and final models,
+every round's candidates and the diagnostics. The gap is RMS(measured − fitted envelope) /
+initial amplitude, extended to the force channel as √(gap_envelope² + gap_force²).
+
+Exit status 3 (and nothing explained) for a record that cannot be analysed.
+
+A record with holes (samples the rig lost, blocks not received, a time axis that jumps) is
+refused; `--longest-clean-stretch` explains the longest stretch of consecutive samples instead.";
+
+///  Explain the disagreement between a friction law and a record.
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` with rig constants, or `tau,y,ydot`).

@@ -21,41 +21,44 @@ pub fn law_spec(s: &str) -> Result<LawSpec, String> {
     s.parse()
 }
 
-/// Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
-///
-/// RECORD is a CSV with header `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` and rig constants in
-/// `# mass_kg=…`, `# stiffness_n_per_m=…`, `# load_n=…` comment lines (the flags below override
-/// them; a constant neither gives takes the real rig's value, and the output says so), a
-/// dimensionless CSV `tau,y,ydot`, or a run folder of the store.
-///
-/// Every constant comes with its standard error (±, one standard deviation: from the Jacobian at the
-/// optimum, with the residuals' correlation taken into account). The *noise floor* is the
-/// envelope's measurement noise read from the record itself; the *gap* is the RMS difference
-/// between measured and fitted envelopes. Both are relative to the initial amplitude. The verdict:
-///
-///   adequate       converged, gap ≤ 1.5 × noise floor: the law describes the record
-///   inadequate     converged, gap above that: the law misses something (try `tribo explain`)
-///   not-converged  the iteration limit came first: the constants are not trustworthy (status 3)
-///   not-analysable no oscillation, too few half cycles, a saturated channel or a non-finite
-///                  sample: nothing is fitted, no constant printed (status 3)
-///
-/// `--json` prints one object: `law`, `verdict`, `mu` and `mu_se` (dimensionless constants of seed
-/// eq. 10–13 in order of j and their standard errors), `gap`, `noise_floor`, `p_si`, `p_si_se` (SI
-/// coefficients of μ(v) = Σ p_j v^j, v in m/s), `params`, `params_se`, `iterations`, `converged`,
-/// `shape` (straight/convex/concave/mixed), `y0`, `y0_se` (fitted initial amplitude), `points`,
-/// `n_eff` (effectively independent residuals), `half_cycles`, `record`, `rig` (the constants used
-/// and where each came from: record, flag, default) and `defaults` (the constants a default stood in
-/// for). A record that cannot be analysed gives `{"record", "verdict": "not-analysable", "reason",
-/// "message"}`.
-///
-/// `--windows N` also fits the law on N successive windows of equal amplitude drop (thesis
-/// ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains
-/// `"windows": [{"a_start", "a_end", "tau_start", "tau_end", "fit": {…}}, …]`. Constants that
-/// drift from window to window mean the law misses an amplitude-dependent term.
-///
-/// A record with holes is refused: a run whose rig lost samples (its acquisition gaps), a run with
-/// blocks not received, a CSV whose time axis jumps. `--longest-clean-stretch` fits the longest
-/// stretch of consecutive samples instead (and says which on stderr).
+/// The long `--help` of the command.
+pub const LONG_ABOUT: &str = "Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
+
+RECORD is a CSV with header `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` and rig constants in
+`# mass_kg=…`, `# stiffness_n_per_m=…`, `# load_n=…` comment lines (the flags below override
+them; a constant neither gives takes the real rig's value, and the output says so), a
+dimensionless CSV `tau,y,ydot`, or a run folder of the store.
+
+Every constant comes with its standard error (±, one standard deviation: from the Jacobian at the
+optimum, with the residuals' correlation taken into account). The *noise floor* is the
+envelope's measurement noise read from the record itself; the *gap* is the RMS difference
+between measured and fitted envelopes. Both are relative to the initial amplitude. The verdict:
+
+  adequate       converged, gap ≤ 1.5 × noise floor: the law describes the record
+  inadequate     converged, gap above that: the law misses something (try `tribo explain`)
+  not-converged  the iteration limit came first: the constants are not trustworthy (status 3)
+  not-analysable no oscillation, too few half cycles, a saturated channel or a non-finite
+                 sample: nothing is fitted, no constant printed (status 3)
+
+`--json` prints one object: `law`, `verdict`, `mu` and `mu_se` (dimensionless constants of seed
+eq. 10–13 in order of j and their standard errors), `gap`, `noise_floor`, `p_si`, `p_si_se` (SI
+coefficients of μ(v) = Σ p_j v^j, v in m/s), `params`, `params_se`, `iterations`, `converged`,
+`shape` (straight/convex/concave/mixed), `y0`, `y0_se` (fitted initial amplitude), `points`,
+`n_eff` (effectively independent residuals), `half_cycles`, `record`, `rig` (the constants used
+and where each came from: record, flag, default) and `defaults` (the constants a default stood in
+for). A record that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"reason\",
+\"message\"}`.
+
+`--windows N` also fits the law on N successive windows of equal amplitude drop (thesis
+ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains
+`\"windows\": [{\"a_start\", \"a_end\", \"tau_start\", \"tau_end\", \"fit\": {…}}, …]`. Constants that
+drift from window to window mean the law misses an amplitude-dependent term.
+
+A record with holes is refused: a run whose rig lost samples (its acquisition gaps), a run with
+blocks not received, a CSV whose time axis jumps. `--longest-clean-stretch` fits the longest
+stretch of consecutive samples instead (and says which on stderr).";
+
+///  Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV, or a run folder).
