@@ -330,3 +330,92 @@ fn envelope_alone_names_quadratic_velocity() {
     assert!((e.final_model.params["mu0"] - mu[0]).abs() < 0.02 * mu[0]);
     assert!((e.final_model.params["mu1"] - mu[1]).abs() < 0.02 * mu[1]);
 }
+
+/// Below the test set's strengths: each effect at about a third of it (and a 5 % direction
+/// asymmetry). The workflow may miss them or call them ambiguous, but it must never name a wrong
+/// effect. `cargo test --release -p tribo-explain --test confusion -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn weaker_effects_are_missed_rather_than_misnamed() {
+    let c = cv();
+    let cases: Vec<(&str, Contact, f64, &str)> = vec![
+        (
+            "μ2 = 1.5e-4",
+            Contact {
+                mu2: 1.5e-4,
+                ..c.clone()
+            },
+            0.0,
+            "quadratic-velocity",
+        ),
+        (
+            "μs = 1.08 μ0",
+            Contact {
+                stribeck: Some((1.08 * MU0, 0.3)),
+                ..c.clone()
+            },
+            0.0,
+            "stribeck",
+        ),
+        (
+            "memory 0.5 ms",
+            Contact {
+                memory_s: 5e-4,
+                ..c.clone()
+            },
+            0.0,
+            "frictional-lag",
+        ),
+        (
+            "k3 = 3e6 N/m³",
+            Contact {
+                k3: 3e6,
+                ..c.clone()
+            },
+            0.0,
+            "cubic-stiffness",
+        ),
+        (
+            "μ0 −1 % over +3 K",
+            Contact {
+                thermal: Some((-0.667e-4, 3.0, 0.8)),
+                ..c.clone()
+            },
+            0.0,
+            "thermal-drift",
+        ),
+        ("force delay 0.2 ms", c.clone(), 2e-4, "sensor-lag"),
+        (
+            "μ0 5 % lower backwards",
+            Contact {
+                mu0_backward: Some(0.95 * MU0),
+                ..c.clone()
+            },
+            0.0,
+            "",
+        ),
+    ];
+    let mut wrong = Vec::new();
+    for (name, contact, lag, truth) in cases {
+        for seed in 1..4 {
+            let ch = tribo_physics::sensor::SensorModel {
+                force_lag_s: lag,
+                ..chain(900 + seed)
+            };
+            let e = explain(
+                &record(&contact, 0.3, 1.3, Some(&ch)),
+                &ExplainOptions::default(),
+            )
+            .unwrap();
+            eprintln!(
+                "{name:<24} seed {seed}: {:<22} {}",
+                e.missing_effects.join("+"),
+                e.conclusion.name()
+            );
+            if e.missing_effects.iter().any(|m| m != truth) {
+                wrong.push(format!("{name}, seed {seed}: {:?}", e.missing_effects));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "wrong names: {wrong:?}");
+}

@@ -41,6 +41,7 @@ fn main() {
     let mut sq = vec![0.0f64; truth.len()];
     let mut se_sum = vec![0.0f64; truth.len()];
     let mut verdicts = std::collections::BTreeMap::new();
+    let mut ratios = Vec::new();
     for seed in 1..=seeds {
         let rs = RecordSpec {
             rig: Rig::new(0.04, 1150.0, load).unwrap(),
@@ -62,6 +63,7 @@ fn main() {
         .unwrap();
         let r = fit(&rec, spec, &FitOptions::default()).unwrap();
         *verdicts.entry(r.verdict.name()).or_insert(0) += 1;
+        ratios.push(r.gap_ratio());
         for j in 0..truth.len() {
             let e = r.mu[j] - truth[j];
             inside[j] += usize::from(e.abs() <= 2.0 * r.mu_se[j]);
@@ -69,7 +71,14 @@ fn main() {
             se_sum[j] += r.mu_se[j];
         }
     }
-    println!("load {load} N, truth {truth:?}, {seeds} seeds, verdicts {verdicts:?}");
+    ratios.sort_by(f64::total_cmp);
+    println!(
+        "load {load} N, truth {truth:?}, {seeds} seeds, verdicts {verdicts:?}, gap / noise floor \
+         {:.3} .. {:.3} (median {:.3})",
+        ratios[0],
+        ratios[ratios.len() - 1],
+        ratios[ratios.len() / 2]
+    );
     for j in 0..truth.len() {
         println!(
             "mu{j}: {}/{seeds} within 2 SE ({:.1} %); RMS error {:.3e}, mean SE {:.3e}",

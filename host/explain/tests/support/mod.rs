@@ -144,9 +144,13 @@ pub fn record(c: &Contact, load_n: f64, duration_s: f64, chain: Option<&SensorMo
                 s[1] = 0.0;
                 t += hi;
                 let spring = k * s[0] + c.k3 * s[0].powi(3);
-                // The pin stays when the spring cannot overcome the static friction (with memory
-                // too: at rest the contact holds like a Coulomb one).
-                let hold = spring.abs() <= n * mu0_at(t, -spring.signum());
+                // The pin stays when the spring cannot overcome the static friction, the steady
+                // law's level at rest (with memory too: at rest the contact holds like a Coulomb
+                // one).
+                let dir_new = -spring.signum();
+                let static_level =
+                    mu0_at(t, dir_new) + c.stribeck.map_or(0.0, |(mus, _)| mus - c.mu0);
+                let hold = spring.abs() <= n * static_level;
                 if hold {
                     stuck = true;
                 } else {
