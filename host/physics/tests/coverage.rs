@@ -124,3 +124,42 @@ fn quadratic_standard_errors_cover_the_truth() {
         201..231,
     );
 }
+
+#[test]
+fn verdicts_follow_convergence_and_the_noise_floor() {
+    let spec = RecordSpec {
+        rig: Rig::REAL,
+        x0_m: 667e-6,
+        v0_m_s: 0.0,
+        duration_s: 1.0,
+        rate_hz: 10_000.0,
+    };
+    let quad = generate(
+        &spec,
+        &Model::new(FrictionLaw::quadratic(0.02, 0.004, 0.003)),
+        Method::dopri(1e-10),
+        Some(&SensorModel::default()),
+    )
+    .unwrap();
+    // The right law: adequate, the gap at the noise floor.
+    let r = fit(&quad, LawSpec::Quadratic, &FitOptions::default()).unwrap();
+    assert_eq!(r.verdict, FitVerdict::Adequate, "{r:?}");
+    assert!((0.8..1.2).contains(&r.gap_ratio()), "{r:?}");
+    // A law that misses the quadratic term: converged, inadequate, its residuals correlated.
+    let r = fit(&quad, LawSpec::CoulombViscous, &FitOptions::default()).unwrap();
+    assert!(r.converged);
+    assert_eq!(r.verdict, FitVerdict::Inadequate, "{r:?}");
+    assert!(
+        r.gap_ratio() > 5.0 && r.n_eff < 0.1 * r.points as f64,
+        "{r:?}"
+    );
+    // Stopped by its iteration limit far from the optimum: not converged.
+    let opts = FitOptions {
+        max_iter: 1,
+        start: Some(vec![0.05, 0.0, 0.0]),
+        ..FitOptions::default()
+    };
+    let r = fit(&quad, LawSpec::Quadratic, &opts).unwrap();
+    assert!(!r.converged);
+    assert_eq!(r.verdict, FitVerdict::NotConverged, "{r:?}");
+}
