@@ -4,10 +4,14 @@
 //!   prints its flash and RAM use. Uses the rustup target when it is installed; otherwise Debian's
 //!   `rustc-web`/`cargo-web`/`rust-web-src`/`lld-22` with `RUSTC_BOOTSTRAP=1 -Z build-std=core`,
 //!   installing those packages first when they are missing and we may (root, apt-get present).
-//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the firmware.
+//! * `cargo xtask windows [--no-smoke]`: cross-builds `tribo.exe` for `x86_64-pc-windows-gnu` and
+//!   runs its smoke test under Wine (see [`windows`]).
+//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the
+//!   firmware, the Windows build and its smoke test.
 
 mod elf;
 mod memory;
+mod windows;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -23,6 +27,7 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("firmware") => firmware(&args[1..]).map(|_| ()),
+        Some("windows") => windows::windows(&args[1..]),
         Some("ci") => ci(),
         _ => {
             eprintln!(
@@ -30,7 +35,10 @@ fn main() -> ExitCode {
                  tasks:\n  \
                  firmware [--run]   build the STM32H743 firmware ELF and print its size\n                     \
                  (--run: flash it with probe-rs and show the defmt log)\n  \
-                 ci                 rustfmt, clippy -D warnings, all tests, firmware build"
+                 windows [--no-smoke]\n                     \
+                 cross-build tribo.exe (mingw-w64) and smoke-test it under Wine\n  \
+                 ci                 rustfmt, clippy -D warnings, all tests, firmware build,\n                     \
+                 Windows build and smoke test"
             );
             return ExitCode::from(2);
         }
@@ -96,6 +104,7 @@ fn ci() -> Result<(), String> {
     ]))?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     firmware(&[])?;
+    windows::windows(&[])?;
     Ok(())
 }
 
@@ -107,7 +116,7 @@ enum Toolchain {
     Debian { cargo: PathBuf, rustc: PathBuf },
 }
 
-fn rustup_has_target() -> bool {
+fn rustup_has_target(target: &str) -> bool {
     let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
     let out = Command::new(rustc).args(["--print", "sysroot"]).output();
     match out {
@@ -115,7 +124,7 @@ fn rustup_has_target() -> bool {
             let sysroot = String::from_utf8_lossy(&o.stdout).trim().to_owned();
             Path::new(&sysroot)
                 .join("lib/rustlib")
-                .join(TARGET)
+                .join(target)
                 .join("lib")
                 .is_dir()
         }
@@ -130,8 +139,9 @@ fn debian_ready() -> bool {
         && (Path::new("/usr/bin/rust-lld").exists() || Path::new("/usr/bin/ld.lld-22").exists())
 }
 
+/// How to build the firmware here, installing Debian's toolchain when needed and allowed.
 fn pick_toolchain() -> Result<Toolchain, String> {
-    if rustup_has_target() {
+    if rustup_has_target(TARGET) {
         return Ok(Toolchain::Rustup);
     }
     if !debian_ready() {
