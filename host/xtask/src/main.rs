@@ -4,15 +4,22 @@
 //!   prints its flash and RAM use. Uses the rustup target when it is installed; otherwise Debian's
 //!   `rustc-web`/`cargo-web`/`rust-web-src`/`lld-22` with `RUSTC_BOOTSTRAP=1 -Z build-std=core`,
 //!   installing those packages first when they are missing and we may (root, apt-get present).
-//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the firmware.
+//! * `cargo xtask target-test [FILTER]`: the on-target tests (`firmware/target-tests`): generates
+//!   the record bundle on the host, builds the test binary for the Cortex-M7 with the firmware's
+//!   flags and profile, runs it under QEMU (`qemu-system-arm -machine mps2-an500 -icount shift=0`)
+//!   and fails unless every test passed within its budgets.
+//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the firmware,
+//!   the on-target tests.
 
 mod elf;
+mod qemu;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 const BOARD: &str = "tribo-board";
+const TARGET_TESTS: &str = "tribo-target-tests";
 const PROFILE: &str = "firmware";
 const DEBIAN_PACKAGES: [&str; 4] = ["rustc-web", "cargo-web", "rust-web-src", "lld-22"];
 /// Budgets of the firmware issue: the ELF must fit these.
@@ -23,6 +30,7 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("firmware") => firmware(&args[1..]).map(|_| ()),
+        Some("target-test") => target_test(&args[1..]),
         Some("ci") => ci(),
         _ => {
             eprintln!(
@@ -30,7 +38,11 @@ fn main() -> ExitCode {
                  tasks:\n  \
                  firmware [--run]   build the STM32H743 firmware ELF and print its size\n                     \
                  (--run: flash it with probe-rs and show the defmt log)\n  \
-                 ci                 rustfmt, clippy -D warnings, all tests, firmware build"
+                 target-test [FILTER]\n                     \
+                 run the on-target tests on an emulated Cortex-M7 (QEMU; Debian package\n                     \
+                 qemu-system-arm); FILTER runs only the tests whose name contains it\n  \
+                 ci                 rustfmt, clippy -D warnings, all tests, firmware build,\n                     \
+                 on-target tests"
             );
             return ExitCode::from(2);
         }
@@ -63,7 +75,7 @@ fn run(cmd: &mut Command) -> Result<(), String> {
     }
 }
 
-fn show(cmd: &Command) -> String {
+pub(crate) fn show(cmd: &Command) -> String {
     let mut s: Vec<String> = cmd
         .get_envs()
         .filter_map(|(k, v)| Some(format!("{}={}", k.to_str()?, v?.to_str()?)))
@@ -92,6 +104,7 @@ fn ci() -> Result<(), String> {
     ]))?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     firmware(&[])?;
+    target_test(&[])?;
     Ok(())
 }
 
@@ -166,11 +179,10 @@ fn is_root() -> bool {
         .unwrap_or(false)
 }
 
-fn firmware(args: &[String]) -> Result<PathBuf, String> {
-    let flash = args.iter().any(|a| a == "--run");
-    let toolchain = pick_toolchain()?;
+/// A cargo command for the ARM target with `toolchain`, and the target directory it uses.
+fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
     let root = root();
-    let (mut cmd, target_dir) = match &toolchain {
+    let (mut cmd, target_dir) = match toolchain {
         Toolchain::Rustup => {
             let dir = root.join("target");
             (cargo(), dir)
@@ -190,6 +202,13 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         }
     };
     cmd.env("CARGO_TARGET_DIR", &target_dir);
+    (cmd, target_dir)
+}
+
+fn firmware(args: &[String]) -> Result<PathBuf, String> {
+    let flash = args.iter().any(|a| a == "--run");
+    let toolchain = pick_toolchain()?;
+    let (mut cmd, target_dir) = cross_cargo(&toolchain);
     cmd.args([
         if flash { "run" } else { "build" },
         "-p",
@@ -234,4 +253,44 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         return Err("the firmware is over its flash or RAM budget".into());
     }
     Ok(elf_path)
+}
+
+/// The on-target tests (see the module docs): bundle, cross-build, QEMU.
+fn target_test(args: &[String]) -> Result<(), String> {
+    let filter = match args {
+        [] => "",
+        [f] if !f.starts_with('-') => f.as_str(),
+        _ => return Err("usage: cargo xtask target-test [FILTER]".into()),
+    };
+    let qemu = qemu::find()?;
+    let started = std::time::Instant::now();
+    let bytes = tribo_target_tests::generate::bundle()
+        .map_err(|e| format!("generating the record bundle: {e}"))?;
+    let dir = root().join("target/target-tests");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let bundle = dir.join("bundle.bin");
+    // Rewritten only when it changed, so that an unchanged bundle does not relink the binary.
+    if std::fs::read(&bundle).ok().as_deref() != Some(&bytes[..]) {
+        std::fs::write(&bundle, &bytes).map_err(|e| format!("{}: {e}", bundle.display()))?;
+    }
+    eprintln!(
+        "xtask: record bundle {} ({:.0} KiB) generated in {:.1} s",
+        bundle.display(),
+        bytes.len() as f64 / 1024.0,
+        started.elapsed().as_secs_f64()
+    );
+    let toolchain = pick_toolchain()?;
+    let (mut cmd, target_dir) = cross_cargo(&toolchain);
+    cmd.env("TRIBO_TARGET_BUNDLE", &bundle).args([
+        "build",
+        "-p",
+        TARGET_TESTS,
+        "--target",
+        TARGET,
+        "--profile",
+        PROFILE,
+    ]);
+    run(&mut cmd)?;
+    let elf = target_dir.join(TARGET).join(PROFILE).join(TARGET_TESTS);
+    qemu::run(&qemu, &elf, filter)
 }

@@ -1,0 +1,23 @@
+//! The tests, and [`TESTS`], the one list the runner goes through (in this order).
+
+pub mod app;
+pub mod pipeline;
+pub mod store;
+pub mod wire;
+
+use crate::{test, Test};
+
+/// Every on-target test. Add yours here: `test!(module::function)`.
+pub const TESTS: &[Test] = &[
+    test!(wire::crc_known_vectors),
+    test!(wire::cobs_round_trip),
+    test!(wire::frames_match_the_host),
+    test!(wire::decoder_resynchronises),
+    test!(wire::framing_costs),
+    test!(store::fills_wraps_and_reads_back),
+    test!(pipeline::unloaded),
+    test!(pipeline::coulomb_viscous),
+    test!(pipeline::noisy),
+    test!(app::coulomb_viscous_run),
+    test!(app::unloaded_run),
+];
