@@ -25,7 +25,7 @@
 //! is answered by `Error { Malformed }`. Nothing a host sends can make it panic.
 
 use crate::acquisition::{select, BlockBuilder};
-use crate::analysis::{ConfigError, Phase, Pipeline, StopReason};
+use crate::analysis::{ConfigError, Finish, Phase, Pipeline, StopReason};
 use crate::ecr::Ecr;
 use crate::hal::{AnalogSample, Hardware, Lamps, MagnetDrive, ANALOG_CHANNELS};
 use crate::heater::{Heater, HeaterConfig};
@@ -50,6 +50,9 @@ pub struct AppConfig {
     pub ecr_period_us: u32,
     /// Most run frames sent per poll (bounds the time a poll takes).
     pub frames_per_poll: u8,
+    /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
+    /// is a few hundred instructions at most on the M7).
+    pub finish_rows_per_poll: u32,
 }
 
 impl AppConfig {
@@ -67,6 +70,7 @@ impl AppConfig {
             heater_period_us: 100_000,
             ecr_period_us: 100_000,
             frames_per_poll: 32,
+            finish_rows_per_poll: 32,
         }
     }
 }
@@ -83,6 +87,15 @@ enum Want {
     Range(u32, u32),
 }
 
+/// A run whose samples are all in, waiting for its end-of-run analysis (spread over polls): the
+/// run is still `Running` until its result and end frames exist.
+struct Ending {
+    job: Finish,
+    reason: EndReason,
+    blocks: u32,
+    samples: u32,
+}
+
 /// The application (see the module docs).
 pub struct App<'a> {
     cfg: AppConfig,
@@ -94,6 +107,7 @@ pub struct App<'a> {
     ecr: Ecr,
     store: RunStore<'a>,
     pipeline: Option<Pipeline>,
+    ending: Option<Ending>,
     builder: Option<BlockBuilder>,
     decoder: Decoder<HostMsg>,
     encoder: Encoder,
@@ -131,6 +145,7 @@ impl<'a> App<'a> {
             ecr: Ecr::new(),
             store,
             pipeline: None,
+            ending: None,
             builder: None,
             decoder: Decoder::new(),
             encoder: Encoder::new(),
@@ -301,6 +316,7 @@ impl<'a> App<'a> {
             }
         }
         self.drain(hw);
+        self.analyse_step();
         self.pump(hw);
         let lamps = self.lamps(now);
         hw.set_lamps(lamps);
@@ -529,7 +545,7 @@ impl<'a> App<'a> {
     fn drain<H: Hardware>(&mut self, hw: &mut H) {
         let mut buf = [[0u16; ANALOG_CHANNELS]; 32];
         loop {
-            if !matches!(self.state, RigState::Armed | RigState::Running) {
+            if !matches!(self.state, RigState::Armed | RigState::Running) || self.ending.is_some() {
                 return;
             }
             // An overrun is checked before each read: the samples still in the ring may straddle the
@@ -625,8 +641,10 @@ impl<'a> App<'a> {
         self.store.push_block(seq, &blk);
     }
 
+    /// Ends the run: no sample is taken after this; the result and end frames follow once the
+    /// end-of-run analysis is done ([`App::analyse_step`], a bounded part of it per poll).
     fn end_run<H: Hardware>(&mut self, hw: &mut H, reason: EndReason) {
-        if self.state != RigState::Running {
+        if self.state != RigState::Running || self.ending.is_some() {
             return;
         }
         if let Some(blk) = self.builder.as_mut().and_then(BlockBuilder::flush) {
@@ -637,14 +655,48 @@ impl<'a> App<'a> {
             .builder
             .as_ref()
             .map_or((0, 0), |b| (b.blocks(), b.samples()));
-        let mut result = match &self.pipeline {
-            Some(p) => p.finish(self.run_id),
-            None => unanalysed(
-                self.run_id,
-                samples,
-                self.config.map_or(1, |c| c.sample_rate_hz),
-            ),
+        let job = match &self.pipeline {
+            Some(p) => p.start_finish(self.run_id),
+            None => {
+                let result = unanalysed(
+                    self.run_id,
+                    samples,
+                    self.config.map_or(1, |c| c.sample_rate_hz),
+                );
+                self.complete_run(result, reason, blocks, samples);
+                return;
+            }
         };
+        self.ending = Some(Ending {
+            job,
+            reason,
+            blocks,
+            samples,
+        });
+        info!("run {} over: analysing", self.run_id);
+    }
+
+    /// Advances the end-of-run analysis, if one is pending, by a bounded number of rows.
+    fn analyse_step(&mut self) {
+        let Some(e) = &mut self.ending else { return };
+        let result = match &self.pipeline {
+            Some(p) => p.finish_step(&mut e.job, self.cfg.finish_rows_per_poll),
+            None => Some(unanalysed(self.run_id, e.samples, 1)),
+        };
+        let Some(result) = result else { return };
+        if let Some(e) = self.ending.take() {
+            self.complete_run(result, e.reason, e.blocks, e.samples);
+        }
+    }
+
+    /// Stores the result and end frames of the run; it is finished.
+    fn complete_run(
+        &mut self,
+        mut result: OnboardResult,
+        reason: EndReason,
+        blocks: u32,
+        samples: u32,
+    ) {
         if reason == EndReason::Aborted {
             result.verdict = Verdict::Aborted;
         }

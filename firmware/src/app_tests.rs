@@ -989,3 +989,37 @@ fn lamps_show_idle_armed_running_and_fault() {
     );
     assert!(!b.hw.lamps.green);
 }
+
+/// The end-of-run fit is spread over polls: once the pin has stopped the run stays `Running`
+/// (no new run can be configured or armed) until the result and end frames exist, a few polls
+/// later, and the result is the pipeline's one-call result.
+#[test]
+fn the_end_of_run_fit_is_spread_over_polls() {
+    let mut b = Bench::new();
+    b.app.cfg.finish_rows_per_poll = 4;
+    b.ready();
+    b.send(HostMsg::Release);
+    let mut analysing_polls = 0;
+    for _ in 0..3000 {
+        b.run_for(1);
+        if b.app.ending.is_some() {
+            analysing_polls += 1;
+            assert_eq!(b.app.state(), RigState::Running);
+            if analysing_polls == 2 {
+                let (r, _) = b.command(HostMsg::Configure(Configure::real_rig(0.3)));
+                assert_eq!(r, Err(ErrorCode::Busy));
+                assert!(b.app.store().frame(Item::End).is_none());
+            }
+        }
+        if b.app.state() == RigState::Finished {
+            break;
+        }
+    }
+    let half_cycles = b.app.pipeline.as_ref().unwrap().half_cycles().len();
+    assert!(half_cycles > 10, "{half_cycles}");
+    // 4 rows per poll over ~35 passes of the half-cycles
+    assert!(analysing_polls > half_cycles, "{analysing_polls} polls");
+    let one_call = b.app.pipeline.as_ref().unwrap().finish(b.app.run_id());
+    let stored = b.app.store().frame(Item::Result).map(|f| f.1);
+    assert_eq!(stored, Some(DeviceMsg::Result(one_call)));
+}
