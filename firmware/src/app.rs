@@ -48,7 +48,9 @@ pub struct AppConfig {
     pub heater_period_us: u32,
     /// ECR update period outside runs, µs (during a run: once per block).
     pub ecr_period_us: u32,
-    /// Most run frames sent per poll (bounds the time a poll takes).
+    /// Most run frames sent per poll (bounds the time a poll takes: framing a full five-channel
+    /// block is the largest single piece of work of a poll). One per millisecond poll is 1000
+    /// frames/s, over three times the blocks of a five-channel run at 20 kS/s.
     pub frames_per_poll: u8,
     /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
     /// is a few hundred instructions at most on the M7).
@@ -69,7 +71,7 @@ impl AppConfig {
             heater: HeaterConfig::default(),
             heater_period_us: 100_000,
             ecr_period_us: 100_000,
-            frames_per_poll: 32,
+            frames_per_poll: 1,
             finish_rows_per_poll: 32,
         }
     }
@@ -112,6 +114,10 @@ pub struct App<'a> {
     decoder: Decoder<HostMsg>,
     encoder: Encoder,
     out: [u8; MAX_FRAME],
+    /// The run frame being offered to the link, encoded once: a frame the link refuses waits here
+    /// and is offered again as is (item, length in `run_out`).
+    run_out: [u8; MAX_FRAME],
+    run_out_item: Option<(Item, usize)>,
     seq: u32,
     run_id: u32,
     run_start_us: u64,
@@ -150,6 +156,8 @@ impl<'a> App<'a> {
             decoder: Decoder::new(),
             encoder: Encoder::new(),
             out: [0; MAX_FRAME],
+            run_out: [0; MAX_FRAME],
+            run_out_item: None,
             seq: 0,
             run_id: 0,
             run_start_us: 0,
@@ -535,6 +543,7 @@ impl<'a> App<'a> {
         };
         let seq = self.next_seq();
         self.store.begin(seq, header);
+        self.run_out_item = None;
         self.want = Some(Want::Header { from_block: 0 });
         self.state = RigState::Running;
         info!("released: run {}", self.run_id);
@@ -729,18 +738,26 @@ impl<'a> App<'a> {
                 }
             };
             let Some(item) = item else { return };
-            let Some((seq, msg)) = self.store.frame(item) else {
-                self.want = None;
-                return;
+            let len = match self.run_out_item {
+                Some((it, len)) if it == item => len,
+                _ => {
+                    let Some((seq, msg)) = self.store.frame(item) else {
+                        self.want = None;
+                        return;
+                    };
+                    // An encoding error cannot happen for stored frames; skip rather than stall.
+                    let len = self
+                        .encoder
+                        .encode(seq, &msg, &mut self.run_out)
+                        .map_or(0, |b| b.len());
+                    self.run_out_item = Some((item, len));
+                    len
+                }
             };
-            let sent = match self.encoder.encode(seq, &msg, &mut self.out) {
-                Ok(bytes) => hw.send_frame(bytes),
-                // Cannot happen for stored frames; skip rather than stall.
-                Err(_) => true,
-            };
-            if !sent {
+            if len > 0 && !hw.send_frame(&self.run_out[..len]) {
                 return;
             }
+            self.run_out_item = None;
             self.want = match (want, item) {
                 (Want::Range(_, end), Item::Block(k)) => Some(Want::Range(k + 1, end)),
                 (Want::Header { from_block }, Item::Header) => Some(Want::Blocks(from_block)),

@@ -469,7 +469,7 @@ fn button_releases_only_when_armed_and_is_debounced() {
     assert!(b.hw.released_at.is_some());
 }
 
-/// Runs to the end and returns all frames sent.
+/// Runs to the end (the run's end frame sent) and returns all frames sent.
 fn full_run(b: &mut Bench) -> Vec<(Vec<u8>, Frame<DeviceMsg>)> {
     b.ready();
     b.take();
@@ -478,7 +478,10 @@ fn full_run(b: &mut Bench) -> Vec<(Vec<u8>, Frame<DeviceMsg>)> {
     for _ in 0..3000 {
         b.run_for(1);
         frames.extend(b.take());
-        if b.app.state() == RigState::Finished {
+        if frames
+            .iter()
+            .any(|f| matches!(f.1.msg, DeviceMsg::RunEnded(_)))
+        {
             break;
         }
     }
@@ -624,6 +627,14 @@ fn overrun_is_reported_and_ends_the_run() {
     let lost = b.hw.ring.lost();
     assert!(lost > 800, "{lost}");
     b.poll();
+    let samples = b.app.status().samples;
+    // the end-of-run analysis and the frames still to send take a few more polls
+    b.run_for(100);
+    assert_eq!(
+        b.app.status().samples,
+        samples,
+        "no sample taken after the overrun"
+    );
     let msgs = b.msgs();
     assert!(
         errors(&msgs).contains(&ErrorCode::Overrun { lost_samples: lost }),
