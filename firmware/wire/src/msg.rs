@@ -673,8 +673,8 @@ impl Counts {
 impl Serialize for Counts {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         let mut bytes = [0u8; 2 * MAX_BLOCK_COUNTS];
-        for (i, c) in self.0.iter().enumerate() {
-            bytes[2 * i..2 * i + 2].copy_from_slice(&c.to_le_bytes());
+        for (pair, c) in bytes.chunks_exact_mut(2).zip(self.0.iter()) {
+            pair.copy_from_slice(&c.to_le_bytes());
         }
         s.serialize_bytes(&bytes[..2 * self.0.len()])
     }
