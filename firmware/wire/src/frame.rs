@@ -64,47 +64,42 @@ impl std::error::Error for FrameError {}
 /// COBS-encodes `src` into `dst` (no closing zero). Returns the length written, or `None` when `dst`
 /// is too small.
 ///
-/// Block by block: each run of up to 254 non-zero bytes is copied whole behind its code byte (a
-/// `memcpy`, not a byte loop: on the M7 this is most of what framing a sample block costs). The
-/// output is the classic encoder's byte for byte, including the `0x01` block that follows a
-/// trailing zero or a final full block.
+/// Block by block, with one copy loop per block that stops at the zero (no per-byte bounds
+/// check or block-length test: on the M7 framing a sample block is mostly this loop). The output
+/// is the classic encoder's byte for byte, including the `0x01` block that follows a trailing
+/// zero or a final full block.
 pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
-    let mut out = 0usize;
     let mut rest = src;
+    let mut out = 0usize;
     loop {
-        let window = &rest[..rest.len().min(254)];
-        let (run, next, last) = match first_zero(window) {
-            // a run ended by a zero: the zero is implied by the code
-            Some(p) => (p, p + 1, false),
-            // 254 non-zero bytes: code 0xFF, no implied zero, another block follows
-            None if window.len() == 254 => (254, 254, false),
-            // the end of the data
-            None => (window.len(), window.len(), true),
+        let chunk = &rest[..rest.len().min(254)];
+        let (code, body) = dst.get_mut(out..)?.split_first_mut()?;
+        let mut run = 0usize;
+        for (d, &b) in body.iter_mut().zip(chunk) {
+            if b == 0 {
+                break;
+            }
+            *d = b;
+            run += 1;
+        }
+        let zero = match chunk.get(run) {
+            Some(0) => true,
+            // `body` ended before the run did: no room
+            Some(_) => return None,
+            None => false,
         };
-        *dst.get_mut(out)? = run as u8 + 1;
-        dst.get_mut(out + 1..out + 1 + run)?
-            .copy_from_slice(&rest[..run]);
+        *code = run as u8 + 1;
         out += 1 + run;
-        if last {
+        if zero {
+            // the zero is implied by the code; a block follows, empty if the data ends here
+            rest = &rest[run + 1..];
+        } else if run == 254 {
+            // 254 non-zero bytes: code 0xFF, no implied zero, another block follows
+            rest = &rest[run..];
+        } else {
             return Some(out);
         }
-        rest = &rest[next..];
     }
-}
-
-/// Index of the first zero byte, four bytes per step: `(w - 0x0101_0101) & !w & 0x8080_8080` is
-/// non-zero exactly when one of the four bytes of `w` is zero.
-fn first_zero(b: &[u8]) -> Option<usize> {
-    let mut words = b.chunks_exact(4);
-    let mut at = 0;
-    for w in &mut words {
-        let v = u32::from_le_bytes([w[0], w[1], w[2], w[3]]);
-        if v.wrapping_sub(0x0101_0101) & !v & 0x8080_8080 != 0 {
-            break;
-        }
-        at += 4;
-    }
-    b[at..].iter().position(|&x| x == 0).map(|p| at + p)
 }
 
 /// Decodes COBS in place (the input holds no zero byte). Returns the decoded length.
