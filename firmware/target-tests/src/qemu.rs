@@ -157,12 +157,38 @@ fn filter(buf: &mut [u8; 128]) -> &str {
     line.split_once(' ').map_or("", |(_, rest)| rest.trim())
 }
 
+/// Checks the counter against straight-line code of known length: 10,000 `nop`s (the counter's
+/// word, not ours, is what every figure rests on).
+fn calibrate(probe: &mut Qemu) -> (Option<u64>, Option<u64>) {
+    let empty = probe.count(&mut || {});
+    let nops = probe.count(&mut || {
+        // SAFETY: `nop` has no effect.
+        unsafe {
+            core::arch::asm!(
+                ".rept 10000",
+                "nop",
+                ".endr",
+                options(nomem, nostack, preserves_flags)
+            )
+        }
+    });
+    (empty, nops)
+}
+
 #[entry]
 fn main() -> ! {
     start_timer();
     let mut out = out();
     let stack_end = core::ptr::addr_of!(_stack_end) as usize;
     let mut probe = Qemu { stack_end };
+    let (empty, nops) = calibrate(&mut probe);
+    let _ = writeln!(
+        out,
+        "instruction counter: an empty call counts {}, 10000 nops count {} (±{})",
+        empty.unwrap_or(0),
+        nops.unwrap_or(0),
+        INSTRUCTIONS_PER_TICK
+    );
     let mut cmdline = [0u8; 128];
     let filter = filter(&mut cmdline);
     let bundle = match Bundle::parse(BUNDLE) {

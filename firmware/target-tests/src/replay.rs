@@ -59,6 +59,8 @@ pub struct Replay<'r> {
     // magnet
     drive: MagnetDrive,
     released_at_us: Option<u64>,
+    /// Samples of the converter completed when the magnet let go (the first motion sample's `k`).
+    released_k: Option<u64>,
     // converter
     running: bool,
     rate: u32,
@@ -93,6 +95,7 @@ impl<'r> Replay<'r> {
             timing: ReadTiming::default(),
             drive: MagnetDrive::Off,
             released_at_us: None,
+            released_k: None,
             running: false,
             rate: 0,
             start_us: 0,
@@ -138,22 +141,17 @@ impl<'r> Replay<'r> {
         (self.now_us - self.start_us) * self.rate as u64 / 1_000_000
     }
 
-    /// The counts of sample `k` since the start (see the module docs).
-    fn content(&self, k: u64) -> AnalogSample {
-        let hold = (self.rec.hold as u64).max(1);
-        let rate = self.rate.max(1) as u64;
-        let done_us = self.start_us + (k + 1) * 1_000_000 / rate;
-        let i = match self.released_at_us {
-            Some(r) if done_us > r => {
-                let held = r.saturating_sub(self.start_us) * rate / 1_000_000;
-                (self.rec.hold as u64 + (k - held)).min(self.rec.len().max(1) as u64 - 1)
+    /// Index in the record of sample `k` since the start (see the module docs). No 64-bit
+    /// division here (the M7 has none in hardware): this runs for every sample, inside the
+    /// measured calls.
+    fn index(&self, k: u64) -> usize {
+        match self.released_k {
+            Some(r) if k >= r => {
+                let i = self.rec.hold as u64 + (k - r);
+                i.min(self.rec.len().max(1) as u64 - 1) as usize
             }
-            _ => k % hold,
-        };
-        let s = self.rec.sample(i as usize);
-        let mut a = [0u16; ANALOG_CHANNELS];
-        a.copy_from_slice(&s[..ANALOG_CHANNELS]);
-        a
+            _ => (k as u32 % self.rec.hold.max(1)) as usize,
+        }
     }
 
     fn note_read(&mut self) {
@@ -177,6 +175,7 @@ impl Magnet for Replay<'_> {
             && !matches!(drive, MagnetDrive::Hold { .. })
         {
             self.released_at_us = Some(self.now_us);
+            self.released_k = Some(self.due());
         }
         self.drive = drive;
     }
@@ -242,7 +241,8 @@ impl SampleSource for Replay<'_> {
         }
         let n = (due.saturating_sub(self.next)).min(out.len() as u64) as usize;
         for (k, o) in out.iter_mut().take(n).enumerate() {
-            *o = self.content(self.next + k as u64);
+            let s = self.rec.sample(self.index(self.next + k as u64));
+            o.copy_from_slice(&s[..ANALOG_CHANNELS]);
         }
         self.next += n as u64;
         n

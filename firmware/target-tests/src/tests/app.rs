@@ -138,9 +138,21 @@ impl Host {
     }
 }
 
+/// Costs of the calls made in one state.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct StateCost {
+    pub calls: u64,
+    pub total: u64,
+    pub worst: u64,
+}
+
 /// Worst costs of the application's calls.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct Worst {
+    /// Polls by the state they started in (`RigState as usize`).
+    pub by_state: [StateCost; 6],
+    /// Worst `on_bytes` by command.
+    pub by_command: [u64; 16],
     pub poll: u64,
     pub on_bytes: u64,
     pub stack: u32,
@@ -187,11 +199,19 @@ impl<'a, 'r> Bench<'a, 'r> {
         }
     }
 
-    fn account(&mut self, c: Cost, poll: bool) {
+    fn account(&mut self, c: Cost, poll: Option<RigState>, command: Option<usize>) {
         let n = c.instructions.unwrap_or(0);
         self.worst.total += n;
         self.hw.timing.base = self.worst.total;
-        if poll {
+        if let Some(st) = poll.and_then(|s| self.worst.by_state.get_mut(s as usize)) {
+            st.calls += 1;
+            st.total += n;
+            st.worst = st.worst.max(n);
+        }
+        if let Some(w) = command.and_then(|k| self.worst.by_command.get_mut(k)) {
+            *w = (*w).max(n);
+        }
+        if poll.is_some() {
             self.worst.polls += 1;
             if n > self.worst.poll {
                 self.worst.poll = n;
@@ -236,12 +256,13 @@ impl<'a, 'r> Bench<'a, 'r> {
         self.hw.now_us = self.now_us;
         let now = self.now_us;
         let clock = self.hw.clock;
+        let state = self.app.state();
         let (app, hw) = (&mut self.app, &mut self.hw);
         let c = cx.measure(|| {
             hw.timing.call_start = clock();
             app.poll(hw, now);
         });
-        self.account(c, true);
+        self.account(c, Some(state), None);
     }
 
     /// Polls every [`POLL_US`] until `until_us`.
@@ -269,7 +290,7 @@ impl<'a, 'r> Bench<'a, 'r> {
             hw.timing.call_start = clock();
             app.on_bytes(hw, buf, now);
         });
-        self.account(c, false);
+        self.account(c, None, Some(command_index(msg)));
         seq
     }
 
@@ -282,6 +303,74 @@ impl<'a, 'r> Bench<'a, 'r> {
             self.host.errors
         );
         Ok(())
+    }
+}
+
+/// Names of the commands, by [`command_index`].
+const COMMANDS: [&str; 14] = [
+    "Hello",
+    "Configure",
+    "SetHeater",
+    "HeaterOff",
+    "Arm",
+    "Disarm",
+    "Release",
+    "Abort",
+    "Status",
+    "Pull",
+    "Heartbeat",
+    "Safe",
+    "PullBlocks",
+    "other",
+];
+
+fn command_index(m: &HostMsg) -> usize {
+    match m {
+        HostMsg::Hello { .. } => 0,
+        HostMsg::Configure(_) => 1,
+        HostMsg::SetHeater(_) => 2,
+        HostMsg::HeaterOff => 3,
+        HostMsg::Arm => 4,
+        HostMsg::Disarm => 5,
+        HostMsg::Release => 6,
+        HostMsg::Abort => 7,
+        HostMsg::Status => 8,
+        HostMsg::Pull { .. } => 9,
+        HostMsg::Heartbeat => 10,
+        HostMsg::Safe => 11,
+        HostMsg::PullBlocks { .. } => 12,
+        #[allow(unreachable_patterns)]
+        _ => 13,
+    }
+}
+
+/// The costs by state and by command, as notes.
+fn breakdown(cx: &mut Cx<'_>, w: &Worst) {
+    if !cx.counting() {
+        return;
+    }
+    const STATES: [&str; 6] = [
+        "Idle",
+        "Configured",
+        "Armed",
+        "Running",
+        "Finished",
+        "Fault",
+    ];
+    for (name, s) in STATES.iter().zip(w.by_state.iter()) {
+        if s.calls > 0 {
+            cx.note(format_args!(
+                "polls in {name}: {} calls, mean {} instructions, worst {}",
+                s.calls,
+                s.total / s.calls,
+                s.worst
+            ));
+        }
+    }
+    for (name, &worst) in COMMANDS.iter().zip(w.by_command.iter()) {
+        if worst > 0 {
+            cx.note(format_args!("on_bytes({name}): {worst} instructions"));
+        }
     }
 }
 
@@ -437,6 +526,7 @@ fn whole_run(cx: &mut Cx<'_>, name: &str, configure: Configure, expect: Expect) 
     ));
     // figures (the pull's polls included)
     let w = b.worst;
+    breakdown(cx, &w);
     cx.note(format_args!(
         "worst poll at {} ms after release; {} polls",
         w.poll_at_us.saturating_sub(release_at) / 1000,

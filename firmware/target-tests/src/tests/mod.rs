@@ -1,6 +1,7 @@
 //! The tests, and [`TESTS`], the one list the runner goes through (in this order).
 
 pub mod app;
+pub mod parts;
 pub mod pipeline;
 pub mod store;
 pub mod wire;
@@ -15,6 +16,8 @@ pub const TESTS: &[Test] = &[
     test!(wire::decoder_resynchronises),
     test!(wire::framing_costs),
     test!(store::fills_wraps_and_reads_back),
+    test!(parts::block_path),
+    test!(parts::analysis_setup),
     test!(pipeline::unloaded),
     test!(pipeline::coulomb_viscous),
     test!(pipeline::noisy),
