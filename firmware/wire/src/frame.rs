@@ -141,20 +141,35 @@ impl Encoder {
     }
 
     /// Frames `msg` with sequence number `seq` into `out`, closing zero included. Returns the bytes
-    /// to send.
+    /// to send. The same as [`Encoder::prepare`] then [`Encoder::stuff`].
     pub fn encode<'o, M: Serialize>(
         &mut self,
         seq: u32,
         msg: &M,
         out: &'o mut [u8],
     ) -> Result<&'o [u8], EncodeError> {
+        let raw = self.prepare(seq, msg)?;
+        self.stuff(raw, out)
+    }
+
+    /// The first half of framing: `seq`, the postcard body and the CRC, in this encoder's buffer.
+    /// Returns their length, for [`Encoder::stuff`]. (The halves let a caller with a time budget,
+    /// the firmware's millisecond poll, spread a frame over two calls.)
+    pub fn prepare<M: Serialize>(&mut self, seq: u32, msg: &M) -> Result<usize, EncodeError> {
         self.raw[..4].copy_from_slice(&seq.to_le_bytes());
         let body = postcard::to_slice(msg, &mut self.raw[4..4 + MAX_BODY])
             .map_err(|_| EncodeError::TooLarge)?
             .len();
         let crc = crc32(&self.raw[..4 + body]);
         self.raw[4 + body..8 + body].copy_from_slice(&crc.to_le_bytes());
-        let n = cobs_encode(&self.raw[..8 + body], out).ok_or(EncodeError::TooLarge)?;
+        Ok(8 + body)
+    }
+
+    /// The second half: byte-stuffs the `raw_len` bytes [`Encoder::prepare`] left into `out`, closing
+    /// zero included. Returns the bytes to send.
+    pub fn stuff<'o>(&self, raw_len: usize, out: &'o mut [u8]) -> Result<&'o [u8], EncodeError> {
+        let raw = self.raw.get(..raw_len).ok_or(EncodeError::TooLarge)?;
+        let n = cobs_encode(raw, out).ok_or(EncodeError::TooLarge)?;
         *out.get_mut(n).ok_or(EncodeError::TooLarge)? = 0;
         Ok(&out[..=n])
     }
