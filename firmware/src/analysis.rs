@@ -172,6 +172,8 @@ struct Pending {
 #[derive(Clone, Debug)]
 pub struct Pipeline {
     st: State,
+    /// The peak fitter (1.5 KiB of ring and table: reset in place, never rebuilt by value).
+    fitter: PeakFitter,
     records: heapless::Vec<HalfCycle, MAX_HALF_CYCLES>,
 }
 
@@ -212,7 +214,6 @@ struct State {
     vsq_n: u32,
     /// Velocity noise measured from the motion (counts), updated at each reversal.
     sv_motion: f64,
-    fitter: PeakFitter,
     moments: Moments,
     pending: Option<Pending>,
     first_sign: i8,
@@ -235,8 +236,12 @@ fn cal_ok(c: ChannelCal) -> bool {
 impl Pipeline {
     /// A pipeline for the run described by `cfg`, in the holding phase.
     pub fn new(cfg: &Configure) -> Result<Self, ConfigError> {
+        let st = Self::state(cfg)?;
+        let mut fitter = PeakFitter::new();
+        fitter.set_step(PI / st.half_period);
         Ok(Self {
-            st: Self::state(cfg)?,
+            st,
+            fitter,
             records: heapless::Vec::new(),
         })
     }
@@ -283,8 +288,6 @@ impl Pipeline {
             }
         }
         let max_samples = (max_duration * rate).min(u32::MAX as f64) as u32;
-        let mut fitter = PeakFitter::new();
-        fitter.set_step(PI / half_period);
         Ok(State {
             mass,
             stiffness,
@@ -313,7 +316,6 @@ impl Pipeline {
             vsq_sum: 0,
             vsq_n: 0,
             sv_motion: 0.0,
-            fitter,
             moments: Moments::default(),
             pending: None,
             first_sign: 1,
@@ -325,10 +327,12 @@ impl Pipeline {
         })
     }
 
-    /// Re-initialises in place for a new run: only the small state (≈ 2 KiB) is rebuilt, the
-    /// half-cycle store is cleared, never copied. On error the pipeline is left unchanged.
+    /// Re-initialises in place for a new run: only the small state (≈ 0.4 KiB) is rebuilt, the
+    /// peak fitter and the half-cycle store are cleared, never copied. On error the pipeline is left unchanged.
     pub fn reset(&mut self, cfg: &Configure) -> Result<(), ConfigError> {
         self.st = Self::state(cfg)?;
+        self.fitter.reset();
+        self.fitter.set_step(PI / self.st.half_period);
         self.records.clear();
         Ok(())
     }
@@ -470,7 +474,7 @@ impl Pipeline {
         if idx == 0 {
             self.st.x_release = self.st.cal[Channel::Displacement as usize].to_si(cx);
         }
-        self.st.fitter.push(cx);
+        self.fitter.push(cx);
         // Second difference of the velocity: white noise of variance σ² gives 6σ², the motion only
         // (ωΔt)⁴ v², taken out at the reversals (see `update_noise`).
         let cvi = cv as i32;
@@ -518,13 +522,13 @@ impl Pipeline {
         }
         if hp > 4.0 {
             self.st.half_period = hp;
-            self.st.fitter.set_step(PI / hp);
+            self.fitter.set_step(PI / hp);
         }
         self.st.last_rev = pos;
-        let wait = 1.5 * self.st.half_period + self.st.fitter.half_window() as f64 + 2.0;
+        let wait = 1.5 * self.st.half_period + self.fitter.half_window() as f64 + 2.0;
         self.st.deadline = (pos + wait) as u32;
         let centre = (pos + 0.5) as u32;
-        let due = centre.saturating_add(self.st.fitter.half_window() as u32);
+        let due = centre.saturating_add(self.fitter.half_window() as u32);
         self.st.pending = Some(Pending {
             due,
             t: pos / self.st.rate,
@@ -563,7 +567,7 @@ impl Pipeline {
     fn complete_pending(&mut self, p: Pending) {
         self.st.pending = None;
         let xc = self.st.cal[Channel::Displacement as usize];
-        let peak_count = self.st.fitter.fit_centre().unwrap_or(xc.zero as f64);
+        let peak_count = self.fitter.fit_centre().unwrap_or(xc.zero as f64);
         let peak = (xc.gain as f64 * (peak_count - xc.zero as f64)) as f32;
         let rec = HalfCycle {
             t: p.t as f32,

@@ -83,6 +83,25 @@ pub fn cos(phi: f64) -> f64 {
     sum
 }
 
+/// Sine for |φ| ≤ π (Taylor series to full precision); the argument is clamped to that range.
+pub fn sin(phi: f64) -> f64 {
+    let p = if phi.is_nan() {
+        0.0
+    } else {
+        phi.clamp(-core::f64::consts::PI, core::f64::consts::PI)
+    };
+    let p2 = p * p;
+    let mut term = p;
+    let mut sum = p;
+    let mut k = 1.0;
+    for _ in 0..16 {
+        k += 2.0;
+        term *= -p2 / ((k - 1.0) * k);
+        sum += term;
+    }
+    sum
+}
+
 /// Ordinary least squares `y = b + Σ c_i x_i` with `P` regressors plus an intercept, computed in
 /// centred form (two passes over the data) for conditioning.
 #[derive(Clone, Copy, Debug)]
@@ -428,6 +447,7 @@ mod tests {
         for i in -30..=30 {
             let p = i as f64 * 0.1;
             assert!((cos(p) - p.cos()).abs() < 1e-15, "cos {p}");
+            assert!((sin(p) - p.sin()).abs() < 1e-15, "sin {p}");
         }
     }
 
