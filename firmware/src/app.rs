@@ -48,9 +48,11 @@ pub struct AppConfig {
     pub heater_period_us: u32,
     /// ECR update period outside runs, µs (during a run: once per block).
     pub ecr_period_us: u32,
-    /// Most run frames sent per poll (bounds the time a poll takes: framing a full five-channel
-    /// block is the largest single piece of work of a poll). One per millisecond poll is 1000
-    /// frames/s, over three times the blocks of a five-channel run at 20 kS/s.
+    /// Steps of run-frame sending per poll; a frame takes two (taken from the store, serialised
+    /// with its CRC; then byte-stuffed and offered to the link), because framing a full
+    /// five-channel block at once is the largest piece of work a poll could do. One step per
+    /// millisecond poll is 500 frames/s, over one and a half times the blocks of a five-channel run
+    /// at 20 kS/s.
     pub frames_per_poll: u8,
     /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
     /// is a few hundred instructions at most on the M7).
@@ -75,6 +77,15 @@ impl AppConfig {
             finish_rows_per_poll: 32,
         }
     }
+}
+
+/// How far the run frame being sent is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RunFrame {
+    /// Serialised with its CRC in `run_encoder` (this many bytes).
+    Prepared(usize),
+    /// Byte-stuffed in `run_out` (this many bytes; 0: could not be encoded, skipped).
+    Stuffed(usize),
 }
 
 /// What the run-frame sender wants next.
@@ -108,16 +119,22 @@ pub struct App<'a> {
     heater: Heater,
     ecr: Ecr,
     store: RunStore<'a>,
+    /// The on-board analysis: allocated once by [`App::new`] and reset in place for each run
+    /// (building one by value at run time puts its 43 KiB on the stack); `pipeline_ready` says
+    /// whether it is configured for the current run (an unloaded run is not analysed).
     pipeline: Option<Pipeline>,
+    pipeline_ready: bool,
     ending: Option<Ending>,
     builder: Option<BlockBuilder>,
     decoder: Decoder<HostMsg>,
     encoder: Encoder,
     out: [u8; MAX_FRAME],
-    /// The run frame being offered to the link, encoded once: a frame the link refuses waits here
-    /// and is offered again as is (item, length in `run_out`).
+    /// The run frame in the making (its own encoder: acknowledgements may be sent between its two
+    /// steps) and, once stuffed, in `run_out`: a frame the link refuses waits there and is offered
+    /// again as is.
+    run_encoder: Encoder,
     run_out: [u8; MAX_FRAME],
-    run_out_item: Option<(Item, usize)>,
+    run_frame: Option<(Item, RunFrame)>,
     seq: u32,
     run_id: u32,
     run_start_us: u64,
@@ -150,14 +167,16 @@ impl<'a> App<'a> {
             heater: Heater::new(cfg.heater),
             ecr: Ecr::new(),
             store,
-            pipeline: None,
+            pipeline: Pipeline::new(&Configure::real_rig(0.3)).ok(),
+            pipeline_ready: false,
             ending: None,
             builder: None,
             decoder: Decoder::new(),
             encoder: Encoder::new(),
             out: [0; MAX_FRAME],
+            run_encoder: Encoder::new(),
             run_out: [0; MAX_FRAME],
-            run_out_item: None,
+            run_frame: None,
             seq: 0,
             run_id: 0,
             run_start_us: 0,
@@ -458,15 +477,11 @@ impl<'a> App<'a> {
         }
         // What the on-board analysis cannot take is refused now rather than discovered after the run,
         // except an unloaded run (load 0: the apparatus alone), which runs without on-board analysis.
+        // (No pipeline is built here, even as a fallback: its 43 KiB would be in this call's stack
+        // frame. App::new allocates the one pipeline.)
         let refused = match &mut self.pipeline {
             Some(p) => p.reset(&c).err(),
-            None => match Pipeline::new(&c) {
-                Ok(p) => {
-                    self.pipeline = Some(p);
-                    None
-                }
-                Err(e) => Some(e),
-            },
+            None => None,
         };
         match refused {
             None | Some(ConfigError::Load) => {}
@@ -485,14 +500,10 @@ impl<'a> App<'a> {
             (_, Some(c)) => c,
         };
         self.release.hold(hw, self.now_us);
-        match &mut self.pipeline {
-            Some(p) => {
-                if p.reset(&cfg).is_err() {
-                    self.pipeline = None;
-                }
-            }
-            None => self.pipeline = Pipeline::new(&cfg).ok(),
-        }
+        self.pipeline_ready = match &mut self.pipeline {
+            Some(p) => p.reset(&cfg).is_ok(),
+            None => false,
+        };
         hw.adc_stop();
         // A converter that does not start is caught by the release interlock (NotSampling).
         let _ = hw.adc_start(cfg.sample_rate_hz);
@@ -524,7 +535,7 @@ impl<'a> App<'a> {
         }
         let now = self.now_us;
         self.release.release(hw, now);
-        if let Some(p) = &mut self.pipeline {
+        if let Some(p) = self.pipeline.as_mut().filter(|_| self.pipeline_ready) {
             p.release();
         }
         self.run_id = self.run_id.wrapping_add(1).max(1);
@@ -543,7 +554,7 @@ impl<'a> App<'a> {
         };
         let seq = self.next_seq();
         self.store.begin(seq, header);
-        self.run_out_item = None;
+        self.run_frame = None;
         self.want = Some(Want::Header { from_block: 0 });
         self.state = RigState::Running;
         info!("released: run {}", self.run_id);
@@ -593,10 +604,12 @@ impl<'a> App<'a> {
     /// One sample; returns true when it ended the run.
     fn take_sample<H: Hardware>(&mut self, hw: &mut H, s: &AnalogSample) -> bool {
         let temp = self.heater.temp_c();
-        let Some(cfg) = self.config else { return false };
+        let Some(cfg) = &self.config else {
+            return false;
+        };
         match self.state {
             RigState::Armed => {
-                if let Some(p) = &mut self.pipeline {
+                if let Some(p) = self.pipeline.as_mut().filter(|_| self.pipeline_ready) {
                     let mut sel = [0u16; CHANNELS];
                     let n = select(
                         cfg.channels,
@@ -615,18 +628,30 @@ impl<'a> App<'a> {
                 };
                 let mut sel = [0u16; CHANNELS];
                 let n = b.select(s, temp, &mut sel);
-                let rate = cfg.sample_rate_hz.max(1) as u64;
-                let t_us = self.run_start_us + b.samples() as u64 * 1_000_000 / rate;
-                let block = b.push(s, temp, t_us);
+                // The time is only read for a block's first sample (a 64-bit division per sample
+                // is a software routine on the M7).
+                let t_us = if b.starts_block() {
+                    let rate = cfg.sample_rate_hz.max(1) as u64;
+                    self.run_start_us + b.samples() as u64 * 1_000_000 / rate
+                } else {
+                    0
+                };
+                let block = b.push_selected(&sel[..n], temp, t_us);
                 let samples = b.samples();
-                let phase = self.pipeline.as_mut().map(|p| p.push(&sel[..n]));
+                let max_samples = cfg.max_samples();
+                let ready = self.pipeline_ready;
+                let phase = self
+                    .pipeline
+                    .as_mut()
+                    .filter(|_| ready)
+                    .map(|p| p.push(&sel[..n]));
                 if let Some(blk) = block {
                     self.store_block(hw, blk);
                 }
                 let reason = match phase {
                     Some(Phase::Finished(StopReason::MaxDuration)) => Some(EndReason::MaxDuration),
                     Some(Phase::Finished(_)) => Some(EndReason::Stopped),
-                    _ if samples >= cfg.max_samples() => Some(EndReason::MaxDuration),
+                    _ if samples >= max_samples => Some(EndReason::MaxDuration),
                     _ => None,
                 };
                 if let Some(r) = reason {
@@ -664,7 +689,7 @@ impl<'a> App<'a> {
             .builder
             .as_ref()
             .map_or((0, 0), |b| (b.blocks(), b.samples()));
-        let job = match &self.pipeline {
+        let job = match self.pipeline.as_ref().filter(|_| self.pipeline_ready) {
             Some(p) => p.start_finish(self.run_id),
             None => {
                 let result = unanalysed(
@@ -688,7 +713,7 @@ impl<'a> App<'a> {
     /// Advances the end-of-run analysis, if one is pending, by a bounded number of rows.
     fn analyse_step(&mut self) {
         let Some(e) = &mut self.ending else { return };
-        let result = match &self.pipeline {
+        let result = match self.pipeline.as_ref().filter(|_| self.pipeline_ready) {
             Some(p) => p.finish_step(&mut e.job, self.cfg.finish_rows_per_poll),
             None => Some(unanalysed(self.run_id, e.samples, 1)),
         };
@@ -738,26 +763,37 @@ impl<'a> App<'a> {
                 }
             };
             let Some(item) = item else { return };
-            let len = match self.run_out_item {
-                Some((it, len)) if it == item => len,
+            // Step one: take the frame from the store, serialise it with its CRC; that is all for
+            // this step. Step two: byte-stuff it and offer it to the link (again each poll while
+            // the link refuses it, without framing it again).
+            let len = match self.run_frame {
+                Some((it, RunFrame::Stuffed(len))) if it == item => len,
+                Some((it, RunFrame::Prepared(raw))) if it == item => {
+                    let len = self
+                        .run_encoder
+                        .stuff(raw, &mut self.run_out)
+                        .map_or(0, |b| b.len());
+                    self.run_frame = Some((item, RunFrame::Stuffed(len)));
+                    len
+                }
                 _ => {
                     let Some((seq, msg)) = self.store.frame(item) else {
                         self.want = None;
                         return;
                     };
                     // An encoding error cannot happen for stored frames; skip rather than stall.
-                    let len = self
-                        .encoder
-                        .encode(seq, &msg, &mut self.run_out)
-                        .map_or(0, |b| b.len());
-                    self.run_out_item = Some((item, len));
-                    len
+                    let step = match self.run_encoder.prepare(seq, &msg) {
+                        Ok(raw) => RunFrame::Prepared(raw),
+                        Err(_) => RunFrame::Stuffed(0),
+                    };
+                    self.run_frame = Some((item, step));
+                    continue;
                 }
             };
             if len > 0 && !hw.send_frame(&self.run_out[..len]) {
                 return;
             }
-            self.run_out_item = None;
+            self.run_frame = None;
             self.want = match (want, item) {
                 (Want::Range(_, end), Item::Block(k)) => Some(Want::Range(k + 1, end)),
                 (Want::Header { from_block }, Item::Header) => Some(Want::Blocks(from_block)),
