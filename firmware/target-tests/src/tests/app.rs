@@ -144,6 +144,7 @@ pub struct StateCost {
     pub calls: u64,
     pub total: u64,
     pub worst: u64,
+    pub stack: u32,
 }
 
 /// Worst costs of the application's calls.
@@ -151,13 +152,15 @@ pub struct StateCost {
 pub struct Worst {
     /// Polls by the state they started in (`RigState as usize`).
     pub by_state: [StateCost; 6],
-    /// Worst `on_bytes` by command.
-    pub by_command: [u64; 16],
+    /// Worst `on_bytes` by command: instructions, stack bytes.
+    pub by_command: [(u64, u32); 16],
     pub poll: u64,
     pub on_bytes: u64,
     pub stack: u32,
     /// Virtual time of the worst poll, µs.
     pub poll_at_us: u64,
+    /// What the worst poll did: samples taken, frames the link took.
+    pub poll_did: (u32, u32),
     pub polls: u64,
     /// Application instructions since the bench started.
     pub total: u64,
@@ -199,23 +202,32 @@ impl<'a, 'r> Bench<'a, 'r> {
         }
     }
 
-    fn account(&mut self, c: Cost, poll: Option<RigState>, command: Option<usize>) {
+    fn account(
+        &mut self,
+        c: Cost,
+        poll: Option<RigState>,
+        command: Option<usize>,
+        did: (u32, u32),
+    ) {
         let n = c.instructions.unwrap_or(0);
         self.worst.total += n;
         self.hw.timing.base = self.worst.total;
+        let stack = c.stack.unwrap_or(0);
         if let Some(st) = poll.and_then(|s| self.worst.by_state.get_mut(s as usize)) {
             st.calls += 1;
             st.total += n;
             st.worst = st.worst.max(n);
+            st.stack = st.stack.max(stack);
         }
         if let Some(w) = command.and_then(|k| self.worst.by_command.get_mut(k)) {
-            *w = (*w).max(n);
+            *w = (w.0.max(n), w.1.max(stack));
         }
         if poll.is_some() {
             self.worst.polls += 1;
             if n > self.worst.poll {
                 self.worst.poll = n;
                 self.worst.poll_at_us = self.now_us;
+                self.worst.poll_did = did;
             }
         } else {
             self.worst.on_bytes = self.worst.on_bytes.max(n);
@@ -257,12 +269,17 @@ impl<'a, 'r> Bench<'a, 'r> {
         let now = self.now_us;
         let clock = self.hw.clock;
         let state = self.app.state();
+        let (samples, sent) = (self.app.status().samples, self.hw.sent);
         let (app, hw) = (&mut self.app, &mut self.hw);
         let c = cx.measure(|| {
             hw.timing.call_start = clock();
             app.poll(hw, now);
         });
-        self.account(c, Some(state), None);
+        let did = (
+            self.app.status().samples.wrapping_sub(samples),
+            self.hw.sent - sent,
+        );
+        self.account(c, Some(state), None, did);
     }
 
     /// Polls every [`POLL_US`] until `until_us`.
@@ -290,7 +307,7 @@ impl<'a, 'r> Bench<'a, 'r> {
             hw.timing.call_start = clock();
             app.on_bytes(hw, buf, now);
         });
-        self.account(c, None, Some(command_index(msg)));
+        self.account(c, None, Some(command_index(msg)), (0, 0));
         seq
     }
 
@@ -360,16 +377,19 @@ fn breakdown(cx: &mut Cx<'_>, w: &Worst) {
     for (name, s) in STATES.iter().zip(w.by_state.iter()) {
         if s.calls > 0 {
             cx.note(format_args!(
-                "polls in {name}: {} calls, mean {} instructions, worst {}",
+                "polls in {name}: {} calls, mean {} instructions, worst {}, stack {} bytes",
                 s.calls,
                 s.total / s.calls,
-                s.worst
+                s.worst,
+                s.stack
             ));
         }
     }
-    for (name, &worst) in COMMANDS.iter().zip(w.by_command.iter()) {
+    for (name, &(worst, stack)) in COMMANDS.iter().zip(w.by_command.iter()) {
         if worst > 0 {
-            cx.note(format_args!("on_bytes({name}): {worst} instructions"));
+            cx.note(format_args!(
+                "on_bytes({name}): {worst} instructions, stack {stack} bytes"
+            ));
         }
     }
 }
@@ -528,8 +548,10 @@ fn whole_run(cx: &mut Cx<'_>, name: &str, configure: Configure, expect: Expect) 
     let w = b.worst;
     breakdown(cx, &w);
     cx.note(format_args!(
-        "worst poll at {} ms after release; {} polls",
+        "worst poll at {} ms after release ({} samples taken, {} frames sent); {} polls",
         w.poll_at_us.saturating_sub(release_at) / 1000,
+        w.poll_did.0,
+        w.poll_did.1,
         w.polls
     ));
     let per_sample = during_run / (end.samples as u64).max(1);
