@@ -48,11 +48,11 @@ pub struct AppConfig {
     pub heater_period_us: u32,
     /// ECR update period outside runs, µs (during a run: once per block).
     pub ecr_period_us: u32,
-    /// Steps of run-frame sending per poll; a frame takes two (taken from the store, serialised
-    /// with its CRC; then byte-stuffed and offered to the link), because framing a full
-    /// five-channel block at once is the largest piece of work a poll could do. One step per
-    /// millisecond poll is 500 frames/s, over one and a half times the blocks of a five-channel run
-    /// at 20 kS/s.
+    /// Steps of run-frame sending per poll; a frame takes three (taken from the store and
+    /// serialised; its CRC; byte-stuffed and offered to the link), because framing a full
+    /// five-channel block at once is the largest piece of work a poll could do (13k instructions
+    /// on the M7). One step per millisecond poll is 333 frames/s, more than the 312 blocks/s of a
+    /// five-channel run at 20 kS/s.
     pub frames_per_poll: u8,
     /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
     /// is a few hundred instructions at most on the M7).
@@ -82,7 +82,9 @@ impl AppConfig {
 /// How far the run frame being sent is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum RunFrame {
-    /// Serialised with its CRC in `run_encoder` (this many bytes).
+    /// Serialised in `run_encoder` (this many bytes).
+    Serialised(usize),
+    /// Its CRC appended (this many bytes now).
     Prepared(usize),
     /// Byte-stuffed in `run_out` (this many bytes; 0: could not be encoded, skipped).
     Stuffed(usize),
@@ -763,11 +765,19 @@ impl<'a> App<'a> {
                 }
             };
             let Some(item) = item else { return };
-            // Step one: take the frame from the store, serialise it with its CRC; that is all for
-            // this step. Step two: byte-stuff it and offer it to the link (again each poll while
-            // the link refuses it, without framing it again).
+            // Step one: take the frame from the store and serialise it. Step two: its CRC. Step
+            // three: byte-stuff it and offer it to the link (again each poll while the link refuses
+            // it, without framing it again).
             let len = match self.run_frame {
                 Some((it, RunFrame::Stuffed(len))) if it == item => len,
+                Some((it, RunFrame::Serialised(n))) if it == item => {
+                    let step = match self.run_encoder.seal(n) {
+                        Ok(raw) => RunFrame::Prepared(raw),
+                        Err(_) => RunFrame::Stuffed(0),
+                    };
+                    self.run_frame = Some((item, step));
+                    continue;
+                }
                 Some((it, RunFrame::Prepared(raw))) if it == item => {
                     let len = self
                         .run_encoder
@@ -782,8 +792,8 @@ impl<'a> App<'a> {
                         return;
                     };
                     // An encoding error cannot happen for stored frames; skip rather than stall.
-                    let step = match self.run_encoder.prepare(seq, &msg) {
-                        Ok(raw) => RunFrame::Prepared(raw),
+                    let step = match self.run_encoder.serialise(seq, &msg) {
+                        Ok(n) => RunFrame::Serialised(n),
                         Err(_) => RunFrame::Stuffed(0),
                     };
                     self.run_frame = Some((item, step));

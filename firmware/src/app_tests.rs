@@ -842,7 +842,8 @@ fn a_pull_replays_the_same_bytes_from_any_block() {
             run_id: 1,
             from_block: from as u32,
         });
-        b.run_for(200);
+        // three polls per frame
+        b.run_for(400);
         let mut again = b.take();
         assert!(matches!(again.remove(0).1.msg, DeviceMsg::Ack { .. }));
         let expect: Vec<&Vec<u8>> = std::iter::once(&run_frames[0].0)

@@ -193,7 +193,10 @@ impl PeakFitter {
         if let Some(slot) = self.ring.get_mut(self.head) {
             *slot = count;
         }
-        self.head = (self.head + 1) % RING;
+        self.head += 1;
+        if self.head == RING {
+            self.head = 0;
+        }
         self.len = (self.len + 1).min(RING);
     }
 
@@ -217,9 +220,12 @@ impl PeakFitter {
             return Some(centre);
         }
         let (mut sx, mut sxg) = (0.0, 0.0);
-        for age in 0..=2 * half {
+        // Newest to oldest, as `at(age)` for age = 0..=2·half, without an index modulo per sample.
+        let (newer, older) = self.ring.split_at(self.head.min(RING));
+        let window = newer.iter().rev().chain(older.iter().rev()).take(2 * half + 1);
+        for (age, &c) in window.enumerate() {
             let k = age.abs_diff(half);
-            let x = self.at(age).map_or(0.0, |c| c as f64 - centre);
+            let x = c as f64 - centre;
             let g = self.g.get(k).copied().unwrap_or(0.0);
             sx += x;
             sxg += x * g;

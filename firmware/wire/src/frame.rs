@@ -152,17 +152,35 @@ impl Encoder {
         self.stuff(raw, out)
     }
 
-    /// The first half of framing: `seq`, the postcard body and the CRC, in this encoder's buffer.
-    /// Returns their length, for [`Encoder::stuff`]. (The halves let a caller with a time budget,
-    /// the firmware's millisecond poll, spread a frame over two calls.)
+    /// The first part of framing: `seq`, the postcard body and the CRC, in this encoder's buffer.
+    /// Returns their length, for [`Encoder::stuff`]. The same as [`Encoder::serialise`] then
+    /// [`Encoder::seal`]. (The parts let a caller with a time budget, the firmware's millisecond
+    /// poll, spread a frame over several calls.)
     pub fn prepare<M: Serialize>(&mut self, seq: u32, msg: &M) -> Result<usize, EncodeError> {
+        let n = self.serialise(seq, msg)?;
+        self.seal(n)
+    }
+
+    /// `seq` and the postcard body in this encoder's buffer; returns their length, for
+    /// [`Encoder::seal`].
+    pub fn serialise<M: Serialize>(&mut self, seq: u32, msg: &M) -> Result<usize, EncodeError> {
         self.raw[..4].copy_from_slice(&seq.to_le_bytes());
         let body = postcard::to_slice(msg, &mut self.raw[4..4 + MAX_BODY])
             .map_err(|_| EncodeError::TooLarge)?
             .len();
-        let crc = crc32(&self.raw[..4 + body]);
-        self.raw[4 + body..8 + body].copy_from_slice(&crc.to_le_bytes());
-        Ok(8 + body)
+        Ok(4 + body)
+    }
+
+    /// Appends the CRC of the `len` bytes [`Encoder::serialise`] left; returns the new length, for
+    /// [`Encoder::stuff`].
+    pub fn seal(&mut self, len: usize) -> Result<usize, EncodeError> {
+        let data = self.raw.get(..len).ok_or(EncodeError::TooLarge)?;
+        let crc = crc32(data);
+        self.raw
+            .get_mut(len..len + 4)
+            .ok_or(EncodeError::TooLarge)?
+            .copy_from_slice(&crc.to_le_bytes());
+        Ok(len + 4)
     }
 
     /// The second half: byte-stuffs the `raw_len` bytes [`Encoder::prepare`] left into `out`, closing
