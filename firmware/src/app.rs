@@ -787,12 +787,24 @@ impl<'a> App<'a> {
                     len
                 }
                 _ => {
-                    let Some((seq, msg)) = self.store.frame(item) else {
+                    // Blocks are serialised from the store's counts, not rebuilt first.
+                    let enc = &mut self.run_encoder;
+                    let serialised = match item {
+                        Item::Block(k) => self
+                            .store
+                            .samples_ref(k)
+                            .map(|(seq, view)| enc.serialise(seq, &view)),
+                        other => self
+                            .store
+                            .frame(other)
+                            .map(|(seq, msg)| enc.serialise(seq, &msg)),
+                    };
+                    let Some(serialised) = serialised else {
                         self.want = None;
                         return;
                     };
                     // An encoding error cannot happen for stored frames; skip rather than stall.
-                    let step = match self.run_encoder.serialise(seq, &msg) {
+                    let step = match serialised {
                         Ok(n) => RunFrame::Serialised(n),
                         Err(_) => RunFrame::Stuffed(0),
                     };

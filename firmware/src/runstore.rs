@@ -11,7 +11,8 @@
 //! stored encoded, which keeps ~2 bytes per count.
 
 use crate::wire::{
-    ChannelSet, Counts, DeviceMsg, OnboardResult, RunEnd, RunHeader, SampleBlock, BLOCK_LEN,
+    ChannelSet, Counts, DeviceMsg, OnboardResult, RunEnd, RunHeader, SampleBlock, SamplesRef,
+    BLOCK_LEN,
 };
 
 /// Counts the board keeps for the last run (144 KiB of the 256 KiB static RAM budget): the last 1.47 s
@@ -170,6 +171,33 @@ impl<'a> RunStore<'a> {
         Some((
             m.seq,
             SampleBlock {
+                run_id: h.run_id,
+                block: k,
+                first_sample: k * BLOCK_LEN as u32,
+                t_us: m.t_us,
+                channels: self.channels,
+                ecr_range: m.ecr_range,
+                log10_ecr_ohm: m.log10_ecr_ohm,
+                temp_c: m.temp_c,
+                counts,
+            },
+        ))
+    }
+
+    /// Block `k` as [`RunStore::block`] gives it, borrowed: it frames to the same bytes without
+    /// copying the counts out of the store (what the application sends).
+    pub fn samples_ref(&self, k: u32) -> Option<(u32, SamplesRef<'_>)> {
+        let (_, h) = self.header.as_ref()?;
+        if k >= self.blocks || k < self.oldest_block() {
+            return None;
+        }
+        let slot = (k as usize) % self.slots;
+        let span = self.channels.len() * BLOCK_LEN;
+        let m = self.meta.get(slot)?;
+        let counts = self.counts.get(slot * span..slot * span + m.len as usize)?;
+        Some((
+            m.seq,
+            SamplesRef {
                 run_id: h.run_id,
                 block: k,
                 first_sample: k * BLOCK_LEN as u32,

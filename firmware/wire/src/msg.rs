@@ -672,11 +672,69 @@ impl Counts {
 
 impl Serialize for Counts {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        CountsBytes(&self.0).serialize(s)
+    }
+}
+
+/// Counts serialised as [`Counts`] is: little-endian bytes.
+struct CountsBytes<'a>(&'a [u16]);
+
+impl Serialize for CountsBytes<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        if self.0.len() > MAX_BLOCK_COUNTS {
+            return Err(serde::ser::Error::custom("more counts than a block holds"));
+        }
         let mut bytes = [0u8; 2 * MAX_BLOCK_COUNTS];
         for (pair, c) in bytes.chunks_exact_mut(2).zip(self.0.iter()) {
             pair.copy_from_slice(&c.to_le_bytes());
         }
         s.serialize_bytes(&bytes[..2 * self.0.len()])
+    }
+}
+
+/// [`DeviceMsg::Samples`] over borrowed counts: serialises to exactly the bytes of the owned
+/// message (a test compares them), without building it. The firmware frames every block from its
+/// run store this way; rebuilding a [`SampleBlock`] copied its counts several times.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SamplesRef<'a> {
+    pub run_id: u32,
+    pub block: u32,
+    pub first_sample: u32,
+    pub t_us: u64,
+    pub channels: ChannelSet,
+    pub ecr_range: u8,
+    pub log10_ecr_ohm: f32,
+    pub temp_c: f32,
+    pub counts: &'a [u16],
+}
+
+/// Index of `Samples` among [`DeviceMsg`]'s variants (a test checks it).
+const SAMPLES_VARIANT: u32 = 5;
+
+impl Serialize for SamplesRef<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_newtype_variant("DeviceMsg", SAMPLES_VARIANT, "Samples", &BlockFields(self))
+    }
+}
+
+/// The fields of a [`SamplesRef`] as [`SampleBlock`]'s, in its order.
+struct BlockFields<'r, 'a>(&'r SamplesRef<'a>);
+
+impl Serialize for BlockFields<'_, '_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let b = self.0;
+        let mut st = s.serialize_struct("SampleBlock", 9)?;
+        st.serialize_field("run_id", &b.run_id)?;
+        st.serialize_field("block", &b.block)?;
+        st.serialize_field("first_sample", &b.first_sample)?;
+        st.serialize_field("t_us", &b.t_us)?;
+        st.serialize_field("channels", &b.channels)?;
+        st.serialize_field("ecr_range", &b.ecr_range)?;
+        st.serialize_field("log10_ecr_ohm", &b.log10_ecr_ohm)?;
+        st.serialize_field("temp_c", &b.temp_c)?;
+        st.serialize_field("counts", &CountsBytes(b.counts))?;
+        st.end()
     }
 }
 

@@ -599,3 +599,24 @@ fn a_device_frame_is_not_taken_for_a_host_frame() {
     let f = encode_vec(1, &blk).unwrap();
     assert_eq!(decode_one::<HostMsg>(&f), Err(FrameError::Decode));
 }
+
+proptest! {
+    /// A borrowed block frames to the same bytes as the owned `DeviceMsg::Samples` (so the
+    /// firmware's frames from its store are the protocol's, whatever the fields or the variant
+    /// order become).
+    #[test]
+    fn samples_ref_frames_like_the_owned_block(b in sample_block(), seq in any::<u32>()) {
+        let view = SamplesRef {
+            run_id: b.run_id,
+            block: b.block,
+            first_sample: b.first_sample,
+            t_us: b.t_us,
+            channels: b.channels,
+            ecr_range: b.ecr_range,
+            log10_ecr_ohm: b.log10_ecr_ohm,
+            temp_c: b.temp_c,
+            counts: &b.counts,
+        };
+        prop_assert_eq!(encode_vec(seq, &view).unwrap(), encode_vec(seq, &DeviceMsg::Samples(b)).unwrap());
+    }
+}
