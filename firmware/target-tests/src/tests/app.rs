@@ -408,6 +408,9 @@ struct Expect {
     analysed: bool,
     /// Stop the host reading for this long during the run (cable out), µs.
     outage_us: u64,
+    /// Do not poll the application for this long during the run (its task held up), µs: the
+    /// converter's ring fills meanwhile and the polls after must catch up in bounded steps.
+    stall_us: u64,
 }
 
 /// A whole run of `record` through the application; checks the stream, the result and a pull, and
@@ -446,9 +449,13 @@ fn whole_run(cx: &mut Cx<'_>, name: &str, configure: Configure, expect: Expect) 
     // stream until the run's end frame, with a cable-out outage early in the run
     let limit = release_at + (configure.max_duration_s as u64 + 10) * 1_000_000;
     let outage = (release_at + 50_000, release_at + 50_000 + expect.outage_us);
+    let stall = (release_at + 150_000, release_at + 150_000 + expect.stall_us);
     while b.host.end.is_none() && b.now_us < limit {
         b.reading = !(outage.0..outage.1).contains(&b.now_us);
         b.now_us += POLL_US;
+        if (stall.0..stall.1).contains(&b.now_us) {
+            continue;
+        }
         b.poll(cx);
     }
     b.reading = true;
@@ -544,11 +551,13 @@ fn whole_run(cx: &mut Cx<'_>, name: &str, configure: Configure, expect: Expect) 
     );
     cx.note(format_args!(
         "{} samples in {} blocks streamed and checked; {} frames refused during a {} ms outage and \
-         sent later; pull: {} frames from block {oldest}, identical; stream ended {} ms after release",
+         sent later; a {} ms stall caught up; pull: {} frames from block {oldest}, identical; \
+         stream ended {} ms after release",
         end.samples,
         end.blocks,
         refused,
         expect.outage_us / 1000,
+        expect.stall_us / 1000,
         h.pulled,
         (stream_end_us - release_at) / 1000
     ));
@@ -606,7 +615,8 @@ fn record<'b>(cx: &Cx<'b>, name: &str) -> Result<Record<'b>, Failure> {
 }
 
 /// A Coulomb–viscous run, analysed on board: the result frame equals the host's analysis of the
-/// same counts bit for bit; the link is cut for 50 ms early in the run and nothing is lost.
+/// same counts bit for bit; the link is cut for 50 ms early in the run, the application is not
+/// polled for 30 ms later, and nothing is lost.
 pub fn coulomb_viscous_run(cx: &mut Cx) -> Outcome {
     let rec = record(cx, "coulomb_viscous")?;
     whole_run(
@@ -616,6 +626,7 @@ pub fn coulomb_viscous_run(cx: &mut Cx) -> Outcome {
         Expect {
             analysed: true,
             outage_us: 50_000,
+            stall_us: 30_000,
         },
     )
 }
@@ -633,6 +644,7 @@ pub fn unloaded_run(cx: &mut Cx) -> Outcome {
         Expect {
             analysed: false,
             outage_us: 0,
+            stall_us: 30_000,
         },
     )
 }
