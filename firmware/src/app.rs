@@ -57,6 +57,11 @@ pub struct AppConfig {
     /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
     /// is a few hundred instructions at most on the M7).
     pub finish_rows_per_poll: u32,
+    /// How often the application is polled, µs (the board's ticker). With the sample rate it sets
+    /// how many samples one poll takes at most: twice what arrives between two polls (at least
+    /// 16), so that a backlog (the application held up) is caught up over several polls instead
+    /// of in one long one.
+    pub poll_period_us: u32,
 }
 
 impl AppConfig {
@@ -75,6 +80,7 @@ impl AppConfig {
             ecr_period_us: 100_000,
             frames_per_poll: 1,
             finish_rows_per_poll: 32,
+            poll_period_us: 1_000,
         }
     }
 }
@@ -344,9 +350,12 @@ impl<'a> App<'a> {
                 self.error(hw, code, None);
             }
         }
-        self.drain(hw);
+        let behind = self.drain(hw, self.samples_per_poll());
         self.analyse_step();
-        self.pump(hw);
+        // While catching up on samples, frames wait (in the store) for a poll with room.
+        if !behind {
+            self.pump(hw);
+        }
         let lamps = self.lamps(now);
         hw.set_lamps(lamps);
     }
@@ -529,8 +538,8 @@ impl<'a> App<'a> {
             self.heater.healthy(),
         )
         .map_err(ErrorCode::Interlock)?;
-        // Samples converted before this instant belong to the hold.
-        self.drain(hw);
+        // Samples converted before this instant belong to the hold: all of them, however many.
+        self.drain(hw, usize::MAX);
         if self.state != RigState::Armed {
             // An overrun seen while draining disarmed nothing, but be strict.
             return Err(ErrorCode::Interlock(Interlock::NotArmed));
@@ -563,12 +572,24 @@ impl<'a> App<'a> {
         Ok(())
     }
 
-    /// Moves converted samples to the hold capture or to the run.
-    fn drain<H: Hardware>(&mut self, hw: &mut H) {
+    /// Most samples one poll takes (see [`AppConfig::poll_period_us`]).
+    fn samples_per_poll(&self) -> usize {
+        let rate = self.config.map_or(0, |c| c.sample_rate_hz) as u64;
+        let per_poll = rate * self.cfg.poll_period_us as u64 / 1_000_000;
+        (2 * per_poll).max(16) as usize
+    }
+
+    /// Moves converted samples to the hold capture or to the run, at most `limit` of them; true
+    /// when it stopped at the limit (samples are still waiting).
+    fn drain<H: Hardware>(&mut self, hw: &mut H, limit: usize) -> bool {
         let mut buf = [[0u16; ANALOG_CHANNELS]; 32];
+        let mut taken = 0usize;
         loop {
             if !matches!(self.state, RigState::Armed | RigState::Running) || self.ending.is_some() {
-                return;
+                return false;
+            }
+            if taken >= limit {
+                return true;
             }
             // An overrun is checked before each read: the samples still in the ring may straddle the
             // gap, so a run ends at the last sample read before the loss was seen.
@@ -588,16 +609,18 @@ impl<'a> App<'a> {
                 if self.state == RigState::Running {
                     self.run_overruns = self.run_overruns.saturating_add(delta);
                     self.end_run(hw, EndReason::Overrun);
-                    return;
+                    return false;
                 }
             }
-            let n = hw.adc_read(&mut buf);
+            let want = buf.len().min(limit - taken);
+            let n = hw.adc_read(&mut buf[..want]);
             if n == 0 {
-                return;
+                return false;
             }
+            taken += n;
             for s in buf.iter().take(n) {
                 if self.take_sample(hw, s) {
-                    return;
+                    return false;
                 }
             }
         }

@@ -1035,3 +1035,24 @@ fn the_end_of_run_fit_is_spread_over_polls() {
     let stored = b.app.store().frame(Item::Result).map(|f| f.1);
     assert_eq!(stored, Some(DeviceMsg::Result(one_call)));
 }
+
+/// A poll after the application was held up takes a bounded number of samples (twice what arrives
+/// per poll at 10 kS/s: 20) and sends no frame; the backlog is caught up over the next polls.
+#[test]
+fn a_backlog_is_caught_up_in_bounded_polls() {
+    let mut b = Bench::new();
+    b.ready();
+    assert_eq!(b.command(HostMsg::Release).0, Ok(()));
+    b.run_for(20);
+    b.take();
+    let before = b.app.status().samples;
+    b.hw.now_us += 30_000; // 300 samples wait
+    b.poll();
+    assert_eq!(b.app.status().samples - before, 20);
+    assert!(b.take().is_empty(), "no frame while catching up");
+    for _ in 0..40 {
+        b.run_for(1);
+    }
+    // caught up: the 300 of the stall and 40 polls × 10 since, all taken
+    assert_eq!(b.app.status().samples - before, 300 + 400);
+}
