@@ -55,7 +55,9 @@ pub struct AppConfig {
     /// five-channel run at 20 kS/s.
     pub frames_per_poll: u8,
     /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
-    /// is a few hundred instructions at most on the M7).
+    /// is up to ~500 instructions on the M7, so 16 rows stay under 9k). The result of a run of
+    /// n half-cycles comes about 35 n / 16 polls after the pin stopped: 0.04 s for 20 half-cycles,
+    /// 4.5 s for the longest run the analysis takes (2048).
     pub finish_rows_per_poll: u32,
     /// How often the application is polled, µs (the board's ticker). With the sample rate it sets
     /// how many samples one poll takes at most: twice what arrives between two polls (at least
@@ -79,7 +81,7 @@ impl AppConfig {
             heater_period_us: 100_000,
             ecr_period_us: 100_000,
             frames_per_poll: 1,
-            finish_rows_per_poll: 32,
+            finish_rows_per_poll: 16,
             poll_period_us: 1_000,
         }
     }
