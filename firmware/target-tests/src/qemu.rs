@@ -30,9 +30,9 @@ const TIMER0_VALUE: *mut u32 = 0x4000_0004 as *mut u32;
 const TIMER0_RELOAD: *mut u32 = 0x4000_0008 as *mut u32;
 /// Instructions per timer tick (25 MHz timer, 1 GHz of instructions under `-icount shift=0`).
 const INSTRUCTIONS_PER_TICK: u64 = 40;
-/// Bytes painted below the caller's stack pointer by [`Qemu::measure`]: four times the budget, so a
+/// Bytes painted below the caller's stack pointer by [`Qemu::measure`]: twice the budget, so a
 /// call over budget is measured, not just detected.
-const WINDOW: usize = 64 * 1024;
+const WINDOW: usize = 32 * 1024;
 const PAINT: u32 = 0xCCCC_CCCC;
 
 extern "C" {

@@ -262,7 +262,18 @@ fn target_test(args: &[String]) -> Result<(), String> {
         [f] if !f.starts_with('-') => f.as_str(),
         _ => return Err("usage: cargo xtask target-test [FILTER]".into()),
     };
-    let qemu = qemu::find()?;
+    let qemu = match qemu::find() {
+        Ok(q) => q,
+        // As for the firmware toolchain: installed when we may (root, apt-get present).
+        Err(e) if Path::new("/usr/bin/apt-get").exists() && is_root() => {
+            eprintln!("xtask: {} is not installed; installing it", qemu::QEMU);
+            run(Command::new("apt-get").arg("update").arg("-q"))?;
+            run(Command::new("apt-get").args(["install", "-y", "-q", "qemu-system-arm"]))
+                .map_err(|i| format!("{i}\n{e}"))?;
+            qemu::find()?
+        }
+        Err(e) => return Err(e),
+    };
     let started = std::time::Instant::now();
     let bytes = tribo_target_tests::generate::bundle()
         .map_err(|e| format!("generating the record bundle: {e}"))?;
