@@ -1,85 +1,25 @@
-//! Acquisition: the ring the converter fills and the application drains, and the assembly of
-//! converted samples into the wire's [`SampleBlock`]s.
+//! Acquisition: the hardware-timed stream of analog samples and its assembly into the wire's
+//! [`SampleBlock`]s.
 //!
-//! The ring never overwrites: a sample that finds it full is dropped *and counted*, and the count is
-//! what [`crate::hal::SampleSource::adc_lost`] reports, so the application can say how many samples a
-//! run lost instead of silently stitching the two sides of a gap together.
+//! * [`clock`]: the sample clock (timer prescaler and reload for a rate, the rate really produced),
+//!   the ADC's scan timing, and the trigger index after a converter restart.
+//! * [`ring`]: the DMA ring and its reader, which gives every sample the index the DMA wrote it at
+//!   and reports lost samples as a jump in index, exactly.
+//! * [`model`]: a software model of the whole converter (timer, DMA ring, reader, induced
+//!   faults) for tests and the virtual rig.
+//! * [`BlockBuilder`]: the run's samples, by index, into blocks of consecutive samples; a gap closes
+//!   the block in progress, so no block ever spans one.
 
-use crate::hal::{AnalogSample, ANALOG_CHANNELS};
-use crate::wire::{Channel, ChannelCal, ChannelSet, Counts, SampleBlock, BLOCK_LEN};
+pub mod clock;
+pub mod model;
+pub mod ring;
 
-/// A fixed-capacity FIFO of analog samples with an overrun counter.
-#[derive(Debug, Clone)]
-pub struct Ring<const N: usize> {
-    buf: [AnalogSample; N],
-    head: usize,
-    len: usize,
-    lost: u32,
-}
+pub use clock::{choose, TimerSetting};
+pub use model::ConverterModel;
+pub use ring::{extend_position, Batch, DmaModel, RingReader, RingView, RING_SCANS, RING_WORDS};
 
-impl<const N: usize> Default for Ring<N> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl<const N: usize> Ring<N> {
-    pub const fn new() -> Self {
-        Ring {
-            buf: [[0; ANALOG_CHANNELS]; N],
-            head: 0,
-            len: 0,
-            lost: 0,
-        }
-    }
-
-    pub fn len(&self) -> usize {
-        self.len
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-
-    pub const fn capacity(&self) -> usize {
-        N
-    }
-
-    /// Samples dropped because the ring was full, since the last [`Ring::clear`].
-    pub fn lost(&self) -> u32 {
-        self.lost
-    }
-
-    /// Empties the ring and zeroes the overrun count (at the start of an acquisition).
-    pub fn clear(&mut self) {
-        self.head = 0;
-        self.len = 0;
-        self.lost = 0;
-    }
-
-    /// Appends a sample; false (and counted as lost) when full.
-    pub fn push(&mut self, s: AnalogSample) -> bool {
-        if self.len == N {
-            self.lost = self.lost.saturating_add(1);
-            return false;
-        }
-        let i = (self.head + self.len) % N;
-        self.buf[i] = s;
-        self.len += 1;
-        true
-    }
-
-    /// Moves the oldest samples into `out`; returns how many.
-    pub fn pop_into(&mut self, out: &mut [AnalogSample]) -> usize {
-        let n = out.len().min(self.len);
-        for o in out.iter_mut().take(n) {
-            *o = self.buf[self.head];
-            self.head = (self.head + 1) % N;
-        }
-        self.len -= n;
-        n
-    }
-}
+use crate::hal::AnalogSample;
+use crate::wire::{Channel, ChannelCal, ChannelSet, Counts, SampleBlock, SampleClock, BLOCK_LEN};
 
 /// Counts of one sample in the channel order of `channels`, written into `out` (at least
 /// [`crate::wire::CHANNELS`] long); returns how many. The temperature count is `temp_c` through
@@ -105,7 +45,10 @@ pub fn select(
     n
 }
 
-/// Assembles the samples of a run into blocks of [`BLOCK_LEN`] samples of the run's channels.
+/// Assembles the samples of a run into blocks of at most [`BLOCK_LEN`] consecutive samples of the
+/// run's channels. Samples come with their index in the run; after a gap the block in progress is
+/// closed and the next one starts at the first sample after the gap, so a block's `first_sample`
+/// and the sample clock place every sample on the time axis.
 ///
 /// Per sample this is a few array writes: the channel order is worked out once, and the
 /// temperature count is converted again only when the reading changes (every 100 ms), not per
@@ -120,15 +63,28 @@ pub struct BlockBuilder {
     width: usize,
     /// The last temperature converted (bits) and its count.
     temp: Option<(u32, u16)>,
-    block: u32,
-    samples: u32,
     /// Samples in `current`.
     filled: usize,
+    clock: SampleClock,
+    start_us: u64,
+    block: u32,
+    /// Index in the run of the next sample expected.
+    next: u32,
+    /// Samples taken (lost ones not counted).
+    samples: u32,
     current: Option<SampleBlock>,
 }
 
 impl BlockBuilder {
-    pub fn new(run_id: u32, channels: ChannelSet, temp_cal: ChannelCal) -> Self {
+    /// A builder for run `run_id`, whose sample 0 is at device time `start_us` and whose samples
+    /// follow `clock`.
+    pub fn new(
+        run_id: u32,
+        channels: ChannelSet,
+        temp_cal: ChannelCal,
+        clock: SampleClock,
+        start_us: u64,
+    ) -> Self {
         let channels = ChannelSet(channels.0 & ChannelSet::ALL.0);
         let mut slots = [0u8; crate::wire::CHANNELS];
         let mut width = 0;
@@ -143,27 +99,29 @@ impl BlockBuilder {
             slots,
             width,
             temp: None,
-            block: 0,
-            samples: 0,
             filled: 0,
+            clock,
+            start_us,
+            block: 0,
+            next: 0,
+            samples: 0,
             current: None,
         }
     }
 
-    /// Samples taken so far.
+    /// Samples taken so far (lost ones not counted).
     pub fn samples(&self) -> u32 {
         self.samples
+    }
+
+    /// Index in the run of the next sample expected (samples taken + samples lost).
+    pub fn next_index(&self) -> u32 {
+        self.next
     }
 
     /// Blocks completed so far.
     pub fn blocks(&self) -> u32 {
         self.block
-    }
-
-    /// True when the next sample starts a new block (and so needs its time, see
-    /// [`BlockBuilder::push`]).
-    pub fn starts_block(&self) -> bool {
-        self.current.is_none()
     }
 
     fn temp_count(&mut self, temp_c: f32) -> u16 {
@@ -177,7 +135,7 @@ impl BlockBuilder {
         }
     }
 
-    /// Counts of one sample in the run's channel order (see [`select`]).
+    /// Counts of one sample in the run's channel order (as [`select`] gives them).
     pub fn select(&mut self, s: &AnalogSample, temp_c: f32, out: &mut [u16]) -> usize {
         let temp = self.temp_count(temp_c);
         let mut n = 0;
@@ -192,34 +150,72 @@ impl BlockBuilder {
         n
     }
 
-    /// Adds one sample taken at `t_us` (only read when the sample starts a block). Returns the
-    /// block it completed, if any (its ECR and temperature fields are left for the caller to
-    /// fill).
-    pub fn push(&mut self, s: &AnalogSample, temp_c: f32, t_us: u64) -> Option<SampleBlock> {
+    /// The samples before run index `index` that were not pushed are lost: closes the block in
+    /// progress (returned, if it holds any sample) so that the next one starts after the gap.
+    pub fn gap(&mut self, index: u32) -> Option<SampleBlock> {
+        if index <= self.next {
+            return None;
+        }
+        self.next = index;
+        self.flush()
+    }
+
+    /// Adds sample `index` of the run (at or after [`BlockBuilder::next_index`]; an index further on
+    /// is a gap, see [`BlockBuilder::gap`], which the caller handles first). Returns the block it
+    /// completed, if any (its ECR and temperature fields are left for the caller to fill).
+    pub fn push(&mut self, s: &AnalogSample, temp_c: f32, index: u32) -> Option<SampleBlock> {
         let mut sel = [0u16; crate::wire::CHANNELS];
         let n = self.select(s, temp_c, &mut sel);
-        self.push_selected(&sel[..n], temp_c, t_us)
+        self.push_selected(&sel[..n], temp_c, index)
     }
 
     /// As [`BlockBuilder::push`], for counts already in the run's channel order (from
     /// [`BlockBuilder::select`]).
-    pub fn push_selected(&mut self, counts: &[u16], temp_c: f32, t_us: u64) -> Option<SampleBlock> {
-        let blk = self.current.get_or_insert_with(|| SampleBlock {
+    pub fn push_selected(
+        &mut self,
+        counts: &[u16],
+        temp_c: f32,
+        index: u32,
+    ) -> Option<SampleBlock> {
+        // A sample behind the stream (cannot happen with a ring reader) is ignored rather than
+        // placed twice.
+        if index < self.next {
+            return None;
+        }
+        // A caller that did not report a gap: the block in progress is closed here and returned,
+        // and this sample starts the next one (a one-sample block is never complete, so at most
+        // one block comes back).
+        let closed = self.gap(index);
+        let done = self.add(counts, temp_c);
+        closed.or(done)
+    }
+
+    fn start_block(&mut self, temp_c: f32) {
+        let index = self.next;
+        self.current = Some(SampleBlock {
             run_id: self.run_id,
             block: self.block,
-            first_sample: self.samples,
-            t_us,
+            first_sample: index,
+            t_us: self.start_us + self.clock.time_us(index as u64),
             channels: self.channels,
             ecr_range: 0,
             log10_ecr_ohm: f32::NAN,
             temp_c,
             counts: Counts::default(),
         });
+    }
+
+    fn add(&mut self, counts: &[u16], temp_c: f32) -> Option<SampleBlock> {
+        if self.current.is_none() {
+            self.start_block(temp_c);
+        }
+        let blk = self.current.as_mut()?;
         for &c in counts.iter().take(self.width) {
             // Cannot fail: a block is closed as soon as it holds BLOCK_LEN samples.
             let _ = blk.counts.push(c);
         }
         self.samples += 1;
+        self.next += 1;
         self.filled += 1;
         if self.filled >= BLOCK_LEN {
             self.filled = 0;
@@ -244,28 +240,10 @@ impl BlockBuilder {
 mod tests {
     use super::*;
 
-    #[test]
-    fn ring_is_fifo_and_counts_every_lost_sample() {
-        let mut r: Ring<8> = Ring::new();
-        for i in 0..11u16 {
-            r.push([i, i + 1, i + 2, i + 3]);
-        }
-        assert_eq!((r.len(), r.lost()), (8, 3));
-        let mut out = [[0u16; 4]; 5];
-        assert_eq!(r.pop_into(&mut out), 5);
-        assert_eq!(out.map(|s| s[0]), [0, 1, 2, 3, 4]);
-        for i in 100..105u16 {
-            assert!(r.push([i; 4]));
-        }
-        assert!(!r.push([0; 4]));
-        let mut out = [[0u16; 4]; 10];
-        assert_eq!(r.pop_into(&mut out), 8);
-        let firsts: Vec<u16> = out[..8].iter().map(|s| s[0]).collect();
-        assert_eq!(firsts, [5, 6, 7, 100, 101, 102, 103, 104]);
-        assert_eq!(r.lost(), 4);
-        r.clear();
-        assert_eq!((r.len(), r.lost()), (0, 0));
-    }
+    const CLOCK: SampleClock = SampleClock {
+        timer_hz: 200_000_000,
+        ticks_per_sample: 20_000,
+    };
 
     #[test]
     fn blocks_hold_the_selected_channels_in_index_order() {
@@ -273,10 +251,10 @@ mod tests {
             .with(Channel::Ecr)
             .with(Channel::Temperature);
         let cal = ChannelCal::unipolar(200.0);
-        let mut b = BlockBuilder::new(7, set, cal);
+        let mut b = BlockBuilder::new(7, set, cal, CLOCK, 1_000);
         let mut done = Vec::new();
         for i in 0..(2 * BLOCK_LEN as u16 + 10) {
-            if let Some(blk) = b.push(&[i, 1000 + i, 2000 + i, 3000 + i], 50.0, 100 * i as u64) {
+            if let Some(blk) = b.push(&[i, 1000 + i, 2000 + i, 3000 + i], 50.0, i as u32) {
                 done.push(blk);
             }
         }
@@ -289,7 +267,8 @@ mod tests {
                 (blk.run_id, blk.block, blk.first_sample),
                 (7, k as u32, (k * BLOCK_LEN) as u32)
             );
-            assert_eq!(blk.t_us, 100 * (k * BLOCK_LEN) as u64);
+            // 10 kS/s: 100 µs per sample, from the run's start.
+            assert_eq!(blk.t_us, 1_000 + 100 * (k * BLOCK_LEN) as u64);
             let first = (k * BLOCK_LEN) as u16;
             assert_eq!(
                 blk.sample(0).unwrap(),
@@ -298,5 +277,54 @@ mod tests {
         }
         assert_eq!(done[2].samples(), 10);
         assert!(b.flush().is_none());
+    }
+
+    #[test]
+    fn a_gap_closes_the_block_and_the_next_one_starts_after_it() {
+        let mut b = BlockBuilder::new(
+            1,
+            ChannelSet::VIBROMETER,
+            ChannelCal::unipolar(200.0),
+            CLOCK,
+            0,
+        );
+        let mut done = Vec::new();
+        for i in 0..70u32 {
+            done.extend(b.push(&[i as u16, 0, 0, 0], 20.0, i));
+        }
+        // Samples 70..100 are lost.
+        done.extend(b.gap(100));
+        assert_eq!(b.next_index(), 100);
+        for i in 100..180u32 {
+            done.extend(b.push(&[i as u16, 0, 0, 0], 20.0, i));
+        }
+        // A caller that forgets the gap still gets the block closed (and the sample kept).
+        done.extend(b.push(&[500, 0, 0, 0], 20.0, 500));
+        done.extend(b.flush());
+        let spans: Vec<(u32, u32, usize)> = done
+            .iter()
+            .map(|k| (k.block, k.first_sample, k.samples()))
+            .collect();
+        assert_eq!(
+            spans,
+            [
+                (0, 0, 64),
+                (1, 64, 6),
+                (2, 100, 64),
+                (3, 164, 16),
+                (4, 500, 1)
+            ]
+        );
+        for blk in &done {
+            // Every count is its own index: no sample moved across a gap.
+            let x: Vec<u32> = blk.channel(Channel::Displacement).map(u32::from).collect();
+            let want: Vec<u32> = (blk.first_sample..blk.first_sample + x.len() as u32).collect();
+            assert_eq!(x, want);
+            assert_eq!(blk.t_us, CLOCK.time_us(blk.first_sample as u64));
+        }
+        assert_eq!(b.samples(), 70 + 80 + 1);
+        // A sample from before the stream's position is never placed twice.
+        assert!(b.push(&[0; 4], 20.0, 3).is_none());
+        assert_eq!(b.samples(), 151);
     }
 }

@@ -223,6 +223,12 @@ struct State {
     deadline: u32,
     saturated: u32,
     rejected: u32,
+    /// Acquisition gaps (see [`Pipeline::gap`]): the half-cycles recorded before the first one are
+    /// what the result uses; the second difference of the velocity restarts at `d2_from`, and a
+    /// peak is compared with the previous one only if both come after `pair_from` records.
+    kept: Option<usize>,
+    d2_from: u32,
+    pair_from: usize,
 }
 
 fn positive(v: f32) -> Option<f64> {
@@ -324,6 +330,9 @@ impl Pipeline {
             deadline: (3.0 * half_period) as u32,
             saturated: 0,
             rejected: 0,
+            kept: None,
+            d2_from: 2,
+            pair_from: 0,
         })
     }
 
@@ -480,7 +489,7 @@ impl Pipeline {
         let cvi = cv as i32;
         let d2 = (cvi - 2 * self.st.v_prev.0 + self.st.v_prev.1) as i64;
         self.st.v_prev = (cvi, self.st.v_prev.0);
-        if idx >= 2 {
+        if idx >= self.st.d2_from {
             self.st.d2_sum = self.st.d2_sum.wrapping_add(d2 * d2);
             self.st.d2_n = self.st.d2_n.wrapping_add(1);
         }
@@ -574,7 +583,11 @@ impl Pipeline {
             peak,
             moments: p.moments,
         };
-        let prev = self.records.last().map(|r| r.peak);
+        let prev = self
+            .records
+            .last()
+            .filter(|_| self.records.len() > self.st.pair_from)
+            .map(|r| r.peak);
         if self.records.push(rec).is_err() || self.records.is_full() {
             self.st.phase = Phase::Finished(StopReason::BufferFull);
             return;
@@ -604,6 +617,38 @@ impl Pipeline {
         }
     }
 
+    /// `count` samples following the last one pushed were lost (an acquisition gap): the sample
+    /// index, hence the time axis, steps over them. A half-cycle straddling a gap cannot be
+    /// measured and records on either side cannot be paired, so the result keeps the half-cycles
+    /// completed before the first gap ([`Pipeline::finish`]); after it, reversals are still followed
+    /// so that the run ends when the pin stops, as it would have without the gap.
+    pub fn gap(&mut self, count: u32) {
+        if self.st.phase != Phase::Running || count == 0 {
+            return;
+        }
+        self.st.n = self.st.n.saturating_add(count);
+        self.st.deadline = self.st.deadline.saturating_add(count);
+        // What straddles the gap: the half-cycle in progress, the peak window, the velocity history.
+        self.st.pending = None;
+        self.st.moments = Moments::default();
+        self.st.detector = ReversalDetector::new(self.st.detector.threshold());
+        self.fitter.reset();
+        self.fitter.set_step(PI / self.st.half_period);
+        self.st.d2_from = self.st.n.saturating_add(2);
+        // No half-period measured across the gap.
+        self.st.last_rev = f64::NAN;
+        self.st.pair_from = self.records.len();
+        if self.st.kept.is_none() {
+            self.st.kept = Some(self.records.len());
+        }
+    }
+
+    /// The half-cycles the result is computed from: all of them, or those before the first gap.
+    fn usable(&self) -> &[HalfCycle] {
+        let n = self.st.kept.unwrap_or(self.records.len());
+        self.records.get(..n).unwrap_or(&self.records)
+    }
+
     /// Analyses what was recorded and returns the result (can be called at any time; normally once
     /// [`Pipeline::is_finished`]). All at once: see [`Pipeline::finish_step`] to spread the work.
     pub fn finish(&self, run_id: u32) -> OnboardResult {
@@ -618,7 +663,7 @@ impl Pipeline {
     /// Starts the end-of-run analysis as a job of bounded steps ([`Pipeline::finish_step`]). The
     /// pipeline must not take samples or be reset until the job is done.
     pub fn start_finish(&self, run_id: u32) -> Finish {
-        let recs: &[HalfCycle] = &self.records;
+        let recs: &[HalfCycle] = self.usable();
         let n_rev = recs.len();
         let cycles = (n_rev / 2).min(u16::MAX as usize) as u16;
         Finish {
@@ -656,7 +701,7 @@ impl Pipeline {
     /// (1 pass), then 4 iterations of the linear fit (3 passes), the quadratic fit (3 passes) and the
     /// range of amplitudes (1 pass). Then the verdict.
     pub fn finish_step(&self, job: &mut Finish, rows: u32) -> Option<OnboardResult> {
-        let recs: &[HalfCycle] = &self.records;
+        let recs: &[HalfCycle] = self.usable();
         let n = recs.len();
         let mut budget = rows;
         loop {
@@ -866,7 +911,7 @@ impl Pipeline {
     /// Envelope of half-cycle `j` in y units (see [`Pipeline::next_iteration`]).
     fn amplitude(&self, a: &Averaging, scale: f64, j: usize) -> Option<f64> {
         let centre = a.offset - self.sign(j) * a.r_now;
-        let ms = self.records.get(j)?.moments.mean_square(centre, a.omega) - a.noise;
+        let ms = self.usable().get(j)?.moments.mean_square(centre, a.omega) - a.noise;
         Some(fit::sqrt(ms.max(0.0)) * scale)
     }
 

@@ -7,7 +7,7 @@
 //! ```text
 //!   Idle ──Configure──▶ Configured ──Arm──▶ Armed ──Release / button──▶ Running ──▶ Finished
 //!                          ▲   ◀──Disarm / hold-time limit──┘                 │ stop, max duration,
-//!                          └──────────────────Configure / Arm ◀───────────────┘ abort, fault, overrun
+//!                          └──────────────────Configure / Arm ◀───────────────┘ abort, fault, gap list full
 //! ```
 //!
 //! * **Arm** energises the magnet (the pin is held at x0) and starts the converter; samples taken while
@@ -17,25 +17,32 @@
 //! * During the run every sample goes to a block and to the analysis; each block is stored in the
 //!   [`RunStore`] and sent from there, so the live stream and a later [`HostMsg::Pull`] are the same
 //!   frames (same bytes, same sequence numbers).
+//! * Samples come from the hardware-timed converter with their index in its stream; a sample's
+//!   place in the run (hence its time) is that index, never a count of samples read. Samples the
+//!   converter lost (the reader fell a whole ring behind, an ADC overrun) are a jump in index: the
+//!   run records exactly which with a [`DeviceMsg::Gap`] frame and goes on; no block spans a gap.
+//! * ECR: during a run the range is decided once per block from the mean of the block's settled ECR
+//!   samples; each change is a [`DeviceMsg::EcrRange`] frame saying from which sample on the new
+//!   range applies and how many samples settle.
 //! * The run ends when the analysis sees the pin at rest (or its amplitude in the noise), at the
-//!   maximum duration, on Abort, on a heater fault, or on an acquisition overrun (reported, and the
-//!   run is cut there: a gap is never stitched over). Then come the result and the end frames.
+//!   maximum duration, on Abort or on a heater fault. Then come the result and the end frames.
 //!
 //! Every command is answered (Ack or Error with its sequence number); a frame that does not decode
 //! is answered by `Error { Malformed }`. Nothing a host sends can make it panic.
 
 use crate::acquisition::{select, BlockBuilder};
 use crate::analysis::{ConfigError, Finish, Phase, Pipeline, StopReason};
-use crate::ecr::Ecr;
+use crate::ecr::{count_to_volts, settling_samples, Ecr, RangeTrack};
 use crate::hal::{AnalogSample, Hardware, Lamps, MagnetDrive, ANALOG_CHANNELS};
 use crate::heater::{Heater, HeaterConfig};
 use crate::release::{check_interlocks, Debouncer, MagnetEvent, Release, ReleaseConfig};
-use crate::runstore::{Item, RunStore};
+use crate::runstore::{Read, RunStore};
 use crate::wire::frame::MAX_FRAME;
 use crate::wire::{
-    Channel, Configure, Decoder, DeviceError, DeviceInfo, DeviceMsg, Encoder, EndReason,
-    EnvelopeShape, ErrorCode, Estimate, Field, Frame, HostMsg, Interlock, OnboardResult, RigState,
-    RunEnd, RunHeader, SampleBlock, Status, Verdict, CHANNELS, PROTOCOL_VERSION,
+    Channel, Configure, Decoder, DeviceError, DeviceInfo, DeviceMsg, EcrRangeChange, Encoder,
+    EndReason, EnvelopeShape, ErrorCode, Estimate, Field, Frame, Gap, HostMsg, Interlock,
+    OnboardResult, PackedBlock, RigState, RunEnd, RunHeader, SampleBlock, SampleClock, Status,
+    Verdict, CHANNELS, PROTOCOL_VERSION,
 };
 
 /// Constants of the application.
@@ -48,22 +55,17 @@ pub struct AppConfig {
     pub heater_period_us: u32,
     /// ECR update period outside runs, µs (during a run: once per block).
     pub ecr_period_us: u32,
-    /// Steps of run-frame sending per poll; a frame takes three (taken from the store and
-    /// serialised; its CRC; byte-stuffed and offered to the link), because framing a full
-    /// five-channel block at once is the largest piece of work a poll could do (13k instructions
-    /// on the M7). One step per millisecond poll is 333 frames/s, more than the 312 blocks/s of a
-    /// five-channel run at 20 kS/s.
+    /// Most run frames sent per poll (bounds the time a poll takes).
     pub frames_per_poll: u8,
+    /// Most samples taken from the converter per poll (bounds the time a poll takes; the
+    /// converter's ring holds the rest, see `acquisition::RING_SCANS`). At least the samples of
+    /// one poll period at the highest rate, with room to catch up after a slow poll.
+    pub samples_per_poll: u16,
     /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
     /// is up to ~500 instructions on the M7, so 16 rows stay under 9k). The result of a run of
     /// n half-cycles comes about 35 n / 16 polls after the pin stopped: 0.04 s for 20 half-cycles,
     /// 4.5 s for the longest run the analysis takes (2048).
     pub finish_rows_per_poll: u32,
-    /// How often the application is polled, µs (the board's ticker). With the sample rate it sets
-    /// how many samples one poll takes at most: twice what arrives between two polls (at least
-    /// 16), so that a backlog (the application held up) is caught up over several polls instead
-    /// of in one long one.
-    pub poll_period_us: u32,
 }
 
 impl AppConfig {
@@ -80,34 +82,26 @@ impl AppConfig {
             heater: HeaterConfig::default(),
             heater_period_us: 100_000,
             ecr_period_us: 100_000,
-            frames_per_poll: 1,
+            frames_per_poll: 32,
+            samples_per_poll: 128,
             finish_rows_per_poll: 16,
-            poll_period_us: 1_000,
         }
     }
 }
 
-/// How far the run frame being sent is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum RunFrame {
-    /// Serialised in `run_encoder` (this many bytes).
-    Serialised(usize),
-    /// Its CRC appended (this many bytes now).
-    Prepared(usize),
-    /// Byte-stuffed in `run_out` (this many bytes; 0: could not be encoded, skipped).
-    Stuffed(usize),
-}
-
-/// What the run-frame sender wants next.
+/// What the run-frame sender wants next (the live stream, or a [`HostMsg::Pull`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Want {
+    /// The header, then the records from block `from_block` on.
     Header {
         from_block: u32,
     },
+    /// The records from just after block `.0 − 1` on (found once the flash allows).
     Blocks(u32),
+    /// The records from this position of the run's stream on, then the result and the end.
+    From(u32),
+    Result,
     End,
-    /// Blocks `.0 .. .1` only ([`HostMsg::PullBlocks`]).
-    Range(u32, u32),
 }
 
 /// A run whose samples are all in, waiting for its end-of-run analysis (spread over polls): the
@@ -130,8 +124,9 @@ pub struct App<'a> {
     ecr: Ecr,
     store: RunStore<'a>,
     /// The on-board analysis: allocated once by [`App::new`] and reset in place for each run
-    /// (building one by value at run time puts its 43 KiB on the stack); `pipeline_ready` says
-    /// whether it is configured for the current run (an unloaded run is not analysed).
+    /// (building one by value at run time puts its 43 KiB in the caller's stack frame);
+    /// `pipeline_ready` says whether it is configured for the current run (an unloaded run is not
+    /// analysed).
     pipeline: Option<Pipeline>,
     pipeline_ready: bool,
     ending: Option<Ending>,
@@ -139,20 +134,24 @@ pub struct App<'a> {
     decoder: Decoder<HostMsg>,
     encoder: Encoder,
     out: [u8; MAX_FRAME],
-    /// The run frame in the making (its own encoder: acknowledgements may be sent between its two
-    /// steps) and, once stuffed, in `run_out`: a frame the link refuses waits there and is offered
-    /// again as is.
-    run_encoder: Encoder,
-    run_out: [u8; MAX_FRAME],
-    run_frame: Option<(Item, RunFrame)>,
     seq: u32,
     run_id: u32,
     run_start_us: u64,
+    /// Samples of this run lost by the acquisition.
     run_overruns: u32,
+    /// The converter's stream: its clock, the index of the sample expected next, and the index of
+    /// the current run's sample 0.
+    clock: Option<SampleClock>,
+    next_index: u64,
+    run_base: u64,
+    /// Which range each ECR sample was converted on, and the block's settled ECR mean.
+    ecr_track: RangeTrack,
     want: Option<Want>,
+    /// Blocks `.0 .. .1` asked for by [`HostMsg::PullBlocks`], sent before the rest.
+    range: Option<(u32, u32)>,
     last_heater_us: Option<u64>,
     last_ecr_us: Option<u64>,
-    lost_seen: u32,
+    /// Samples lost by the acquisition since start-up (held or running).
     overruns: u32,
     dropped_frames: u32,
     now_us: u64,
@@ -184,17 +183,18 @@ impl<'a> App<'a> {
             decoder: Decoder::new(),
             encoder: Encoder::new(),
             out: [0; MAX_FRAME],
-            run_encoder: Encoder::new(),
-            run_out: [0; MAX_FRAME],
-            run_frame: None,
             seq: 0,
             run_id: 0,
             run_start_us: 0,
             run_overruns: 0,
+            clock: None,
+            next_index: 0,
+            run_base: 0,
+            ecr_track: RangeTrack::new(0),
             want: None,
+            range: None,
             last_heater_us: None,
             last_ecr_us: None,
-            lost_seen: 0,
             overruns: 0,
             dropped_frames: 0,
             now_us: 0,
@@ -214,6 +214,12 @@ impl<'a> App<'a> {
     /// Id of the current or last run (0 before the first).
     pub fn run_id(&self) -> u32 {
         self.run_id
+    }
+
+    /// Index in the converter's stream of the current or last run's sample 0 (run sample `i` is
+    /// stream sample `run_first_index() + i`).
+    pub fn run_first_index(&self) -> u64 {
+        self.run_base
     }
 
     pub fn store(&self) -> &RunStore<'a> {
@@ -278,9 +284,15 @@ impl<'a> App<'a> {
         }
     }
 
+    /// Whether run frames are waiting to be sent (a stream or pull under way).
+    pub fn sending(&self) -> bool {
+        self.want.is_some() || self.range.is_some()
+    }
+
     /// Feeds bytes received from the host; handles every complete frame.
     pub fn on_bytes<H: Hardware>(&mut self, hw: &mut H, bytes: &[u8], now_us: u64) {
         self.now_us = self.now_us.max(now_us);
+        self.start(hw);
         for &b in bytes {
             match self.decoder.push(b) {
                 Some(Ok(frame)) => self.handle(hw, frame),
@@ -295,12 +307,7 @@ impl<'a> App<'a> {
     pub fn poll<H: Hardware>(&mut self, hw: &mut H, now_us: u64) {
         self.now_us = self.now_us.max(now_us);
         let now = self.now_us;
-        if !self.started {
-            self.started = true;
-            hw.magnet_drive(MagnetDrive::Off);
-            hw.set_heater_duty(0.0);
-            self.ecr.init(hw);
-        }
+        self.start(hw);
         match self.release.poll(hw, now) {
             Some(MagnetEvent::HoldTimeExceeded) => {
                 info!("hold time exceeded: magnet off");
@@ -338,7 +345,9 @@ impl<'a> App<'a> {
         {
             self.last_ecr_us = Some(now);
             let v = hw.read_ecr_output();
+            let before = (self.ecr.range(), self.ecr.source_v());
             self.ecr.update(v, hw);
+            self.ecr_changed(hw, before);
         }
         let pressed = hw.button_pressed();
         if self.debouncer.update(pressed, now) {
@@ -352,14 +361,30 @@ impl<'a> App<'a> {
                 self.error(hw, code, None);
             }
         }
-        let behind = self.drain(hw, self.samples_per_poll());
+        self.drain(hw);
         self.analyse_step();
-        // While catching up on samples, frames wait (in the store) for a poll with room.
-        if !behind {
-            self.pump(hw);
-        }
+        self.store.service(hw);
+        self.pump(hw);
         let lamps = self.lamps(now);
         hw.set_lamps(lamps);
+    }
+
+    /// First call after reset: outputs to their safe values, and the last run back from flash.
+    fn start<H: Hardware>(&mut self, hw: &mut H) {
+        if self.started {
+            return;
+        }
+        self.started = true;
+        hw.magnet_drive(MagnetDrive::Off);
+        hw.set_heater_duty(0.0);
+        self.ecr.init(hw);
+        if let Some(r) = self.store.recover(hw) {
+            info!(
+                "run {} recovered from flash: {} blocks, finished: {}",
+                r.run_id, r.blocks, r.finished
+            );
+            self.run_id = r.run_id;
+        }
     }
 
     fn next_seq(&mut self) -> u32 {
@@ -462,7 +487,7 @@ impl<'a> App<'a> {
                 count,
             } => {
                 if self.store.run_id() == Some(run_id) && run_id != 0 {
-                    self.want = Some(Want::Range(first, first.saturating_add(count)));
+                    self.range = Some((first, first.saturating_add(count)));
                     Ok(())
                 } else {
                     Err(ErrorCode::NoRun)
@@ -519,8 +544,9 @@ impl<'a> App<'a> {
         };
         hw.adc_stop();
         // A converter that does not start is caught by the release interlock (NotSampling).
-        let _ = hw.adc_start(cfg.sample_rate_hz);
-        self.lost_seen = hw.adc_lost();
+        self.clock = hw.adc_start(cfg.sample_rate_hz);
+        self.next_index = 0;
+        self.ecr_track = RangeTrack::new(self.ecr.range());
         self.state = RigState::Armed;
         info!("armed");
         Ok(())
@@ -533,103 +559,167 @@ impl<'a> App<'a> {
         if self.state == RigState::Running {
             return Err(ErrorCode::Busy);
         }
+        let clock = self.clock.filter(|_| hw.adc_running());
         check_interlocks(
             self.state == RigState::Armed,
             self.release.is_holding(),
-            hw.adc_running(),
+            clock.is_some(),
             self.heater.healthy(),
         )
         .map_err(ErrorCode::Interlock)?;
-        // Samples converted before this instant belong to the hold: all of them, however many.
-        self.drain(hw, usize::MAX);
+        let Some(clock) = clock else {
+            return Err(ErrorCode::Interlock(Interlock::NotSampling));
+        };
+        // Samples converted before this instant belong to the hold.
+        self.drain(hw);
         if self.state != RigState::Armed {
-            // An overrun seen while draining disarmed nothing, but be strict.
             return Err(ErrorCode::Interlock(Interlock::NotArmed));
         }
         let now = self.now_us;
+        // The run's sample 0 is the first conversion to begin after the magnet lets go.
         self.release.release(hw, now);
+        self.run_base = hw.adc_next_index();
         if let Some(p) = self.pipeline.as_mut().filter(|_| self.pipeline_ready) {
             p.release();
         }
         self.run_id = self.run_id.wrapping_add(1).max(1);
         self.run_start_us = now;
         self.run_overruns = 0;
+        self.ecr.set_hold(false);
         self.builder = Some(BlockBuilder::new(
             self.run_id,
             cfg.channels,
             cfg.calibration[Channel::Temperature.index()],
+            clock,
+            now,
         ));
         let header = RunHeader {
             run_id: self.run_id,
             config: cfg,
             temp_c: self.heater.temp_c(),
             t_us: now,
+            clock,
         };
         let seq = self.next_seq();
-        self.store.begin(seq, header);
-        self.run_frame = None;
+        if let Ok(frame) = self
+            .encoder
+            .encode(seq, &DeviceMsg::RunStarted(header), &mut self.out)
+        {
+            self.store.begin(hw, self.run_id, frame);
+        }
+        // The range the run starts on, and what is left of its settling after a change made while
+        // holding: from here on every sample's range is known from these frames.
+        let settling = self
+            .ecr_track
+            .settled_from()
+            .saturating_sub(self.run_base)
+            .min(u16::MAX as u64) as u16;
+        self.push_event(DeviceMsg::EcrRange(EcrRangeChange {
+            run_id: self.run_id,
+            first_sample: 0,
+            range: self.ecr.range(),
+            settling,
+        }));
         self.want = Some(Want::Header { from_block: 0 });
+        self.range = None;
         self.state = RigState::Running;
         info!("released: run {}", self.run_id);
         Ok(())
     }
 
-    /// Most samples one poll takes (see [`AppConfig::poll_period_us`]).
-    fn samples_per_poll(&self) -> usize {
-        let rate = self.config.map_or(0, |c| c.sample_rate_hz) as u64;
-        let per_poll = rate * self.cfg.poll_period_us as u64 / 1_000_000;
-        (2 * per_poll).max(16) as usize
+    /// Stores a run event (a [`DeviceMsg::Gap`] or [`DeviceMsg::EcrRange`] frame, sent in its place
+    /// among the blocks). False when the run has used its [`MAX_RUN_EVENTS`] or the store refused it.
+    fn push_event(&mut self, event: DeviceMsg) -> bool {
+        if self.events_free() == 0 {
+            return false;
+        }
+        let seq = self.next_seq();
+        match self.encoder.encode(seq, &event, &mut self.out) {
+            Ok(frame) => self.store.push_event(frame),
+            Err(_) => false,
+        }
     }
 
-    /// Moves converted samples to the hold capture or to the run, at most `limit` of them; true
-    /// when it stopped at the limit (samples are still waiting).
-    fn drain<H: Hardware>(&mut self, hw: &mut H, limit: usize) -> bool {
-        let mut buf = [[0u16; ANALOG_CHANNELS]; 32];
-        let mut taken = 0usize;
-        loop {
+    /// Events the run may still record.
+    fn events_free(&self) -> usize {
+        MAX_RUN_EVENTS.saturating_sub(self.store.events() as usize)
+    }
+
+    /// Moves converted samples to the hold capture or to the run, at most
+    /// [`AppConfig::samples_per_poll`] per call (the converter's ring holds the rest until the next
+    /// poll; a reader that falls a whole ring behind loses samples, which the indices then show).
+    fn drain<H: Hardware>(&mut self, hw: &mut H) {
+        const CHUNK: usize = 32;
+        let mut buf = [[0u16; ANALOG_CHANNELS]; CHUNK];
+        let mut budget = self.cfg.samples_per_poll as usize;
+        while budget > 0 {
             if !matches!(self.state, RigState::Armed | RigState::Running) || self.ending.is_some() {
-                return false;
+                return;
             }
-            if taken >= limit {
-                return true;
-            }
-            // An overrun is checked before each read: the samples still in the ring may straddle the
-            // gap, so a run ends at the last sample read before the loss was seen.
-            let lost = hw.adc_lost();
-            if lost != self.lost_seen {
-                let delta = lost.wrapping_sub(self.lost_seen);
-                self.lost_seen = lost;
-                self.overruns = self.overruns.saturating_add(delta);
-                info!("overrun: {} samples lost", delta);
-                self.error(
-                    hw,
-                    ErrorCode::Overrun {
-                        lost_samples: delta,
-                    },
-                    None,
-                );
-                if self.state == RigState::Running {
-                    self.run_overruns = self.run_overruns.saturating_add(delta);
-                    self.end_run(hw, EndReason::Overrun);
-                    return false;
+            let want = budget.min(CHUNK);
+            let batch = hw.adc_read(&mut buf[..want]);
+            if batch.first > self.next_index {
+                self.lost(hw, self.next_index, batch.first);
+                if !matches!(self.state, RigState::Armed | RigState::Running) {
+                    return;
                 }
             }
-            let want = buf.len().min(limit - taken);
-            let n = hw.adc_read(&mut buf[..want]);
-            if n == 0 {
-                return false;
-            }
-            taken += n;
-            for s in buf.iter().take(n) {
-                if self.take_sample(hw, s) {
-                    return false;
+            self.next_index = self.next_index.max(batch.end());
+            let n = batch.len.min(want);
+            for (k, s) in buf.iter().take(n).enumerate() {
+                if self.take_sample(hw, s, batch.first + k as u64) {
+                    return;
                 }
+            }
+            budget -= n;
+            if n < want {
+                return;
             }
         }
     }
 
-    /// One sample; returns true when it ended the run.
-    fn take_sample<H: Hardware>(&mut self, hw: &mut H, s: &AnalogSample) -> bool {
+    /// Stream samples `from .. to` were lost by the acquisition. In a run: the block in progress is
+    /// closed, a [`DeviceMsg::Gap`] frame records exactly which samples of the run are missing, and
+    /// the run goes on (the on-board analysis keeps what came before the first gap). Never silent:
+    /// also counted in the status and the run's end frame.
+    fn lost<H: Hardware>(&mut self, hw: &mut H, from: u64, to: u64) {
+        let count = to.saturating_sub(from);
+        self.overruns = self
+            .overruns
+            .saturating_add(count.min(u32::MAX as u64) as u32);
+        info!("acquisition: samples {} .. {} lost", from, to);
+        if self.state != RigState::Running || to <= self.run_base {
+            // Hold samples: the zero capture simply has fewer of them.
+            return;
+        }
+        let first = from.max(self.run_base) - self.run_base;
+        let end = to - self.run_base;
+        let (Ok(first), Ok(end)) = (u32::try_from(first), u32::try_from(end)) else {
+            self.end_run(hw, EndReason::MaxDuration);
+            return;
+        };
+        let count = end - first;
+        self.run_overruns = self.run_overruns.saturating_add(count);
+        if let Some(blk) = self.builder.as_mut().and_then(|b| b.gap(end)) {
+            self.store_block(hw, blk);
+        }
+        if let Some(p) = self.pipeline.as_mut().filter(|_| self.pipeline_ready) {
+            p.gap(count);
+        }
+        let gap = Gap {
+            run_id: self.run_id,
+            first_sample: first,
+            count,
+        };
+        if !self.push_event(DeviceMsg::Gap(gap)) {
+            // More gaps than a run can list: what is recorded can no longer be described exactly,
+            // so the run ends here (its end frame says so).
+            self.end_run(hw, EndReason::Overrun);
+        }
+    }
+
+    /// One sample, with its index in the converter's stream; returns true when it ended the run.
+    fn take_sample<H: Hardware>(&mut self, hw: &mut H, s: &AnalogSample, index: u64) -> bool {
         let temp = self.heater.temp_c();
         let Some(cfg) = &self.config else {
             return false;
@@ -650,21 +740,21 @@ impl<'a> App<'a> {
                 false
             }
             RigState::Running => {
+                // Converted before the release: part of the hold, not of the run.
+                let Some(i) = index.checked_sub(self.run_base) else {
+                    return false;
+                };
+                let Ok(i) = u32::try_from(i) else {
+                    self.end_run(hw, EndReason::MaxDuration);
+                    return true;
+                };
+                self.ecr_track.add(index, s[3]);
                 let Some(b) = &mut self.builder else {
                     return false;
                 };
                 let mut sel = [0u16; CHANNELS];
                 let n = b.select(s, temp, &mut sel);
-                // The time is only read for a block's first sample (a 64-bit division per sample
-                // is a software routine on the M7).
-                let t_us = if b.starts_block() {
-                    let rate = cfg.sample_rate_hz.max(1) as u64;
-                    self.run_start_us + b.samples() as u64 * 1_000_000 / rate
-                } else {
-                    0
-                };
-                let block = b.push_selected(&sel[..n], temp, t_us);
-                let samples = b.samples();
+                let block = b.push_selected(&sel[..n], temp, i);
                 let max_samples = cfg.max_samples();
                 let ready = self.pipeline_ready;
                 let phase = self
@@ -678,7 +768,7 @@ impl<'a> App<'a> {
                 let reason = match phase {
                     Some(Phase::Finished(StopReason::MaxDuration)) => Some(EndReason::MaxDuration),
                     Some(Phase::Finished(_)) => Some(EndReason::Stopped),
-                    _ if samples >= max_samples => Some(EndReason::MaxDuration),
+                    _ if i.saturating_add(1) >= max_samples => Some(EndReason::MaxDuration),
                     _ => None,
                 };
                 if let Some(r) = reason {
@@ -691,15 +781,78 @@ impl<'a> App<'a> {
         }
     }
 
+    /// The ECR range or source changed (`before` = range and source before the last update): the
+    /// samples from the next conversion on settle for the new range's settling time; during a run,
+    /// a range change is recorded as a [`DeviceMsg::EcrRange`] frame.
+    fn ecr_changed<H: Hardware>(&mut self, hw: &mut H, before: (u8, f32)) {
+        let (range, source) = (self.ecr.range(), self.ecr.source_v());
+        if (range, source.to_bits()) == (before.0, before.1.to_bits()) {
+            return;
+        }
+        let at = if hw.adc_running() {
+            hw.adc_next_index()
+        } else {
+            0
+        };
+        let settling = self.clock.map_or(0, |c| settling_samples(range, c));
+        self.ecr_track.switch(at, range, settling);
+        if self.state == RigState::Running && range != before.0 {
+            let first_sample = at.saturating_sub(self.run_base).min(u32::MAX as u64) as u32;
+            let change = EcrRangeChange {
+                run_id: self.run_id,
+                first_sample,
+                range,
+                settling,
+            };
+            // Keep room for gaps: a run whose range changes this often holds its range instead
+            // (switched back at once; the samples settle again from the same instant).
+            if self.events_free() <= GAP_RESERVE || !self.push_event(DeviceMsg::EcrRange(change)) {
+                self.ecr.set_hold(true);
+                self.ecr.set_range(before.0, hw);
+                let settling =
+                    settling.max(self.clock.map_or(0, |c| settling_samples(before.0, c)));
+                self.ecr_track.switch(at, before.0, settling);
+            }
+        }
+    }
+
     /// Completes a block's ECR and temperature fields (the ECR range is the one used during the
     /// block; the reading at its end sets the next one) and stores it.
+    ///
+    /// The resistance is computed from the mean of the block's ECR samples converted on the current
+    /// range and source after they settled (NaN when the block has none, e.g. all settling, or when
+    /// they were outside the range's span); that reading then sets the range and source for what
+    /// follows.
     fn store_block<H: Hardware>(&mut self, hw: &mut H, mut blk: SampleBlock) {
-        blk.ecr_range = self.ecr.range();
-        let v = hw.read_ecr_output();
-        blk.log10_ecr_ohm = self.ecr.update(v, hw);
+        blk.ecr_range = self
+            .ecr_track
+            .range_at(self.run_base + blk.first_sample as u64);
+        blk.log10_ecr_ohm = match self.ecr_track.take_mean() {
+            Some(count) => {
+                let before = (self.ecr.range(), self.ecr.source_v());
+                let l = self.ecr.update(count_to_volts(count), hw);
+                self.ecr_changed(hw, before);
+                // A reading out of the range's span only moves the range: no resistance for it.
+                if self.ecr.measured() {
+                    l
+                } else {
+                    f32::NAN
+                }
+            }
+            None => f32::NAN,
+        };
         blk.temp_c = self.heater.temp_c();
         let seq = self.next_seq();
-        self.store.push_block(seq, &blk);
+        // Cannot fail for a block the builder made (consistent, at most BLOCK_LEN samples).
+        if let Ok(p) = PackedBlock::pack(&blk) {
+            let k = p.block;
+            if let Ok(frame) = self
+                .encoder
+                .encode(seq, &DeviceMsg::Packed(p), &mut self.out)
+            {
+                self.store.push_block(k, frame);
+            }
+        }
     }
 
     /// Ends the run: no sample is taken after this; the result and end frames follow once the
@@ -716,8 +869,16 @@ impl<'a> App<'a> {
             .builder
             .as_ref()
             .map_or((0, 0), |b| (b.blocks(), b.samples()));
-        let job = match self.pipeline.as_ref().filter(|_| self.pipeline_ready) {
-            Some(p) => p.start_finish(self.run_id),
+        match self.pipeline.as_ref().filter(|_| self.pipeline_ready) {
+            Some(p) => {
+                self.ending = Some(Ending {
+                    job: p.start_finish(self.run_id),
+                    reason,
+                    blocks,
+                    samples,
+                });
+                info!("run {} over: analysing", self.run_id);
+            }
             None => {
                 let result = unanalysed(
                     self.run_id,
@@ -725,16 +886,8 @@ impl<'a> App<'a> {
                     self.config.map_or(1, |c| c.sample_rate_hz),
                 );
                 self.complete_run(result, reason, blocks, samples);
-                return;
             }
-        };
-        self.ending = Some(Ending {
-            job,
-            reason,
-            blocks,
-            samples,
-        });
-        info!("run {} over: analysing", self.run_id);
+        }
     }
 
     /// Advances the end-of-run analysis, if one is pending, by a bounded number of rows.
@@ -762,7 +915,12 @@ impl<'a> App<'a> {
             result.verdict = Verdict::Aborted;
         }
         let seq = self.next_seq();
-        self.store.set_result(seq, result);
+        if let Ok(frame) = self
+            .encoder
+            .encode(seq, &DeviceMsg::Result(result), &mut self.out)
+        {
+            self.store.set_result(frame);
+        }
         let end = RunEnd {
             run_id: self.run_id,
             blocks,
@@ -771,86 +929,103 @@ impl<'a> App<'a> {
             reason,
         };
         let seq = self.next_seq();
-        self.store.set_end(seq, end);
+        if let Ok(frame) = self
+            .encoder
+            .encode(seq, &DeviceMsg::RunEnded(end), &mut self.out)
+        {
+            self.store.set_end(frame);
+        }
+        self.ecr.set_hold(false);
         self.state = RigState::Finished;
         info!("run {} ended", self.run_id);
     }
 
-    /// Sends run frames from the store while the link takes them.
+    /// Sends run frames from the store while the link takes them: first the blocks a
+    /// [`HostMsg::PullBlocks`] asked for, then the stream (live, or a [`HostMsg::Pull`]). At most
+    /// `frames_per_poll` records are looked at per call; every frame is sent as stored, so this is
+    /// copying only.
     fn pump<H: Hardware>(&mut self, hw: &mut H) {
         for _ in 0..self.cfg.frames_per_poll {
-            let Some(want) = self.want else { return };
-            let item = match want {
-                Want::Header { .. } => Some(Item::Header),
-                Want::Blocks(k) => self.store.first_from(k),
-                Want::End => self.store.is_finished().then_some(Item::End),
-                Want::Range(k, end) => {
-                    let k = k.max(self.store.oldest_block());
-                    (k < end && k < self.store.blocks()).then_some(Item::Block(k))
-                }
-            };
-            let Some(item) = item else { return };
-            // Step one: take the frame from the store and serialise it. Step two: its CRC. Step
-            // three: byte-stuff it and offer it to the link (again each poll while the link refuses
-            // it, without framing it again).
-            let len = match self.run_frame {
-                Some((it, RunFrame::Stuffed(len))) if it == item => len,
-                Some((it, RunFrame::Serialised(n))) if it == item => {
-                    let step = match self.run_encoder.seal(n) {
-                        Ok(raw) => RunFrame::Prepared(raw),
-                        Err(_) => RunFrame::Stuffed(0),
-                    };
-                    self.run_frame = Some((item, step));
+            if let Some((k, end)) = self.range {
+                if k >= end || k >= self.store.blocks() {
+                    self.range = None;
                     continue;
                 }
-                Some((it, RunFrame::Prepared(raw))) if it == item => {
-                    let len = self
-                        .run_encoder
-                        .stuff(raw, &mut self.run_out)
-                        .map_or(0, |b| b.len());
-                    self.run_frame = Some((item, RunFrame::Stuffed(len)));
-                    len
+                let Some(pos) = self.store.block_pos(k) else {
+                    self.range = None;
+                    continue;
+                };
+                match self.store.read(hw, pos, &mut self.out) {
+                    Read::Frame { len, .. } => {
+                        if !hw.send_frame(&self.out[..len]) {
+                            return;
+                        }
+                        self.range = Some((k + 1, end));
+                    }
+                    Read::Busy => return,
+                    Read::Lost { .. } | Read::End => self.range = Some((k + 1, end)),
                 }
-                _ => {
-                    // Blocks are serialised from the store's counts, not rebuilt first.
-                    let enc = &mut self.run_encoder;
-                    let serialised = match item {
-                        Item::Block(k) => self
-                            .store
-                            .samples_ref(k)
-                            .map(|(seq, view)| enc.serialise(seq, &view)),
-                        other => self
-                            .store
-                            .frame(other)
-                            .map(|(seq, msg)| enc.serialise(seq, &msg)),
-                    };
-                    let Some(serialised) = serialised else {
+                continue;
+            }
+            let Some(want) = self.want else { return };
+            let (len, next) = match want {
+                Want::Header { from_block } => {
+                    let Some(h) = self.store.header() else {
                         self.want = None;
                         return;
                     };
-                    // An encoding error cannot happen for stored frames; skip rather than stall.
-                    let step = match serialised {
-                        Ok(n) => RunFrame::Serialised(n),
-                        Err(_) => RunFrame::Stuffed(0),
-                    };
-                    self.run_frame = Some((item, step));
+                    self.out[..h.len()].copy_from_slice(h);
+                    (h.len(), Some(Want::Blocks(from_block)))
+                }
+                Want::Blocks(k) => {
+                    match self.store.start_of_block(hw, k) {
+                        Some(pos) => self.want = Some(Want::From(pos)),
+                        None => return,
+                    }
                     continue;
                 }
+                Want::From(pos) => match self.store.read(hw, pos, &mut self.out) {
+                    Read::Frame { len, next } => (len, Some(Want::From(next))),
+                    Read::Busy => return,
+                    Read::Lost { next } => {
+                        self.want = Some(Want::From(next));
+                        continue;
+                    }
+                    Read::End => {
+                        if self.store.result().is_none() {
+                            // More may come (a run in progress).
+                            return;
+                        }
+                        self.want = Some(Want::Result);
+                        continue;
+                    }
+                },
+                Want::Result => {
+                    let Some(r) = self.store.result() else { return };
+                    self.out[..r.len()].copy_from_slice(r);
+                    (r.len(), Some(Want::End))
+                }
+                Want::End => {
+                    let Some(e) = self.store.end() else { return };
+                    self.out[..e.len()].copy_from_slice(e);
+                    (e.len(), None)
+                }
             };
-            if len > 0 && !hw.send_frame(&self.run_out[..len]) {
+            if !hw.send_frame(&self.out[..len]) {
                 return;
             }
-            self.run_frame = None;
-            self.want = match (want, item) {
-                (Want::Range(_, end), Item::Block(k)) => Some(Want::Range(k + 1, end)),
-                (Want::Header { from_block }, Item::Header) => Some(Want::Blocks(from_block)),
-                (_, Item::Block(k)) => Some(Want::Blocks(k + 1)),
-                (_, Item::Result) => Some(Want::End),
-                _ => None,
-            };
+            self.want = next;
         }
     }
 }
+
+/// Most events (gaps, ECR range changes) one run records: a run that would need more is ended (an
+/// overrun that cannot be described exactly any more) or holds its ECR range.
+pub const MAX_RUN_EVENTS: usize = 1024;
+
+/// Event slots of a run kept for gaps: ECR range changes stop (the range is held) when only these
+/// are left.
+const GAP_RESERVE: usize = 16;
 
 /// The configuration field the on-board analysis objected to.
 fn field_of(e: ConfigError) -> Field {

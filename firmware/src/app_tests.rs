@@ -2,7 +2,8 @@
 
 use super::*;
 use crate::hal::*;
-use crate::runstore::BlockMeta;
+use crate::runstore::memflash::MemFlash;
+use crate::runstore::{FlashState, MAX_RUN_BLOCKS};
 use crate::wire::frame::decode_one;
 
 fn encode_vec(seq: u32, msg: &HostMsg) -> Result<Vec<u8>, crate::wire::EncodeError> {
@@ -11,7 +12,7 @@ fn encode_vec(seq: u32, msg: &HostMsg) -> Result<Vec<u8>, crate::wire::EncodeErr
     out.truncate(n);
     Ok(out)
 }
-use crate::wire::{ChannelSet, Field, HeaterFault, HeaterSetpoint, BLOCK_LEN};
+use crate::wire::{ChannelSet, Field, HeaterFault, HeaterSetpoint};
 use proptest::prelude::*;
 
 /// The run's end frame among the messages, if it came.
@@ -27,9 +28,25 @@ fn block_indices<'a>(msgs: impl IntoIterator<Item = &'a DeviceMsg>) -> Vec<u32> 
     msgs.into_iter()
         .filter_map(|m| match m {
             DeviceMsg::Samples(s) => Some(s.block),
+            DeviceMsg::Packed(p) => Some(p.block),
             _ => None,
         })
         .collect()
+}
+
+/// The sample blocks among the messages (packed ones unpacked), in order.
+fn sample_blocks<'a>(msgs: impl IntoIterator<Item = &'a DeviceMsg>) -> Vec<SampleBlock> {
+    msgs.into_iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Samples(s) => Some(s.clone()),
+            DeviceMsg::Packed(p) => Some(p.unpack().expect("the rig packs blocks that unpack")),
+            _ => None,
+        })
+        .collect()
+}
+
+fn is_block(m: &DeviceMsg) -> bool {
+    matches!(m, DeviceMsg::Samples(_) | DeviceMsg::Packed(_))
 }
 
 /// The run's on-board result among the messages, if it came.
@@ -39,6 +56,9 @@ fn onboard_result<M: core::borrow::Borrow<DeviceMsg>>(msgs: &[M]) -> Option<Onbo
         _ => None,
     })
 }
+
+/// What the mock's ECR output reads while its amplifier settles (no contact reads exactly this).
+const SETTLING_V: f32 = 1.2345;
 
 /// A rig whose pin, once released, oscillates at 26 Hz with an amplitude decaying linearly to rest
 /// (Coulomb-like) in `stop_s`. The ADC converts on demand up to the time set by the test.
@@ -52,16 +72,18 @@ struct Mock {
     ecr_r: f32,
     ecr_range: u8,
     ecr_source: f32,
+    /// Model the transimpedance amplifier's settling: for `SETTLE_US` of the range after a change
+    /// of range or source, the output reads [`SETTLING_V`].
+    ecr_settles: bool,
+    ecr_changed_us: u64,
     adc_ok: bool,
-    adc_on: bool,
-    rate: u32,
-    next_sample_us: f64,
-    ring: crate::acquisition::Ring<4096>,
+    adc: crate::acquisition::ConverterModel,
     button: bool,
     connected: bool,
     out: Vec<u8>,
     lamps: Lamps,
     stop_s: f64,
+    flash: MemFlash<Vec<u8>>,
 }
 
 impl Mock {
@@ -76,16 +98,16 @@ impl Mock {
             ecr_r: 1e7,
             ecr_range: 0,
             ecr_source: 0.0,
+            ecr_settles: false,
+            ecr_changed_us: 0,
             adc_ok: true,
-            adc_on: false,
-            rate: 0,
-            next_sample_us: 0.0,
-            ring: crate::acquisition::Ring::new(),
+            adc: crate::acquisition::ConverterModel::new(200_000_000),
             button: false,
             connected: true,
             out: Vec::new(),
             lamps: Lamps::default(),
             stop_s: 0.5,
+            flash: MemFlash::new(vec![0; 1 << 20], FlashGeometry::H743_BANK2).with_h743_timing(),
         }
     }
 
@@ -100,22 +122,51 @@ impl Mock {
         (a * (w * t).cos(), -a * w * (w * t).sin())
     }
 
-    /// Converts every sample due up to `now_us` into the ring.
+    /// Converts every sample due up to `now_us` into the ring (and lets the flash work that long).
     fn convert(&mut self) {
-        if !self.adc_on {
-            return;
-        }
-        let dt = 1e6 / self.rate as f64;
-        while self.next_sample_us <= self.now_us as f64 {
-            let (x, v) = self.x_v(self.next_sample_us);
+        self.flash.advance(self.now_us);
+        while let Some(t) = self.adc.due(self.now_us) {
+            let (x, v) = self.x_v(t as f64);
             let s = [
                 self.cal[0].to_count(x as f32),
                 self.cal[1].to_count(v as f32),
                 self.cal[2].to_count(0.01),
-                self.cal[3].to_count(self.ecr_out()),
+                self.cal[3].to_count(self.ecr_at(t)),
             ];
-            self.ring.push(s);
-            self.next_sample_us += dt;
+            self.adc.convert(&s);
+        }
+    }
+
+    /// Asserts that every sample of `blk` holds the displacement and velocity of its own instant:
+    /// run sample `i` is stream sample `base + i`, converted at that trigger's time.
+    fn check_block(&self, blk: &SampleBlock, base: u64) {
+        let (px, pv) = (
+            blk.channels.position(Channel::Displacement).unwrap(),
+            blk.channels.position(Channel::Velocity).unwrap(),
+        );
+        for i in 0..blk.samples() {
+            let k = base + blk.first_sample as u64 + i as u64;
+            let (x, v) = self.x_v(self.adc.trigger_time_us(k) as f64);
+            let s = blk.sample(i).unwrap();
+            assert_eq!(
+                (s[px], s[pv]),
+                (
+                    self.cal[0].to_count(x as f32),
+                    self.cal[1].to_count(v as f32)
+                ),
+                "block {} sample {i} (stream {k})",
+                blk.block
+            );
+        }
+    }
+
+    /// The ECR output converted at device time `t_us`.
+    fn ecr_at(&self, t_us: u64) -> f32 {
+        let settle = crate::ecr::SETTLE_US[self.ecr_range as usize] as u64;
+        if self.ecr_settles && t_us < self.ecr_changed_us + settle {
+            SETTLING_V
+        } else {
+            self.ecr_out()
         }
     }
 
@@ -152,9 +203,15 @@ impl HeaterOutput for Mock {
 }
 impl EcrFrontEnd for Mock {
     fn set_ecr_source(&mut self, v: f32) {
+        if v != self.ecr_source {
+            self.ecr_changed_us = self.now_us;
+        }
         self.ecr_source = v;
     }
     fn set_ecr_range(&mut self, r: u8) {
+        if r != self.ecr_range {
+            self.ecr_changed_us = self.now_us;
+        }
         self.ecr_range = r;
     }
     fn read_ecr_output(&mut self) -> f32 {
@@ -162,28 +219,28 @@ impl EcrFrontEnd for Mock {
     }
 }
 impl SampleSource for Mock {
-    fn adc_start(&mut self, rate_hz: u32) -> bool {
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
+        self.adc.clock_for(rate_hz)
+    }
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
         if !self.adc_ok {
-            return false;
+            return None;
         }
-        self.adc_on = true;
-        self.rate = rate_hz;
-        self.next_sample_us = self.now_us as f64;
-        self.ring.clear();
-        true
+        self.adc.start(rate_hz, self.now_us)
     }
     fn adc_stop(&mut self) {
-        self.adc_on = false;
+        self.adc.stop();
     }
     fn adc_running(&self) -> bool {
-        self.adc_on
+        self.adc.is_running()
     }
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize {
+    fn adc_next_index(&mut self) -> u64 {
         self.convert();
-        self.ring.pop_into(out)
+        self.adc.next_index()
     }
-    fn adc_lost(&self) -> u32 {
-        self.ring.lost()
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
+        self.convert();
+        self.adc.read(out)
     }
 }
 impl Button for Mock {
@@ -205,26 +262,49 @@ impl Link for Mock {
     }
 }
 
+impl RunFlash for Mock {
+    fn flash_geometry(&self) -> FlashGeometry {
+        self.flash.flash_geometry()
+    }
+    fn flash_busy(&mut self) -> bool {
+        self.flash.flash_busy()
+    }
+    fn flash_erase(&mut self, sector: u32) -> bool {
+        self.flash.flash_erase(sector)
+    }
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
+        self.flash.flash_program(offset, data)
+    }
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
+        self.flash.flash_read(offset, out)
+    }
+    fn flash_take_error(&mut self) -> bool {
+        self.flash.flash_take_error()
+    }
+}
+
 struct Bench {
     app: App<'static>,
     hw: Mock,
     seq: u32,
 }
 
-fn store(counts: usize) -> RunStore<'static> {
-    let c = Box::leak(vec![0u16; counts].into_boxed_slice());
-    let m = Box::leak(vec![BlockMeta::default(); counts / (2 * BLOCK_LEN) + 1].into_boxed_slice());
-    RunStore::new(c, m)
+/// A run store with `ram` bytes of RAM (in two buffers, as on the board).
+fn store(ram: usize) -> RunStore<'static> {
+    let a: &'static mut [u8] = Box::leak(vec![0u8; ram / 2].into_boxed_slice());
+    let b: &'static mut [u8] = Box::leak(vec![0u8; ram - ram / 2].into_boxed_slice());
+    let index = Box::leak(vec![0u32; MAX_RUN_BLOCKS].into_boxed_slice());
+    RunStore::new([a, b], index)
 }
 
 impl Bench {
     fn new() -> Self {
-        Self::with_store(200_000)
+        Self::with_store(256 * 1024)
     }
 
-    fn with_store(counts: usize) -> Self {
+    fn with_store(ram: usize) -> Self {
         let mut b = Bench {
-            app: App::new(AppConfig::new(42), store(counts)),
+            app: App::new(AppConfig::new(42), store(ram)),
             hw: Mock::new(),
             seq: 100,
         };
@@ -423,7 +503,7 @@ fn hold_time_limit_disarms_and_is_reported() {
     assert!(errors(&b.msgs()).contains(&ErrorCode::HoldTimeExceeded));
     assert_eq!(b.hw.magnet(), MagnetDrive::Off);
     assert!(
-        !b.hw.adc_on,
+        !b.hw.adc.is_running(),
         "sampling left running after the magnet was cut"
     );
     assert_eq!(
@@ -469,7 +549,7 @@ fn button_releases_only_when_armed_and_is_debounced() {
     assert!(b.hw.released_at.is_some());
 }
 
-/// Runs to the end (the run's end frame sent) and returns all frames sent.
+/// Runs to the end and returns all frames sent.
 fn full_run(b: &mut Bench) -> Vec<(Vec<u8>, Frame<DeviceMsg>)> {
     b.ready();
     b.take();
@@ -478,10 +558,7 @@ fn full_run(b: &mut Bench) -> Vec<(Vec<u8>, Frame<DeviceMsg>)> {
     for _ in 0..3000 {
         b.run_for(1);
         frames.extend(b.take());
-        if frames
-            .iter()
-            .any(|f| matches!(f.1.msg, DeviceMsg::RunEnded(_)))
-        {
+        if b.app.state() == RigState::Finished {
             break;
         }
     }
@@ -504,16 +581,7 @@ fn a_run_streams_contiguous_blocks_then_result_and_end() {
             }
         })
         .unwrap();
-    let blocks: Vec<&SampleBlock> = msgs
-        .iter()
-        .filter_map(|m| {
-            if let DeviceMsg::Samples(s) = m {
-                Some(s)
-            } else {
-                None
-            }
-        })
-        .collect();
+    let blocks = sample_blocks(msgs.iter().copied());
     let end = run_end(&msgs).unwrap();
     let result = onboard_result(&msgs).unwrap();
     assert_eq!(
@@ -531,8 +599,10 @@ fn a_run_streams_contiguous_blocks_then_result_and_end() {
             (header.run_id, k as u32, next_sample)
         );
         assert_eq!(blk.t_us, header.t_us + blk.first_sample as u64 * 100);
-        // The autoranger starts cold at arming (least gain, low source): a few blocks to settle.
-        if k >= 8 {
+        // The autoranger starts cold at arming (least gain, low source): it climbs a range per block
+        // and waits out each change's settling (20 ms on the highest range, three blocks), so
+        // a dozen blocks go by before it reads.
+        if k >= 14 {
             assert!(
                 (blk.log10_ecr_ohm - 7.0).abs() < 0.01,
                 "ECR of a 1e7 Ω contact read as {}",
@@ -552,10 +622,7 @@ fn a_run_streams_contiguous_blocks_then_result_and_end() {
     assert_eq!(end.overruns, 0);
     // Result and end close the run, in that order, after every block.
     let pos = |f: &dyn Fn(&DeviceMsg) -> bool| msgs.iter().position(|m| f(m)).unwrap();
-    let last_block = msgs
-        .iter()
-        .rposition(|m| matches!(m, DeviceMsg::Samples(_)))
-        .unwrap();
+    let last_block = msgs.iter().rposition(|m| is_block(m)).unwrap();
     assert!(last_block < pos(&|m| matches!(m, DeviceMsg::Result(_))));
     assert!(
         pos(&|m| matches!(m, DeviceMsg::Result(_))) < pos(&|m| matches!(m, DeviceMsg::RunEnded(_)))
@@ -616,36 +683,239 @@ fn heater_fault_during_a_run_cuts_the_heater_and_ends_the_run() {
 }
 
 #[test]
-fn overrun_is_reported_and_ends_the_run() {
+fn a_reader_stall_is_a_gap_frame_with_the_exact_missing_samples_and_the_run_goes_on() {
     let mut b = Bench::new();
+    b.hw.stop_s = 1.0;
     b.ready();
     assert_eq!(b.command(HostMsg::Release).0, Ok(()));
     b.run_for(100);
-    // The consumer stalls for 0.5 s: 5000 samples for a 4096-sample ring.
-    b.hw.now_us += 500_000;
-    b.hw.convert();
-    let lost = b.hw.ring.lost();
-    assert!(lost > 800, "{lost}");
-    b.poll();
-    let samples = b.app.status().samples;
-    // the end-of-run analysis and the frames still to send take a few more polls
-    b.run_for(100);
-    assert_eq!(
-        b.app.status().samples,
-        samples,
-        "no sample taken after the overrun"
-    );
+    // Every sample due so far was read; the reader then stops for 300 ms (3000 samples, for a
+    // ring of 2048), while the converter goes on.
+    let stall_from = b.hw.adc.next_index();
+    b.hw.adc.stall_reader(b.hw.now_us + 300_000);
+    b.run_for(299);
+    let before_resume = b.hw.adc.next_index();
+    b.run_for(1);
+    // At the poll that resumed reading, the ring held the last RING_SCANS samples.
+    let resumed_at = b.hw.adc.next_index() - crate::acquisition::RING_SCANS as u64;
+    assert!(before_resume < b.hw.adc.next_index());
+    b.run_for(1500);
     let msgs = b.msgs();
-    assert!(
-        errors(&msgs).contains(&ErrorCode::Overrun { lost_samples: lost }),
-        "{:?}",
-        errors(&msgs)
+    let base = b.app.run_base;
+    let gaps: Vec<Gap> = msgs
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Gap(g) => Some(*g),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        gaps,
+        [Gap {
+            run_id: 1,
+            first_sample: (stall_from - base) as u32,
+            count: (resumed_at - stall_from) as u32,
+        }]
     );
     let end = run_end(&msgs).unwrap();
-    assert_eq!((end.reason, end.overruns), (EndReason::Overrun, lost));
-    // No block reaches past the samples read before the loss was seen: ≈ 100 ms at 10 kS/s.
-    assert!(end.samples <= 1100, "{}", end.samples);
-    assert_eq!(b.app.status().overruns, lost);
+    assert_eq!(end.reason, EndReason::Stopped, "the run went on to its end");
+    assert_eq!(end.overruns, gaps[0].count);
+    assert_eq!(b.app.status().overruns, gaps[0].count);
+    // Blocks: numbered on, each of consecutive samples, the one after the gap starting at its end,
+    // and every sample holding the displacement of its own instant.
+    let blocks = sample_blocks(&msgs);
+    assert_eq!(
+        blocks.iter().map(|k| k.block).collect::<Vec<_>>(),
+        (0..blocks.len() as u32).collect::<Vec<_>>()
+    );
+    let mut next = 0;
+    for k in &blocks {
+        if k.first_sample != next {
+            assert_eq!(
+                (next, k.first_sample),
+                (gaps[0].first_sample, gaps[0].first_sample + gaps[0].count)
+            );
+        }
+        next = k.first_sample + k.samples() as u32;
+        b.hw.check_block(k, base);
+    }
+    assert_eq!(next, end.samples + end.overruns);
+}
+
+#[test]
+fn a_poll_takes_a_bounded_number_of_samples_and_a_backlog_drains_over_the_next_polls() {
+    let mut b = Bench::new();
+    b.hw.stop_s = 1.0;
+    b.ready();
+    assert_eq!(b.command(HostMsg::Release).0, Ok(()));
+    b.run_for(50);
+    // 150 ms without reading: 1500 samples wait in the 2048-scan ring (none lost).
+    b.hw.adc.stall_reader(b.hw.now_us + 150_000);
+    b.run_for(150);
+    let taken = |b: &Bench| b.app.builder.as_ref().unwrap().samples();
+    let before = taken(&b);
+    b.run_for(1);
+    let per_poll = b.app.cfg.samples_per_poll as u32;
+    assert_eq!(
+        taken(&b) - before,
+        per_poll,
+        "one poll takes at most samples_per_poll"
+    );
+    // Taking 128 a poll while 10 arrive, the backlog is gone within 13 polls, nothing lost.
+    b.run_for(14);
+    assert_eq!(b.app.next_index, b.hw.adc.next_index());
+    let msgs = b.msgs();
+    assert!(!msgs.iter().any(|m| matches!(m, DeviceMsg::Gap(_))));
+    assert_eq!(b.app.status().overruns, 0);
+}
+
+#[test]
+fn an_adc_overrun_restarts_the_converter_and_is_a_gap_not_a_shift() {
+    let mut b = Bench::new();
+    b.hw.stop_s = 0.6;
+    b.ready();
+    assert_eq!(b.command(HostMsg::Release).0, Ok(()));
+    b.run_for(200);
+    let at = b.hw.adc.next_index();
+    b.hw.adc.inject_overrun();
+    b.run_for(1000);
+    let msgs = b.msgs();
+    let base = b.app.run_base;
+    let gaps: Vec<Gap> = msgs
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Gap(g) => Some(*g),
+            _ => None,
+        })
+        .collect();
+    // The scan the overrun struck and those converted until the next read (one 1 ms poll: ten).
+    assert_eq!(gaps.len(), 1);
+    assert_eq!(gaps[0].first_sample as u64, at - base);
+    assert!((1..=11).contains(&gaps[0].count), "{:?}", gaps);
+    // After it, the samples are those of their own instants: nothing shifted by the lost ones.
+    for k in &sample_blocks(&msgs) {
+        b.hw.check_block(k, base);
+    }
+    assert_eq!(run_end(&msgs).unwrap().overruns, gaps[0].count);
+}
+
+#[test]
+fn a_rate_the_timer_cannot_make_is_run_at_the_nearest_and_recorded() {
+    let mut b = Bench::new();
+    let mut cfg = Configure::real_rig(0.3);
+    cfg.sample_rate_hz = 9_999;
+    assert_eq!(b.command(HostMsg::Configure(cfg)).0, Ok(()));
+    assert_eq!(b.command(HostMsg::Arm).0, Ok(()));
+    b.run_for(300);
+    let (r, mut msgs) = b.command(HostMsg::Release);
+    assert_eq!(r, Ok(()));
+    b.run_for(700);
+    msgs.extend(b.msgs());
+    let header = msgs
+        .iter()
+        .find_map(|m| match m {
+            DeviceMsg::RunStarted(h) => Some(*h),
+            _ => None,
+        })
+        .unwrap();
+    // 200 MHz / 20 002 = 9 999.0001 S/s: the rate used, not the one asked for.
+    assert_eq!(
+        header.clock,
+        SampleClock {
+            timer_hz: 200_000_000,
+            ticks_per_sample: 20_002
+        }
+    );
+    assert_eq!(header.config.sample_rate_hz, 9_999);
+    let base = b.app.run_base;
+    for k in &sample_blocks(&msgs) {
+        assert_eq!(
+            k.t_us,
+            header.t_us + header.clock.time_us(k.first_sample as u64)
+        );
+        b.hw.check_block(k, base);
+    }
+}
+
+#[test]
+fn ecr_range_changes_flag_exactly_the_settling_samples_and_no_reading_uses_them() {
+    let mut b = Bench::new();
+    b.hw.stop_s = 1.0;
+    b.hw.ecr_settles = true;
+    b.ready();
+    // Armed long enough for the autoranger to find 1e7 Ω (range 3) and settle.
+    b.run_for(1500);
+    assert_eq!(b.app.ecr.range(), 3);
+    let (r, mut msgs) = b.command(HostMsg::Release);
+    assert_eq!(r, Ok(()));
+    b.run_for(100);
+    // The contact drops to 10 Ω: the autoranger steps down to range 0, one change per block.
+    b.hw.ecr_r = 10.0;
+    b.run_for(1400);
+    msgs.extend(b.msgs());
+    let clock = msgs
+        .iter()
+        .find_map(|m| match m {
+            DeviceMsg::RunStarted(h) => Some(h.clock),
+            _ => None,
+        })
+        .unwrap();
+    let changes: Vec<EcrRangeChange> = msgs
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMsg::EcrRange(e) => Some(*e),
+            _ => None,
+        })
+        .collect();
+    let ranges: Vec<u8> = changes.iter().map(|c| c.range).collect();
+    assert_eq!(ranges, [3, 2, 1, 0], "{changes:?}");
+    // The run starts settled on range 3; each change settles for its range's stated time.
+    assert_eq!((changes[0].first_sample, changes[0].settling), (0, 0));
+    for c in &changes[1..] {
+        assert_eq!(c.settling, crate::ecr::settling_samples(c.range, clock));
+    }
+    assert!(changes
+        .windows(2)
+        .all(|w| w[0].first_sample < w[1].first_sample));
+    // What the frames say about sample i: its range and whether it settles.
+    let range_of = |i: u32| changes.iter().rev().find(|c| c.first_sample <= i).unwrap();
+    let settling = |i: u32| {
+        let c = range_of(i);
+        i < c.first_sample + c.settling as u32
+    };
+    let blocks = sample_blocks(&msgs);
+    let pos = Channel::Ecr.index() - 1; // after displacement and velocity; force is counted too
+    let pos = blocks[0].channels.position(Channel::Ecr).unwrap_or(pos);
+    let garbage = b.hw.cal[3].to_count(SETTLING_V);
+    let mut flagged_garbage = 0;
+    for k in &blocks {
+        // The range a block declares is the one its first sample was converted on.
+        assert_eq!(
+            k.ecr_range,
+            range_of(k.first_sample).range,
+            "block {}",
+            k.block
+        );
+        for i in 0..k.samples() {
+            let idx = k.first_sample + i as u32;
+            if k.sample(i).unwrap()[pos] == garbage {
+                // Every sample taken while the amplifier settled is flagged as settling.
+                assert!(settling(idx), "sample {idx} unsettled but not flagged");
+                flagged_garbage += 1;
+            }
+        }
+        // No reading is made of settling samples or of samples from two ranges: each one is the
+        // contact's resistance before or after the step.
+        let l = k.log10_ecr_ohm;
+        assert!(
+            l.is_nan() || (l - 7.0).abs() < 0.01 || (l - 1.0).abs() < 0.01,
+            "block {}: log10 R = {l}",
+            k.block
+        );
+    }
+    assert!(flagged_garbage > 0, "the settling was exercised");
+    let last = blocks.last().unwrap();
+    assert!((last.log10_ecr_ohm - 1.0).abs() < 0.01);
 }
 
 #[test]
@@ -792,7 +1062,7 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
     #[test]
     fn random_bytes_never_panic_and_every_reply_decodes(chunks in prop::collection::vec(prop::collection::vec(any::<u8>(), 0..300), 1..8)) {
-        let mut b = Bench::with_store(20_000);
+        let mut b = Bench::with_store(16 * 1024);
         b.ready();
         for c in &chunks {
             let now = b.hw.now_us;
@@ -810,7 +1080,7 @@ proptest! {
 
     #[test]
     fn random_commands_never_panic(cmds in prop::collection::vec(0u8..10, 1..30), k in any::<u32>()) {
-        let mut b = Bench::with_store(20_000);
+        let mut b = Bench::with_store(16 * 1024);
         for c in cmds {
             let msg = match c {
                 0 => HostMsg::Configure(Configure::real_rig(0.3)),
@@ -835,19 +1105,30 @@ fn a_pull_replays_the_same_bytes_from_any_block() {
     let mut b = Bench::new();
     let frames = full_run(&mut b);
     let run_frames: Vec<_> = frames.iter().filter(|f| f.1.msg.is_run_frame()).collect();
-    let n_blocks = run_frames.len() - 3;
+    let n_blocks = run_frames.iter().filter(|f| is_block(&f.1.msg)).count();
     assert!(n_blocks > 20);
+    assert!(run_frames
+        .iter()
+        .any(|f| matches!(f.1.msg, DeviceMsg::EcrRange(_))));
     for from in [0, 1, n_blocks / 2, n_blocks - 1, n_blocks + 5] {
         b.send(HostMsg::Pull {
             run_id: 1,
             from_block: from as u32,
         });
-        // three polls per frame
-        b.run_for(400);
+        b.run_for(200);
         let mut again = b.take();
         assert!(matches!(again.remove(0).1.msg, DeviceMsg::Ack { .. }));
-        let expect: Vec<&Vec<u8>> = std::iter::once(&run_frames[0].0)
-            .chain(run_frames[1 + from.min(n_blocks)..].iter().map(|f| &f.0))
+        // The header, then the live order from just after block `from − 1`: the events between
+        // blocks `from − 1` and `from` come along, each in its place (those before were received
+        // with the blocks before them).
+        let after = run_frames
+            .iter()
+            .rposition(|f| matches!(&f.1.msg, DeviceMsg::Packed(p) if (p.block as usize) < from))
+            .map_or(1, |i| i + 1);
+        let expect: Vec<&Vec<u8>> = run_frames[..1]
+            .iter()
+            .chain(&run_frames[after..])
+            .map(|f| &f.0)
             .collect();
         let got: Vec<&Vec<u8>> = again.iter().map(|f| &f.0).collect();
         assert_eq!(got, expect, "pull from block {from}");
@@ -882,32 +1163,140 @@ fn a_cable_pulled_mid_run_loses_nothing() {
     );
 }
 
+/// Runs `b` until the flash holds everything of the finished run.
+fn settle_flash(b: &mut Bench) {
+    for _ in 0..20_000 {
+        if b.app.store().flash_state() == FlashState::Done {
+            return;
+        }
+        b.run_for(1);
+    }
+    panic!("flash copy not done: {:?}", b.app.store().flash_state());
+}
+
 #[test]
-fn a_long_run_keeps_its_last_blocks_and_says_which() {
-    // Room for 20 blocks of the 5-channel run.
-    let mut b = Bench::with_store(20 * 5 * BLOCK_LEN);
+fn a_run_longer_than_ram_is_pulled_whole_from_flash() {
+    // RAM for a few packed blocks; the run has over 60. (RAM this small cannot ride out an erase
+    // of the real 1.1 s: the flash here is instant.)
+    let mut b = Bench::with_store(2 * 1024);
+    b.hw.flash = MemFlash::new(vec![0; 1 << 20], FlashGeometry::H743_BANK2);
     let frames = full_run(&mut b);
-    let total = frames
+    let run_frames: Vec<&Vec<u8>> = frames
         .iter()
-        .filter(|f| matches!(f.1.msg, DeviceMsg::Samples(_)))
-        .count() as u32;
-    assert!(total > 40);
-    assert_eq!(b.app.store().oldest_block(), total - 20);
+        .filter(|f| f.1.msg.is_run_frame())
+        .map(|f| &f.0)
+        .collect();
+    let total = frames.iter().filter(|f| is_block(&f.1.msg)).count() as u32;
+    assert!(total > 60);
+    settle_flash(&mut b);
+    assert!(b.app.store().first_block_in_ram() > total / 2);
+    b.take();
     b.send(HostMsg::Pull {
         run_id: 1,
         from_block: 0,
     });
-    b.run_for(100);
-    let again = b.take();
-    let blocks: Vec<u32> = block_indices(again.iter().map(|f| &f.1.msg));
-    assert_eq!(blocks, (total - 20..total).collect::<Vec<_>>());
-    // The held blocks are the very frames first sent.
-    for f in again
+    b.run_for(200);
+    let mut again = b.take();
+    assert!(matches!(again.remove(0).1.msg, DeviceMsg::Ack { .. }));
+    let got: Vec<&Vec<u8>> = again.iter().map(|f| &f.0).collect();
+    assert_eq!(got, run_frames, "the very frames first sent, all of them");
+    assert_eq!(b.hw.flash.violations(), 0);
+}
+
+#[test]
+fn after_a_power_cut_the_rig_offers_the_last_run_from_flash() {
+    let mut b = Bench::new();
+    let frames = full_run(&mut b);
+    let run_frames: Vec<Vec<u8>> = frames
         .iter()
-        .filter(|f| matches!(f.1.msg, DeviceMsg::Samples(_)))
-    {
-        assert!(frames.iter().any(|g| g.0 == f.0));
+        .filter(|f| f.1.msg.is_run_frame())
+        .map(|f| f.0.clone())
+        .collect();
+    settle_flash(&mut b);
+    // Power cut: the application and its RAM are gone; the flash (in the hardware) stays.
+    b.hw.flash.power_cut();
+    b.app = App::new(AppConfig::new(42), store(256 * 1024));
+    b.poll();
+    assert_eq!(
+        b.app.status().run_id,
+        1,
+        "the recovered run is the rig's last run"
+    );
+    assert_eq!(b.app.state(), RigState::Idle);
+    b.take();
+    b.send(HostMsg::Pull {
+        run_id: 1,
+        from_block: 0,
+    });
+    b.run_for(300);
+    let mut again = b.take();
+    assert!(matches!(again.remove(0).1.msg, DeviceMsg::Ack { .. }));
+    let got: Vec<Vec<u8>> = again.into_iter().map(|f| f.0).collect();
+    assert_eq!(got, run_frames, "bit-identical from flash");
+    // The next run gets the next number.
+    b.ready();
+    b.take();
+    b.send(HostMsg::Release);
+    b.run_for(20);
+    let msgs = b.msgs();
+    assert!(
+        msgs.iter()
+            .any(|m| matches!(m, DeviceMsg::RunStarted(h) if h.run_id == 2)),
+        "{msgs:?}"
+    );
+}
+
+#[test]
+fn pull_blocks_sends_those_blocks_only_then_the_live_stream_goes_on() {
+    let mut b = Bench::new();
+    b.ready();
+    b.take();
+    b.send(HostMsg::Release);
+    b.run_for(100);
+    let first = b.take();
+    let seen = block_indices(first.iter().map(|f| &f.1.msg));
+    assert!(seen.len() > 10);
+    let (r, msgs) = b.command(HostMsg::PullBlocks {
+        run_id: 1,
+        first: 2,
+        count: 3,
+    });
+    assert_eq!(r, Ok(()));
+    let mut rest = msgs;
+    for _ in 0..3000 {
+        b.run_for(1);
+        rest.extend(b.msgs());
+        if b.app.state() == RigState::Finished && !b.app.sending() {
+            break;
+        }
     }
+    let blocks = block_indices(rest.iter());
+    assert_eq!(&blocks[..3], &[2, 3, 4], "the asked blocks first");
+    let live: Vec<u32> = blocks[3..].to_vec();
+    let end = run_end(&rest).unwrap();
+    assert_eq!(
+        seen.iter().chain(live.iter()).copied().collect::<Vec<_>>(),
+        (0..end.blocks).collect::<Vec<_>>(),
+        "the live stream resumed where it was"
+    );
+    // Out of range: nothing but the Ack.
+    let (r, msgs) = b.command(HostMsg::PullBlocks {
+        run_id: 1,
+        first: end.blocks + 10,
+        count: u32::MAX,
+    });
+    assert_eq!(r, Ok(()));
+    b.run_for(20);
+    assert!(block_indices(msgs.iter().chain(b.msgs().iter())).is_empty());
+    assert_eq!(
+        b.command(HostMsg::PullBlocks {
+            run_id: 2,
+            first: 0,
+            count: 1
+        })
+        .0,
+        Err(ErrorCode::NoRun)
+    );
 }
 
 #[test]
@@ -926,7 +1315,7 @@ fn abort_keeps_the_run_and_marks_it() {
         (end.reason, res.verdict),
         (EndReason::Aborted, Verdict::Aborted)
     );
-    assert!(!b.hw.adc_on);
+    assert!(!b.hw.adc.is_running());
     assert_eq!(
         b.command(HostMsg::Pull {
             run_id: 1,
@@ -1003,7 +1392,7 @@ fn lamps_show_idle_armed_running_and_fault() {
 }
 
 /// The end-of-run fit is spread over polls: once the pin has stopped the run stays `Running`
-/// (no new run can be configured or armed) until the result and end frames exist, a few polls
+/// (no new run can be configured or armed) until the result and end frames exist, some polls
 /// later, and the result is the pipeline's one-call result.
 #[test]
 fn the_end_of_run_fit_is_spread_over_polls() {
@@ -1020,39 +1409,23 @@ fn the_end_of_run_fit_is_spread_over_polls() {
             if analysing_polls == 2 {
                 let (r, _) = b.command(HostMsg::Configure(Configure::real_rig(0.3)));
                 assert_eq!(r, Err(ErrorCode::Busy));
-                assert!(b.app.store().frame(Item::End).is_none());
+                assert!(b.app.store().end().is_none());
             }
         }
         if b.app.state() == RigState::Finished {
             break;
         }
     }
-    let half_cycles = b.app.pipeline.as_ref().unwrap().half_cycles().len();
+    let p = b.app.pipeline.as_ref().unwrap();
+    let half_cycles = p.half_cycles().len();
     assert!(half_cycles > 10, "{half_cycles}");
     // 4 rows per poll over ~35 passes of the half-cycles
     assert!(analysing_polls > half_cycles, "{analysing_polls} polls");
-    let one_call = b.app.pipeline.as_ref().unwrap().finish(b.app.run_id());
-    let stored = b.app.store().frame(Item::Result).map(|f| f.1);
+    let one_call = p.finish(b.app.run_id());
+    let stored = b
+        .app
+        .store()
+        .result()
+        .map(|f| decode_one::<DeviceMsg>(f).unwrap().msg);
     assert_eq!(stored, Some(DeviceMsg::Result(one_call)));
-}
-
-/// A poll after the application was held up takes a bounded number of samples (twice what arrives
-/// per poll at 10 kS/s: 20) and sends no frame; the backlog is caught up over the next polls.
-#[test]
-fn a_backlog_is_caught_up_in_bounded_polls() {
-    let mut b = Bench::new();
-    b.ready();
-    assert_eq!(b.command(HostMsg::Release).0, Ok(()));
-    b.run_for(20);
-    b.take();
-    let before = b.app.status().samples;
-    b.hw.now_us += 30_000; // 300 samples wait
-    b.poll();
-    assert_eq!(b.app.status().samples - before, 20);
-    assert!(b.take().is_empty(), "no frame while catching up");
-    for _ in 0..40 {
-        b.run_for(1);
-    }
-    // caught up: the 300 of the stall and 40 polls × 10 since, all taken
-    assert_eq!(b.app.status().samples - before, 300 + 400);
 }

@@ -8,6 +8,9 @@
 //! Every method is non-blocking: the application is a state machine polled with the time, and a
 //! slow peripheral (SPI thermocouple, USB) is served by its own task that these methods only talk to.
 
+pub use crate::acquisition::Batch;
+pub use crate::wire::SampleClock;
+
 /// Drive of the release electromagnet (an H-bridge on the board: PWM duty and polarity).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -65,16 +68,29 @@ pub const ANALOG_CHANNELS: usize = 4;
 /// One conversion of every analog channel, 16-bit counts.
 pub type AnalogSample = [u16; ANALOG_CHANNELS];
 
-/// Timer-triggered conversions of the analog channels into a ring the application drains.
+/// Timer-triggered scans of the analog channels, written by DMA round a ring the application reads.
+///
+/// Every sample has an index in the converter's stream (0 = the first conversion after
+/// [`SampleSource::adc_start`]) that comes from where the DMA wrote it, never from counting reads;
+/// samples that could not be read (the reader fell a whole ring behind, or the ADC overran and was
+/// restarted) show as a jump in index between two reads, so the caller knows exactly which are
+/// missing.
 pub trait SampleSource {
-    /// Starts converting at `rate_hz`. Returns false if the converter could not start.
-    fn adc_start(&mut self, rate_hz: u32) -> bool;
+    /// The sample clock the converter would run at for `rate_hz`: the timer's nearest rate to it
+    /// (`None`: no setting comes near).
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock>;
+    /// Starts a new stream at the rate of [`SampleSource::adc_clock`]; returns that clock, or
+    /// `None` if the converter could not start.
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock>;
     fn adc_stop(&mut self);
     fn adc_running(&self) -> bool;
-    /// Moves the oldest converted samples into `out`; returns how many.
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize;
-    /// Samples lost so far because the ring was full (cumulative since the last start).
-    fn adc_lost(&self) -> u32;
+    /// Index of the first sample whose conversion has not begun: whatever the rig changes now (an
+    /// ECR range, the magnet) acts on samples from this index on.
+    fn adc_next_index(&mut self) -> u64;
+    /// Copies the oldest samples not yet read into `out` (at most `out.len()`); the batch says the
+    /// index of the first. A batch starting after the index that followed the previous one means the
+    /// samples in between are lost (an empty batch still carries where reading goes on).
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch;
 }
 
 /// The user button (raw level; the application debounces).
@@ -102,6 +118,56 @@ pub trait Link {
     fn send_frame(&mut self, frame: &[u8]) -> bool;
 }
 
+/// Shape of the flash that keeps runs across power loss: bank 2 of the STM32H743 is 8 sectors of
+/// 128 KiB, programmed in 32-byte flash words (each written once after an erase: the ECC covers the
+/// whole word).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FlashGeometry {
+    pub sector_bytes: u32,
+    pub sectors: u32,
+}
+
+impl FlashGeometry {
+    /// Bank 2 of the STM32H743 (0x0810_0000, 1 MiB).
+    pub const H743_BANK2: FlashGeometry = FlashGeometry {
+        sector_bytes: 128 * 1024,
+        sectors: 8,
+    };
+
+    pub const fn bytes(&self) -> u32 {
+        self.sector_bytes * self.sectors
+    }
+}
+
+/// Programming unit of [`RunFlash`]: a 256-bit flash word.
+pub const FLASH_WORD: usize = 32;
+/// Most bytes one [`RunFlash::flash_program`] takes (whole words).
+pub const FLASH_MAX_PROGRAM: usize = 256;
+
+/// The flash the run store writes (bank 2 on the board; a model of it on the host).
+///
+/// Erase and program only *start* an operation, which runs while the application goes on; meanwhile
+/// [`RunFlash::flash_busy`] is true and every call but `flash_busy` is refused (on the STM32H7 a read
+/// of the bank being written would stall the CPU for the whole erase). Offsets are from the start of
+/// the flash.
+pub trait RunFlash {
+    fn flash_geometry(&self) -> FlashGeometry;
+    /// An erase or program is under way.
+    fn flash_busy(&mut self) -> bool;
+    /// Starts erasing sector `sector` (every byte to 0xFF). False, nothing started, when busy or
+    /// out of range.
+    fn flash_erase(&mut self, sector: u32) -> bool;
+    /// Starts programming `data` at `offset`: both multiples of [`FLASH_WORD`], at most
+    /// [`FLASH_MAX_PROGRAM`] bytes, inside one sector, every word erased since it was last
+    /// programmed. False, nothing started, when busy or refused.
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool;
+    /// Reads `out.len()` bytes at `offset`. False when busy or out of range.
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool;
+    /// Whether the last finished erase or program failed (reading it clears it).
+    fn flash_take_error(&mut self) -> bool;
+}
+
 /// A monotonic clock, microseconds.
 pub trait Clock {
     fn now_us(&self) -> u64;
@@ -109,12 +175,20 @@ pub trait Clock {
 
 /// Everything the application drives.
 pub trait Hardware:
-    Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link
+    Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link + RunFlash
 {
 }
 
 impl<
-        T: Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link,
+        T: Magnet
+            + Thermocouple
+            + HeaterOutput
+            + EcrFrontEnd
+            + SampleSource
+            + Button
+            + Led
+            + Link
+            + RunFlash,
     > Hardware for T
 {
 }

@@ -222,7 +222,11 @@ impl PeakFitter {
         let (mut sx, mut sxg) = (0.0, 0.0);
         // Newest to oldest, as `at(age)` for age = 0..=2·half, without an index modulo per sample.
         let (newer, older) = self.ring.split_at(self.head.min(RING));
-        let window = newer.iter().rev().chain(older.iter().rev()).take(2 * half + 1);
+        let window = newer
+            .iter()
+            .rev()
+            .chain(older.iter().rev())
+            .take(2 * half + 1);
         for (age, &c) in window.enumerate() {
             let k = age.abs_diff(half);
             let x = c as f64 - centre;

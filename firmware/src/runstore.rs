@@ -1,237 +1,848 @@
-//! The last run, kept in RAM so that a host that connected late or lost the cable can pull it again.
+//! The whole run, kept: every frame of the last run in RAM and in flash, so that a host that lost
+//! the cable, crashed, or found the rig power-cycled can still pull all of it.
 //!
-//! What is kept: the run's header, result and end frames always; its sample blocks in a ring of
-//! whole blocks over a caller-provided count buffer, so the *most recent* blocks that fit are held
-//! (on the board: [`BOARD_COUNTS`] = 72 Ki counts, i.e. the last 1.47 s of a run with all five
-//! channels at 10 kS/s, the last 3.7 s of a displacement + velocity run; see `firmware/README.md`).
-//! A run that fits is held entirely. Each frame keeps the sequence number it was first sent with, so a replay is
-//! byte-for-byte the original frame.
+//! # What is kept, where
 //!
-//! Blocks are rebuilt from their counts and a few bytes of per-block metadata instead of being
-//! stored encoded, which keeps ~2 bytes per count.
+//! A run is a sequence of *records*, each one wire frame exactly as it was (or will be) sent, with
+//! its sequence number: the header, then the compressed sample blocks and the run's events (gaps,
+//! ECR range changes) in the order they happened, then the result and the end. A record is the
+//! frame's length (u16, little-endian) followed by the frame; the frame's own CRC-32 checks it.
+//!
+//! * **RAM**: a ring over a few large buffers (on the board: AXI SRAM, SRAM1–2, DTCM) holds the most
+//!   recent records, the header, result and end are also kept apart. The live stream and pulls are
+//!   sent from here, byte for byte.
+//! * **Flash** (bank 2 on the board, behind [`RunFlash`]): the same records, written as they
+//!   complete, in 32-byte flash words. A sector is erased just before the run needs it (erasing all
+//!   of bank 2 takes ~9 s), and each run starts at the sector after the previous run's last one, so
+//!   the wear is spread over the bank. When a run outgrows the flash, the flash keeps its beginning
+//!   (a cut) and always its result and end (room is reserved for them); the RAM ring keeps its most
+//!   recent part, and only records the ring had to drop before the flash took them are lost (each
+//!   pull says which blocks it could not send).
+//! * **After a power loss** [`RunStore::recover`] finds the newest run in flash (the highest run id
+//!   among the sectors that open with a valid header) and reads it back record by record, each frame
+//!   checked (CRC, decoding, run id, block order); a torn or foreign record ends it there. The run is
+//!   then served from flash.
+//!
+//! The application ([`crate::app`]) encodes each frame once, stores it here, and sends from here;
+//! [`RunStore::service`] moves the flash along one operation per poll.
 
-use crate::wire::{
-    ChannelSet, Counts, DeviceMsg, OnboardResult, RunEnd, RunHeader, SampleBlock, SamplesRef,
-    BLOCK_LEN,
-};
+use crate::hal::{FlashGeometry, RunFlash, FLASH_MAX_PROGRAM, FLASH_WORD};
+use crate::wire::frame::{decode_one, MAX_FRAME};
+use crate::wire::{DeviceMsg, BLOCK_LEN};
 
-/// Counts the board keeps for the last run (144 KiB of the 256 KiB static RAM budget): the last 1.47 s
-/// of a five-channel run at 10 kS/s, 1.84 s with four channels, 3.7 s with displacement + velocity.
-pub const BOARD_COUNTS: usize = 72 * 1024;
-/// Block slots the board keeps: enough for the narrowest run (two channels) filling [`BOARD_COUNTS`].
-pub const BOARD_BLOCKS: usize = BOARD_COUNTS / (2 * BLOCK_LEN);
+pub mod memflash;
 
-/// Per-block data not in the counts.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BlockMeta {
-    pub seq: u32,
-    pub t_us: u64,
-    pub ecr_range: u8,
-    pub log10_ecr_ohm: f32,
-    pub temp_c: f32,
-    /// Number of counts (less than a full block only for the last one).
-    pub len: u16,
-}
+/// The RAM ring on the board, by buffer: 384 KiB of the AXI SRAM, SRAM1 and SRAM2 (128 KiB each),
+/// and the 48 KiB of the DTCM the block index leaves (see `firmware/README.md` for the memory map).
+/// 688 KiB: the last ~25 s of a five-channel run at 10 kS/s, and far more than the 2.2 s of data a
+/// sector erase (at most) keeps waiting.
+pub const BOARD_RING_BYTES: [usize; 4] = [384 * 1024, 128 * 1024, 128 * 1024, 48 * 1024];
 
-impl BlockMeta {
-    pub const EMPTY: BlockMeta = BlockMeta {
-        seq: 0,
-        t_us: 0,
-        ecr_range: 0,
-        log10_ecr_ohm: 0.0,
-        temp_c: 0.0,
-        len: 0,
-    };
-}
+/// Largest header, result or end frame (they are ~100 bytes).
+pub const SLOT: usize = 256;
+/// Blocks of the longest run the protocol allows (60 s at 20 kS/s): what the block index must hold.
+pub const MAX_RUN_BLOCKS: usize = 60 * 20_000 / BLOCK_LEN + 1;
+/// Bytes of a record's length prefix.
+const LEN_BYTES: u32 = 2;
+/// Flash room always kept free for the result and end records (and the last word's padding).
+pub const FLASH_RESERVE: u32 = 2 * (LEN_BYTES + SLOT as u32) + FLASH_WORD as u32;
 
-impl Default for BlockMeta {
-    fn default() -> Self {
-        Self::EMPTY
-    }
-}
+type Slot = heapless::Vec<u8, SLOT>;
 
-/// The stored run (see the module docs).
-pub struct RunStore<'a> {
-    counts: &'a mut [u16],
-    meta: &'a mut [BlockMeta],
-    header: Option<(u32, RunHeader)>,
-    result: Option<(u32, OnboardResult)>,
-    end: Option<(u32, RunEnd)>,
-    channels: ChannelSet,
-    /// Block slots available for this run.
-    slots: usize,
-    /// Blocks pushed so far.
-    blocks: u32,
-}
-
-/// One item of a stored run, in the order it is sent.
+/// What [`RunStore::read`] found at a position of the run's stream.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Item {
-    Header,
-    Block(u32),
-    Result,
+pub enum Read {
+    /// A frame of `len` bytes was copied; the next record starts at `next`.
+    Frame { len: usize, next: u32 },
+    /// Held in flash only, and the flash is busy: ask again later.
+    Busy,
+    /// Neither in RAM nor in flash any more; `next` is the oldest position still held after it.
+    Lost { next: u32 },
+    /// Past the last record (so far).
     End,
 }
 
-impl<'a> RunStore<'a> {
-    /// A store over `counts` (block data) and `meta` (one entry per block slot; it needs no more than
-    /// `counts.len() / (2 * BLOCK_LEN)` entries since every run has at least two channels).
-    pub fn new(counts: &'a mut [u16], meta: &'a mut [BlockMeta]) -> Self {
-        RunStore {
-            counts,
-            meta,
-            header: None,
-            result: None,
-            end: None,
-            channels: ChannelSet::EMPTY,
-            slots: 0,
-            blocks: 0,
+/// What [`RunStore::recover`] found in flash.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Recovered {
+    pub run_id: u32,
+    pub blocks: u32,
+    pub events: u32,
+    /// The result and end records were there (the run finished before the power went).
+    pub finished: bool,
+}
+
+/// How the flash copy of the current run is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FlashState {
+    /// No run, or the flash has no room at all.
+    Off,
+    /// Records are being written as they come.
+    Writing,
+    /// Everything of the run that the flash keeps is written.
+    Done,
+    /// An erase or program failed, or the writer fell so far behind that the RAM ring had to drop
+    /// records it had not written: nothing more of this run goes to flash.
+    Failed,
+}
+
+// ------------------------------------------------------------------------------------------------
+// RAM ring
+// ------------------------------------------------------------------------------------------------
+
+/// Bytes `lo..hi` of the run's stream, over several buffers taken as one circle (stream position
+/// `p` lives at offset `p mod cap`).
+struct Ring<'a> {
+    segs: heapless::Vec<&'a mut [u8], 4>,
+    cap: u32,
+    lo: u32,
+    hi: u32,
+}
+
+impl<'a> Ring<'a> {
+    fn new(buffers: impl IntoIterator<Item = &'a mut [u8]>) -> Self {
+        let mut segs = heapless::Vec::new();
+        let mut cap = 0u32;
+        for b in buffers {
+            let len = b.len().min(u32::MAX as usize / 2) as u32;
+            if len > 0 && cap.checked_add(len).is_some_and(|c| c <= u32::MAX / 2) {
+                cap += len;
+                let _ = segs.push(b);
+            }
+        }
+        Ring {
+            segs,
+            cap,
+            lo: 0,
+            hi: 0,
         }
     }
 
-    /// Forgets the previous run and opens a new one.
-    pub fn begin(&mut self, seq: u32, header: RunHeader) {
-        let width = header.config.channels.len().max(1);
-        self.channels = header.config.channels;
-        self.slots = (self.counts.len() / (width * BLOCK_LEN)).min(self.meta.len());
-        self.blocks = 0;
-        self.header = Some((seq, header));
-        self.result = None;
-        self.end = None;
+    fn reset(&mut self, at: u32) {
+        self.lo = at;
+        self.hi = at;
+    }
+
+    fn holds(&self, pos: u32, len: u32) -> bool {
+        pos >= self.lo && pos.checked_add(len).is_some_and(|e| e <= self.hi)
+    }
+
+    /// Buffer and offset in it of ring offset `off` (< `cap`).
+    fn locate(&self, off: usize) -> (usize, usize) {
+        let mut start = 0;
+        for (i, s) in self.segs.iter().enumerate() {
+            if off < start + s.len() {
+                return (i, off - start);
+            }
+            start += s.len();
+        }
+        (0, 0)
+    }
+
+    /// Copies `out.len()` bytes from stream position `pos` (the caller checked they are held).
+    fn read(&self, pos: u32, out: &mut [u8]) {
+        if self.cap == 0 {
+            return;
+        }
+        let cap = self.cap as usize;
+        let mut off = (pos % self.cap) as usize;
+        let mut done = 0;
+        while done < out.len() {
+            let (s, o) = self.locate(off);
+            let seg = &self.segs[s];
+            let n = (seg.len() - o).min(out.len() - done);
+            out[done..done + n].copy_from_slice(&seg[o..o + n]);
+            done += n;
+            off = (off + n) % cap;
+        }
+    }
+
+    /// Appends at `hi` (the caller made room).
+    fn append(&mut self, bytes: &[u8]) {
+        if self.cap == 0 {
+            return;
+        }
+        let cap = self.cap as usize;
+        let mut off = (self.hi % self.cap) as usize;
+        let mut done = 0;
+        while done < bytes.len() {
+            let (s, o) = self.locate(off);
+            let seg = &mut self.segs[s];
+            let n = (seg.len() - o).min(bytes.len() - done);
+            seg[o..o + n].copy_from_slice(&bytes[done..done + n]);
+            done += n;
+            off = (off + n) % cap;
+        }
+        self.hi += bytes.len() as u32;
+    }
+
+    fn read_len(&self, pos: u32) -> Option<u32> {
+        if !self.holds(pos, LEN_BYTES) {
+            return None;
+        }
+        let mut b = [0u8; 2];
+        self.read(pos, &mut b);
+        Some(u16::from_le_bytes(b) as u32)
+    }
+}
+
+// ------------------------------------------------------------------------------------------------
+// Flash writer
+// ------------------------------------------------------------------------------------------------
+
+/// The operation the flash is running for the store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Op {
+    Erase,
+    Program {
+        len: u32,
+    },
+    /// Started for an earlier run: its outcome no longer matters.
+    Stale,
+}
+
+/// The run's flash image: the stream's records up to `cut` (all of them if none), then the result
+/// and end records, laid out from sector `start` on, wrapping around the bank.
+#[derive(Debug, Clone, Copy)]
+struct Writer {
+    geometry: FlashGeometry,
+    start: u32,
+    /// Sectors of the image erased so far.
+    erased: u32,
+    /// Bytes of the image programmed so far (whole words, except after recovery).
+    written: u32,
+    cut: Option<u32>,
+    state: FlashState,
+    inflight: Option<Op>,
+}
+
+impl Writer {
+    const OFF: Writer = Writer {
+        geometry: FlashGeometry {
+            sector_bytes: 0,
+            sectors: 0,
+        },
+        start: 0,
+        erased: 0,
+        written: 0,
+        cut: None,
+        state: FlashState::Off,
+        inflight: None,
+    };
+
+    fn capacity(&self) -> u32 {
+        self.geometry.bytes()
+    }
+
+    /// Flash offset of image position `q`.
+    fn phys(&self, q: u32) -> u32 {
+        let sb = self.geometry.sector_bytes.max(1);
+        let sectors = self.geometry.sectors.max(1);
+        ((self.start + q / sb) % sectors) * sb + q % sb
+    }
+
+    /// Sectors the image occupies once `written` bytes are in.
+    fn sectors_used(&self) -> u32 {
+        self.written.div_ceil(self.geometry.sector_bytes.max(1))
+    }
+}
+
+/// Reads image bytes `q..` from flash, across the wrap of the bank.
+fn read_image<F: RunFlash>(flash: &mut F, w: &Writer, q: u32, out: &mut [u8]) -> bool {
+    let sb = w.geometry.sector_bytes;
+    if sb == 0 {
+        return false;
+    }
+    let mut done = 0;
+    while done < out.len() {
+        let at = q + done as u32;
+        let n = ((sb - at % sb) as usize).min(out.len() - done);
+        if !flash.flash_read(w.phys(at), &mut out[done..done + n]) {
+            return false;
+        }
+        done += n;
+    }
+    true
+}
+
+// ------------------------------------------------------------------------------------------------
+// The store
+// ------------------------------------------------------------------------------------------------
+
+/// The last run (see the module docs).
+pub struct RunStore<'a> {
+    ring: Ring<'a>,
+    /// Stream position of each block's record.
+    index: &'a mut [u32],
+    header: Slot,
+    result: Slot,
+    end: Slot,
+    run_id: Option<u32>,
+    blocks: u32,
+    events: u32,
+    /// Blocks refused because the index was full (never the case with [`MAX_RUN_BLOCKS`]).
+    refused: u32,
+    writer: Writer,
+}
+
+impl<'a> RunStore<'a> {
+    /// A store over RAM `buffers` (taken as one ring) and a block `index` of [`MAX_RUN_BLOCKS`]
+    /// entries (a shorter index keeps fewer blocks of a long run). The ring must hold what arrives
+    /// while a sector is erased (up to 2.2 s of the stream), and at least two frames and a flash
+    /// word, or the flash copy stops ([`FlashState::Failed`]) and the run lives in RAM only.
+    pub fn new(buffers: impl IntoIterator<Item = &'a mut [u8]>, index: &'a mut [u32]) -> Self {
+        RunStore {
+            ring: Ring::new(buffers),
+            index,
+            header: Slot::new(),
+            result: Slot::new(),
+            end: Slot::new(),
+            run_id: None,
+            blocks: 0,
+            events: 0,
+            refused: 0,
+            writer: Writer::OFF,
+        }
+    }
+
+    /// Bytes of RAM the ring has.
+    pub fn ram_capacity(&self) -> u32 {
+        self.ring.cap
     }
 
     pub fn run_id(&self) -> Option<u32> {
-        self.header.as_ref().map(|h| h.1.run_id)
+        self.run_id
     }
 
-    /// Blocks pushed so far (held or not).
+    /// Blocks stored so far.
     pub fn blocks(&self) -> u32 {
         self.blocks
     }
 
-    /// Index of the oldest block still held.
-    pub fn oldest_block(&self) -> u32 {
-        self.blocks.saturating_sub(self.slots as u32)
-    }
-
-    /// How many blocks of this run the store can hold.
-    pub fn capacity_blocks(&self) -> usize {
-        self.slots
+    /// Events stored so far.
+    pub fn events(&self) -> u32 {
+        self.events
     }
 
     pub fn is_finished(&self) -> bool {
-        self.end.is_some()
+        !self.end.is_empty()
     }
 
-    /// Stores a block (the next in order; others are refused).
-    pub fn push_block(&mut self, seq: u32, b: &SampleBlock) -> bool {
-        let width = self.channels.len();
-        if self.header.is_none()
-            || self.slots == 0
-            || b.block != self.blocks
-            || b.channels != self.channels
-            || width == 0
-        {
+    pub fn flash_state(&self) -> FlashState {
+        self.writer.state
+    }
+
+    /// The header frame, if a run is held.
+    pub fn header(&self) -> Option<&[u8]> {
+        (!self.header.is_empty()).then_some(&self.header[..])
+    }
+
+    pub fn result(&self) -> Option<&[u8]> {
+        (!self.result.is_empty()).then_some(&self.result[..])
+    }
+
+    pub fn end(&self) -> Option<&[u8]> {
+        (!self.end.is_empty()).then_some(&self.end[..])
+    }
+
+    /// Stream position just past the last block or event.
+    pub fn end_pos(&self) -> u32 {
+        self.ring.hi
+    }
+
+    /// Stream position of the first record after the header.
+    pub fn first_pos(&self) -> u32 {
+        LEN_BYTES + self.header.len() as u32
+    }
+
+    /// Stream position of block `k`'s record.
+    pub fn block_pos(&self, k: u32) -> Option<u32> {
+        (k < self.blocks).then(|| self.index.get(k as usize).copied())?
+    }
+
+    /// The flash image end: where stream records stop being written (the cut) or the stream end.
+    fn base(&self) -> u32 {
+        self.writer.cut.unwrap_or(self.ring.hi)
+    }
+
+    /// Blocks whose record is in flash now (they survive a power loss).
+    pub fn durable_blocks(&self) -> u32 {
+        let limit = self.writer.written.min(self.base());
+        // Blocks are in stream order: count those that end within the written image.
+        let (mut lo, mut hi) = (0u32, self.blocks);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            let end = self
+                .index
+                .get(mid as usize + 1)
+                .copied()
+                .filter(|_| mid + 1 < self.blocks)
+                .unwrap_or(self.ring.hi);
+            if end <= limit {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    }
+
+    /// The first block whose record is still in RAM (`blocks()` if none).
+    pub fn first_block_in_ram(&self) -> u32 {
+        let (mut lo, mut hi) = (0u32, self.blocks);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if self
+                .index
+                .get(mid as usize)
+                .is_some_and(|&p| p >= self.ring.lo)
+            {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        lo
+    }
+
+    /// Forgets the previous run (RAM and, sector by sector as the new one needs them, flash) and
+    /// opens a new one with its header frame. False if the frame does not fit a slot.
+    pub fn begin<F: RunFlash>(&mut self, flash: &F, run_id: u32, header: &[u8]) -> bool {
+        let Ok(slot) = Slot::from_slice(header) else {
+            return false;
+        };
+        let g = flash.flash_geometry();
+        let usable = g.sector_bytes >= FLASH_WORD as u32
+            && g.sector_bytes.is_multiple_of(FLASH_WORD as u32)
+            && g.sectors > 0
+            && g.bytes() > FLASH_RESERVE + 2 * MAX_FRAME as u32;
+        // The new image starts after the sectors the previous one used (wear spread over the bank).
+        let start = if self.writer.geometry == g && g.sectors > 0 {
+            (self.writer.start + self.writer.sectors_used()) % g.sectors
+        } else {
+            0
+        };
+        self.header = slot;
+        self.result.clear();
+        self.end.clear();
+        self.run_id = Some(run_id);
+        self.blocks = 0;
+        self.events = 0;
+        self.refused = 0;
+        self.ring.reset(0);
+        let inflight = self.writer.inflight.map(|_| Op::Stale);
+        self.writer = Writer {
+            geometry: g,
+            start,
+            erased: 0,
+            written: 0,
+            cut: None,
+            state: if usable {
+                FlashState::Writing
+            } else {
+                FlashState::Off
+            },
+            inflight,
+        };
+        // The header is the stream's first record.
+        let mut rec = [0u8; LEN_BYTES as usize + SLOT];
+        let n = self.header.len();
+        rec[..2].copy_from_slice(&(n as u16).to_le_bytes());
+        rec[2..2 + n].copy_from_slice(&self.header);
+        self.make_room(2 + n as u32);
+        self.ring.append(&rec[..2 + n]);
+        true
+    }
+
+    /// Stores the next block's frame. False if it is not the next block or no run is open.
+    pub fn push_block(&mut self, block: u32, frame: &[u8]) -> bool {
+        if self.run_id.is_none() || self.is_finished() || block != self.blocks {
             return false;
         }
-        let slot = (b.block as usize) % self.slots;
-        let span = width * BLOCK_LEN;
-        let n = b.counts.len().min(span);
-        self.counts[slot * span..slot * span + n].copy_from_slice(&b.counts[..n]);
-        self.meta[slot] = BlockMeta {
-            seq,
-            t_us: b.t_us,
-            ecr_range: b.ecr_range,
-            log10_ecr_ohm: b.log10_ecr_ohm,
-            temp_c: b.temp_c,
-            len: n as u16,
-        };
+        let pos = self.ring.hi;
+        if block as usize >= self.index.len() {
+            self.refused += 1;
+            return false;
+        }
+        if !self.push_record(frame) {
+            return false;
+        }
+        self.index[block as usize] = pos;
         self.blocks += 1;
         true
     }
 
-    pub fn set_result(&mut self, seq: u32, r: OnboardResult) {
-        self.result = Some((seq, r));
-    }
-
-    pub fn set_end(&mut self, seq: u32, e: RunEnd) {
-        self.end = Some((seq, e));
-    }
-
-    /// Block `k` as first sent, with its sequence number, if held.
-    pub fn block(&self, k: u32) -> Option<(u32, SampleBlock)> {
-        let (_, h) = self.header.as_ref()?;
-        if k >= self.blocks || k < self.oldest_block() {
-            return None;
+    /// Stores an event frame (gap, ECR range change, …) after the blocks stored so far.
+    pub fn push_event(&mut self, frame: &[u8]) -> bool {
+        if self.run_id.is_none() || self.is_finished() || !self.push_record(frame) {
+            return false;
         }
-        let slot = (k as usize) % self.slots;
-        let span = self.channels.len() * BLOCK_LEN;
-        let m = self.meta[slot];
-        let counts = Counts::from_slice(&self.counts[slot * span..slot * span + m.len as usize])?;
-        Some((
-            m.seq,
-            SampleBlock {
-                run_id: h.run_id,
-                block: k,
-                first_sample: k * BLOCK_LEN as u32,
-                t_us: m.t_us,
-                channels: self.channels,
-                ecr_range: m.ecr_range,
-                log10_ecr_ohm: m.log10_ecr_ohm,
-                temp_c: m.temp_c,
-                counts,
-            },
-        ))
+        self.events += 1;
+        true
     }
 
-    /// Block `k` as [`RunStore::block`] gives it, borrowed: it frames to the same bytes without
-    /// copying the counts out of the store (what the application sends).
-    pub fn samples_ref(&self, k: u32) -> Option<(u32, SamplesRef<'_>)> {
-        let (_, h) = self.header.as_ref()?;
-        if k >= self.blocks || k < self.oldest_block() {
-            return None;
+    /// Stores the result frame (once, before the end).
+    pub fn set_result(&mut self, frame: &[u8]) -> bool {
+        if self.run_id.is_none() || !self.result.is_empty() || self.is_finished() {
+            return false;
         }
-        let slot = (k as usize) % self.slots;
-        let span = self.channels.len() * BLOCK_LEN;
-        let m = self.meta.get(slot)?;
-        let counts = self.counts.get(slot * span..slot * span + m.len as usize)?;
-        Some((
-            m.seq,
-            SamplesRef {
-                run_id: h.run_id,
-                block: k,
-                first_sample: k * BLOCK_LEN as u32,
-                t_us: m.t_us,
-                channels: self.channels,
-                ecr_range: m.ecr_range,
-                log10_ecr_ohm: m.log10_ecr_ohm,
-                temp_c: m.temp_c,
-                counts,
-            },
-        ))
-    }
-
-    /// The frame (sequence number and message) of `item`, if it exists yet.
-    pub fn frame(&self, item: Item) -> Option<(u32, DeviceMsg)> {
-        match item {
-            Item::Header => self.header.map(|(s, h)| (s, DeviceMsg::RunStarted(h))),
-            Item::Block(k) => self.block(k).map(|(s, b)| (s, DeviceMsg::Samples(b))),
-            Item::Result => self.result.map(|(s, r)| (s, DeviceMsg::Result(r))),
-            Item::End => self.end.map(|(s, e)| (s, DeviceMsg::RunEnded(e))),
+        match Slot::from_slice(frame) {
+            Ok(s) => {
+                self.result = s;
+                true
+            }
+            Err(_) => false,
         }
     }
 
-    /// The first item at or after block `k` that exists now.
-    pub fn first_from(&self, k: u32) -> Option<Item> {
-        let k = k.max(self.oldest_block());
-        if k < self.blocks {
-            Some(Item::Block(k))
-        } else if self.result.is_some() {
-            Some(Item::Result)
-        } else if self.end.is_some() {
-            Some(Item::End)
+    /// Stores the end frame: the run is complete, and its flash image can be finished.
+    pub fn set_end(&mut self, frame: &[u8]) -> bool {
+        if self.run_id.is_none() || self.is_finished() {
+            return false;
+        }
+        match Slot::from_slice(frame) {
+            Ok(s) => {
+                self.end = s;
+                true
+            }
+            Err(_) => false,
+        }
+    }
+
+    fn push_record(&mut self, frame: &[u8]) -> bool {
+        if frame.is_empty()
+            || frame.len() > MAX_FRAME
+            || frame.len() as u32 + LEN_BYTES > self.ring.cap
+        {
+            return false;
+        }
+        let mut len = [0u8; 2];
+        len.copy_from_slice(&(frame.len() as u16).to_le_bytes());
+        // The flash keeps the run's beginning: once a record would eat into the room kept for the
+        // result and end, the flash image stops before it.
+        let need = LEN_BYTES + frame.len() as u32;
+        let pos = self.ring.hi;
+        if self.writer.cut.is_none() && pos + need + FLASH_RESERVE > self.writer.capacity() {
+            self.writer.cut = Some(pos);
+        }
+        self.make_room(need);
+        self.ring.append(&len);
+        self.ring.append(frame);
+        true
+    }
+
+    /// Drops the oldest records until `need` more bytes fit.
+    fn make_room(&mut self, need: u32) {
+        while self.ring.hi - self.ring.lo + need > self.ring.cap {
+            let Some(len) = self.ring.read_len(self.ring.lo) else {
+                self.ring.lo = self.ring.hi;
+                return;
+            };
+            let end = self.ring.lo + LEN_BYTES + len;
+            let unwritten = end > self.writer.written && self.ring.lo < self.base();
+            if unwritten && self.writer.state == FlashState::Writing {
+                // The flash fell behind by a whole ring: it will never catch up with this run.
+                self.writer.state = FlashState::Failed;
+            }
+            self.ring.lo = end.min(self.ring.hi);
+        }
+    }
+
+    /// Bytes of the flash image: the stream up to the cut, then the result and end records.
+    fn image_len(&self) -> u32 {
+        let tail = if self.is_finished() {
+            2 * LEN_BYTES + self.result.len() as u32 + self.end.len() as u32
         } else {
-            None
+            0
+        };
+        self.base() + tail
+    }
+
+    /// Copies image bytes `q..q + out.len()` (0xFF past its end). False if some are not in RAM.
+    fn image_bytes(&self, q: u32, out: &mut [u8]) -> bool {
+        let base = self.base();
+        let mut done = 0usize;
+        while done < out.len() {
+            let at = q + done as u32;
+            if at < base {
+                let n = ((base - at) as usize).min(out.len() - done);
+                if !self.ring.holds(at, n as u32) {
+                    return false;
+                }
+                self.ring.read(at, &mut out[done..done + n]);
+                done += n;
+            } else {
+                // The tail: [len][result][len][end].
+                let r = self.result.len();
+                let e = self.end.len();
+                let off = (at - base) as usize;
+                out[done] = match off {
+                    0 | 1 => (r as u16).to_le_bytes()[off],
+                    o if o < 2 + r => self.result[o - 2],
+                    o if o < 4 + r => (e as u16).to_le_bytes()[o - 2 - r],
+                    o if o < 4 + r + e => self.end[o - 4 - r],
+                    _ => 0xFF,
+                };
+                done += 1;
+            }
         }
+        true
+    }
+
+    /// Moves the flash copy along: at most one erase or program is started per call.
+    pub fn service<F: RunFlash>(&mut self, flash: &mut F) {
+        if flash.flash_busy() {
+            return;
+        }
+        if let Some(op) = self.writer.inflight.take() {
+            let failed = flash.flash_take_error();
+            match op {
+                Op::Stale => {}
+                _ if failed => {
+                    self.writer.state = FlashState::Failed;
+                    return;
+                }
+                Op::Erase => self.writer.erased += 1,
+                Op::Program { len } => self.writer.written += len,
+            }
+        }
+        if self.writer.state != FlashState::Writing {
+            return;
+        }
+        let w = FLASH_WORD as u32;
+        let image = self.image_len();
+        let avail = if self.is_finished() {
+            image.div_ceil(w) * w
+        } else {
+            image / w * w
+        };
+        let written = self.writer.written;
+        if written >= avail {
+            if self.is_finished() {
+                self.writer.state = FlashState::Done;
+            }
+            return;
+        }
+        let sb = self.writer.geometry.sector_bytes;
+        let sector = written / sb;
+        if sector >= self.writer.geometry.sectors {
+            // Cannot happen (the cut keeps the image inside the bank); stop rather than wrap.
+            self.writer.state = FlashState::Failed;
+            return;
+        }
+        if sector >= self.writer.erased {
+            let phys = (self.writer.start + self.writer.erased) % self.writer.geometry.sectors;
+            if flash.flash_erase(phys) {
+                self.writer.inflight = Some(Op::Erase);
+            } else {
+                self.writer.state = FlashState::Failed;
+            }
+            return;
+        }
+        let n = (avail - written)
+            .min((sector + 1) * sb - written)
+            .min(FLASH_MAX_PROGRAM as u32);
+        let mut buf = [0xFFu8; FLASH_MAX_PROGRAM];
+        if !self.image_bytes(written, &mut buf[..n as usize]) {
+            self.writer.state = FlashState::Failed;
+            return;
+        }
+        if flash.flash_program(self.writer.phys(written), &buf[..n as usize]) {
+            self.writer.inflight = Some(Op::Program { len: n });
+        } else {
+            self.writer.state = FlashState::Failed;
+        }
+    }
+
+    /// Copies the record at stream position `pos` into `out` (from RAM if held there, else from
+    /// flash).
+    pub fn read<F: RunFlash>(&self, flash: &mut F, pos: u32, out: &mut [u8]) -> Read {
+        if self.run_id.is_none() || pos >= self.ring.hi {
+            return Read::End;
+        }
+        if let Some(len) = self.ring.read_len(pos) {
+            let (len, next) = (len as usize, pos + LEN_BYTES + len);
+            if len > out.len() || !self.ring.holds(pos, LEN_BYTES + len as u32) {
+                return Read::Lost {
+                    next: self.ring.lo.max(pos + 1),
+                };
+            }
+            self.ring.read(pos + LEN_BYTES, &mut out[..len]);
+            return Read::Frame { len, next };
+        }
+        // Not in RAM: in flash if the image holds it whole.
+        let limit = self.writer.written.min(self.base());
+        if pos + LEN_BYTES > limit {
+            return Read::Lost {
+                next: self.ring.lo.max(pos + 1),
+            };
+        }
+        if flash.flash_busy() {
+            return Read::Busy;
+        }
+        let mut b = [0u8; 2];
+        if !read_image(flash, &self.writer, pos, &mut b) {
+            return Read::Busy;
+        }
+        let len = u16::from_le_bytes(b) as usize;
+        let next = pos + LEN_BYTES + len as u32;
+        if len > out.len() || next > limit {
+            return Read::Lost {
+                next: self.ring.lo.max(pos + 1),
+            };
+        }
+        if !read_image(flash, &self.writer, pos + LEN_BYTES, &mut out[..len]) {
+            return Read::Busy;
+        }
+        Read::Frame { len, next }
+    }
+
+    /// Where a pull from block `k` starts: just after block `k − 1`, so that the events between the
+    /// two come along. `None` while the flash that holds that block is busy.
+    pub fn start_of_block<F: RunFlash>(&self, flash: &mut F, k: u32) -> Option<u32> {
+        if k == 0 {
+            return Some(self.first_pos());
+        }
+        let Some(prev) = self.block_pos(k - 1) else {
+            return Some(self.ring.hi);
+        };
+        let mut buf = [0u8; MAX_FRAME];
+        match self.read(flash, prev, &mut buf) {
+            Read::Frame { next, .. } => Some(next),
+            Read::Busy => None,
+            Read::Lost { .. } | Read::End => Some(self.block_pos(k).unwrap_or(self.ring.hi)),
+        }
+    }
+
+    /// Reads the newest run back from flash (at boot). Returns what was found, and holds it.
+    pub fn recover<F: RunFlash>(&mut self, flash: &mut F) -> Option<Recovered> {
+        let g = flash.flash_geometry();
+        if g.sectors == 0 || g.sector_bytes < FLASH_WORD as u32 || flash.flash_busy() {
+            return None;
+        }
+        // The newest header at the start of a sector.
+        let mut best: Option<(u32, u32)> = None;
+        let mut buf = [0u8; MAX_FRAME];
+        for s in 0..g.sectors {
+            let probe = Writer {
+                geometry: g,
+                start: s,
+                ..Writer::OFF
+            };
+            if let Some((len, DeviceMsg::RunStarted(h))) = read_record(flash, &probe, 0, &mut buf) {
+                let _ = len;
+                if best.is_none_or(|(id, _)| h.run_id > id) {
+                    best = Some((h.run_id, s));
+                }
+            }
+        }
+        let (run_id, start) = best?;
+        let mut w = Writer {
+            geometry: g,
+            start,
+            erased: g.sectors,
+            written: g.bytes(),
+            cut: None,
+            state: FlashState::Done,
+            inflight: None,
+        };
+        let (hlen, _) = read_record(flash, &w, 0, &mut buf)?;
+        let header = Slot::from_slice(&buf[..hlen]).ok()?;
+        let mut q = LEN_BYTES + hlen as u32;
+        let (mut blocks, mut events) = (0u32, 0u32);
+        let mut result = Slot::new();
+        let mut end = Slot::new();
+        let mut tail_at = None;
+        while let Some((len, msg)) = read_record(flash, &w, q, &mut buf) {
+            let rec = q;
+            let same = |id: u32| id == run_id;
+            let ok = match &msg {
+                DeviceMsg::Packed(p)
+                    if tail_at.is_none() && same(p.run_id) && p.block == blocks =>
+                {
+                    match self.index.get_mut(blocks as usize) {
+                        Some(slot) => {
+                            *slot = rec;
+                            blocks += 1;
+                            true
+                        }
+                        None => false,
+                    }
+                }
+                DeviceMsg::Gap(g) if tail_at.is_none() && same(g.run_id) => {
+                    events += 1;
+                    true
+                }
+                DeviceMsg::EcrRange(e) if tail_at.is_none() && same(e.run_id) => {
+                    events += 1;
+                    true
+                }
+                DeviceMsg::Result(r) if tail_at.is_none() && same(r.run_id) => {
+                    tail_at = Some(rec);
+                    result = Slot::from_slice(&buf[..len]).ok()?;
+                    true
+                }
+                DeviceMsg::RunEnded(e) if tail_at.is_some() && same(e.run_id) => {
+                    end = Slot::from_slice(&buf[..len]).ok()?;
+                    q += LEN_BYTES + len as u32;
+                    break;
+                }
+                _ => false,
+            };
+            if !ok {
+                break;
+            }
+            q += LEN_BYTES + len as u32;
+        }
+        if end.is_empty() {
+            // A result without its end is not a finished run (and the end is what says so).
+            result.clear();
+        }
+        let stream_end = tail_at.filter(|_| !end.is_empty()).unwrap_or(q);
+        w.written = q;
+        w.erased = w.sectors_used();
+        w.cut = Some(stream_end);
+        self.header = header;
+        self.result = result;
+        self.end = end;
+        self.run_id = Some(run_id);
+        self.blocks = blocks;
+        self.events = events;
+        self.refused = 0;
+        self.ring.reset(stream_end);
+        self.writer = w;
+        Some(Recovered {
+            run_id,
+            blocks,
+            events,
+            finished: self.is_finished(),
+        })
     }
 }
+
+/// Reads and checks the record at image position `q`: its length, then a frame that decodes.
+fn read_record<F: RunFlash>(
+    flash: &mut F,
+    w: &Writer,
+    q: u32,
+    buf: &mut [u8; MAX_FRAME],
+) -> Option<(usize, DeviceMsg)> {
+    let mut b = [0u8; 2];
+    if q + LEN_BYTES > w.capacity() || !read_image(flash, w, q, &mut b) {
+        return None;
+    }
+    let len = u16::from_le_bytes(b) as usize;
+    if len == 0 || len > MAX_FRAME || q + LEN_BYTES + len as u32 > w.capacity() {
+        return None;
+    }
+    if !read_image(flash, w, q + LEN_BYTES, &mut buf[..len]) {
+        return None;
+    }
+    let frame = decode_one::<DeviceMsg>(&buf[..len]).ok()?;
+    Some((len, frame.msg))
+}
+
+#[cfg(test)]
+mod tests;

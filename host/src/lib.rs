@@ -8,7 +8,7 @@ pub mod exit;
 pub mod link;
 mod load;
 
-pub use load::load_record;
+pub use load::{load_for_fit, load_record, Holes, LONGEST_CLEAN_STRETCH_FLAG};
 
 pub use tribo_firmware as firmware;
 pub use tribo_physics as physics;

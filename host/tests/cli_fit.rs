@@ -142,3 +142,64 @@ fn sim_then_fit_json_recovers_the_constants() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("unknown law"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_record_with_a_hole_is_refused_unless_the_longest_clean_stretch_is_asked_for() {
+    let dir = std::env::temp_dir().join(format!("tribo-cli-hole-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let rec = dir.join("rec.csv");
+    let rec_s = rec.to_str().unwrap();
+    let out = tribo(&[
+        "sim",
+        "--law",
+        "coulomb-viscous",
+        "--mu",
+        "0.03,0.012",
+        "--load-n",
+        "0.3",
+        "--duration-s",
+        "1.5",
+        "-o",
+        rec_s,
+    ]);
+    assert!(out.status.success());
+    // Cut 0.1 s out of the middle of the time axis.
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let mut rows = 0;
+    let holed: String = text
+        .lines()
+        .filter(|l| {
+            let Some(t) = l.split(',').next().and_then(|t| t.parse::<f64>().ok()) else {
+                return true;
+            };
+            rows += 1;
+            !(0.9..1.0).contains(&t)
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert!(rows > 1000);
+    std::fs::write(&rec, holed).unwrap();
+    let out = tribo(&["fit", rec_s]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("--longest-clean-stretch") && err.contains("jumps 1 time"),
+        "{err}"
+    );
+    // `tribo explain` refuses the same way.
+    let out = tribo(&["explain", rec_s]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("--longest-clean-stretch"), "{err}");
+    let out = tribo(&["fit", "--longest-clean-stretch", "--json", rec_s]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("longest clean stretch"), "{err}");
+    // The first 0.9 s: the constants are still the simulated ones.
+    let mu = number_array(&String::from_utf8_lossy(&out.stdout), "mu");
+    assert!(
+        (mu[0] - 0.03).abs() < 1e-3 && (mu[1] - 0.012).abs() < 1e-3,
+        "{mu:?}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -5,51 +5,60 @@
 //! primitives and atomics.
 //!
 //! * `app`: the rig's state machine (`tribo_firmware::app::App`), polled every millisecond and on
-//!   every USB packet; it owns the magnet and heater PWM, the ECR DAC and range switches, the button
-//!   and the lamps through [`BoardHw`].
-//! * `acquisition`: ticker-driven 16-bit conversions of the four analog channels into the ring (a
-//!   simpler binding than a timer-triggered ADC with DMA, see the README), overruns counted there.
+//!   every USB packet; it owns the magnet and heater PWM, the ECR DAC and range switches, the button,
+//!   the lamps and the sampler (TIM6 → ADC1 scans → DMA ring, [`crate::sampling`]: it reads the ring
+//!   by the DMA's position at every poll) through [`BoardHw`].
 //! * `thermocouple`: the MAX31856 over SPI1 every 100 ms.
-//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class.
-use core::cell::{Cell, RefCell};
-use core::sync::atomic::{AtomicU32, Ordering};
+//! * `flash`: erases and programs bank 2 for the run store, one operation at a time as the
+//!   application asks ([`FlashLink`]), interrupt-driven, so the application keeps running meanwhile.
+//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. Each (re)connection of the
+//!   host starts clean: bytes queued before it are dropped, the application forgets any
+//!   half-received frame, and frames are refused (they wait in the run store) while no host is
+//!   connected.
+use core::cell::Cell;
+use core::sync::atomic::{AtomicBool, Ordering};
 
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, Either};
-use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, Resolution, SampleTime};
+use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, Resolution};
 use embassy_stm32::dac::{DacChannel, Value};
+use embassy_stm32::flash::{Async, Bank2Region, Flash};
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::mode::Blocking;
-use embassy_stm32::peripherals::{ADC1, TIM1, TIM4, USB_OTG_FS};
+use embassy_stm32::peripherals::{ADC1, DMA1_CH0, TIM1, TIM4, USB_OTG_FS};
 use embassy_stm32::spi::{self, Spi};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
-use embassy_stm32::{bind_interrupts, usb};
+use embassy_stm32::{bind_interrupts, dma, usb};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::pipe::Pipe;
+use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use panic_probe as _;
 use static_cell::{ConstStaticCell, StaticCell};
-use tribo_firmware::acquisition::Ring;
 use tribo_firmware::app::{App, AppConfig};
-use tribo_firmware::ecr::FULL_SCALE_V;
+use tribo_firmware::ecr::{count_to_volts, FULL_SCALE_V};
 use tribo_firmware::hal::*;
-use tribo_firmware::runstore::{BlockMeta, RunStore, BOARD_BLOCKS, BOARD_COUNTS};
+use tribo_firmware::runstore::RunStore;
 
-bind_interrupts!(struct Irqs {
+use crate::memory;
+
+use crate::sampling::Sampler;
+
+bind_interrupts!(pub(crate) struct Irqs {
     OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
+    FLASH => embassy_stm32::flash::InterruptHandler;
+    DMA1_STREAM0 => dma::InterruptHandler<DMA1_CH0>;
 });
 
 type Cs = CriticalSectionRawMutex;
 type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
 
-/// Samples the converter ring holds: 100 ms at 10 kS/s (the application drains it every 1 ms).
-const RING: usize = 1024;
 /// Bytes of frames waiting for the USB sender.
 const TX_PIPE: usize = 4096;
 /// ECR source divider: the DAC's 0..3.3 V become 0..3.3 mV across the contact.
@@ -62,34 +71,53 @@ const TC_STALE_MS: u64 = 500;
 
 /// What the tasks share.
 struct Shared {
-    ring: Mutex<Cs, RefCell<Ring<RING>>>,
-    /// Conversion rate, Hz; 0 = stopped.
-    rate_hz: AtomicU32,
-    /// Latest ECR channel count (converted even when stopped, every 10 ms).
-    ecr_count: AtomicU32,
     thermocouple: &'static Mutex<Cs, Cell<TcReading>>,
+    /// A host is connected (the CDC class is configured): frames may be queued for it.
+    connected: AtomicBool,
     tx: Pipe<Cs, TX_PIPE>,
     rx: Channel<Cs, heapless::Vec<u8, 64>, 8>,
 }
 
-// The thermocouple cell apart: its non-zero initial value would put all of `Shared` (13 KiB of ring
-// and pipe) in `.data`, i.e. in flash too.
+// The thermocouple cell apart: its non-zero initial value would put all of `Shared` (4 KiB of
+// pipe) in `.data`, i.e. in flash too.
 static THERMOCOUPLE: ConstStaticCell<Mutex<Cs, Cell<TcReading>>> = ConstStaticCell::new(
     Mutex::new(Cell::new((Err(ThermocoupleFault::NoReading), 0))),
 );
 static SHARED: StaticCell<Shared> = StaticCell::new();
-static STORE_COUNTS: ConstStaticCell<[u16; BOARD_COUNTS]> = ConstStaticCell::new([0; BOARD_COUNTS]);
-static STORE_META: ConstStaticCell<[BlockMeta; BOARD_BLOCKS]> =
-    ConstStaticCell::new([BlockMeta::EMPTY; BOARD_BLOCKS]);
+static FLASH_LINK: StaticCell<FlashLink> = StaticCell::new();
 static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static CONTROL_BUF: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
 static CDC_STATE: StaticCell<State> = StaticCell::new();
 
+/// An operation on bank 2, asked by the application, run by the flash task.
+#[derive(Clone)]
+enum FlashOp {
+    Erase {
+        sector: u32,
+    },
+    Program {
+        offset: u32,
+        len: usize,
+        data: [u8; FLASH_MAX_PROGRAM],
+    },
+}
+
+/// Bank 2 between the application (which asks and reads) and the flash task (which erases and
+/// programs, awaiting the flash interrupt).
+struct FlashLink {
+    region: embassy_sync::mutex::Mutex<Cs, Bank2Region<'static, Async>>,
+    op: Signal<Cs, FlashOp>,
+    /// An operation was asked and is not finished.
+    busy: AtomicBool,
+    failed: AtomicBool,
+}
+
 /// The hardware the application task drives directly.
 struct BoardHw {
     shared: &'static Shared,
+    flash: &'static FlashLink,
     magnet_hold: SimplePwmChannel<'static, TIM1>,
     magnet_reverse: SimplePwmChannel<'static, TIM1>,
     heater: SimplePwmChannel<'static, TIM4>,
@@ -97,6 +125,7 @@ struct BoardHw {
     ecr_range: [Output<'static>; 3],
     button: Input<'static>,
     lamps: [Output<'static>; 3],
+    sampler: Sampler,
 }
 
 fn fraction(duty: f32) -> u32 {
@@ -155,27 +184,31 @@ impl EcrFrontEnd for BoardHw {
         }
     }
     fn read_ecr_output(&mut self) -> f32 {
-        self.shared.ecr_count.load(Ordering::Relaxed) as f32 / 65535.0 * FULL_SCALE_V
+        // The sampler always runs (at its idle rate between runs): the latest scan's ECR channel.
+        self.sampler
+            .latest_ecr()
+            .map_or(f32::NAN, |c| count_to_volts(c as f32))
     }
 }
 
 impl SampleSource for BoardHw {
-    fn adc_start(&mut self, rate_hz: u32) -> bool {
-        self.shared.ring.lock(|r| r.borrow_mut().clear());
-        self.shared.rate_hz.store(rate_hz, Ordering::Relaxed);
-        rate_hz > 0
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
+        self.sampler.clock_for(rate_hz)
+    }
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
+        self.sampler.start(rate_hz)
     }
     fn adc_stop(&mut self) {
-        self.shared.rate_hz.store(0, Ordering::Relaxed);
+        self.sampler.stop();
     }
     fn adc_running(&self) -> bool {
-        self.shared.rate_hz.load(Ordering::Relaxed) != 0
+        self.sampler.is_acquiring()
     }
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize {
-        self.shared.ring.lock(|r| r.borrow_mut().pop_into(out))
+    fn adc_next_index(&mut self) -> u64 {
+        self.sampler.next_index()
     }
-    fn adc_lost(&self) -> u32 {
-        self.shared.ring.lock(|r| r.borrow().lost())
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
+        self.sampler.read(out)
     }
 }
 
@@ -199,7 +232,11 @@ impl Led for BoardHw {
 
 impl Link for BoardHw {
     fn send_frame(&mut self, frame: &[u8]) -> bool {
-        if self.shared.tx.free_capacity() < frame.len() {
+        // No host: refused, so that run frames wait in the store rather than in a pipe that is
+        // emptied when the next host connects.
+        if !self.shared.connected.load(Ordering::Acquire)
+            || self.shared.tx.free_capacity() < frame.len()
+        {
             return false;
         }
         // Only this task writes the pipe, so the free space cannot shrink meanwhile.
@@ -214,47 +251,80 @@ impl Link for BoardHw {
     }
 }
 
+impl RunFlash for BoardHw {
+    fn flash_geometry(&self) -> FlashGeometry {
+        FlashGeometry::H743_BANK2
+    }
+    fn flash_busy(&mut self) -> bool {
+        self.flash.busy.load(Ordering::Acquire)
+    }
+    fn flash_erase(&mut self, sector: u32) -> bool {
+        if self.flash_busy() || sector >= FlashGeometry::H743_BANK2.sectors {
+            return false;
+        }
+        self.flash.busy.store(true, Ordering::Release);
+        self.flash.op.signal(FlashOp::Erase { sector });
+        true
+    }
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
+        let g = FlashGeometry::H743_BANK2;
+        let w = FLASH_WORD as u32;
+        let len = data.len() as u32;
+        if self.flash_busy()
+            || !offset.is_multiple_of(w)
+            || len == 0
+            || !len.is_multiple_of(w)
+            || data.len() > FLASH_MAX_PROGRAM
+            || offset + len > g.bytes()
+            || offset / g.sector_bytes != (offset + len - 1) / g.sector_bytes
+        {
+            return false;
+        }
+        let mut buf = [0xFF; FLASH_MAX_PROGRAM];
+        buf[..data.len()].copy_from_slice(data);
+        self.flash.busy.store(true, Ordering::Release);
+        self.flash.op.signal(FlashOp::Program {
+            offset,
+            len: data.len(),
+            data: buf,
+        });
+        true
+    }
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
+        // Never while bank 2 is erased or programmed: the read would stall the CPU until it ends.
+        if self.flash_busy() {
+            return false;
+        }
+        match self.flash.region.try_lock() {
+            Ok(mut region) => region.blocking_read(offset, out).is_ok(),
+            Err(_) => false,
+        }
+    }
+    fn flash_take_error(&mut self) -> bool {
+        self.flash.failed.swap(false, Ordering::AcqRel)
+    }
+}
+
 fn now_us() -> u64 {
     Instant::now().as_micros()
 }
 
 #[embassy_executor::task]
 async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64) {
-    let store = RunStore::new(STORE_COUNTS.take(), STORE_META.take());
+    let Some(mem) = memory::take() else {
+        defmt::error!("run store memory already taken");
+        return;
+    };
+    let store = RunStore::new(mem.ring, mem.index);
     let mut app = App::new(AppConfig::new(serial), store);
     let mut ticker = Ticker::every(Duration::from_millis(1));
     loop {
         match select(shared.rx.receive(), ticker.next()).await {
+            // The receiver's mark of a new host connection: no half frame of the previous one is
+            // completed by the new host's bytes, which come after it.
+            Either::First(bytes) if bytes.is_empty() => app.link_reset(),
             Either::First(bytes) => app.on_bytes(&mut hw, &bytes, now_us()),
             Either::Second(()) => app.poll(&mut hw, now_us()),
-        }
-    }
-}
-
-#[embassy_executor::task]
-async fn acquisition_task(
-    shared: &'static Shared,
-    mut adc: Adc<'static, ADC1>,
-    mut ch: [AnyAdcChannel<'static, ADC1>; 4],
-) {
-    const SAMPLE: SampleTime = SampleTime::CYCLES32_5;
-    loop {
-        let rate = shared.rate_hz.load(Ordering::Relaxed);
-        if rate == 0 {
-            let e = adc.blocking_read(&mut ch[3], SAMPLE);
-            shared.ecr_count.store(e as u32, Ordering::Relaxed);
-            Timer::after_millis(10).await;
-            continue;
-        }
-        let mut ticker = Ticker::every(Duration::from_hz(rate as u64));
-        while shared.rate_hz.load(Ordering::Relaxed) == rate {
-            ticker.next().await;
-            let mut s: AnalogSample = [0; ANALOG_CHANNELS];
-            for (v, c) in s.iter_mut().zip(ch.iter_mut()) {
-                *v = adc.blocking_read(c, SAMPLE);
-            }
-            shared.ecr_count.store(s[3] as u32, Ordering::Relaxed);
-            shared.ring.lock(|r| r.borrow_mut().push(s));
         }
     }
 }
@@ -302,6 +372,32 @@ async fn thermocouple_task(
     }
 }
 
+/// Runs the application's flash operations on bank 2, one at a time.
+#[embassy_executor::task]
+async fn flash_task(link: &'static FlashLink) {
+    const SECTOR: u32 = FlashGeometry::H743_BANK2.sector_bytes;
+    loop {
+        let op = link.op.wait().await;
+        let ok = {
+            let mut region = link.region.lock().await;
+            match op {
+                FlashOp::Erase { sector } => region
+                    .erase(sector * SECTOR, (sector + 1) * SECTOR)
+                    .await
+                    .is_ok(),
+                FlashOp::Program { offset, len, data } => {
+                    region.write(offset, &data[..len]).await.is_ok()
+                }
+            }
+        };
+        if !ok {
+            defmt::warn!("bank 2 operation failed");
+            link.failed.store(true, Ordering::Release);
+        }
+        link.busy.store(false, Ordering::Release);
+    }
+}
+
 #[embassy_executor::task]
 async fn usb_task(mut dev: embassy_usb::UsbDevice<'static, UsbDriver>) -> ! {
     dev.run().await
@@ -312,12 +408,19 @@ async fn usb_tx_task(shared: &'static Shared, mut tx: Sender<'static, UsbDriver>
     let mut buf = [0u8; 64];
     loop {
         tx.wait_connection().await;
+        // A clean start: bytes queued for a host that went away (a frame cut by the cable pull)
+        // are dropped; what the application must resend, it resends from its run store.
+        shared.tx.clear();
+        shared.connected.store(true, Ordering::Release);
+        defmt::info!("usb: host connected");
         loop {
             let n = shared.tx.read(&mut buf).await;
             if tx.write_packet(&buf[..n]).await.is_err() {
                 break;
             }
         }
+        shared.connected.store(false, Ordering::Release);
+        defmt::info!("usb: host gone");
     }
 }
 
@@ -326,36 +429,51 @@ async fn usb_rx_task(shared: &'static Shared, mut rx: Receiver<'static, UsbDrive
     let mut buf = [0u8; 64];
     loop {
         rx.wait_connection().await;
+        // Packets of a previous connection not yet taken by the application are stale; the empty
+        // packet tells the application a new connection starts here.
+        shared.rx.clear();
+        shared.rx.send(heapless::Vec::new()).await;
         while let Ok(n) = rx.read_packet(&mut buf).await {
+            if n == 0 {
+                continue;
+            }
             let bytes = heapless::Vec::from_slice(&buf[..n]).unwrap_or_default();
             shared.rx.send(bytes).await;
         }
     }
 }
 
+/// The clock tree (written down in `firmware/README.md`): HSE in bypass from the ST-LINK's 8 MHz
+/// MCO (crystal-accurate) → PLL1 400 MHz core, PLL2P 25 MHz ADC kernel clock; AHB 200 MHz, APB
+/// 100 MHz, so the APB1 timers (TIM6: the sample clock) run at 200 MHz; HSI48 synchronised on the
+/// USB SOF by the CRS for USB.
 fn clocks() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
+    config.rcc.hse = Some(Hse {
+        freq: Hertz(8_000_000),
+        mode: HseMode::Bypass,
+    });
     config.rcc.hsi = Some(HSIPrescaler::DIV1);
     config.rcc.csi = true;
     config.rcc.hsi48 = Some(Hsi48Config {
         sync_from_usb: true,
     });
-    // 64 MHz HSI / 4 × 50 = 800 MHz VCO: 400 MHz core, 100 MHz for SPI1.
+    // 8 MHz / 4 × 400 = 800 MHz VCO: 400 MHz core (P / 2), 100 MHz for SPI1 (Q / 8).
     config.rcc.pll1 = Some(Pll {
-        source: PllSource::HSI,
+        source: PllSource::HSE,
         prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL50,
+        mul: PllMul::MUL400,
         fracn: None,
         divp: Some(PllDiv::DIV2),
         divq: Some(PllDiv::DIV8),
         divr: None,
     });
-    // 64 MHz / 8 × 50 = 400 MHz VCO / 16: 25 MHz ADC kernel clock.
+    // 8 MHz / 4 × 200 = 400 MHz VCO / 16: 25 MHz ADC kernel clock.
     config.rcc.pll2 = Some(Pll {
-        source: PllSource::HSI,
-        prediv: PllPreDiv::DIV8,
-        mul: PllMul::MUL50,
+        source: PllSource::HSE,
+        prediv: PllPreDiv::DIV4,
+        mul: PllMul::MUL200,
         fracn: None,
         divp: Some(PllDiv::DIV16),
         divq: None,
@@ -384,16 +502,24 @@ macro_rules! spawn {
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    // The DMA ring non-cacheable, then the caches on (before anything uses DMA).
+    if let Some(mut cp) = cortex_m::Peripherals::take() {
+        crate::sampling::configure_mpu_and_caches(&mut cp.MPU, &mut cp.SCB, &mut cp.CPUID);
+    } else {
+        defmt::error!("core peripherals already taken: caches left off");
+    }
     let p = embassy_stm32::init(clocks());
+    // SRAM3 (the DMA ring) allocated to the CPU's domain, so D2 stays on while the CPU runs.
+    embassy_stm32::pac::RCC
+        .ahb2enr()
+        .modify(|w| w.set_sram3en(true));
     defmt::info!(
         "tribo-board, protocol v{}",
         tribo_firmware::wire::PROTOCOL_VERSION
     );
     let shared: &'static Shared = SHARED.init(Shared {
-        ring: Mutex::new(RefCell::new(Ring::new())),
-        rate_hz: AtomicU32::new(0),
-        ecr_count: AtomicU32::new(0),
         thermocouple: THERMOCOUPLE.take(),
+        connected: AtomicBool::new(false),
         tx: Pipe::new(),
         rx: Channel::new(),
     });
@@ -431,8 +557,37 @@ async fn main(spawner: Spawner) {
     heater_ch.set_duty_cycle_fully_off();
     heater_ch.enable();
 
+    // Bank 2 of the flash: the run store's (bank 1 holds this program).
+    let flash: &'static FlashLink = FLASH_LINK.init(FlashLink {
+        region: embassy_sync::mutex::Mutex::new(
+            Flash::new(p.FLASH, Irqs).into_regions().bank2_region,
+        ),
+        op: Signal::new(),
+        busy: AtomicBool::new(false),
+        failed: AtomicBool::new(false),
+    });
+
+    // ADC1, 16 bits, calibrated by the driver; scans of displacement PA3, velocity PC0, force PB1,
+    // ECR PF11 (pins set analog by `degrade_adc`), triggered by TIM6, DMA1 stream 0 into the ring.
+    let adc = Adc::new_with_config(
+        p.ADC1,
+        AdcConfig {
+            resolution: Some(Resolution::BITS16),
+            averaging: None,
+        },
+    );
+    let channels: [AnyAdcChannel<'static, ADC1>; 4] = [
+        p.PA3.degrade_adc(),
+        p.PC0.degrade_adc(),
+        p.PB1.degrade_adc(),
+        p.PF11.degrade_adc(),
+    ];
+    let sampler = Sampler::new(adc, p.DMA1_CH0, channels);
+
     let hw = BoardHw {
         shared,
+        sampler,
+        flash,
         magnet_hold,
         magnet_reverse,
         heater: heater_ch,
@@ -450,21 +605,6 @@ async fn main(spawner: Spawner) {
         ],
     };
 
-    // ADC1, 16 bits: displacement PA3, velocity PC0, force PB1, ECR PF11.
-    let adc = Adc::new_with_config(
-        p.ADC1,
-        AdcConfig {
-            resolution: Some(Resolution::BITS16),
-            averaging: None,
-        },
-    );
-    let channels: [AnyAdcChannel<'static, ADC1>; 4] = [
-        p.PA3.degrade_adc(),
-        p.PC0.degrade_adc(),
-        p.PB1.degrade_adc(),
-        p.PF11.degrade_adc(),
-    ];
-
     // MAX31856 on SPI1 (mode 1, 1 MHz), chip select PD14.
     let mut spi_cfg = spi::Config::default();
     spi_cfg.mode = spi::MODE_1;
@@ -479,7 +619,8 @@ async fn main(spawner: Spawner) {
     let mut config = embassy_usb::Config::new(0x1209, 0x0001);
     config.manufacturer = Some("tribo");
     config.product = Some("oscillating tribometer");
-    config.serial_number = Some("tribo-h743");
+    // The chip's unique id: two rigs on one host are told apart by `tribo devices`.
+    config.serial_number = Some(embassy_stm32::uid::uid_hex());
     config.max_power = 100;
     config.max_packet_size_0 = 64;
     let mut builder = embassy_usb::Builder::new(
@@ -498,6 +639,6 @@ async fn main(spawner: Spawner) {
     spawn!(spawner, usb_tx_task(shared, tx));
     spawn!(spawner, usb_rx_task(shared, rx));
     spawn!(spawner, thermocouple_task(shared, spi, cs));
-    spawn!(spawner, acquisition_task(shared, adc, channels));
+    spawn!(spawner, flash_task(flash));
     spawn!(spawner, app_task(shared, hw, serial));
 }

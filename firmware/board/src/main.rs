@@ -5,6 +5,10 @@
 
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod board;
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+mod memory;
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+mod sampling;
 
 #[cfg(not(all(target_arch = "arm", target_os = "none")))]
 fn main() {

@@ -1,27 +1,30 @@
 //! Replay hardware: the [`tribo_firmware::hal`] traits fed from a simulated [`Record`].
 //!
-//! Time is virtual: the test sets [`Replay::now_us`] before each call into the application. The
-//! converter "converts" on a fixed clock from `adc_start`: sample `k` is complete at
-//! `start + (k + 1) / rate`. While the magnet holds the pin, samples come from the record's hold
-//! (cycled if the hold runs longer than the record's); once the magnet lets go (its drive leaves
-//! `Hold`), samples converted after that instant come from the record's motion, from its first
-//! sample after the hold; past the record's end the last sample repeats (the pin at rest). The
-//! converter's ring holds [`RING`] samples: a larger backlog is dropped and counted as lost, like
-//! the board's ring.
+//! Time is virtual: before each call into the application the test brings the hardware to the call's
+//! time with [`Replay::advance`] (outside the measured call, as the board's DMA and flash work in
+//! the background). The converter is the firmware's own model of the board's
+//! ([`ConverterModel`]: sample timer, DMA ring, and the board's ring reader, whose reading code is
+//! what `adc_read` runs inside the measured call). Each trigger is converted with the record's counts:
+//! while the magnet holds the pin, the record's hold (cycled if the hold lasts longer); from the
+//! first conversion after the magnet lets go, the record's motion from its first sample after the
+//! hold; past the record's end the last sample repeats (the pin at rest). The run store's flash is
+//! the firmware's flash model ([`MemFlash`], with the STM32H743's erase and program times).
 //!
 //! The link models the board's USB pipe: [`PIPE`] bytes of room; a frame that does not fit is
-//! refused (nothing queued), as the board's `send_frame` does; the test takes the bytes out
-//! (the host reading) whenever it likes. Every hardware method is cheap (a copy at most), because its
-//! instructions are counted as the application's, like the board's would be.
+//! refused (nothing queued), as the board's `send_frame` does; the test takes the bytes out (the
+//! host reading) whenever it likes. Every hardware method is cheap (a copy at most), because its
+//! instructions are counted as the application's, as the board's would be.
 
 use crate::bundle::Record;
+use tribo_firmware::acquisition::clock::BOARD_TIMER_HZ;
+use tribo_firmware::acquisition::{Batch, ConverterModel};
 use tribo_firmware::hal::{
-    AnalogSample, Button, EcrFrontEnd, HeaterOutput, Lamps, Led, Link, Magnet, MagnetDrive,
-    SampleSource, Thermocouple, ThermocoupleFault, ANALOG_CHANNELS,
+    AnalogSample, Button, EcrFrontEnd, FlashGeometry, HeaterOutput, Lamps, Led, Link, Magnet,
+    MagnetDrive, RunFlash, SampleSource, Thermocouple, ThermocoupleFault, ANALOG_CHANNELS,
 };
+use tribo_firmware::runstore::memflash::MemFlash;
+use tribo_firmware::wire::SampleClock;
 
-/// Samples the converter's ring holds.
-pub const RING: u64 = 4096;
 /// Bytes the link's pipe holds (the board's USB pipe is 4 KiB).
 pub const PIPE: usize = 4096;
 
@@ -51,7 +54,7 @@ pub struct ReadTiming {
 /// The replay hardware (see the module docs).
 pub struct Replay<'r> {
     rec: Record<'r>,
-    /// Virtual time, µs (set by the test).
+    /// Virtual time, µs (set by [`Replay::advance`]).
     pub now_us: u64,
     /// The instruction clock for [`ReadTiming`].
     pub clock: Clock,
@@ -59,15 +62,10 @@ pub struct Replay<'r> {
     // magnet
     drive: MagnetDrive,
     released_at_us: Option<u64>,
-    /// Samples of the converter completed when the magnet let go (the first motion sample's `k`).
+    /// Index of the first conversion after the magnet let go (the run's first motion sample).
     released_k: Option<u64>,
-    // converter
-    running: bool,
-    rate: u32,
-    start_us: u64,
-    /// Samples converted and handed over (or lost) since `start_us`.
-    next: u64,
-    lost: u32,
+    adc: ConverterModel,
+    flash: MemFlash<&'r mut [u8]>,
     // heater, ECR, button, lamps
     /// What the thermocouple reads.
     pub temp: Result<f32, ThermocoupleFault>,
@@ -88,7 +86,8 @@ pub struct Replay<'r> {
 }
 
 impl<'r> Replay<'r> {
-    pub fn new(rec: Record<'r>) -> Self {
+    /// Replay of `rec`, with `flash` (at least [`FlashGeometry::H743_BANK2`]'s size) as bank 2.
+    pub fn new(rec: Record<'r>, flash: &'r mut [u8]) -> Self {
         Replay {
             rec,
             now_us: 0,
@@ -97,11 +96,8 @@ impl<'r> Replay<'r> {
             drive: MagnetDrive::Off,
             released_at_us: None,
             released_k: None,
-            running: false,
-            rate: 0,
-            start_us: 0,
-            next: 0,
-            lost: 0,
+            adc: ConverterModel::new(BOARD_TIMER_HZ),
+            flash: MemFlash::new(flash, FlashGeometry::H743_BANK2).with_h743_timing(),
             temp: Ok(25.0),
             heater_duty: 0.0,
             ecr_output_v: 1.0,
@@ -129,30 +125,33 @@ impl<'r> Replay<'r> {
         self.drive
     }
 
+    /// Brings the converter and the flash to `now_us`: every trigger due by then is converted.
+    pub fn advance(&mut self, now_us: u64) {
+        self.now_us = self.now_us.max(now_us);
+        self.flash.advance(self.now_us);
+        while self.adc.due(self.now_us).is_some() {
+            let k = self.adc.next_index();
+            let s = self.rec.sample(self.index(k));
+            let mut a = [0u16; ANALOG_CHANNELS];
+            a.copy_from_slice(&s[..ANALOG_CHANNELS]);
+            self.adc.convert(&a);
+        }
+    }
+
     /// The bytes the link took since the last call (the host reads them all; the pipe empties).
     pub fn take_output(&mut self, mut f: impl FnMut(&[u8])) {
         f(&self.outbox[..self.outbox_len]);
         self.outbox_len = 0;
     }
 
-    /// Samples completed by `now_us` since the converter started.
-    fn due(&self) -> u64 {
-        if !self.running || self.now_us < self.start_us {
-            return 0;
-        }
-        (self.now_us - self.start_us) * self.rate as u64 / 1_000_000
-    }
-
-    /// Index in the record of sample `k` since the start (see the module docs). No 64-bit
-    /// division here (the M7 has none in hardware): this runs for every sample, inside the
-    /// measured calls.
+    /// Index in the record of conversion `k` of the stream (see the module docs).
     fn index(&self, k: u64) -> usize {
         match self.released_k {
             Some(r) if k >= r => {
                 let i = self.rec.hold as u64 + (k - r);
                 i.min(self.rec.len().max(1) as u64 - 1) as usize
             }
-            _ => (k as u32 % self.rec.hold.max(1)) as usize,
+            _ => (k % self.rec.hold.max(1) as u64) as usize,
         }
     }
 
@@ -177,7 +176,7 @@ impl Magnet for Replay<'_> {
             && !matches!(drive, MagnetDrive::Hold { .. })
         {
             self.released_at_us = Some(self.now_us);
-            self.released_k = Some(self.due());
+            self.released_k = Some(self.adc.next_index());
         }
         self.drive = drive;
     }
@@ -208,50 +207,52 @@ impl EcrFrontEnd for Replay<'_> {
 }
 
 impl SampleSource for Replay<'_> {
-    fn adc_start(&mut self, rate_hz: u32) -> bool {
-        if rate_hz == 0 {
-            return false;
-        }
-        self.running = true;
-        self.rate = rate_hz;
-        self.start_us = self.now_us;
-        self.next = 0;
-        self.lost = 0;
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
+        self.adc.clock_for(rate_hz)
+    }
+
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
         self.timing.last = None;
-        true
+        self.adc.start(rate_hz, self.now_us)
     }
 
     fn adc_stop(&mut self) {
-        self.running = false;
         self.timing.last = None;
+        self.adc.stop();
     }
 
     fn adc_running(&self) -> bool {
-        self.running
+        self.adc.is_running()
     }
 
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize {
+    fn adc_next_index(&mut self) -> u64 {
+        self.adc.next_index()
+    }
+
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
         self.note_read();
-        let due = self.due();
-        let backlog = due.saturating_sub(self.next);
-        if backlog > RING {
-            let dropped = backlog - RING;
-            self.lost = self
-                .lost
-                .saturating_add(dropped.min(u32::MAX as u64) as u32);
-            self.next += dropped;
-        }
-        let n = (due.saturating_sub(self.next)).min(out.len() as u64) as usize;
-        for (k, o) in out.iter_mut().take(n).enumerate() {
-            let s = self.rec.sample(self.index(self.next + k as u64));
-            o.copy_from_slice(&s[..ANALOG_CHANNELS]);
-        }
-        self.next += n as u64;
-        n
+        self.adc.read(out)
     }
+}
 
-    fn adc_lost(&self) -> u32 {
-        self.lost
+impl RunFlash for Replay<'_> {
+    fn flash_geometry(&self) -> FlashGeometry {
+        self.flash.flash_geometry()
+    }
+    fn flash_busy(&mut self) -> bool {
+        self.flash.flash_busy()
+    }
+    fn flash_erase(&mut self, sector: u32) -> bool {
+        self.flash.flash_erase(sector)
+    }
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
+        self.flash.flash_program(offset, data)
+    }
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
+        self.flash.flash_read(offset, out)
+    }
+    fn flash_take_error(&mut self) -> bool {
+        self.flash.flash_take_error()
     }
 }
 

@@ -5,8 +5,23 @@
 use tribo_target_tests::generate::bundle;
 use tribo_target_tests::{run, tests::TESTS, Bundle, Cx, NoProbe};
 
+/// Runs `f` on a thread with the stack the app tests need (they hold the board's run store, ~2 MiB,
+/// as locals, as the target's 4 MiB stack allows).
+fn big_stack(f: impl FnOnce() + Send + 'static) {
+    std::thread::Builder::new()
+        .stack_size(64 << 20)
+        .spawn(f)
+        .unwrap()
+        .join()
+        .unwrap();
+}
+
 #[test]
 fn every_on_target_test_passes_on_the_host() {
+    big_stack(every_on_target_test_passes);
+}
+
+fn every_on_target_test_passes() {
     let bytes = bundle().expect("bundle generates");
     let b = Bundle::parse(&bytes).expect("bundle parses");
     assert!(b.records().count() >= 3);
@@ -27,6 +42,10 @@ fn every_on_target_test_passes_on_the_host() {
 
 #[test]
 fn a_wrong_host_result_fails_the_comparison() {
+    big_stack(a_wrong_host_result_fails);
+}
+
+fn a_wrong_host_result_fails() {
     let mut bytes = bundle().expect("bundle generates");
     // Flip the lowest bit of the coulomb_viscous record's host μ0 (one ulp): the last occurrence of
     // its four bytes, which follow that record's counts.

@@ -6,6 +6,7 @@
 //! * [`frame`]: how it is said: each message is postcard-encoded behind a sequence number, followed by
 //!   a CRC-32 of both, COBS-stuffed and closed by a zero byte. The [`frame::Decoder`] never panics,
 //!   reports every bad frame and resynchronises on the next zero byte.
+//! * [`codec`]: block compression (per-channel prediction, Rice codes) of [`PackedBlock`]s.
 //! * [`crc32`]: the CRC-32 (IEEE 802.3 / ISO-HDLC) used by the frames.
 //!
 //! Compatibility rule: variant 0 of [`HostMsg`] and [`DeviceMsg`] is `Hello`, and [`DeviceInfo`] starts
@@ -13,6 +14,7 @@
 //! a protocol it does not understand with a clear message (see [`check_protocol`]).
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 
+pub mod codec;
 pub mod crc32;
 pub mod frame;
 pub mod msg;

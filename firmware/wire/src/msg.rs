@@ -581,6 +581,81 @@ wire_type! {
         pub temp_c: f32,
         /// Device time of the release.
         pub t_us: u64,
+        /// The sample clock the run was converted with (the rate the timer really produced, which
+        /// may differ from `config.sample_rate_hz` when the timer cannot make that one exactly):
+        /// sample `i` of the run was converted at `clock.time_s(i)` after the run's first sample.
+        pub clock: SampleClock,
+    }
+}
+
+wire_type! {
+    /// A hardware sample clock: a timer clocked at `timer_hz` triggers one conversion every
+    /// `ticks_per_sample` ticks, so the rate `timer_hz / ticks_per_sample` is an exact rational and the
+    /// time of sample `i` is `i * ticks_per_sample / timer_hz` seconds, with no rounding that grows
+    /// with `i`.
+    #[derive(Copy, Eq, Hash)]
+    pub struct SampleClock {
+        pub timer_hz: u32,
+        pub ticks_per_sample: u32,
+    }
+}
+
+impl SampleClock {
+    /// The clock of a rate that is exactly `rate_hz` (what a record without a clock assumed).
+    pub const fn exact(rate_hz: u32) -> Self {
+        SampleClock {
+            timer_hz: rate_hz,
+            ticks_per_sample: 1,
+        }
+    }
+
+    /// A usable clock: both numbers non-zero.
+    pub const fn is_valid(&self) -> bool {
+        self.timer_hz > 0 && self.ticks_per_sample > 0
+    }
+
+    /// Samples per second (NaN for an invalid clock).
+    pub fn rate_hz(&self) -> f64 {
+        if !self.is_valid() {
+            return f64::NAN;
+        }
+        self.timer_hz as f64 / self.ticks_per_sample as f64
+    }
+
+    /// Time of sample `index`, seconds after sample 0.
+    pub fn time_s(&self, index: u64) -> f64 {
+        if !self.is_valid() {
+            return f64::NAN;
+        }
+        // Integer part and remainder apart, so that the result is exact to f64 rounding for any index.
+        let ticks = index as u128 * self.ticks_per_sample as u128;
+        let whole = ticks / self.timer_hz as u128;
+        let rest = ticks % self.timer_hz as u128;
+        whole as f64 + rest as f64 / self.timer_hz as f64
+    }
+
+    /// Time of sample `index`, whole microseconds after sample 0 (rounded down).
+    pub fn time_us(&self, index: u64) -> u64 {
+        if !self.is_valid() {
+            return 0;
+        }
+        let us = index as u128 * self.ticks_per_sample as u128 * 1_000_000 / self.timer_hz as u128;
+        us.min(u64::MAX as u128) as u64
+    }
+
+    /// Whole sample periods completed in `us` microseconds: how many samples a clock started `us`
+    /// ago has converted (the first one a period after the start).
+    pub fn samples_in_us(&self, us: u64) -> u64 {
+        if !self.is_valid() {
+            return 0;
+        }
+        let n = us as u128 * self.timer_hz as u128 / (self.ticks_per_sample as u128 * 1_000_000);
+        n.min(u64::MAX as u128) as u64
+    }
+
+    /// Whether this clock produces exactly `rate_hz` samples per second.
+    pub fn is_exactly(&self, rate_hz: u32) -> bool {
+        self.is_valid() && self.timer_hz as u64 == rate_hz as u64 * self.ticks_per_sample as u64
     }
 }
 
@@ -689,52 +764,6 @@ impl Serialize for CountsBytes<'_> {
             pair.copy_from_slice(&c.to_le_bytes());
         }
         s.serialize_bytes(&bytes[..2 * self.0.len()])
-    }
-}
-
-/// [`DeviceMsg::Samples`] over borrowed counts: serialises to exactly the bytes of the owned
-/// message (a test compares them), without building it. The firmware frames every block from its
-/// run store this way; rebuilding a [`SampleBlock`] copied its counts several times.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SamplesRef<'a> {
-    pub run_id: u32,
-    pub block: u32,
-    pub first_sample: u32,
-    pub t_us: u64,
-    pub channels: ChannelSet,
-    pub ecr_range: u8,
-    pub log10_ecr_ohm: f32,
-    pub temp_c: f32,
-    pub counts: &'a [u16],
-}
-
-/// Index of `Samples` among [`DeviceMsg`]'s variants (a test checks it).
-const SAMPLES_VARIANT: u32 = 5;
-
-impl Serialize for SamplesRef<'_> {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_newtype_variant("DeviceMsg", SAMPLES_VARIANT, "Samples", &BlockFields(self))
-    }
-}
-
-/// The fields of a [`SamplesRef`] as [`SampleBlock`]'s, in its order.
-struct BlockFields<'r, 'a>(&'r SamplesRef<'a>);
-
-impl Serialize for BlockFields<'_, '_> {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        use serde::ser::SerializeStruct;
-        let b = self.0;
-        let mut st = s.serialize_struct("SampleBlock", 9)?;
-        st.serialize_field("run_id", &b.run_id)?;
-        st.serialize_field("block", &b.block)?;
-        st.serialize_field("first_sample", &b.first_sample)?;
-        st.serialize_field("t_us", &b.t_us)?;
-        st.serialize_field("channels", &b.channels)?;
-        st.serialize_field("ecr_range", &b.ecr_range)?;
-        st.serialize_field("log10_ecr_ohm", &b.log10_ecr_ohm)?;
-        st.serialize_field("temp_c", &b.temp_c)?;
-        st.serialize_field("counts", &CountsBytes(b.counts))?;
-        st.end()
     }
 }
 
@@ -965,23 +994,28 @@ wire_type! {
 }
 
 wire_type! {
-    /// A compressed sample block (filled in by the whole-run work: see `tribo_firmware::codec`).
+    /// A compressed sample block: the v2 form of [`SampleBlock`], every field the same, the counts
+    /// packed by [`crate::codec`] ([`PackedBlock::pack`], [`PackedBlock::unpack`]).
     pub struct PackedBlock {
         pub run_id: u32,
         /// Index of this block in the run, from 0.
         pub block: u32,
         /// Index in the run of the block's first sample.
         pub first_sample: u32,
+        /// Device time of the block's first sample.
+        pub t_us: u64,
         pub channels: ChannelSet,
         /// Number of samples in the block.
         pub samples: u16,
+        /// ECR transimpedance range during the block.
+        pub ecr_range: u8,
         pub temp_c: f32,
         pub log10_ecr_ohm: f32,
-        /// The compressed counts.
+        /// The compressed counts ([`crate::codec`] describes the format).
         pub data: heapless::Vec<u8, MAX_PACKED_BYTES>,
     }
 }
 
-/// Largest compressed payload of a [`PackedBlock`]: the raw size plus one byte per count of worst-case
-/// overhead (the codec falls back to raw counts when compression would not pay).
+/// Largest compressed payload of a [`PackedBlock`]: the raw form (a format byte and two bytes per
+/// count), which the codec falls back to when compression would not pay, plus a little room.
 pub const MAX_PACKED_BYTES: usize = 2 * MAX_BLOCK_COUNTS + 16;

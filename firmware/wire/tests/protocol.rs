@@ -229,15 +229,44 @@ fn device_msg() -> impl Strategy<Value = DeviceMsg> {
                 }
             )
             .boxed(),
-        (any::<u32>(), configure(), any_f32(), any::<u64>())
+        (
+            any::<u32>(),
+            configure(),
+            any_f32(),
+            any::<u64>(),
+            (any::<u32>(), any::<u32>())
+        )
             .prop_map(
-                |(run_id, config, temp_c, t_us)| DeviceMsg::RunStarted(RunHeader {
-                    run_id,
-                    config,
-                    temp_c,
-                    t_us
-                })
+                |(run_id, config, temp_c, t_us, (timer_hz, ticks_per_sample))| {
+                    DeviceMsg::RunStarted(RunHeader {
+                        run_id,
+                        config,
+                        temp_c,
+                        t_us,
+                        clock: SampleClock {
+                            timer_hz,
+                            ticks_per_sample,
+                        },
+                    })
+                }
             )
+            .boxed(),
+        (any::<u32>(), any::<u32>(), any::<u32>())
+            .prop_map(|(run_id, first_sample, count)| DeviceMsg::Gap(Gap {
+                run_id,
+                first_sample,
+                count
+            }))
+            .boxed(),
+        (any::<u32>(), any::<u32>(), any::<u8>(), any::<u16>())
+            .prop_map(|(run_id, first_sample, range, settling)| {
+                DeviceMsg::EcrRange(EcrRangeChange {
+                    run_id,
+                    first_sample,
+                    range,
+                    settling,
+                })
+            })
             .boxed(),
         sample_block().prop_map(DeviceMsg::Samples).boxed(),
         (
@@ -600,23 +629,36 @@ fn a_device_frame_is_not_taken_for_a_host_frame() {
     assert_eq!(decode_one::<HostMsg>(&f), Err(FrameError::Decode));
 }
 
-proptest! {
-    /// A borrowed block frames to the same bytes as the owned `DeviceMsg::Samples` (so the
-    /// firmware's frames from its store are the protocol's, whatever the fields or the variant
-    /// order become).
-    #[test]
-    fn samples_ref_frames_like_the_owned_block(b in sample_block(), seq in any::<u32>()) {
-        let view = SamplesRef {
-            run_id: b.run_id,
-            block: b.block,
-            first_sample: b.first_sample,
-            t_us: b.t_us,
-            channels: b.channels,
-            ecr_range: b.ecr_range,
-            log10_ecr_ohm: b.log10_ecr_ohm,
-            temp_c: b.temp_c,
-            counts: &b.counts,
-        };
-        prop_assert_eq!(encode_vec(seq, &view).unwrap(), encode_vec(seq, &DeviceMsg::Samples(b)).unwrap());
-    }
+#[test]
+fn sample_clock_times_are_exact_rationals_at_any_index() {
+    // 200 MHz / 20 002 ticks: the timer's nearest rate to 9 999 S/s, not 9 999 S/s.
+    let c = SampleClock {
+        timer_hz: 200_000_000,
+        ticks_per_sample: 20_002,
+    };
+    assert!(!c.is_exactly(9_999));
+    assert!((c.rate_hz() - 200e6 / 20_002.0).abs() < 1e-9);
+    // One hour of samples: the integer and fractional parts apart keep it exact to f64 rounding,
+    // where i as f64 / rate would drift by an ulp per operation.
+    let i = 36_000_000u64;
+    let exact = i as f64 * 20_002.0 / 200e6;
+    assert!((c.time_s(i) - exact).abs() <= 1e-12 * exact);
+    assert_eq!(c.time_us(10_000), 1_000_100);
+    // The clock that started 1 s ago has converted the samples whose period has elapsed.
+    assert_eq!(c.samples_in_us(1_000_000), 9_999);
+    assert_eq!(c.samples_in_us(1_000_100), 10_000);
+    assert_eq!(c.samples_in_us(1_000_099), 9_999);
+    let ten_k = SampleClock {
+        timer_hz: 200_000_000,
+        ticks_per_sample: 20_000,
+    };
+    assert!(ten_k.is_exactly(10_000));
+    assert_eq!(SampleClock::exact(10_000).time_s(5), 5e-4);
+    // A damaged clock gives no time rather than a division by zero.
+    let bad = SampleClock {
+        timer_hz: 0,
+        ticks_per_sample: 7,
+    };
+    assert!(bad.rate_hz().is_nan() && bad.time_s(3).is_nan());
+    assert_eq!((bad.time_us(3), bad.samples_in_us(9)), (0, 0));
 }

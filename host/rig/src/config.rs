@@ -163,6 +163,22 @@ impl Default for EcrModel {
     }
 }
 
+/// Acquisition faults to induce (test flags), each at most once per run, timed from the release:
+///
+/// ```toml
+/// [acquisition]
+/// stall_reader_after_ms = 500   # the firmware stops reading the converter's ring ...
+/// stall_reader_ms = 300         # ... for this long: the DMA laps it, samples are lost
+/// adc_overrun_after_ms = 900    # the ADC overruns: the converter is restarted, samples are lost
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AcquisitionFaults {
+    pub stall_reader_after_ms: Option<u64>,
+    pub stall_reader_ms: u64,
+    pub adc_overrun_after_ms: Option<u64>,
+}
+
 /// The simulated rig.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -189,6 +205,8 @@ pub struct VirtualRigConfig {
     pub seed: u64,
     /// Serial number announced in the hello.
     pub serial: u64,
+    /// Induced acquisition faults (none by default).
+    pub acquisition: AcquisitionFaults,
 }
 
 impl Default for VirtualRigConfig {
@@ -211,6 +229,7 @@ impl Default for VirtualRigConfig {
             ecr: EcrModel::default(),
             seed: 1,
             serial: 0x7472_6962_6f00_0001,
+            acquisition: AcquisitionFaults::default(),
         }
     }
 }

@@ -13,15 +13,15 @@
 pub mod config;
 pub mod sim;
 
-pub use config::{EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
+pub use config::{AcquisitionFaults, EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
 pub use sim::SimHardware;
 
 use std::io::{self, Read, Write};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use tribo_firmware::app::{App, AppConfig};
-use tribo_firmware::hal::ThermocoupleFault;
-use tribo_firmware::runstore::{BlockMeta, RunStore, BOARD_BLOCKS, BOARD_COUNTS};
+use tribo_firmware::hal::{HeaterOutput, Magnet, MagnetDrive, SampleSource, ThermocoupleFault};
+use tribo_firmware::runstore::{RunStore, BOARD_RING_BYTES, MAX_RUN_BLOCKS};
 
 /// A virtual rig: simulated hardware and the firmware application.
 pub struct VirtualRig {
@@ -29,26 +29,45 @@ pub struct VirtualRig {
     hw: SimHardware,
     now_us: u64,
     tick_us: u64,
+    serial: u64,
+}
+
+/// A run store with the board's RAM (ring buffers and block index), so that what a host can pull
+/// from the virtual rig is what it could pull from the real one. Leaked: it lives as long as the
+/// program (761 KiB per rig, and per power cycle).
+fn board_store() -> RunStore<'static> {
+    let ring = BOARD_RING_BYTES
+        .map(|n| -> &'static mut [u8] { Box::leak(vec![0u8; n].into_boxed_slice()) });
+    let index: &'static mut [u32] = Box::leak(vec![0u32; MAX_RUN_BLOCKS].into_boxed_slice());
+    RunStore::new(ring, index)
 }
 
 impl VirtualRig {
     /// A rig at time 0, pin held nowhere (magnet off), heater off. Refuses an invalid configuration.
     pub fn new(cfg: VirtualRigConfig) -> Result<VirtualRig, String> {
         let hw = SimHardware::new(&cfg)?;
-        // The same store size as the board, so that what a host can pull is what it could pull from
-        // the real rig. Leaked: it lives as long as the program (a few hundred KiB per rig).
-        let counts: &'static mut [u16] = Box::leak(vec![0u16; BOARD_COUNTS].into_boxed_slice());
-        let meta: &'static mut [BlockMeta] =
-            Box::leak(vec![BlockMeta::EMPTY; BOARD_BLOCKS].into_boxed_slice());
-        let app = App::new(AppConfig::new(cfg.serial), RunStore::new(counts, meta));
         let mut rig = VirtualRig {
-            app,
+            app: App::new(AppConfig::new(cfg.serial), board_store()),
             hw,
             now_us: 0,
             tick_us: 1000,
+            serial: cfg.serial,
         };
         rig.app.poll(&mut rig.hw, 0);
         Ok(rig)
+    }
+
+    /// Cuts the power and turns it on again: the firmware restarts with empty RAM (an operation the
+    /// flash was doing is torn), the flash keeps what it holds, the physical rig stays where it is
+    /// (the magnet lets go, the heater stops). The application recovers the last run from flash on
+    /// its first poll, as the board does.
+    pub fn power_cycle(&mut self) {
+        self.hw.flash.power_cut();
+        self.hw.adc_stop();
+        self.hw.magnet_drive(MagnetDrive::Off);
+        self.hw.set_heater_duty(0.0);
+        self.app = App::new(AppConfig::new(self.serial), board_store());
+        self.app.poll(&mut self.hw, self.now_us);
     }
 
     /// Device time, µs.

@@ -3,23 +3,28 @@
 //! * Pin: `tribo_physics::Simulator` of `m x'' + k x = −N μ(v)` (plus apparatus damping), started at
 //!   rest at `x0` when the magnet lets go: at once on the reverse pulse, `remanence_s` later if the
 //!   coil is merely switched off. Until then the magnet really holds it at `x0`.
-//! * ADC: samples at the configured rate, each on its own time instant, displacement and velocity
-//!   with white noise, force through the charge amplifier's 2nd-order 300 Hz low-pass, ECR as the
-//!   transimpedance output of the range and source the firmware set; 16-bit counts through the board
-//!   front end's calibration (`Configure::real_rig`), into a ring that drops and counts on overflow.
+//! * Converter: the board's sample timer (200 MHz kernel clock, the prescaler and reload chosen by
+//!   the firmware's own arithmetic, so an unreachable rate is answered with the same rate as the
+//!   board's), one scan per trigger at the trigger's instant, written by a modelled DMA round the
+//!   same ring the board uses and read back by position (`tribo_firmware::acquisition::
+//!   ConverterModel`). Displacement and velocity with white noise, force through the charge
+//!   amplifier's 2nd-order 300 Hz low-pass, ECR as the transimpedance output of the range and source
+//!   the firmware set; 16-bit counts through the board front end's calibration
+//!   (`Configure::real_rig`). Test flags: stall the reader ([`SimHardware::stall_reader_for`]), make
+//!   the ADC overrun ([`SimHardware::inject_adc_overrun`]), keep every converted sample
+//!   ([`SimHardware::record_truth`]).
 //! * Heater: first-order thermal model of the plate; thermocouple with noise at the MAX31856's
 //!   resolution (1/128 °C), faults injectable.
 
 use crate::config::VirtualRigConfig;
-use tribo_firmware::acquisition::Ring;
+use tribo_firmware::acquisition::clock::BOARD_TIMER_HZ;
+use tribo_firmware::acquisition::{Batch, ConverterModel};
 use tribo_firmware::ecr::{FULL_SCALE_V, GAIN_V_PER_A, RANGES};
 use tribo_firmware::hal::*;
+use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::wire::{ChannelCal, Configure, CHANNELS};
 use tribo_physics::sensor::Rng;
 use tribo_physics::{FrictionLaw, Method, Model, Rig, Simulator};
-
-/// Converter ring capacity, samples (as on the board).
-pub const RING: usize = 1024;
 
 /// 2nd-order Butterworth low-pass (bilinear transform), streaming.
 #[derive(Debug, Clone)]
@@ -92,10 +97,13 @@ pub struct SimHardware {
     ecr_source_v: f64,
     ecr_dev: f64,
     // ADC.
-    adc_on: bool,
-    rate_hz: u32,
-    next_sample: u64,
-    ring: Ring<RING>,
+    adc: Box<ConverterModel>,
+    rate_hz: f64,
+    /// Every sample converted since the last start, by stream index (when recording).
+    truth: Option<Vec<AnalogSample>>,
+    /// Induced acquisition faults still to come in this run (device times).
+    stall_at_us: Option<u64>,
+    overrun_at_us: Option<u64>,
     force_lp: Biquad,
     /// Force samples waiting out the channel's lag.
     force_delay: std::collections::VecDeque<f64>,
@@ -104,6 +112,8 @@ pub struct SimHardware {
     lamps: Lamps,
     pub(crate) connected: bool,
     pub(crate) out: Vec<u8>,
+    /// Bank 2: kept across a rig reset (power loss), with the STM32H743's erase and program times.
+    pub(crate) flash: MemFlash<Vec<u8>>,
 }
 
 impl SimHardware {
@@ -137,17 +147,28 @@ impl SimHardware {
             ecr_range: 0,
             ecr_source_v: 0.0,
             ecr_dev: 0.0,
-            adc_on: false,
-            rate_hz: 10_000,
-            next_sample: 0,
-            ring: Ring::new(),
+            adc: Box::new(ConverterModel::new(BOARD_TIMER_HZ)),
+            rate_hz: 10_000.0,
+            truth: None,
+            stall_at_us: None,
+            overrun_at_us: None,
             force_lp: Biquad::lowpass(cfg.force_cutoff_hz, 10_000.0),
             force_delay: std::collections::VecDeque::new(),
             button: false,
             lamps: Lamps::default(),
             connected: true,
             out: Vec::new(),
+            flash: MemFlash::new(
+                vec![0xFF; FlashGeometry::H743_BANK2.bytes() as usize],
+                FlashGeometry::H743_BANK2,
+            )
+            .with_h743_timing(),
         })
+    }
+
+    /// The run store's flash (to inspect or damage it).
+    pub fn flash(&mut self) -> &mut MemFlash<Vec<u8>> {
+        &mut self.flash
     }
 
     /// (μ0, μ1) a Coulomb–viscous fit should find (contact law + apparatus damping).
@@ -188,18 +209,31 @@ impl SimHardware {
         matches!(self.pin, Pin::Free { .. })
     }
 
-    /// Samples dropped by the converter ring so far.
-    pub fn lost(&self) -> u32 {
-        self.ring.lost()
+    /// Test flag: the converter's reader takes nothing for the next `us` of device time, while the
+    /// timer and the DMA go on (a stalled application: the DMA laps the reader).
+    pub fn stall_reader_for(&mut self, us: u64) {
+        self.adc.stall_reader(self.now_us + us);
     }
 
-    /// Stalls the consumer: converts `samples` samples into the ring at once (overrun tests).
-    pub fn flood(&mut self, samples: u32) {
-        for _ in 0..samples {
-            let t = self.next_sample;
-            self.convert_one(t);
-            self.next_sample += 1;
-        }
+    /// Test flag: the ADC overruns at its next conversion (the DMA takes no more conversions until
+    /// the reader restarts the converter).
+    pub fn inject_adc_overrun(&mut self) {
+        self.adc.inject_overrun();
+    }
+
+    /// Keeps every sample converted from the next start on (or stops keeping them).
+    pub fn record_truth(&mut self, on: bool) {
+        self.truth = on.then(Vec::new);
+    }
+
+    /// The samples converted since the converter last started, by stream index, if recording.
+    pub fn converted(&self) -> Option<&[AnalogSample]> {
+        self.truth.as_deref()
+    }
+
+    /// The converter's sample clock, if it ran.
+    pub fn sample_clock(&self) -> Option<tribo_firmware::wire::SampleClock> {
+        self.adc.clock()
     }
 
     /// The true ECR, log10 Ω, at this instant.
@@ -217,6 +251,7 @@ impl SimHardware {
         if t_us <= self.now_us {
             return;
         }
+        self.flash.advance(t_us);
         let dt = (t_us - self.now_us) as f64 * 1e-6;
         // Heater: exact step of the first-order plate model.
         let th = self.cfg.thermal;
@@ -231,17 +266,23 @@ impl SimHardware {
                 self.free_pin(t_go);
             }
         }
-        // ADC samples due up to t_us.
-        if self.adc_on {
-            let per = 1e6 / self.rate_hz as f64;
-            loop {
-                let ts = (self.next_sample as f64 * per) as u64;
-                if ts > t_us {
-                    break;
-                }
-                self.convert_one(ts);
-                self.next_sample += 1;
+        // Induced acquisition faults, once per run.
+        if let Some(at) = self.stall_at_us.filter(|&at| at <= t_us) {
+            self.stall_at_us = None;
+            self.adc
+                .stall_reader(at + self.cfg.acquisition.stall_reader_ms * 1000);
+        }
+        if self.overrun_at_us.is_some_and(|at| at <= t_us) {
+            self.overrun_at_us = None;
+            self.adc.inject_overrun();
+        }
+        // Converter triggers due up to t_us, each at its own instant.
+        while let Some(ts) = self.adc.due(t_us) {
+            let s = self.sample_at(ts);
+            if let Some(t) = &mut self.truth {
+                t.push(s);
             }
+            self.adc.convert(&s);
         }
         self.now_us = t_us;
     }
@@ -250,6 +291,9 @@ impl SimHardware {
         if matches!(self.pin, Pin::Free { .. }) {
             return;
         }
+        let after = |ms: Option<u64>| ms.map(|ms| t0_us + ms * 1000);
+        self.stall_at_us = after(self.cfg.acquisition.stall_reader_after_ms);
+        self.overrun_at_us = after(self.cfg.acquisition.adc_overrun_after_ms);
         let y0 = self.rig.y_of_x(self.cfg.x0_m);
         let sim = Simulator::new(self.model.clone(), y0, 0.0, Method::default());
         self.pin = Pin::Free {
@@ -288,13 +332,14 @@ impl SimHardware {
         }
     }
 
-    fn convert_one(&mut self, t_us: u64) {
+    /// The counts a scan triggered at `t_us` converts.
+    fn sample_at(&mut self, t_us: u64) -> AnalogSample {
         let (x, v, f, _) = self.state_at(t_us);
         let n = self.cfg.noise;
         let x = x + n.displacement_m * self.rng.normal();
         let v = v + n.velocity_m_s * self.rng.normal();
         // Charge amplifier: lag (a delay line of whole samples), then its low-pass.
-        let lag = (self.cfg.force_lag_s * self.rate_hz as f64).round() as usize;
+        let lag = (self.cfg.force_lag_s * self.rate_hz).round() as usize;
         self.force_delay.push_back(f);
         let f_lagged = if self.force_delay.len() > lag {
             self.force_delay.pop_front().unwrap_or(f)
@@ -303,18 +348,17 @@ impl SimHardware {
         };
         let f = self.force_lp.step(f_lagged) + n.force_n * self.rng.normal();
         // ECR: correlated fluctuation of log10 R (AR(1) at the sample rate).
-        let dt = 1.0 / self.rate_hz as f64;
+        let dt = 1.0 / self.rate_hz;
         let rho = (-dt / self.cfg.ecr.correlation_s).exp();
         self.ecr_dev = rho * self.ecr_dev
             + (1.0 - rho * rho).sqrt() * self.cfg.ecr.fluctuation_decades * self.rng.normal();
         let e = self.ecr_output() + n.ecr_v * self.rng.normal();
-        let s = [
+        [
             self.cal[0].to_count(x as f32),
             self.cal[1].to_count(v as f32),
             self.cal[2].to_count(f as f32),
             self.cal[3].to_count(e as f32),
-        ];
-        self.ring.push(s);
+        ]
     }
 
     fn ecr_output(&self) -> f64 {
@@ -385,31 +429,52 @@ impl EcrFrontEnd for SimHardware {
 }
 
 impl SampleSource for SimHardware {
-    fn adc_start(&mut self, rate_hz: u32) -> bool {
-        if rate_hz == 0 {
-            return false;
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
+        self.adc.clock_for(rate_hz)
+    }
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
+        let clock = self.adc.start(rate_hz, self.now_us)?;
+        self.rate_hz = clock.rate_hz();
+        if let Some(t) = &mut self.truth {
+            t.clear();
         }
-        self.rate_hz = rate_hz;
-        self.adc_on = true;
-        self.ring.clear();
-        self.force_lp = Biquad::lowpass(self.cfg.force_cutoff_hz, rate_hz as f64);
+        self.force_lp = Biquad::lowpass(self.cfg.force_cutoff_hz, self.rate_hz);
         self.force_lp.reset(self.last.2);
         self.force_delay.clear();
-        // Sample k is at k / rate: the first one due at or after now.
-        self.next_sample = (self.now_us as f64 * 1e-6 * rate_hz as f64).ceil() as u64;
-        true
+        Some(clock)
     }
     fn adc_stop(&mut self) {
-        self.adc_on = false;
+        self.adc.stop();
     }
     fn adc_running(&self) -> bool {
-        self.adc_on
+        self.adc.is_running()
     }
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> usize {
-        self.ring.pop_into(out)
+    fn adc_next_index(&mut self) -> u64 {
+        self.adc.next_index()
     }
-    fn adc_lost(&self) -> u32 {
-        self.ring.lost()
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
+        self.adc.read(out)
+    }
+}
+
+impl RunFlash for SimHardware {
+    fn flash_geometry(&self) -> FlashGeometry {
+        self.flash.flash_geometry()
+    }
+    fn flash_busy(&mut self) -> bool {
+        self.flash.flash_busy()
+    }
+    fn flash_erase(&mut self, sector: u32) -> bool {
+        self.flash.flash_erase(sector)
+    }
+    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
+        self.flash.flash_program(offset, data)
+    }
+    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
+        self.flash.flash_read(offset, out)
+    }
+    fn flash_take_error(&mut self) -> bool {
+        self.flash.flash_take_error()
     }
 }
 
@@ -501,12 +566,14 @@ mod tests {
         hw.magnet_drive(MagnetDrive::Reverse { duty: 0.3 });
         let mut f = Vec::new();
         let mut out = [[0u16; 4]; 256];
+        let mut next = 0;
         for ms in 1..=300 {
             hw.advance(ms * 1000);
-            let n = hw.adc_read(&mut out);
-            f.extend(out[..n].iter().map(|s| s[2] as f64));
+            let b = hw.adc_read(&mut out);
+            assert_eq!(b.first, next, "no sample lost");
+            next = b.end();
+            f.extend(out[..b.len].iter().map(|s| s[2] as f64));
         }
-        assert_eq!(hw.lost(), 0);
         f
     }
 

@@ -87,7 +87,9 @@ impl Host {
         for f in &self.frames {
             match &f.1.msg {
                 DeviceMsg::RunStarted(h) => header = Some(*h),
-                DeviceMsg::Samples(b) => blocks.push(b.clone()),
+                DeviceMsg::Samples(_) | DeviceMsg::Packed(_) => {
+                    blocks.push(f.1.msg.sample_block().unwrap().expect("blocks unpack"))
+                }
                 DeviceMsg::Result(r) => result = Some(*r),
                 DeviceMsg::RunEnded(e) => end = Some(*e),
                 _ => {}
@@ -159,14 +161,20 @@ fn mixed_lubrication_shows_as_a_fluctuating_ecr() {
     };
     let mut h = Host::new(cfg);
     let (_, blocks, _, _) = h.run(0.3);
-    let l: Vec<f64> = blocks[10..blocks.len() / 2]
+    let all: Vec<f64> = blocks[10..blocks.len() / 2]
         .iter()
         .map(|b| b.log10_ecr_ohm as f64)
         .collect();
+    // A contact that wanders over decades overruns any one range (a span of ×120) often: such a
+    // block, or one whose samples were all settling from a range change, reads nothing (NaN)
+    // rather than a wrong value, and the range follows. A good part of the blocks still read.
+    let l: Vec<f64> = all.iter().copied().filter(|x| x.is_finite()).collect();
+    assert!(3 * l.len() > all.len(), "{all:?}");
     let mean = l.iter().sum::<f64>() / l.len() as f64;
     let sd = (l.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / l.len() as f64).sqrt();
     assert!((mean - 4.0).abs() < 0.5, "{mean}");
-    // Block readings are instantaneous values of an AR(1) with σ = 1 decade: spread well above 0.3.
+    // Block readings are block means of an AR(1) with σ = 1 decade correlated over 10 ms (about
+    // one and a half blocks): spread well above 0.3.
     assert!(sd > 0.4, "{sd}");
 }
 
@@ -214,37 +222,148 @@ fn heater_regulates_the_plate_and_cuts_off_when_it_overheats() {
     assert_eq!(h.rig.hardware().heater_duty(), 0.0);
 }
 
+/// Asserts that every sample of every block is the one the simulated converter made at that
+/// index of its stream, that blocks are numbered on and hold consecutive samples, and that the
+/// samples between blocks are exactly the gaps the rig reported. Returns the samples held.
+fn assert_in_place(h: &mut Host, blocks: &[SampleBlock], gaps: &[Gap]) -> u64 {
+    let base = h.rig.app().run_first_index();
+    let truth = h.rig.hardware().converted().expect("recording").to_vec();
+    let mut next = 0u64;
+    let mut gaps_seen = Vec::new();
+    for (k, b) in blocks.iter().enumerate() {
+        assert_eq!(b.block as usize, k);
+        let first = b.first_sample as u64;
+        if first != next {
+            gaps_seen.push(Gap {
+                run_id: b.run_id,
+                first_sample: next as u32,
+                count: (first - next) as u32,
+            });
+        }
+        for i in 0..b.samples() {
+            let t = truth[(base + first + i as u64) as usize];
+            let want: Vec<u16> = b
+                .channels
+                .iter()
+                .filter(|c| *c != Channel::Temperature)
+                .map(|c| t[c.index()])
+                .collect();
+            let got: Vec<u16> = b
+                .channels
+                .iter()
+                .zip(b.sample(i).unwrap())
+                .filter(|(c, _)| *c != Channel::Temperature)
+                .map(|(_, &v)| v)
+                .collect();
+            assert_eq!(got, want, "block {k}, sample {i}");
+        }
+        next = first + b.samples() as u64;
+    }
+    assert_eq!(
+        gaps_seen, gaps,
+        "the gap frames are exactly the samples missing"
+    );
+    blocks.iter().map(|b| b.samples() as u64).sum()
+}
+
+fn gaps_of(h: &Host) -> Vec<Gap> {
+    h.frames
+        .iter()
+        .filter_map(|f| match f.1.msg {
+            DeviceMsg::Gap(g) => Some(g),
+            _ => None,
+        })
+        .collect()
+}
+
 #[test]
-fn an_overrun_in_the_simulated_converter_is_reported() {
+fn every_sample_is_read_in_place_across_the_ring_s_half_and_full_boundaries() {
+    let mut h = Host::new(VirtualRigConfig::default());
+    h.rig.hardware().record_truth(true);
+    let (header, blocks, _, end) = h.run(0.3);
+    assert_eq!(end.reason, EndReason::Stopped);
+    assert!(gaps_of(&h).is_empty());
+    let held = assert_in_place(&mut h, &blocks, &[]);
+    assert_eq!(held, end.samples as u64);
+    // The run went many times round the 2048-scan ring, through every half and full mark.
+    let ring = tribo_firmware::acquisition::RING_SCANS as u64;
+    assert!(held > 4 * ring, "{held} samples");
+    assert!(header.clock.is_exactly(10_000));
+}
+
+#[test]
+fn an_induced_reader_stall_is_a_gap_frame_with_the_exact_missing_samples() {
+    let cfg = VirtualRigConfig {
+        acquisition: tribo_rig::AcquisitionFaults {
+            stall_reader_after_ms: Some(500),
+            stall_reader_ms: 300,
+            adc_overrun_after_ms: None,
+        },
+        ..Default::default()
+    };
+    let mut h = Host::new(cfg);
+    h.rig.hardware().record_truth(true);
+    let (_, blocks, result, end) = h.run(0.3);
+    let gaps = gaps_of(&h);
+    assert_eq!(gaps.len(), 1, "{gaps:?}");
+    // 300 ms at 10 kS/s is 3000 samples; the ring kept the last 2048 of them.
+    let ring = tribo_firmware::acquisition::RING_SCANS as u32;
+    assert!(
+        (3000 - ring - 10..=3000 - ring + 10).contains(&gaps[0].count),
+        "{gaps:?}"
+    );
+    assert!((4_990..=5_010).contains(&gaps[0].first_sample), "{gaps:?}");
+    assert_in_place(&mut h, &blocks, &gaps);
+    // The run went on to its natural end, and says what it lost.
+    assert_eq!(end.reason, EndReason::Stopped, "{end:?}");
+    assert_eq!(end.overruns, gaps[0].count);
+    // The on-board analysis used what came before the gap: still within its verdicts.
+    assert!(result.cycles >= 5, "{result:?}");
+}
+
+#[test]
+fn an_induced_adc_overrun_restarts_the_converter_and_is_a_gap_not_a_shift() {
+    let cfg = VirtualRigConfig {
+        acquisition: tribo_rig::AcquisitionFaults {
+            adc_overrun_after_ms: Some(700),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut h = Host::new(cfg);
+    h.rig.hardware().record_truth(true);
+    let (_, blocks, _, end) = h.run(0.3);
+    let gaps = gaps_of(&h);
+    assert_eq!(gaps.len(), 1, "{gaps:?}");
+    // The scan the overrun struck and the ones until the next 1 ms poll restarted the converter.
+    assert!((1..=11).contains(&gaps[0].count), "{gaps:?}");
+    assert_in_place(&mut h, &blocks, &gaps);
+    assert_eq!(end.reason, EndReason::Stopped);
+}
+
+#[test]
+fn a_rate_the_timer_cannot_make_is_answered_with_the_rate_used() {
     let mut h = Host::new(VirtualRigConfig::default());
     let mut c = Configure::real_rig(0.3);
-    c.max_duration_s = 6.0;
+    c.sample_rate_hz = 7_777;
+    c.max_duration_s = 1.0;
     assert_eq!(h.command(HostMsg::Configure(c)), Ok(()));
     assert_eq!(h.command(HostMsg::Arm), Ok(()));
-    h.wait(100);
+    h.wait(300);
     assert_eq!(h.command(HostMsg::Release), Ok(()));
-    h.wait(100);
-    h.rig.hardware().flood(5000);
-    let lost = h.rig.hardware().lost();
-    assert!(lost > 0);
-    h.wait(10);
-    assert!(h.frames.iter().any(|f| f.1.msg
-        == DeviceMsg::Error(DeviceError {
-            code: ErrorCode::Overrun { lost_samples: lost },
-            about_seq: None
-        })));
-    let end = h
+    h.wait(200);
+    let header = h
         .frames
         .iter()
-        .find_map(|f| {
-            if let DeviceMsg::RunEnded(e) = f.1.msg {
-                Some(e)
-            } else {
-                None
-            }
+        .find_map(|f| match f.1.msg {
+            DeviceMsg::RunStarted(h) => Some(h),
+            _ => None,
         })
         .unwrap();
-    assert_eq!((end.reason, end.overruns), (EndReason::Overrun, lost));
+    // 200 MHz / 7 777 = 25 716.83 ticks: the timer counts 25 717, 7 776.95 S/s.
+    assert_eq!(header.clock.ticks_per_sample, 25_717);
+    assert!(!header.clock.is_exactly(7_777));
+    assert!((header.clock.rate_hz() - 200e6 / 25_717.0).abs() < 1e-9);
 }
 
 #[test]
@@ -377,9 +496,14 @@ fn serve_over_a_stream_survives_a_pulled_cable_and_replays_the_run() {
     });
     assert!(matches!(again[0].1.msg, DeviceMsg::Ack { seq: 10 }));
     let got: Vec<&Vec<u8>> = again[1..].iter().map(|f| &f.0).collect();
-    let want: Vec<&Vec<u8>> = std::iter::once(&run[0].0)
-        .chain(run[8..].iter().map(|f| &f.0))
-        .collect();
+    // The header, then the live order from just after block 6 (the events between blocks 6 and 7
+    // come along in their place).
+    let after = run
+        .iter()
+        .rposition(|f| matches!(&f.1.msg, DeviceMsg::Packed(b) if b.block < 7))
+        .expect("blocks 0..7 were sent")
+        + 1;
+    let want: Vec<&Vec<u8>> = run[..1].iter().chain(&run[after..]).map(|f| &f.0).collect();
     assert_eq!(got, want);
 }
 

@@ -21,6 +21,9 @@ use tribo_physics::identify::LawSpec;
 /// "gap_after", "delta_bic", "params"}], "gap_initial", "gap_final", ...}`. The gap is RMS(measured
 /// − fitted envelope) / initial amplitude, extended to the force channel as
 /// √(gap_envelope² + gap_force²).
+///
+/// A record with holes (samples the rig lost, blocks not received, a time axis that jumps) is
+/// refused; `--longest-clean-stretch` explains the longest stretch of consecutive samples instead.
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` with rig constants, or `tau,y,ydot`).
@@ -40,6 +43,10 @@ pub struct Args {
     /// At most this many effects are added.
     #[arg(long, default_value_t = 3)]
     pub max_steps: usize,
+    /// If the record has holes (samples the rig lost, blocks not received), use the longest
+    /// stretch of consecutive samples instead of refusing.
+    #[arg(long)]
+    pub longest_clean_stretch: bool,
 }
 
 /// Runs the subcommand.
@@ -64,7 +71,12 @@ pub fn run(args: Args) -> Result<()> {
             })
             .collect::<Result<_>>()?;
     }
-    let record = crate::load_record(&args.record)?;
+    let holes = if args.longest_clean_stretch {
+        crate::Holes::LongestCleanStretch
+    } else {
+        crate::Holes::Refuse
+    };
+    let record = crate::load_for_fit(&args.record, holes)?;
     let data = Prepared::new(
         &record,
         opts.max_env_points,

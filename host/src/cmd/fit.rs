@@ -25,6 +25,10 @@ use tribo_physics::{Record, Rig};
 /// ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains
 /// `"windows": [{"a_start", "a_end", "tau_start", "tau_end", "fit": {…}}, …]`. Constants that
 /// drift from window to window mean the law misses an amplitude-dependent term.
+///
+/// A record with holes is refused: a run whose rig lost samples (its acquisition gaps), a run with
+/// blocks not received, a CSV whose time axis jumps. `--longest-clean-stretch` fits the longest
+/// stretch of consecutive samples instead (and says which on stderr).
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV).
@@ -53,12 +57,21 @@ pub struct Args {
     /// Also fit on N amplitude windows (0 = off).
     #[arg(long, default_value_t = 0)]
     pub windows: usize,
+    /// If the record has holes (samples the rig lost, blocks not received), fit the longest
+    /// stretch of consecutive samples instead of refusing.
+    #[arg(long)]
+    pub longest_clean_stretch: bool,
 }
 
 /// Runs `tribo fit`.
 pub fn run(a: Args) -> Result<()> {
     let spec: LawSpec = a.law.parse().map_err(anyhow::Error::msg)?;
-    let mut rec = crate::load_record(&a.record)?;
+    let holes = if a.longest_clean_stretch {
+        crate::Holes::LongestCleanStretch
+    } else {
+        crate::Holes::Refuse
+    };
+    let mut rec = crate::load_for_fit(&a.record, holes)?;
     if a.mass_kg.is_some() || a.stiffness.is_some() || a.load_n.is_some() {
         let base = rec.rig.unwrap_or(Rig::REAL);
         rec.rig = Some(

@@ -113,6 +113,7 @@ pub fn replay_pipeline(run: &Run) -> anyhow::Result<OnboardResult> {
         }
     }
     p.release();
+    let mut next_sample = 0u32;
     'blocks: for (expected_block, b) in (0u32..).zip(run.blocks()) {
         if b.block != expected_block {
             bail!(
@@ -121,6 +122,11 @@ pub fn replay_pipeline(run: &Run) -> anyhow::Result<OnboardResult> {
                 run.dir().display()
             );
         }
+        // An acquisition gap the rig reported: the firmware's pipeline stepped over it too.
+        if b.first_sample > next_sample {
+            p.gap(b.first_sample - next_sample);
+        }
+        next_sample = b.first_sample + b.samples() as u32;
         for i in 0..b.samples() {
             let Some(s) = b.sample(i) else { break };
             if p.push(s) != Phase::Running {

@@ -156,7 +156,11 @@ impl Ui {
                 // The bar follows the envelope's decay from the release amplitude to zero: the run
                 // ends when the pin stops, long before its maximum duration.
                 self.a0 = header.config.initial_amplitude_m as f64;
-                self.rate = header.config.sample_rate_hz as f64;
+                self.rate = if header.clock.is_valid() {
+                    header.clock.rate_hz()
+                } else {
+                    header.config.sample_rate_hz as f64
+                };
                 let b = self.bar(1000);
                 b.set_length(1000);
                 b.set_position(0);
@@ -189,6 +193,20 @@ impl Ui {
             Progress::Pulling { from_block } => {
                 self.say(&format!("fetching the run from block {from_block} on"))
             }
+            Progress::Lost(g) => self.say(&format!(
+                "acquisition gap: the rig lost samples {}..{} ({} samples); the run goes on, and fits \
+                 will not cross the gap",
+                g.first_sample,
+                g.first_sample as u64 + g.count as u64,
+                g.count
+            )),
+            Progress::RateUsed { asked_hz, clock } => self.say(&format!(
+                "sample clock: {} Hz / {} = {:.4} S/s (the timer cannot make {asked_hz} S/s exactly; \
+                 the record's time axis uses the rate used)",
+                clock.timer_hz,
+                clock.ticks_per_sample,
+                clock.rate_hz()
+            )),
             Progress::Warning(w) => self.say(&format!("warning: {w}")),
             Progress::Ended(e) => {
                 if let Some(b) = &self.bar {
@@ -279,6 +297,26 @@ pub fn print_outcome(o: &Outcome) {
             String::new()
         }
     );
+    if run.lost_samples() > 0 {
+        let spans: Vec<String> = run
+            .gaps()
+            .map(|g| {
+                format!(
+                    "{}..{}",
+                    g.first_sample,
+                    g.first_sample as u64 + g.count as u64
+                )
+            })
+            .collect();
+        println!(
+            "acquisition gaps: the rig lost {} samples (samples {}); fits refuse to cross a gap: \
+             `tribo fit {} {}` fits the longest stretch without one",
+            run.lost_samples(),
+            spans.join(", "),
+            crate::LONGEST_CLEAN_STRETCH_FLAG,
+            run.dir().display()
+        );
+    }
     if let Some(e) = &o.link_lost {
         println!("the link was lost: {e}");
         println!(

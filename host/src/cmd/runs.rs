@@ -3,7 +3,8 @@
 use std::path::PathBuf;
 use tribo_store::{Catalog, Filter};
 
-/// Arguments of `tribo runs`.
+/// Arguments of `tribo runs`. The `lost` column counts the samples a run's rig lost (acquisition
+/// gaps: the run went on, and fits will not cross them).
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
@@ -102,11 +103,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("no run matches (try `tribo runs --reindex` if folders were copied in by hand)");
         return Ok(());
     }
+    let any_lost = rows.iter().any(|r| r.lost_samples > 0);
     let opt = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.5}"));
     println!(
-        "{:<44} {:<10} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
+        "{:<44} {:<10} {:>6} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
         "run",
         "status",
+        "lost",
         "load N",
         "°C",
         "campaign",
@@ -118,9 +121,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     for r in rows {
         println!(
-            "{:<44} {:<10} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
+            "{:<44} {:<10} {:>6} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
             r.id,
             r.status,
+            if r.lost_samples > 0 {
+                r.lost_samples.to_string()
+            } else {
+                "—".into()
+            },
             r.load_n,
             r.temp_c.map_or("—".into(), |t| format!("{t:.1}")),
             r.campaign.as_deref().unwrap_or("—"),
@@ -129,6 +137,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             opt(r.onboard_mu1),
             opt(r.host_mu0),
             opt(r.host_mu1),
+        );
+    }
+    if any_lost {
+        println!(
+            "lost: samples the rig's acquisition lost (its gap frames); fits refuse to cross a gap: \
+             `tribo fit --longest-clean-stretch RUN` fits the longest stretch without one"
         );
     }
     Ok(())

@@ -9,8 +9,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use tribo_store::{Catalog, DeviceMeta, HostFit, Results, Run, RunMeta, RunWriter};
 use tribo_wire::{
-    Configure, DeviceInfo, DeviceMsg, ErrorCode, HeaterSetpoint, HostMsg, Interlock, RigState,
-    RunEnd, RunHeader, SampleBlock,
+    Configure, DeviceInfo, DeviceMsg, ErrorCode, Gap, HeaterSetpoint, HostMsg, Interlock, RigState,
+    RunEnd, RunHeader, SampleBlock, SampleClock,
 };
 
 /// Heat the plate to a setpoint and wait until it holds it.
@@ -86,6 +86,13 @@ pub enum Progress<'a> {
     Pulling {
         from_block: u32,
     },
+    /// The rig lost these samples (an acquisition gap); the run goes on.
+    Lost(&'a Gap),
+    /// The rig's sample clock is not exactly the rate asked for (the timer cannot make it).
+    RateUsed {
+        asked_hz: u32,
+        clock: SampleClock,
+    },
     Warning(String),
     Ended(&'a RunEnd),
 }
@@ -154,9 +161,9 @@ fn lost_blocks_message(missing: &[u32]) -> String {
         i = j + 1;
     }
     format!(
-        "{} sample blocks ({}) are no longer held by the rig: its memory keeps only the most recent part of a long \
-         run (about 1.5 s with all five channels at 10 kS/s), so they are lost and the run is stored incomplete; \
-         keep the cable in during runs, or record fewer channels",
+        "{} sample blocks ({}) are no longer held by the rig, so they are lost and the run is stored incomplete: \
+         the rig keeps a whole run in RAM and flash (about 60 s with all five channels at 10 kS/s; after a power \
+         cut, what its flash held, about the first 35 s), and this one was longer or the power went during it",
         missing.len(),
         ranges.join(", ")
     )
@@ -201,44 +208,46 @@ impl Streamer<'_, '_> {
                         header: h,
                         dir: &dir,
                     });
+                    if h.clock.is_valid() && !h.clock.is_exactly(h.config.sample_rate_hz) {
+                        (self.obs)(Progress::RateUsed {
+                            asked_hz: h.config.sample_rate_hz,
+                            clock: h.clock,
+                        });
+                    }
                 }
             }
-            DeviceMsg::Samples(b) => {
+            DeviceMsg::Gap(_) | DeviceMsg::EcrRange(_) => {
+                // Run events: stored with the run once (a Pull sends them again).
                 let Some(w) = self.writer.as_mut() else {
                     return Ok(None);
-                }; // before its header: pulled later
-                if let Some(old) = w.block(b.block) {
-                    if !same(old, b) {
-                        self.mismatch(&format!(
-                            "its block {} differs from the stored one",
-                            b.block
-                        ))?;
+                };
+                if !w.has_event(&f.frame.msg) {
+                    if w.is_complete() {
+                        // A run stored whole gets no new events: this is another run.
+                        self.mismatch(
+                            "it reports an acquisition event the stored run does not have",
+                        )?;
+                        return Ok(None);
                     }
-                    return Ok(None);
-                }
-                let next = w.resume_from();
-                let last_seen = w.blocks() as u32;
-                w.append_frame(&f.raw)?;
-                if self.pulling {
-                    self.pulled += 1;
-                }
-                if b.block > next && b.block >= last_seen && !self.pulling {
-                    (self.obs)(Progress::Gap {
-                        from: next,
-                        to: b.block,
-                    });
-                }
-                if let Some(h) = w.header().copied() {
-                    let samples = (b.first_sample as u64) + b.samples() as u64;
-                    let env = envelope(&h, b);
-                    (self.obs)(Progress::Block {
-                        block: b,
-                        envelope_m: env,
-                        samples,
-                        expected: h.config.max_samples() as u64,
-                    });
+                    w.append_frame(&f.raw)?;
+                    if let DeviceMsg::Gap(g) = &f.frame.msg {
+                        (self.obs)(Progress::Lost(g));
+                    }
                 }
             }
+            DeviceMsg::Samples(b) => return self.file_block(&f.raw, b),
+            DeviceMsg::Packed(p) => match p.unpack() {
+                Ok(b) => return self.file_block(&f.raw, &b),
+                Err(e) => {
+                    let msg = format!(
+                        "sample block {} of run {} arrived intact but its counts do not decode ({e}): \
+                         is this tribo older than the rig's firmware?",
+                        p.block, p.run_id
+                    );
+                    self.warnings.push(msg.clone());
+                    (self.obs)(Progress::Warning(msg));
+                }
+            },
             DeviceMsg::Result(r) => {
                 if let Some(old) = self.writer.as_ref().and_then(|w| w.onboard().copied()) {
                     if !same(old, *r) {
@@ -263,6 +272,45 @@ impl Streamer<'_, '_> {
                 (self.obs)(Progress::Warning(msg));
             }
             _ => {}
+        }
+        Ok(None)
+    }
+
+    /// Files a sample block (from a v1 `Samples` or an unpacked v2 `Packed` frame, `raw`).
+    fn file_block(&mut self, raw: &[u8], b: &SampleBlock) -> anyhow::Result<Option<StreamEnd>> {
+        let Some(w) = self.writer.as_mut() else {
+            return Ok(None);
+        }; // before its header: pulled later
+        if let Some(old) = w.block(b.block) {
+            if !same(old, b) {
+                self.mismatch(&format!(
+                    "its block {} differs from the stored one",
+                    b.block
+                ))?;
+            }
+            return Ok(None);
+        }
+        let next = w.resume_from();
+        let last_seen = w.blocks() as u32;
+        w.append_frame(raw)?;
+        if self.pulling {
+            self.pulled += 1;
+        }
+        if b.block > next && b.block >= last_seen && !self.pulling {
+            (self.obs)(Progress::Gap {
+                from: next,
+                to: b.block,
+            });
+        }
+        if let Some(h) = w.header().copied() {
+            let samples = (b.first_sample as u64) + b.samples() as u64;
+            let env = envelope(&h, b);
+            (self.obs)(Progress::Block {
+                block: b,
+                envelope_m: env,
+                samples,
+                expected: h.config.max_samples() as u64,
+            });
         }
         Ok(None)
     }
@@ -754,6 +802,16 @@ pub fn find_run(store: &Path, serial: &str, run_id: u32) -> anyhow::Result<Optio
 /// The host's Coulomb–viscous fit of a run (Levenberg–Marquardt on the envelope).
 pub fn host_fit(run: &Run) -> Result<HostFit, String> {
     use tribo_physics::identify::{fit, FitOptions};
+    if run.gaps().next().is_some() {
+        return Err(format!(
+            "the rig lost {} samples in {} acquisition gap(s): not fitted across them; \
+             `tribo fit {} {}` fits the longest stretch without one",
+            run.lost_samples(),
+            run.gaps().count(),
+            crate::LONGEST_CLEAN_STRETCH_FLAG,
+            run.dir().display()
+        ));
+    }
     let rec = run.record().map_err(|e| e.msg)?;
     rec.validate().map_err(|e| e.0)?;
     let r = fit(

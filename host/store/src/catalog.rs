@@ -34,7 +34,8 @@ CREATE TABLE IF NOT EXISTS runs (
     onboard_mu1 REAL,
     host_mu0 REAL,
     host_mu1 REAL,
-    host_gap REAL
+    host_gap REAL,
+    lost_samples INTEGER NOT NULL DEFAULT 0
 );
 CREATE INDEX IF NOT EXISTS runs_campaign ON runs(campaign);
 ";
@@ -65,6 +66,8 @@ pub struct CatalogRow {
     pub host_mu0: Option<f64>,
     pub host_mu1: Option<f64>,
     pub host_gap: Option<f64>,
+    /// Samples the rig lost (acquisition gaps reported by the run's gap frames).
+    pub lost_samples: u64,
 }
 
 /// Which runs to list.
@@ -237,6 +240,22 @@ impl Catalog {
             .map_err(|e| db_err("open", e))?;
         conn.execute_batch(SCHEMA)
             .map_err(|e| db_err("schema", e))?;
+        // A catalog made before the acquisition gaps were recorded: add their column (its runs
+        // ended at their first overrun, so they have none).
+        let has_lost: bool = conn
+            .query_row(
+                "SELECT COUNT(*) FROM pragma_table_info('runs') WHERE name = 'lost_samples'",
+                [],
+                |r| r.get::<_, i64>(0),
+            )
+            .map_err(|e| db_err("schema", e))?
+            > 0;
+        if !has_lost {
+            conn.execute_batch(
+                "ALTER TABLE runs ADD COLUMN lost_samples INTEGER NOT NULL DEFAULT 0",
+            )
+            .map_err(|e| db_err("schema", e))?;
+        }
         Ok(Catalog {
             conn,
             root: root.to_owned(),
@@ -255,7 +274,7 @@ impl Catalog {
         let host = run.host_fit();
         self.conn
             .execute(
-                "INSERT OR REPLACE INTO runs VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22)",
+                "INSERT OR REPLACE INTO runs VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23)",
                 params![
                     m.id,
                     run.dir().to_string_lossy(),
@@ -279,6 +298,7 @@ impl Catalog {
                     host.map(|h| h.mu0).filter(|v| v.is_finite()),
                     host.map(|h| h.mu1).filter(|v| v.is_finite()),
                     host.map(|h| h.gap).filter(|v| v.is_finite()),
+                    run.lost_samples() as i64,
                 ],
             )
             .map_err(|e| db_err("insert", e))?;
@@ -311,7 +331,7 @@ impl Catalog {
             .conn
             .prepare(
                 "SELECT id,path,created,status,label,sample,lubricant,campaign,repeat,load_n,temp_c,firmware,serial,\
-                 samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,host_mu0,host_mu1,host_gap FROM runs \
+                 samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,host_mu0,host_mu1,host_gap,lost_samples FROM runs \
                  WHERE (?1 IS NULL OR campaign = ?1) AND (?2 IS NULL OR instr(label, ?2) > 0) \
                  AND (?3 IS NULL OR status = ?3) AND (?4 IS NULL OR load_n >= ?4 - 1e-9) \
                  AND (?5 IS NULL OR load_n <= ?5 + 1e-9) AND (?6 IS NULL OR temp_c >= ?6 - 1e-9) \
@@ -347,6 +367,7 @@ impl Catalog {
                         host_mu0: r.get(19)?,
                         host_mu1: r.get(20)?,
                         host_gap: r.get(21)?,
+                        lost_samples: r.get::<_, i64>(22)? as u64,
                     })
                 },
             )

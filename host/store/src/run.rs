@@ -10,7 +10,8 @@ use tribo_physics::record::Units;
 use tribo_physics::{Record, Rig};
 use tribo_wire::frame::decode_one;
 use tribo_wire::{
-    Channel, Configure, DeviceMsg, EndReason, OnboardResult, RunEnd, RunHeader, SampleBlock,
+    Channel, Configure, DeviceMsg, EcrRangeChange, EndReason, Gap, OnboardResult, RunEnd,
+    RunHeader, SampleBlock, SampleClock,
 };
 
 pub const LOG_FILE: &str = "frames.log";
@@ -197,6 +198,14 @@ pub struct Samples {
     /// Contact resistance, Ω (one value per block, held over its samples; NaN for a block in which
     /// the autoranger had no reading, typically the first few while it searches its range).
     pub ecr_ohm: Option<Vec<f64>>,
+    /// Index in the run of each sample (its time is `clock.time_s(index)`); consecutive except
+    /// across gaps.
+    pub index: Vec<u64>,
+    /// The ECR transimpedance range each sample was converted on, and whether the amplifier was
+    /// still settling from a change (from the run's `EcrRange` frames; `None` for a run without
+    /// them, recorded by older firmware).
+    pub ecr_range: Option<Vec<u8>>,
+    pub ecr_settling: Option<Vec<bool>>,
 }
 
 impl Samples {
@@ -215,35 +224,58 @@ struct Assembled {
     blocks: BTreeMap<u32, SampleBlock>,
     result: Option<OnboardResult>,
     end: Option<RunEnd>,
-    /// Records that were not frames of this protocol (count).
+    /// Records that were not frames of this protocol, or packed blocks that did not unpack (count).
     undecodable: usize,
     /// Blocks received twice with different contents.
     conflicts: Vec<u32>,
+    /// Acquisition gaps the rig reported, by first sample.
+    gaps: BTreeMap<u32, Gap>,
+    /// ECR range changes the rig reported, by first sample.
+    ecr_changes: BTreeMap<u32, EcrRangeChange>,
 }
 
 impl Assembled {
     fn add(&mut self, msg: DeviceMsg) {
         match msg {
             DeviceMsg::RunStarted(h) if self.header.is_none() => self.header = Some(h),
-            DeviceMsg::Samples(b) => match self.blocks.get(&b.block) {
-                Some(old) if *old != b => self.conflicts.push(b.block),
-                Some(_) => {}
-                None => {
-                    self.blocks.insert(b.block, b);
-                }
+            DeviceMsg::Samples(_) | DeviceMsg::Packed(_) => match msg.sample_block() {
+                Some(Ok(b)) => match self.blocks.get(&b.block) {
+                    Some(old) if *old != b => self.conflicts.push(b.block),
+                    Some(_) => {}
+                    None => {
+                        self.blocks.insert(b.block, b);
+                    }
+                },
+                // A packed block whose counts do not decode (a CRC-valid frame from a newer codec).
+                _ => self.undecodable += 1,
             },
             DeviceMsg::Result(r) => self.result = Some(r),
             DeviceMsg::RunEnded(e) => self.end = Some(e),
+            DeviceMsg::Gap(g) => {
+                self.gaps.insert(g.first_sample, g);
+            }
+            DeviceMsg::EcrRange(e) => {
+                self.ecr_changes.insert(e.first_sample, e);
+            }
             _ => {}
+        }
+    }
+
+    /// Whether this event frame is already filed.
+    fn has_event(&self, msg: &DeviceMsg) -> bool {
+        match msg {
+            DeviceMsg::Gap(g) => self.gaps.get(&g.first_sample) == Some(g),
+            DeviceMsg::EcrRange(e) => self.ecr_changes.get(&e.first_sample) == Some(e),
+            _ => false,
         }
     }
 
     fn from_records(records: &[Vec<u8>]) -> Assembled {
         let mut a = Assembled::default();
         for r in records {
-            match decode_one::<DeviceMsg>(r) {
-                Ok(f) => a.add(f.msg),
-                Err(_) => a.undecodable += 1,
+            match decode_record(r) {
+                Some(m) => a.add(m),
+                None => a.undecodable += 1,
             }
         }
         a
@@ -268,6 +300,50 @@ impl Assembled {
             next += 1;
         }
         next
+    }
+}
+
+/// Protocol v1 run headers, which had no sample clock: logs recorded before it stay readable (their
+/// samples are at the configured rate, as v1 assumed).
+pub(crate) mod v1 {
+    use serde::{Deserialize, Serialize};
+    use tribo_wire::{Configure, DeviceError, DeviceInfo, Status};
+
+    #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+    pub struct RunHeader {
+        pub run_id: u32,
+        pub config: Configure,
+        pub temp_c: f32,
+        pub t_us: u64,
+    }
+
+    /// The first variants of v1's `DeviceMsg`, in its order, up to the run header.
+    #[derive(Debug, Clone, Serialize, Deserialize)]
+    #[allow(clippy::large_enum_variant, dead_code)]
+    pub enum DeviceMsg {
+        Hello(DeviceInfo),
+        Ack { seq: u32 },
+        Error(DeviceError),
+        Status(Status),
+        RunStarted(RunHeader),
+    }
+}
+
+/// A logged frame's message: this protocol's, or a v1 run header (given the exact configured rate
+/// as its clock).
+fn decode_record(raw: &[u8]) -> Option<DeviceMsg> {
+    if let Ok(f) = decode_one::<DeviceMsg>(raw) {
+        return Some(f.msg);
+    }
+    match decode_one::<v1::DeviceMsg>(raw).ok()?.msg {
+        v1::DeviceMsg::RunStarted(h) => Some(DeviceMsg::RunStarted(RunHeader {
+            run_id: h.run_id,
+            config: h.config,
+            temp_c: h.temp_c,
+            t_us: h.t_us,
+            clock: SampleClock::exact(h.config.sample_rate_hz),
+        })),
+        _ => None,
     }
 }
 
@@ -432,6 +508,48 @@ impl Run {
         self.data.undecodable
     }
 
+    /// The acquisition gaps the rig reported: samples it lost (a reader that fell behind, an ADC
+    /// overrun), in order. A fit must not run across one ([`Run::clean_stretches`]).
+    pub fn gaps(&self) -> impl Iterator<Item = &Gap> {
+        self.data.gaps.values()
+    }
+
+    /// Samples the rig lost, in all.
+    pub fn lost_samples(&self) -> u64 {
+        self.data.gaps.values().map(|g| g.count as u64).sum()
+    }
+
+    /// The ECR range changes the rig reported, in order.
+    pub fn ecr_changes(&self) -> impl Iterator<Item = &EcrRangeChange> {
+        self.data.ecr_changes.values()
+    }
+
+    /// The sample clock of the run: the header's (the rate the timer really produced), or, for a
+    /// run recorded before the rig reported one, exactly the configured rate.
+    pub fn clock(&self) -> SampleClock {
+        match self.data.header {
+            Some(h) if h.clock.is_valid() => h.clock,
+            _ => SampleClock::exact(self.config().sample_rate_hz),
+        }
+    }
+
+    /// The stretches of consecutive samples held, as run sample index ranges, in order: split at
+    /// each gap the rig reported and at each block not received (missing blocks leave holes too).
+    pub fn clean_stretches(&self) -> Vec<std::ops::Range<u64>> {
+        let mut out: Vec<std::ops::Range<u64>> = Vec::new();
+        for b in self.data.blocks.values() {
+            let (a, e) = (
+                b.first_sample as u64,
+                b.first_sample as u64 + b.samples() as u64,
+            );
+            match out.last_mut() {
+                Some(last) if last.end == a => last.end = e,
+                _ => out.push(a..e),
+            }
+        }
+        out
+    }
+
     /// All blocks and the end received, nothing missing.
     pub fn is_complete(&self) -> bool {
         self.data.end.is_some() && self.data.missing().is_empty() && self.data.header.is_some()
@@ -449,14 +567,22 @@ impl Run {
     /// gaps in `t`, never misplaced samples.
     pub fn samples_si(&self) -> Result<Samples> {
         let cfg = self.config();
-        if cfg.sample_rate_hz == 0 {
+        let clock = self.clock();
+        if !clock.is_valid() {
             return Err(StoreError::new(
                 ErrorKind::Corrupt,
-                format!("{}: sample rate is 0", self.dir.display()),
+                format!(
+                    "{}: sample clock {} Hz / {} ticks is not a rate",
+                    self.dir.display(),
+                    clock.timer_hz,
+                    clock.ticks_per_sample
+                ),
             ));
         }
-        let dt = 1.0 / cfg.sample_rate_hz as f64;
         let cal = cfg.calibration;
+        let events = !self.data.ecr_changes.is_empty();
+        let mut ecr_range = Vec::new();
+        let mut ecr_settling = Vec::new();
         let mut s = Samples::default();
         let any = |c: Channel| {
             self.data.blocks.values().all(|b| b.channels.contains(c))
@@ -483,7 +609,21 @@ impl Run {
             };
             for i in 0..b.samples() {
                 let Some(c) = b.sample(i) else { break };
-                s.t.push((b.first_sample as f64 + i as f64) * dt);
+                let index = b.first_sample as u64 + i as u64;
+                s.t.push(clock.time_s(index));
+                s.index.push(index);
+                if events {
+                    let change = self
+                        .data
+                        .ecr_changes
+                        .range(..=index.min(u32::MAX as u64) as u32)
+                        .next_back()
+                        .map(|(_, c)| c);
+                    ecr_range.push(change.map_or(b.ecr_range, |c| c.range));
+                    ecr_settling.push(
+                        change.is_some_and(|c| index < c.first_sample as u64 + c.settling as u64),
+                    );
+                }
                 s.x.push(cal[Channel::Displacement.index()].to_si(c[px]) as f64);
                 s.v.push(cal[Channel::Velocity.index()].to_si(c[pv]) as f64);
                 if let (true, Some(p)) = (has_f, ch.position(Channel::Force)) {
@@ -501,6 +641,8 @@ impl Run {
         s.force = has_f.then_some(force);
         s.temp_c = temp.iter().all(|v| v.is_finite()).then_some(temp);
         s.ecr_ohm = ecr.iter().any(|v| v.is_finite() && *v > 0.0).then_some(ecr);
+        s.ecr_range = events.then_some(ecr_range);
+        s.ecr_settling = events.then_some(ecr_settling);
         Ok(s)
     }
 
@@ -640,22 +782,25 @@ impl RunWriter {
     /// Logs one raw wire frame (as received) and files the message it holds. Frames that do not
     /// decode are refused (the link layer asks again for them).
     pub fn append_frame(&mut self, raw: &[u8]) -> Result<()> {
-        let frame = decode_one::<DeviceMsg>(raw).map_err(|e| {
-            StoreError::new(
-                ErrorKind::Invalid,
-                format!("refusing to log a bad frame: {e}"),
-            )
-        })?;
-        let is_header = matches!(frame.msg, DeviceMsg::RunStarted(_));
-        let is_end = matches!(frame.msg, DeviceMsg::RunEnded(_) | DeviceMsg::Result(_));
-        if let DeviceMsg::RunStarted(h) = &frame.msg {
+        let msg = match decode_one::<DeviceMsg>(raw) {
+            Ok(f) => f.msg,
+            Err(e) => decode_record(raw).ok_or_else(|| {
+                StoreError::new(
+                    ErrorKind::Invalid,
+                    format!("refusing to log a bad frame: {e}"),
+                )
+            })?,
+        };
+        let is_header = matches!(msg, DeviceMsg::RunStarted(_));
+        let is_end = matches!(msg, DeviceMsg::RunEnded(_) | DeviceMsg::Result(_));
+        if let DeviceMsg::RunStarted(h) = &msg {
             self.meta.device_run_id = Some(h.run_id);
             if h.temp_c.is_finite() {
                 self.meta.temp_c = Some(clean(h.temp_c));
             }
         }
         self.log.append(raw)?;
-        self.data.add(frame.msg);
+        self.data.add(msg);
         if is_header {
             // The rig's run id is how `tribo pull` finds this folder again, even if this process
             // is killed before `finish`.
@@ -671,6 +816,16 @@ impl RunWriter {
     /// Block `i`, if logged.
     pub fn block(&self, i: u32) -> Option<&SampleBlock> {
         self.data.blocks.get(&i)
+    }
+
+    /// Whether this frame is a run event (gap, ECR range change) already logged.
+    pub fn has_event(&self, msg: &DeviceMsg) -> bool {
+        self.data.has_event(msg)
+    }
+
+    /// Acquisition gaps logged so far.
+    pub fn gaps(&self) -> impl Iterator<Item = &Gap> {
+        self.data.gaps.values()
     }
 
     /// Whether block `i` is already logged.

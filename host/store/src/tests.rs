@@ -2,7 +2,7 @@
 
 use crate::catalog::{Axis, Value};
 use crate::*;
-use tribo_wire::frame::encode_vec;
+use tribo_wire::frame::{decode_one, encode_vec};
 use tribo_wire::*;
 
 /// Frames of a synthetic run: a decaying sine of amplitude `a0`, `nblocks` full blocks.
@@ -20,6 +20,10 @@ fn run_frames(cfg: &Configure, nblocks: u32, mu0: f32) -> Vec<Vec<u8>> {
         config: *cfg,
         temp_c: 41.5,
         t_us: 1000,
+        clock: SampleClock {
+            timer_hz: 200_000_000,
+            ticks_per_sample: 200_000_000 / cfg.sample_rate_hz,
+        },
     }));
     for b in 0..nblocks {
         let mut counts = Counts::default();
@@ -131,6 +135,127 @@ fn samples_round_trip_through_the_store() {
     assert_eq!(run.result().unwrap().best.mu0, 0.02);
     // NaN survives the TOML result file.
     assert!(run.result().unwrap().best.mu1_se.is_nan());
+}
+
+#[test]
+fn gaps_and_ecr_ranges_are_stored_and_place_every_sample() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    // 9 999 S/s asked; the timer made 200 MHz / 20 002.
+    let clock = SampleClock {
+        timer_hz: 200_000_000,
+        ticks_per_sample: 20_002,
+    };
+    let mut frames = run_frames(&cfg, 6, 0.02);
+    let header = frames.remove(0);
+    let mut h = match decode_one::<DeviceMsg>(&header).unwrap().msg {
+        DeviceMsg::RunStarted(h) => h,
+        _ => unreachable!(),
+    };
+    h.clock = clock;
+    let mut out = vec![encode_vec(1, &DeviceMsg::RunStarted(h)).unwrap()];
+    let ev = |seq, m| encode_vec(seq, &m).unwrap();
+    out.push(ev(
+        2,
+        DeviceMsg::EcrRange(EcrRangeChange {
+            run_id: 7,
+            first_sample: 0,
+            range: 3,
+            settling: 0,
+        }),
+    ));
+    // Blocks 0, 1 hold samples 0..128; then 300 lost; blocks 2.. start at 428.
+    let mut blocks: Vec<SampleBlock> = frames
+        .iter()
+        .filter_map(|f| match decode_one::<DeviceMsg>(f).unwrap().msg {
+            DeviceMsg::Samples(b) => Some(b),
+            _ => None,
+        })
+        .collect();
+    for b in blocks.iter_mut().skip(2) {
+        b.first_sample += 300;
+    }
+    let tail: Vec<Vec<u8>> = frames
+        .iter()
+        .filter(|f| {
+            !matches!(
+                decode_one::<DeviceMsg>(f).unwrap().msg,
+                DeviceMsg::Samples(_)
+            )
+        })
+        .cloned()
+        .collect();
+    let gap = Gap {
+        run_id: 7,
+        first_sample: 128,
+        count: 300,
+    };
+    for (k, b) in blocks.into_iter().enumerate() {
+        if k == 2 {
+            out.push(ev(50, DeviceMsg::Gap(gap)));
+        }
+        if k == 4 {
+            out.push(ev(
+                60,
+                DeviceMsg::EcrRange(EcrRangeChange {
+                    run_id: 7,
+                    first_sample: 600,
+                    range: 2,
+                    settling: 21,
+                }),
+            ));
+        }
+        out.push(ev(10 + k as u32, DeviceMsg::Samples(b)));
+    }
+    out.extend(tail);
+    // A frame received twice (live, then by a Pull) is stored once.
+    out.push(ev(50, DeviceMsg::Gap(gap)));
+    let run = record(d.path(), &cfg, &out, |_| {});
+    assert_eq!(run.gaps().copied().collect::<Vec<_>>(), [gap]);
+    assert_eq!(run.lost_samples(), 300);
+    assert_eq!(run.clock(), clock);
+    assert_eq!(run.clean_stretches(), [0..128, 428..428 + 4 * 64]);
+    let s = run.samples_si().unwrap();
+    assert_eq!(s.len(), 6 * BLOCK_LEN);
+    // Times from the clock: sample i at i × 20 002 / 200 MHz, across the gap too.
+    for (k, &i) in s.index.iter().enumerate() {
+        assert_eq!(s.t[k], clock.time_s(i));
+    }
+    assert_eq!(s.index[128], 428);
+    // Each sample's range, and the settling after the change at 600.
+    let r = s.ecr_range.as_ref().unwrap();
+    let st = s.ecr_settling.as_ref().unwrap();
+    let at = |i: u64| s.index.iter().position(|&x| x == i).unwrap();
+    assert_eq!((r[at(599)], st[at(599)]), (3, false));
+    assert_eq!((r[at(600)], st[at(600)]), (2, true));
+    assert_eq!((r[at(620)], st[at(620)]), (2, true));
+    assert_eq!((r[at(621)], st[at(621)]), (2, false));
+    // The catalog marks it.
+    let cat = Catalog::open(d.path()).unwrap();
+    cat.upsert(&run).unwrap();
+    let rows = cat.list(&Filter::default()).unwrap();
+    assert_eq!(rows[0].lost_samples, 300);
+}
+
+#[test]
+fn a_header_without_a_valid_clock_reads_at_the_configured_rate() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let mut frames = run_frames(&cfg, 2, 0.02);
+    let mut h = match decode_one::<DeviceMsg>(&frames[0]).unwrap().msg {
+        DeviceMsg::RunStarted(h) => h,
+        _ => unreachable!(),
+    };
+    h.clock = SampleClock {
+        timer_hz: 0,
+        ticks_per_sample: 0,
+    };
+    frames[0] = encode_vec(1, &DeviceMsg::RunStarted(h)).unwrap();
+    let run = record(d.path(), &cfg, &frames, |_| {});
+    assert_eq!(run.clock(), SampleClock::exact(10_000));
+    let s = run.samples_si().unwrap();
+    assert_eq!(s.t[100], 0.01);
+    assert!(s.ecr_range.is_none());
 }
 
 #[test]
@@ -351,4 +476,110 @@ fn blocks_without_an_ecr_reading_stay_nan_in_samples_and_take_the_nearest_readin
     assert!((e[0] / 1e8 - 1.0).abs() < 1e-5 && (e[BLOCK_LEN + 5] / 1e8 - 1.0).abs() < 1e-5);
     assert!((e[3 * BLOCK_LEN] / 1e8 - 1.0).abs() < 1e-5);
     assert!((e[4 * BLOCK_LEN] / 1e10 - 1.0).abs() < 1e-5);
+}
+
+/// The frames of `run_frames` with every sample block in its v2 packed form.
+fn packed(frames: &[Vec<u8>]) -> Vec<Vec<u8>> {
+    frames
+        .iter()
+        .map(|f| {
+            let fr = tribo_wire::frame::decode_one::<DeviceMsg>(f).unwrap();
+            match fr.msg {
+                DeviceMsg::Samples(b) => {
+                    encode_vec(fr.seq, &DeviceMsg::Packed(PackedBlock::pack(&b).unwrap())).unwrap()
+                }
+                _ => f.clone(),
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn packed_blocks_read_back_as_the_same_samples() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let v1 = run_frames(&cfg, 20, 0.02);
+    let v2 = packed(&v1);
+    assert!(
+        v2.iter().map(Vec::len).sum::<usize>() * 2 < v1.iter().map(Vec::len).sum::<usize>(),
+        "packed frames are smaller"
+    );
+    let a = record(d.path(), &cfg, &v1, |_| {});
+    let b = record(d.path(), &cfg, &v2, |_| {});
+    assert!(b.is_complete());
+    assert_eq!(b.meta.status, RunStatus::Complete);
+    assert_eq!(a.samples_si().unwrap(), b.samples_si().unwrap());
+    assert_eq!(
+        a.blocks().cloned().collect::<Vec<_>>(),
+        b.blocks().cloned().collect::<Vec<_>>()
+    );
+    assert_eq!(b.undecodable_records(), 0);
+}
+
+#[test]
+fn a_packed_block_that_does_not_unpack_counts_as_missing() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let mut frames = packed(&run_frames(&cfg, 10, 0.02));
+    // Block 4 re-framed (valid CRC) with a codec format this build does not know.
+    let fr = tribo_wire::frame::decode_one::<DeviceMsg>(&frames[5]).unwrap();
+    let DeviceMsg::Packed(mut p) = fr.msg else {
+        panic!("frame 5 is block 4")
+    };
+    p.data[0] = 9;
+    frames[5] = encode_vec(fr.seq, &DeviceMsg::Packed(p)).unwrap();
+    let run = record(d.path(), &cfg, &frames, |_| {});
+    assert_eq!(run.missing_blocks(), vec![4]);
+    assert_eq!(run.undecodable_records(), 1);
+    assert!(!run.is_complete());
+}
+
+#[test]
+fn a_catalog_from_before_the_gap_column_is_migrated() {
+    let d = tempfile::tempdir().unwrap();
+    let old_schema = "CREATE TABLE runs (id TEXT PRIMARY KEY, path TEXT NOT NULL, created TEXT NOT NULL, \
+        status TEXT NOT NULL, label TEXT, sample TEXT, lubricant TEXT, campaign TEXT, repeat INTEGER, \
+        load_n REAL NOT NULL, temp_c REAL, firmware TEXT, serial TEXT, samples INTEGER NOT NULL, \
+        missing_blocks INTEGER NOT NULL, verdict TEXT, cycles INTEGER, onboard_mu0 REAL, onboard_mu1 REAL, \
+        host_mu0 REAL, host_mu1 REAL, host_gap REAL);";
+    rusqlite::Connection::open(d.path().join(catalog::CATALOG_FILE))
+        .unwrap()
+        .execute_batch(old_schema)
+        .unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let run = record(d.path(), &cfg, &run_frames(&cfg, 2, 0.02), |_| {});
+    let cat = Catalog::open(d.path()).unwrap();
+    cat.upsert(&run).unwrap();
+    assert_eq!(cat.list(&Filter::default()).unwrap()[0].lost_samples, 0);
+    // Opening it again leaves it as it is.
+    Catalog::open(d.path()).unwrap();
+}
+
+#[test]
+fn a_v1_log_s_header_without_a_clock_still_reads() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let mut frames = run_frames(&cfg, 3, 0.02);
+    let h = match decode_one::<DeviceMsg>(&frames[0]).unwrap().msg {
+        DeviceMsg::RunStarted(h) => h,
+        _ => unreachable!(),
+    };
+    // The v1 header: the same fields, no clock (as firmware v1 wrote it).
+    let v1 = crate::run::v1::DeviceMsg::RunStarted(crate::run::v1::RunHeader {
+        run_id: h.run_id,
+        config: h.config,
+        temp_c: h.temp_c,
+        t_us: h.t_us,
+    });
+    frames[0] = encode_vec(1, &v1).unwrap();
+    assert!(
+        decode_one::<DeviceMsg>(&frames[0]).is_err(),
+        "not a v2 frame"
+    );
+    let run = record(d.path(), &cfg, &frames, |_| {});
+    assert_eq!(run.undecodable_records(), 0);
+    let hh = run.header().unwrap();
+    assert_eq!((hh.run_id, hh.t_us), (h.run_id, h.t_us));
+    assert_eq!(run.clock(), SampleClock::exact(10_000));
+    assert_eq!(run.samples_si().unwrap().t[10], 0.001);
 }

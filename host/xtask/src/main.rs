@@ -12,6 +12,7 @@
 //!   the on-target tests.
 
 mod elf;
+mod memory;
 mod qemu;
 
 use std::path::{Path, PathBuf};
@@ -22,9 +23,8 @@ const BOARD: &str = "tribo-board";
 const TARGET_TESTS: &str = "tribo-target-tests";
 const PROFILE: &str = "firmware";
 const DEBIAN_PACKAGES: [&str; 4] = ["rustc-web", "cargo-web", "rust-web-src", "lld-22"];
-/// Budgets of the firmware issue: the ELF must fit these.
-const FLASH_BUDGET: u64 = 256 * 1024;
-const RAM_BUDGET: u64 = 256 * 1024;
+/// Least stack the AXI SRAM must leave after the static data (the stack grows down from its end).
+const MIN_STACK: u64 = 32 * 1024;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -54,6 +54,10 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+fn kib(bytes: u64) -> f64 {
+    bytes as f64 / 1024.0
 }
 
 fn root() -> PathBuf {
@@ -231,26 +235,59 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         }
     );
     println!(
-        "flash: {:>8} bytes ({:.1} KiB; text {} + rodata {} + data {} + vectors {}), budget {} KiB",
+        "flash: {:>8} bytes ({:.1} KiB; text {} + rodata {} + data {} + vectors {})",
         size.flash(),
-        size.flash() as f64 / 1024.0,
+        kib(size.flash()),
         size.text,
         size.rodata,
         size.data,
         size.vectors,
-        FLASH_BUDGET / 1024
     );
-    println!(
-        "RAM:   {:>8} bytes ({:.1} KiB static; data {} + bss {} + uninit {}), budget {} KiB",
-        size.ram(),
-        size.ram() as f64 / 1024.0,
-        size.data,
-        size.bss,
-        size.uninit,
-        RAM_BUDGET / 1024
-    );
-    if size.flash() > FLASH_BUDGET || size.ram() > RAM_BUDGET {
-        return Err("the firmware is over its flash or RAM budget".into());
+    let memory_x = root().join("firmware/board/memory.x");
+    let text =
+        std::fs::read_to_string(&memory_x).map_err(|e| format!("{}: {e}", memory_x.display()))?;
+    let regions = memory::regions(&text)?;
+    let sections = elf::sections(&bytes).map_err(|e| format!("{}: {e}", elf_path.display()))?;
+    let mut used = memory::usage(&regions, &sections);
+    let mut over = vec![];
+    println!("memory regions (memory.x):");
+    for (r, u) in regions.iter().zip(used.iter_mut()) {
+        let note = match r.name.as_str() {
+            "FLASH" => {
+                // .data's initial values are stored in flash too.
+                *u = size.flash();
+                "code, constants, .data's initial values (bank 1)".to_string()
+            }
+            "RAM" => {
+                let stack = r.length.saturating_sub(*u);
+                if stack < MIN_STACK {
+                    over.push(format!(
+                        "RAM leaves {:.1} KiB for the stack, less than {} KiB",
+                        kib(stack),
+                        MIN_STACK / 1024
+                    ));
+                }
+                format!(
+                    ".data, .bss, .uninit; the stack has the other {:.1} KiB",
+                    kib(stack)
+                )
+            }
+            _ => String::new(),
+        };
+        if *u > r.length {
+            over.push(format!("{} is over its size", r.name));
+        }
+        println!(
+            "  {:<6} {:>8.1} KiB of {:>6.0} KiB ({:>5.1} %)  {note}",
+            r.name,
+            kib(*u),
+            kib(r.length),
+            100.0 * *u as f64 / r.length.max(1) as f64,
+        );
+    }
+    println!("  bank 2 of the flash (0x0810_0000, 1024 KiB): the run store, written at run time");
+    if !over.is_empty() {
+        return Err(over.join("; "));
     }
     Ok(elf_path)
 }

@@ -15,7 +15,7 @@ pub const TESTS: &[Test] = &[
     test!(wire::frames_match_the_host),
     test!(wire::decoder_resynchronises),
     test!(wire::framing_costs),
-    test!(store::fills_wraps_and_reads_back),
+    test!(store::wraps_and_reads_back_and_recovers),
     test!(parts::block_path),
     test!(parts::analysis_setup),
     test!(pipeline::unloaded),

@@ -1,29 +1,35 @@
 //! Costs of the pieces of the per-sample path on the target (figures only): assembling blocks,
-//! storing them, framing them.
+//! packing and framing them, storing them.
 
 use crate::{check, Cx, Outcome};
 use tribo_firmware::acquisition::BlockBuilder;
 use tribo_firmware::analysis::Pipeline;
 use tribo_firmware::hal::ANALOG_CHANNELS;
 use tribo_firmware::peaks::PeakFitter;
-use tribo_firmware::runstore::{BlockMeta, Item, RunStore};
+use tribo_firmware::runstore::memflash::MemFlash;
+use tribo_firmware::runstore::{RunStore, MAX_RUN_BLOCKS};
 use tribo_firmware::wire::frame::MAX_FRAME;
 use tribo_firmware::wire::{
-    Channel, ChannelSet, Configure, DeviceMsg, Encoder, RunHeader, BLOCK_LEN,
+    Channel, ChannelSet, Configure, DeviceMsg, Encoder, PackedBlock, RunHeader, SampleClock,
+    BLOCK_LEN,
 };
 
 /// Per sample, on the counts of the `coulomb_viscous` record (five channels, the temperature from
-/// the thermocouple as the application does): `BlockBuilder::push`, `RunStore::push_block`, the
-/// block rebuilt from the store (`RunStore::frame`), its framing (`Encoder::encode`).
+/// the thermocouple as the application does): `BlockBuilder::push`, packing a block
+/// (`PackedBlock::pack`, the codec), framing it (`Encoder::encode`), storing it
+/// (`RunStore::push_block`).
 pub fn block_path(cx: &mut Cx) -> Outcome {
     let rec = cx.bundle()?.record("coulomb_viscous");
     check!(rec.is_some(), "no coulomb_viscous record");
     let Some(rec) = rec else { return Ok(()) };
     let cfg = rec.configure;
+    let clock = SampleClock::exact(cfg.sample_rate_hz);
     let mut b = BlockBuilder::new(
         1,
         ChannelSet::ALL,
         cfg.calibration[Channel::Temperature.index()],
+        clock,
+        0,
     );
     const BLOCKS: usize = 4;
     let mut samples = [[0u16; ANALOG_CHANNELS]; BLOCKS * BLOCK_LEN];
@@ -33,77 +39,76 @@ pub fn block_path(cx: &mut Cx) -> Outcome {
     let mut blocks = heapless::Vec::<_, BLOCKS>::new();
     let build = cx.count(|| {
         for (k, s) in samples.iter().enumerate() {
-            if let Some(blk) = b.push(s, crate::tests::app::TEMP_C, 100 * k as u64) {
+            if let Some(blk) = b.push(s, crate::tests::app::TEMP_C, k as u32) {
                 let _ = blocks.push(blk);
             }
         }
     });
     check!(blocks.len() == BLOCKS);
-    let mut counts = [0u16; 8 * BLOCK_LEN * 5];
-    let mut meta = [BlockMeta::EMPTY; 8];
-    let mut store = RunStore::new(&mut counts, &mut meta);
-    store.begin(
-        0,
-        RunHeader {
-            run_id: 1,
-            config: cfg,
-            temp_c: 25.0,
-            t_us: 0,
-        },
-    );
-    let mut ok = true;
-    let stored = cx.count(|| {
-        for (k, blk) in blocks.iter().enumerate() {
-            ok &= store.push_block(k as u32 + 1, blk);
-        }
-    });
-    check!(ok);
-    let mut msgs = heapless::Vec::<(u32, DeviceMsg), BLOCKS>::new();
-    let rebuilt = cx.count(|| {
-        for k in 0..BLOCKS as u32 {
-            if let Some(f) = store.frame(Item::Block(k)) {
-                let _ = msgs.push(f);
+    let mut packed = heapless::Vec::<PackedBlock, BLOCKS>::new();
+    let pack = cx.count(|| {
+        for blk in &blocks {
+            if let Ok(p) = PackedBlock::pack(blk) {
+                let _ = packed.push(p);
             }
         }
     });
-    check!(msgs.len() == BLOCKS);
+    check!(packed.len() == BLOCKS, "a block did not pack");
     let mut enc = Encoder::new();
-    let mut out = [0u8; MAX_FRAME];
-    let mut n = 0;
+    let mut frames = [[0u8; MAX_FRAME]; BLOCKS];
+    let mut lens = [0usize; BLOCKS];
     let framed = cx.count(|| {
-        for (seq, msg) in &msgs {
-            n += enc.encode(*seq, msg, &mut out).map_or(0, |b| b.len());
+        for ((p, f), n) in packed.iter().zip(frames.iter_mut()).zip(lens.iter_mut()) {
+            *n = enc
+                .encode(p.block, &DeviceMsg::Packed(p.clone()), f)
+                .map_or(0, |b| b.len());
         }
     });
-    check!(n > 0);
-    // the three steps of framing, on the first block
-    let mut body = [0u8; MAX_FRAME];
-    let mut len = 0;
-    let ser = cx.count(|| len = postcard::to_slice(&msgs[0].1, &mut body).map_or(0, |b| b.len()));
-    let mut crc = 0;
-    let crc_cost = cx.count(|| crc = tribo_firmware::wire::crc32::crc32(&body[..len]));
-    let mut stuffed = [0u8; MAX_FRAME + 8];
-    let mut m = None;
-    let cobs =
-        cx.count(|| m = tribo_firmware::wire::frame::cobs_encode(&body[..len], &mut stuffed));
-    check!(crc != 0 && m.is_some());
-    cx.note(format_args!(
-        "framing one block: postcard {:?}, CRC {:?}, COBS {:?} instructions; {} zero bytes in {len}",
-        ser,
-        crc_cost,
-        cobs,
-        body[..len].iter().filter(|&&b| b == 0).count()
-    ));
+    check!(lens.iter().all(|&n| n > 0));
+    let mut fbuf = [0u8; 32 * 1024];
+    let f = MemFlash::new(
+        &mut fbuf[..],
+        tribo_firmware::hal::FlashGeometry {
+            sector_bytes: 4096,
+            sectors: 8,
+        },
+    );
+    let (mut r0, mut index) = ([0u8; 8 * 1024], [0u32; MAX_RUN_BLOCKS]);
+    let mut store = RunStore::new([&mut r0[..]], &mut index);
+    let mut hdr = [0u8; MAX_FRAME];
+    let n = enc
+        .encode(
+            0,
+            &DeviceMsg::RunStarted(RunHeader {
+                run_id: 1,
+                config: cfg,
+                temp_c: 25.0,
+                t_us: 0,
+                clock,
+            }),
+            &mut hdr,
+        )
+        .map_or(0, |b| b.len());
+    check!(store.begin(&f, 1, &hdr[..n]));
+    let mut ok = true;
+    let stored = cx.count(|| {
+        for (k, (fr, &n)) in frames.iter().zip(lens.iter()).enumerate() {
+            ok &= store.push_block(k as u32, &fr[..n]);
+        }
+    });
+    check!(ok);
     let per = |v: Option<u64>| v.map(|v| v / (BLOCKS * BLOCK_LEN) as u64);
+    let bytes: usize = lens.iter().sum();
     cx.note(format_args!(
-        "a block frame of the record: {} bytes",
-        n / BLOCKS
+        "a packed block frame of the record: {} bytes (raw counts: {} bytes)",
+        bytes / BLOCKS,
+        2 * 5 * BLOCK_LEN
     ));
     let figures = [
         ("parts.block_builder_per_sample", build),
-        ("parts.store_push_per_sample", stored),
-        ("parts.block_from_store_per_sample", rebuilt),
+        ("parts.pack_per_sample", pack),
         ("parts.framing_per_sample", framed),
+        ("parts.store_push_per_sample", stored),
     ];
     let mut r = Ok(());
     for (name, v) in figures {

@@ -8,7 +8,7 @@ use tribo_firmware::wire::{
     BootReport, ChannelSet, Configure, Counts, Decoder, DeviceError, DeviceInfo, DeviceMsg,
     EcrRangeChange, EndReason, EnvelopeShape, ErrorCode, Estimate, FaultReason, FaultReport, Field,
     FrameError, Gap, HeaterFault, HeaterSetpoint, HostMsg, Interlock, OnboardResult, PackedBlock,
-    ResetCause, RigState, RunEnd, RunHeader, SampleBlock, Status, Verdict, BLOCK_LEN,
+    ResetCause, RigState, RunEnd, RunHeader, SampleBlock, SampleClock, Status, Verdict, BLOCK_LEN,
     MAX_BLOCK_COUNTS, PROTOCOL_VERSION,
 };
 use tribo_firmware::wire::{Encoder, Frame};
@@ -92,6 +92,10 @@ pub fn vector(i: usize) -> Option<(u32, Vector)> {
             config: Configure::real_rig(0.05),
             temp_c: 25.5,
             t_us: 1 << 40,
+            clock: SampleClock {
+                timer_hz: 200_000_000,
+                ticks_per_sample: 20_002,
+            },
         })),
         15 => Vector::Device(DeviceMsg::Samples(full_block())),
         16 => Vector::Device(DeviceMsg::Result(OnboardResult {
@@ -146,8 +150,10 @@ pub fn vector(i: usize) -> Option<(u32, Vector)> {
                 run_id: 7,
                 block: 2,
                 first_sample: 128,
+                t_us: 12_800,
                 channels: ChannelSet::VIBROMETER,
                 samples: 64,
+                ecr_range: 3,
                 temp_c: 25.0,
                 log10_ecr_ohm: 3.5,
                 data,

@@ -1,0 +1,79 @@
+//! Where the run store's big buffers live (the map is in `firmware/README.md`):
+//!
+//! * the RAM ring: 384 KiB in the AXI SRAM (`.bss`, next to everything else), SRAM1 and SRAM2
+//!   (128 KiB each, D2 domain) and 48 KiB of the DTCM, 688 KiB in all;
+//! * the block index (73 KiB): in the DTCM too. Only the CPU reaches the DTCM, and only the CPU
+//!   touches these (no DMA).
+//!
+//! SRAM1, SRAM2 and the DTCM buffers are not in the runtime's `.bss`: their sections (see `memory.x`) are
+//! `NOLOAD`, so this module zeroes them before handing them out, once. SRAM3 (DMA buffers) and
+//! SRAM4 are left to the other concerns.
+// `#[link_section]` and the raw pointers need `unsafe`; this module is the only place.
+#![allow(unsafe_code)]
+
+use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicBool, Ordering};
+use static_cell::ConstStaticCell;
+use tribo_firmware::runstore::{BOARD_RING_BYTES, MAX_RUN_BLOCKS};
+
+const AXI: usize = BOARD_RING_BYTES[0];
+const SRAM1: usize = BOARD_RING_BYTES[1];
+const SRAM2: usize = BOARD_RING_BYTES[2];
+const DTCM: usize = BOARD_RING_BYTES[3];
+
+static RING_AXI: ConstStaticCell<[u8; AXI]> = ConstStaticCell::new([0; AXI]);
+
+#[link_section = ".sram1"]
+static mut RING_SRAM1: MaybeUninit<[u8; SRAM1]> = MaybeUninit::uninit();
+#[link_section = ".sram2"]
+static mut RING_SRAM2: MaybeUninit<[u8; SRAM2]> = MaybeUninit::uninit();
+#[link_section = ".dtcm"]
+static mut INDEX: MaybeUninit<[u32; MAX_RUN_BLOCKS]> = MaybeUninit::uninit();
+#[link_section = ".dtcm"]
+static mut RING_DTCM: MaybeUninit<[u8; DTCM]> = MaybeUninit::uninit();
+
+static TAKEN: AtomicBool = AtomicBool::new(false);
+
+/// The run store's memory, handed out once.
+pub struct RunStoreMemory {
+    pub ring: [&'static mut [u8]; 4],
+    pub index: &'static mut [u32],
+}
+
+/// The run store's buffers, zeroed; `None` after the first call.
+pub fn take() -> Option<RunStoreMemory> {
+    if TAKEN.swap(true, Ordering::AcqRel) {
+        return None;
+    }
+    // The CPU allocates SRAM1 and SRAM2 (they stay powered with it in every run mode).
+    embassy_stm32::pac::RCC.ahb2enr().modify(|w| {
+        w.set_sram1en(true);
+        w.set_sram2en(true);
+    });
+    cortex_m::asm::dsb();
+    // SAFETY: `TAKEN` lets this run once, so the four `&'static mut` made here are the only
+    // references to these statics for the life of the program (nothing else names them). The
+    // statics live in NOLOAD sections that the runtime does not initialise: each is fully written
+    // (zeroed) through a raw pointer before a reference to it is made, so the slices cover
+    // initialised bytes of exactly the statics' sizes.
+    let (sram1, sram2, dtcm, index) = unsafe {
+        let p1 = (&raw mut RING_SRAM1).cast::<u8>();
+        let p2 = (&raw mut RING_SRAM2).cast::<u8>();
+        let pd = (&raw mut RING_DTCM).cast::<u8>();
+        let pi = (&raw mut INDEX).cast::<u32>();
+        core::ptr::write_bytes(p1, 0, SRAM1);
+        core::ptr::write_bytes(p2, 0, SRAM2);
+        core::ptr::write_bytes(pd, 0, DTCM);
+        core::ptr::write_bytes(pi, 0, MAX_RUN_BLOCKS);
+        (
+            core::slice::from_raw_parts_mut(p1, SRAM1),
+            core::slice::from_raw_parts_mut(p2, SRAM2),
+            core::slice::from_raw_parts_mut(pd, DTCM),
+            core::slice::from_raw_parts_mut(pi, MAX_RUN_BLOCKS),
+        )
+    };
+    Some(RunStoreMemory {
+        ring: [RING_AXI.take(), sram1, sram2, dtcm],
+        index,
+    })
+}

@@ -1,0 +1,786 @@
+//! Block compression: the counts of a [`SampleBlock`] packed into a [`PackedBlock`] and back,
+//! bit-exact, with no allocation and no panic on any input.
+//!
+//! Each channel of a block is coded on its own (counts de-interleaved) with the predictor that
+//! suits it best, chosen per block:
+//!
+//! * **level**: residual = count − a 16-bit base (the block's mean): a channel at rest, where only
+//!   the noise moves;
+//! * **slope**: residual = first difference: slow or stepwise signals (temperature, ECR, force);
+//! * **curve**: residual = second difference: the oscillation itself, sampled hundreds of times per
+//!   cycle, whose second difference is a few counts;
+//! * **verbatim**: 16 bits per count, when nothing predicts it.
+//!
+//! Residuals are taken modulo 2¹⁶ (so any counts round-trip, however wild), folded to unsigned by
+//! zig-zag (0, −1, 1, −2, … → 0, 1, 2, 3, …) and Rice-coded with a per-channel parameter `k`:
+//! `u >> k` in unary (ones closed by a zero), then the `k` low bits. A quotient of [`ESCAPE`] or more
+//! is sent as [`ESCAPE`] ones followed by the 16-bit value, so one spike costs 32 bits, not
+//! thousands. When the whole block would not be smaller than its raw counts, it is sent raw.
+//!
+//! Format of [`PackedBlock::data`] (the shape, `channels` and `samples`, is in the block's fields):
+//!
+//! ```text
+//! byte 0 = 0 (RAW):  then exactly 2·n·c bytes: the counts, interleaved, u16 little-endian
+//! byte 0 = 1 (RICE): then a bit stream, most significant bit first, for each channel in order:
+//!     mode  2 bits   0 level, 1 slope, 2 curve, 3 verbatim
+//!     verbatim: n × 16 bits
+//!     level:    base 16 bits,                k 4 bits, n residuals
+//!     slope:    first count 16 bits,          k 4 bits, n − 1 residuals
+//!     curve:    first two counts 2 × 16 bits, k 4 bits, n − 2 residuals
+//!               (fewer counts than that: the counts verbatim, k and residuals absent)
+//!     k = 15: every residual is 0 and none is sent
+//!   then zero bits up to the byte boundary, and nothing after.
+//! ```
+//!
+//! The decoder accepts exactly that grammar: a truncated stream, a wrong length, padding that is not
+//! zero, trailing bytes or an unknown format byte are errors ([`CodecError`]), never a panic.
+
+use crate::msg::{ChannelSet, Counts, DeviceMsg, PackedBlock, SampleBlock, BLOCK_LEN, CHANNELS};
+
+/// A Rice quotient this large or larger is sent as an escape and the value in 16 bits.
+pub const ESCAPE: u32 = 16;
+/// `k` that says "every residual of this channel is zero".
+const K_ZERO: u32 = 15;
+/// Largest Rice parameter used (a residual needs at most 16 bits).
+const K_MAX: u32 = 14;
+
+const FORMAT_RAW: u8 = 0;
+const FORMAT_RICE: u8 = 1;
+
+/// Why packed data could not be decoded (or a block not packed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CodecError {
+    /// No data at all (not even the format byte).
+    Empty,
+    /// The format byte is neither raw nor Rice: data from a newer codec, or garbage.
+    UnknownFormat(u8),
+    /// The data ends before every count is decoded.
+    Truncated,
+    /// Bytes (or non-zero padding bits) follow the last count.
+    Trailing,
+    /// Raw data whose length is not two bytes per count.
+    RawLength,
+    /// Channel set or sample count out of range (empty or unknown channels, more than
+    /// [`BLOCK_LEN`] samples), or counts that are not a whole number of samples.
+    Shape,
+    /// The output buffer is too small for the encoding (cannot happen with [`MAX_PACKED_BYTES`]).
+    ///
+    /// [`MAX_PACKED_BYTES`]: crate::msg::MAX_PACKED_BYTES
+    Overflow,
+}
+
+impl core::fmt::Display for CodecError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            CodecError::Empty => f.write_str("packed block has no data"),
+            CodecError::UnknownFormat(b) => write!(
+                f,
+                "packed block format {b} is unknown (written by a newer firmware, or damaged)"
+            ),
+            CodecError::Truncated => f.write_str("packed block data ends too early"),
+            CodecError::Trailing => f.write_str("packed block data has bytes after its last count"),
+            CodecError::RawLength => f.write_str("raw packed block has the wrong length"),
+            CodecError::Shape => {
+                f.write_str("packed block has an impossible channel set or length")
+            }
+            CodecError::Overflow => f.write_str("packed block does not fit its buffer"),
+        }
+    }
+}
+
+#[cfg(any(test, feature = "std"))]
+impl std::error::Error for CodecError {}
+
+/// Bytes of the raw form of `n` samples of `c` channels (format byte included).
+pub const fn raw_len(samples: usize, channels: usize) -> usize {
+    1 + 2 * samples * channels
+}
+
+#[inline]
+fn zigzag(r: u16) -> u16 {
+    let r = r as i16;
+    ((r << 1) ^ (r >> 15)) as u16
+}
+
+#[inline]
+fn unzigzag(u: u16) -> u16 {
+    (u >> 1) ^ (u & 1).wrapping_neg()
+}
+
+/// A predictor of one channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Level = 0,
+    Slope = 1,
+    Curve = 2,
+    Verbatim = 3,
+}
+
+impl Mode {
+    fn from_bits(b: u32) -> Mode {
+        match b & 3 {
+            0 => Mode::Level,
+            1 => Mode::Slope,
+            2 => Mode::Curve,
+            _ => Mode::Verbatim,
+        }
+    }
+}
+
+/// The zig-zagged residuals of `mode` for the lane `x` (those past the warm-up), modulo 2^16,
+/// into `out`; returns how many.
+fn residuals(x: &[u16], mode: Mode, base: u16, out: &mut [u16; BLOCK_LEN]) -> usize {
+    match mode {
+        Mode::Level => {
+            for (o, &v) in out.iter_mut().zip(x) {
+                *o = zigzag(v.wrapping_sub(base));
+            }
+        }
+        Mode::Slope => {
+            for (o, w) in out.iter_mut().zip(x.windows(2)) {
+                *o = zigzag(w[1].wrapping_sub(w[0]));
+            }
+        }
+        Mode::Curve => {
+            for (o, w) in out.iter_mut().zip(x.windows(3)) {
+                *o = zigzag(w[2].wrapping_sub(w[1].wrapping_mul(2).wrapping_sub(w[0])));
+            }
+        }
+        Mode::Verbatim => return 0,
+    }
+    x.len() - warm_up(mode, x.len())
+}
+
+/// Counts sent verbatim before the residuals of `mode` start (the base of `Level` aside).
+fn warm_up(mode: Mode, n: usize) -> usize {
+    match mode {
+        Mode::Level => 0,
+        Mode::Slope => n.min(1),
+        Mode::Curve => n.min(2),
+        Mode::Verbatim => n,
+    }
+}
+
+/// The plan for one channel: predictor, base and Rice parameter.
+#[derive(Debug, Clone, Copy)]
+struct Plan {
+    mode: Mode,
+    base: u16,
+    k: u32,
+}
+
+/// Residuals of one predictor summarised by bit length: `count[b]` residuals of `b` significant
+/// bits (`b = 0` for zero), `sum[b]` their total. Enough to price any Rice parameter closely.
+#[derive(Default, Clone, Copy)]
+struct Histogram {
+    count: [u32; 17],
+    sum: [u32; 17],
+    n: u32,
+    total: u32,
+    /// Highest bucket used.
+    hi: u32,
+}
+
+impl Histogram {
+    #[inline]
+    fn add(&mut self, u: u16) {
+        let b = 16 - u.leading_zeros();
+        self.count[b as usize] += 1;
+        self.sum[b as usize] += u as u32;
+        self.n += 1;
+        self.total += u as u32;
+        self.hi = self.hi.max(b);
+    }
+
+    /// Bits of the residuals under `k`, over-estimated by less than one per residual whose
+    /// quotient is not zero.
+    fn bits(&self, k: u32) -> u32 {
+        let mut bits = 0;
+        for b in 0..=self.hi {
+            let cnt = self.count[b as usize];
+            if cnt == 0 {
+                continue;
+            }
+            if b <= k {
+                // Quotient 0: a zero and k bits each.
+                bits += cnt * (1 + k);
+                continue;
+            }
+            // Σ⌊u / 2^k⌋ ≤ ⌊Σu / 2^k⌋ < Σ⌊u / 2^k⌋ + cnt.
+            let plain = cnt * (1 + k) + (self.sum[b as usize] >> k);
+            let qmin = (1u32 << (b - 1)) >> k;
+            let qmax = ((1u32 << b) - 1) >> k;
+            bits += if qmin >= ESCAPE {
+                cnt * (ESCAPE + 16)
+            } else if qmax < ESCAPE {
+                plain
+            } else {
+                plain.min(cnt * (ESCAPE + 16))
+            };
+        }
+        bits
+    }
+
+    /// The best parameter and its cost (header included): from the mean's bit length, a local
+    /// search (the cost is unimodal in k for these distributions; a worse pick only costs bits).
+    fn best(&self) -> (u32, u32) {
+        if self.n == 0 {
+            return (K_ZERO, 0);
+        }
+        if self.count[0] == self.n {
+            return (K_ZERO, 4);
+        }
+        let mean = self.total / self.n;
+        let mut k = (u32::BITS - mean.leading_zeros()).min(K_MAX);
+        let mut bits = self.bits(k);
+        while k > 0 {
+            let b = self.bits(k - 1);
+            if b > bits {
+                break;
+            }
+            k -= 1;
+            bits = b;
+        }
+        while k < K_MAX {
+            let b = self.bits(k + 1);
+            if b >= bits {
+                break;
+            }
+            k += 1;
+            bits = b;
+        }
+        (k, 4 + bits)
+    }
+}
+
+/// Rough bits of `n` residuals summing to `sum` under the Rice parameter their mean suggests: what
+/// the predictors are compared by.
+fn rough_bits(sum: u32, n: u32) -> u32 {
+    if n == 0 {
+        return 0;
+    }
+    if sum == 0 {
+        return 4;
+    }
+    let k = (u32::BITS - (sum / n).leading_zeros())
+        .saturating_sub(1)
+        .min(K_MAX);
+    4 + n * (1 + k) + (sum >> k)
+}
+
+/// Picks the cheapest predictor (by the sums of its residuals) and its Rice parameter (by their
+/// histogram), and leaves its residuals in `r` (how many: the second value). Four passes over the
+/// lane's counts.
+fn plan(x: &[u16], r: &mut [u16; BLOCK_LEN]) -> (Plan, usize) {
+    let n = x.len();
+    // Pass 1: the lane's sum (for the level's base), and the slope and curve residuals.
+    let mut sum = 0u32;
+    let mut s = [0u32; 3];
+    let (mut p1, mut p2) = (0u16, 0u16);
+    for (i, &v) in x.iter().enumerate() {
+        sum += v as u32;
+        if i >= 1 {
+            s[1] += zigzag(v.wrapping_sub(p1)) as u32;
+        }
+        if i >= 2 {
+            s[2] += zigzag(v.wrapping_sub(p1.wrapping_mul(2).wrapping_sub(p2))) as u32;
+        }
+        p2 = p1;
+        p1 = v;
+    }
+    let base = if n == 0 {
+        0
+    } else {
+        ((sum + n as u32 / 2) / n as u32) as u16
+    };
+    // Pass 2: the level residuals.
+    s[0] = x.iter().map(|&v| zigzag(v.wrapping_sub(base)) as u32).sum();
+    let mut mode = Mode::Verbatim;
+    let mut least = 16 * n as u32;
+    for (m, sum) in [Mode::Level, Mode::Slope, Mode::Curve].into_iter().zip(s) {
+        let warm = warm_up(m, n);
+        let fixed = 16 * warm as u32 + if m == Mode::Level { 16 } else { 0 };
+        let bits = fixed + rough_bits(sum, (n - warm) as u32);
+        if bits < least {
+            least = bits;
+            mode = m;
+        }
+    }
+    let verbatim = Plan {
+        mode: Mode::Verbatim,
+        base,
+        k: 0,
+    };
+    if mode == Mode::Verbatim {
+        return (verbatim, 0);
+    }
+    // Pass 3: the residuals and, from their histogram (robust to a few spikes), the parameter.
+    let m = residuals(x, mode, base, r);
+    let mut h = Histogram::default();
+    for &u in &r[..m] {
+        h.add(u);
+    }
+    let (k, bits) = h.best();
+    let fixed = 16 * warm_up(mode, n) as u32 + if mode == Mode::Level { 16 } else { 0 };
+    if fixed + bits >= 16 * n as u32 {
+        return (verbatim, 0);
+    }
+    (Plan { mode, base, k }, m)
+}
+
+/// Writes bits most significant first into a byte slice; refuses to overrun it.
+struct BitWriter<'a> {
+    out: &'a mut [u8],
+    pos: usize,
+    acc: u64,
+    bits: u32,
+}
+
+impl<'a> BitWriter<'a> {
+    fn new(out: &'a mut [u8]) -> Self {
+        BitWriter {
+            out,
+            pos: 0,
+            acc: 0,
+            bits: 0,
+        }
+    }
+
+    /// Appends the low `n` (≤ 32) bits of `v`.
+    #[inline]
+    fn put(&mut self, v: u32, n: u32) -> Result<(), CodecError> {
+        if n == 0 {
+            return Ok(());
+        }
+        let v = (v as u64) & ((1u64 << n) - 1);
+        self.acc = (self.acc << n) | v;
+        self.bits += n;
+        while self.bits >= 8 {
+            self.bits -= 8;
+            let byte = (self.acc >> self.bits) as u8;
+            *self.out.get_mut(self.pos).ok_or(CodecError::Overflow)? = byte;
+            self.pos += 1;
+        }
+        Ok(())
+    }
+
+    /// Pads with zeros to the byte boundary; returns the bytes written.
+    fn finish(mut self) -> Result<usize, CodecError> {
+        if self.bits > 0 {
+            let pad = 8 - self.bits;
+            self.put(0, pad)?;
+        }
+        Ok(self.pos)
+    }
+}
+
+/// Reads bits most significant first.
+struct BitReader<'a> {
+    data: &'a [u8],
+    pos: usize,
+    acc: u64,
+    bits: u32,
+}
+
+impl<'a> BitReader<'a> {
+    fn new(data: &'a [u8]) -> Self {
+        BitReader {
+            data,
+            pos: 0,
+            acc: 0,
+            bits: 0,
+        }
+    }
+
+    #[inline]
+    fn get(&mut self, n: u32) -> Result<u32, CodecError> {
+        if n == 0 {
+            return Ok(0);
+        }
+        while self.bits < n {
+            let b = *self.data.get(self.pos).ok_or(CodecError::Truncated)?;
+            self.pos += 1;
+            self.acc = (self.acc << 8) | b as u64;
+            self.bits += 8;
+        }
+        self.bits -= n;
+        Ok(((self.acc >> self.bits) & ((1u64 << n) - 1)) as u32)
+    }
+
+    /// Counts one bits up to a zero, or up to `limit` ones (then no zero is read).
+    fn unary(&mut self, limit: u32) -> Result<u32, CodecError> {
+        let mut q = 0;
+        while q < limit {
+            if self.get(1)? == 0 {
+                return Ok(q);
+            }
+            q += 1;
+        }
+        Ok(q)
+    }
+
+    /// Checks that only zero padding remains.
+    fn finish(self) -> Result<(), CodecError> {
+        let mask = (1u64 << self.bits) - 1;
+        if self.acc & mask != 0 || self.pos != self.data.len() {
+            return Err(CodecError::Trailing);
+        }
+        Ok(())
+    }
+}
+
+fn check_shape(samples: usize, channels: usize) -> Result<(), CodecError> {
+    if channels == 0 || channels > CHANNELS || samples > BLOCK_LEN {
+        return Err(CodecError::Shape);
+    }
+    Ok(())
+}
+
+/// Packs `counts` (`samples` × `channels`, interleaved) into `out`; returns the bytes written.
+/// The output never exceeds [`raw_len`]`(samples, channels)` bytes.
+pub fn encode(
+    counts: &[u16],
+    samples: usize,
+    channels: usize,
+    out: &mut [u8],
+) -> Result<usize, CodecError> {
+    check_shape(samples, channels)?;
+    if counts.len() != samples * channels {
+        return Err(CodecError::Shape);
+    }
+    let raw = raw_len(samples, channels);
+    if out.len() < raw {
+        return Err(CodecError::Overflow);
+    }
+    // Rice first, into at most the raw size; raw when it does not fit there.
+    if let Ok(n) = encode_rice(counts, samples, channels, &mut out[1..raw]) {
+        if 1 + n < raw {
+            out[0] = FORMAT_RICE;
+            return Ok(1 + n);
+        }
+    }
+    out[0] = FORMAT_RAW;
+    for (i, c) in counts.iter().enumerate() {
+        out[1 + 2 * i..3 + 2 * i].copy_from_slice(&c.to_le_bytes());
+    }
+    Ok(raw)
+}
+
+fn encode_rice(
+    counts: &[u16],
+    n: usize,
+    channels: usize,
+    out: &mut [u8],
+) -> Result<usize, CodecError> {
+    let mut w = BitWriter::new(out);
+    let mut lane = [0u16; BLOCK_LEN];
+    let mut r = [0u16; BLOCK_LEN];
+    for c in 0..channels {
+        // De-interleave (the caller checked counts.len() == n * channels).
+        for (x, &v) in lane.iter_mut().zip(counts.iter().skip(c).step_by(channels)) {
+            *x = v;
+        }
+        let x = &lane[..n];
+        let (p, m) = plan(x, &mut r);
+        w.put(p.mode as u32, 2)?;
+        let warm = warm_up(p.mode, n);
+        if p.mode == Mode::Level {
+            w.put(p.base as u32, 16)?;
+        }
+        for &v in &x[..warm] {
+            w.put(v as u32, 16)?;
+        }
+        if p.mode == Mode::Verbatim || warm == n && p.mode != Mode::Level {
+            continue;
+        }
+        w.put(p.k, 4)?;
+        if p.k == K_ZERO {
+            continue;
+        }
+        let mask = (1u32 << p.k) - 1;
+        for &u in &r[..m] {
+            let u = u as u32;
+            let q = u >> p.k;
+            if q < ESCAPE {
+                // q ones, a zero, then the k low bits: one write of q + 1 + k ≤ 31 bits.
+                w.put((((1u32 << q) - 1) << (1 + p.k)) | (u & mask), q + 1 + p.k)?;
+            } else {
+                w.put((1 << ESCAPE) - 1, ESCAPE)?;
+                w.put(u, 16)?;
+            }
+        }
+    }
+    w.finish()
+}
+
+/// Unpacks `data` into `out` (`samples` × `channels` counts, interleaved).
+pub fn decode(
+    data: &[u8],
+    samples: usize,
+    channels: usize,
+    out: &mut [u16],
+) -> Result<(), CodecError> {
+    check_shape(samples, channels)?;
+    let n = samples;
+    let out = out.get_mut(..n * channels).ok_or(CodecError::Overflow)?;
+    let (&format, body) = data.split_first().ok_or(CodecError::Empty)?;
+    match format {
+        FORMAT_RAW => {
+            if body.len() != 2 * n * channels {
+                return Err(CodecError::RawLength);
+            }
+            for (o, b) in out.iter_mut().zip(body.chunks_exact(2)) {
+                *o = u16::from_le_bytes([b[0], b[1]]);
+            }
+            Ok(())
+        }
+        FORMAT_RICE => {
+            let mut r = BitReader::new(body);
+            for c in 0..channels {
+                let at = |i: usize| i * channels + c;
+                let mode = Mode::from_bits(r.get(2)?);
+                let base = if mode == Mode::Level {
+                    r.get(16)? as u16
+                } else {
+                    0
+                };
+                let warm = warm_up(mode, n);
+                for i in 0..warm {
+                    out[at(i)] = r.get(16)? as u16;
+                }
+                if mode == Mode::Verbatim || warm == n && mode != Mode::Level {
+                    continue;
+                }
+                let k = r.get(4)?;
+                for i in warm..n {
+                    let u = if k == K_ZERO {
+                        0
+                    } else {
+                        let q = r.unary(ESCAPE)?;
+                        if q < ESCAPE {
+                            ((q << k) | r.get(k)?) as u16
+                        } else {
+                            r.get(16)? as u16
+                        }
+                    };
+                    let res = unzigzag(u);
+                    let pred = match mode {
+                        Mode::Level => base,
+                        Mode::Slope => out[at(i - 1)],
+                        Mode::Curve => out[at(i - 1)].wrapping_mul(2).wrapping_sub(out[at(i - 2)]),
+                        Mode::Verbatim => 0,
+                    };
+                    out[at(i)] = pred.wrapping_add(res);
+                }
+            }
+            r.finish()
+        }
+        other => Err(CodecError::UnknownFormat(other)),
+    }
+}
+
+impl PackedBlock {
+    /// Packs a sample block (same run, index, time, ECR and temperature fields; counts compressed).
+    pub fn pack(b: &SampleBlock) -> Result<PackedBlock, CodecError> {
+        let channels = b.channels.len();
+        if !b.is_consistent() {
+            return Err(CodecError::Shape);
+        }
+        let samples = b.samples();
+        let mut data = heapless::Vec::new();
+        data.resize(raw_len(samples, channels), 0)
+            .map_err(|_| CodecError::Overflow)?;
+        let len = encode(&b.counts, samples, channels, &mut data)?;
+        data.truncate(len);
+        Ok(PackedBlock {
+            run_id: b.run_id,
+            block: b.block,
+            first_sample: b.first_sample,
+            t_us: b.t_us,
+            channels: b.channels,
+            samples: samples as u16,
+            ecr_range: b.ecr_range,
+            temp_c: b.temp_c,
+            log10_ecr_ohm: b.log10_ecr_ohm,
+            data,
+        })
+    }
+
+    /// The sample block this packs, counts decoded.
+    pub fn unpack(&self) -> Result<SampleBlock, CodecError> {
+        if self.channels.0 & !ChannelSet::ALL.0 != 0 {
+            return Err(CodecError::Shape);
+        }
+        let (n, c) = (self.samples as usize, self.channels.len());
+        check_shape(n, c)?;
+        let mut counts = [0u16; BLOCK_LEN * CHANNELS];
+        decode(&self.data, n, c, &mut counts)?;
+        Ok(SampleBlock {
+            run_id: self.run_id,
+            block: self.block,
+            first_sample: self.first_sample,
+            t_us: self.t_us,
+            channels: self.channels,
+            ecr_range: self.ecr_range,
+            log10_ecr_ohm: self.log10_ecr_ohm,
+            temp_c: self.temp_c,
+            counts: Counts::from_slice(&counts[..n * c]).ok_or(CodecError::Shape)?,
+        })
+    }
+}
+
+impl DeviceMsg {
+    /// The sample block this frame carries, whichever its form: a v1 [`DeviceMsg::Samples`] as is,
+    /// a v2 [`DeviceMsg::Packed`] unpacked (an error if its data does not decode). `None` for other
+    /// messages.
+    pub fn sample_block(&self) -> Option<Result<SampleBlock, CodecError>> {
+        match self {
+            DeviceMsg::Samples(b) => Some(Ok(b.clone())),
+            DeviceMsg::Packed(p) => Some(p.unpack()),
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn round_trip(counts: &[u16], n: usize, c: usize) -> usize {
+        let mut out = [0u8; raw_len(BLOCK_LEN, CHANNELS)];
+        let len = encode(counts, n, c, &mut out).unwrap();
+        assert!(len <= raw_len(n, c));
+        let mut back = [0u16; BLOCK_LEN * CHANNELS];
+        decode(&out[..len], n, c, &mut back).unwrap();
+        assert_eq!(&back[..n * c], counts);
+        len
+    }
+
+    /// Bits of one residual under parameter `k`.
+    #[inline]
+    fn rice_bits(u: u16, k: u32) -> u32 {
+        let q = (u as u32) >> k;
+        if q < ESCAPE {
+            q + 1 + k
+        } else {
+            ESCAPE + 16
+        }
+    }
+
+    #[test]
+    fn the_histogram_prices_every_parameter_within_a_bit_per_residual() {
+        let mut x = 77u32;
+        for spread in [0u32, 1, 5, 40, 300, 5000, 65535] {
+            let us: Vec<u16> = (0..200)
+                .map(|_| {
+                    x = x.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                    ((x >> 8) % (spread + 1)) as u16
+                })
+                .collect();
+            let mut h = Histogram::default();
+            us.iter().for_each(|&u| h.add(u));
+            for k in 0..=K_MAX {
+                let exact: u32 = us.iter().map(|&u| rice_bits(u, k)).sum();
+                let est = h.bits(k);
+                assert!(
+                    exact <= est && est <= exact + us.len() as u32,
+                    "spread {spread} k {k}: estimate {est}, exact {exact}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn zigzag_is_a_bijection_on_16_bits() {
+        for r in 0..=u16::MAX {
+            assert_eq!(unzigzag(zigzag(r)), r);
+        }
+        assert_eq!(
+            [0, 0xFFFF, 1, 0xFFFE].map(zigzag),
+            [0, 1, 2, 3],
+            "0, −1, 1, −2 fold to 0, 1, 2, 3"
+        );
+    }
+
+    #[test]
+    fn a_constant_channel_costs_its_first_count_and_a_flag() {
+        let counts = [1234u16; BLOCK_LEN];
+        // format byte + mode 2 bits + count 16 bits + k 4 bits = 22 bits → 3 bytes.
+        assert_eq!(round_trip(&counts, BLOCK_LEN, 1), 1 + 3);
+    }
+
+    #[test]
+    fn a_parabola_is_coded_by_its_second_difference() {
+        let counts: Vec<u16> = (0..BLOCK_LEN as i32)
+            .map(|i| (30_000 + 3 * i * i - 100 * i) as u16)
+            .collect();
+        // Second difference is the constant 6: curve mode, k chosen so each residual is ~4 bits.
+        // Each residual 6 → zig-zag 12: k = 3, 5 bits (a zero and 4 bits)... or k = 2 with a
+        // quotient of 3: 6 bits. Header 2 + 32 + 4 bits.
+        let len = round_trip(&counts, BLOCK_LEN, 1);
+        assert_eq!(
+            len,
+            1 + (2 + 32 + 4 + 62 * 5usize).div_ceil(8),
+            "{len} bytes"
+        );
+    }
+
+    #[test]
+    fn full_scale_noise_falls_back_to_raw() {
+        let mut x = 0x1234_5678u32;
+        let counts: Vec<u16> = (0..BLOCK_LEN * CHANNELS)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                x as u16
+            })
+            .collect();
+        assert_eq!(
+            round_trip(&counts, BLOCK_LEN, CHANNELS),
+            raw_len(BLOCK_LEN, CHANNELS)
+        );
+    }
+
+    #[test]
+    fn escapes_carry_spikes_at_either_end_of_the_range() {
+        let mut counts = [32768u16; BLOCK_LEN];
+        counts[10] = 0;
+        counts[11] = 65535;
+        counts[40] = 1;
+        let len = round_trip(&counts, BLOCK_LEN, 1);
+        assert!(len < 40, "{len} bytes");
+    }
+
+    #[test]
+    fn empty_and_short_blocks_round_trip() {
+        for n in 0..4 {
+            for c in 1..=CHANNELS {
+                let counts: Vec<u16> = (0..n * c).map(|i| (i * 7919) as u16).collect();
+                round_trip(&counts, n, c);
+            }
+        }
+    }
+
+    #[test]
+    fn bad_shapes_are_refused() {
+        let mut out = [0u8; 1024];
+        assert_eq!(encode(&[], 0, 0, &mut out), Err(CodecError::Shape));
+        assert_eq!(encode(&[0; 6], 1, 6, &mut out), Err(CodecError::Shape));
+        assert_eq!(encode(&[0; 3], 2, 2, &mut out), Err(CodecError::Shape));
+        assert_eq!(
+            encode(&[0; 130], 65, 2, &mut out),
+            Err(CodecError::Shape),
+            "more than a block"
+        );
+        let mut back = [0u16; 8];
+        assert_eq!(decode(&[0], 1, 0, &mut back), Err(CodecError::Shape));
+        assert_eq!(decode(&[], 1, 1, &mut back), Err(CodecError::Empty));
+        assert_eq!(
+            decode(&[7, 0, 0], 1, 1, &mut back),
+            Err(CodecError::UnknownFormat(7))
+        );
+        assert_eq!(decode(&[0, 1], 1, 1, &mut back), Err(CodecError::RawLength));
+    }
+}
