@@ -66,6 +66,10 @@ pub struct Replay<'r> {
     released_k: Option<u64>,
     adc: ConverterModel,
     flash: MemFlash<&'r mut [u8]>,
+    /// A sector erase the application started, handed to the flash model by [`Replay::advance`]:
+    /// the model clears the sector's 128 KiB at once, which the board's flash does by itself
+    /// (starting an erase is a register write), so that work must not count as the application's.
+    erase: Option<u32>,
     // heater, ECR, button, lamps
     /// What the thermocouple reads.
     pub temp: Result<f32, ThermocoupleFault>,
@@ -98,6 +102,7 @@ impl<'r> Replay<'r> {
             released_k: None,
             adc: ConverterModel::new(BOARD_TIMER_HZ),
             flash: MemFlash::new(flash, FlashGeometry::H743_BANK2).with_h743_timing(),
+            erase: None,
             temp: Ok(25.0),
             heater_duty: 0.0,
             ecr_output_v: 1.0,
@@ -129,6 +134,9 @@ impl<'r> Replay<'r> {
     pub fn advance(&mut self, now_us: u64) {
         self.now_us = self.now_us.max(now_us);
         self.flash.advance(self.now_us);
+        if let Some(sector) = self.erase.take() {
+            self.flash.flash_erase(sector);
+        }
         while self.adc.due(self.now_us).is_some() {
             let k = self.adc.next_index();
             let s = self.rec.sample(self.index(k));
@@ -240,16 +248,20 @@ impl RunFlash for Replay<'_> {
         self.flash.flash_geometry()
     }
     fn flash_busy(&mut self) -> bool {
-        self.flash.flash_busy()
+        self.erase.is_some() || self.flash.flash_busy()
     }
     fn flash_erase(&mut self, sector: u32) -> bool {
-        self.flash.flash_erase(sector)
+        if self.flash_busy() || sector >= self.flash.flash_geometry().sectors {
+            return false;
+        }
+        self.erase = Some(sector);
+        true
     }
     fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
-        self.flash.flash_program(offset, data)
+        self.erase.is_none() && self.flash.flash_program(offset, data)
     }
     fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
-        self.flash.flash_read(offset, out)
+        self.erase.is_none() && self.flash.flash_read(offset, out)
     }
     fn flash_take_error(&mut self) -> bool {
         self.flash.flash_take_error()

@@ -169,6 +169,9 @@ pub struct Worst {
     pub poll_at_us: u64,
     /// What the worst poll did: samples taken, frames the link took.
     pub poll_did: (u32, u32),
+    /// Ordinal of the worst poll among all measured polls (to find it in an execution trace:
+    /// the n-th call of [`poll_mark`]).
+    pub poll_ordinal: u64,
     pub polls: u64,
     /// Application instructions since the bench started.
     pub total: u64,
@@ -236,6 +239,7 @@ impl<'a, 'r> Bench<'a, 'r> {
                 self.worst.poll = n;
                 self.worst.poll_at_us = self.now_us;
                 self.worst.poll_did = did;
+                self.worst.poll_ordinal = self.worst.polls;
             }
         } else {
             self.worst.on_bytes = self.worst.on_bytes.max(n);
@@ -465,7 +469,9 @@ fn whole_run(cx: &mut Cx<'_>, name: &str, configure: Configure, expect: Expect) 
     // stream until the run's end frame, with a cable-out outage early in the run
     let limit = release_at + (configure.max_duration_s as u64 + 10) * 1_000_000;
     let outage = (release_at + 20_000, release_at + 20_000 + expect.outage_us);
-    let stall = (release_at + 150_000, release_at + 150_000 + expect.stall_us);
+    // the stall after the outage (the backlog it leaves takes a while to catch up)
+    let stall_at = outage.1 + 20_000;
+    let stall = (stall_at, stall_at + expect.stall_us);
     while b.host.end.is_none() && b.now_us < limit {
         b.reading = !(outage.0..outage.1).contains(&b.now_us);
         b.now_us += POLL_US;
@@ -578,10 +584,11 @@ fn whole_run(cx: &mut Cx<'_>, name: &str, configure: Configure, expect: Expect) 
     let w = b.worst;
     breakdown(cx, &w);
     cx.note(format_args!(
-        "worst poll at {} ms after release ({} samples taken, {} frames sent); {} polls",
+        "worst poll at {} ms after release ({} samples taken, {} frames sent; poll #{}); {} polls",
         w.poll_at_us.saturating_sub(release_at) / 1000,
         w.poll_did.0,
         w.poll_did.1,
+        w.poll_ordinal,
         w.polls
     ));
     let per_sample = during_run / (end.samples as u64).max(1);

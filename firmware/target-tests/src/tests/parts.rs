@@ -54,6 +54,26 @@ pub fn block_path(cx: &mut Cx) -> Outcome {
         }
     });
     check!(packed.len() == BLOCKS, "a block did not pack");
+    // The packing as the application spreads it: one channel per step.
+    let mut worst_step = None::<u64>;
+    let mut steps = 0;
+    for blk in &blocks {
+        let mut p = None;
+        let c = cx.count(|| p = PackedBlock::start(blk).ok());
+        worst_step = c.map(|c| worst_step.map_or(c, |w: u64| w.max(c)));
+        let Some(mut p) = p else { continue };
+        let mut packer = tribo_firmware::wire::codec::Packer::new();
+        let mut done = false;
+        while !done {
+            let c = cx.count(|| done = p.pack_step(blk, &mut packer).unwrap_or(true));
+            worst_step = c.map(|c| worst_step.map_or(c, |w: u64| w.max(c)));
+            steps += 1;
+        }
+    }
+    check!(
+        steps == 5 * BLOCKS,
+        "{steps} packing steps for {BLOCKS} five-channel blocks"
+    );
     let mut enc = Encoder::new();
     let mut frames = [[0u8; MAX_FRAME]; BLOCKS];
     let mut lens = [0usize; BLOCKS];
@@ -114,7 +134,14 @@ pub fn block_path(cx: &mut Cx) -> Outcome {
     for (name, v) in figures {
         r = r.and(cx.figure(name, per(v), "instructions/sample", None));
     }
-    r
+    let framing_one = framed.map(|f| f / BLOCKS as u64);
+    r.and(cx.figure("parts.worst_pack_step", worst_step, "instructions", None))
+        .and(cx.figure(
+            "parts.frame_one_packed_block",
+            framing_one,
+            "instructions",
+            None,
+        ))
 }
 
 /// What configuring the on-board analysis costs: `Pipeline::reset` (every Configure and Arm) and
