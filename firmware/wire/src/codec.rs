@@ -275,19 +275,22 @@ fn rough_bits(sum: u32, n: u32) -> u32 {
 fn plan(x: &[u16], r: &mut [u16; BLOCK_LEN]) -> (Plan, usize) {
     let n = x.len();
     // Pass 1: the lane's sum (for the level's base), and the slope and curve residuals.
+    // (The first two counts apart, so that the loop over the rest has no branch: on the M7 this
+    // pass is a fifth of packing a block.)
     let mut sum = 0u32;
     let mut s = [0u32; 3];
-    let (mut p1, mut p2) = (0u16, 0u16);
-    for (i, &v) in x.iter().enumerate() {
+    if let Some(&a) = x.first() {
+        sum += a as u32;
+    }
+    if let [a, b, ..] = *x {
+        sum += b as u32;
+        s[1] += zigzag(b.wrapping_sub(a)) as u32;
+    }
+    for w in x.windows(3) {
+        let (p2, p1, v) = (w[0], w[1], w[2]);
         sum += v as u32;
-        if i >= 1 {
-            s[1] += zigzag(v.wrapping_sub(p1)) as u32;
-        }
-        if i >= 2 {
-            s[2] += zigzag(v.wrapping_sub(p1.wrapping_mul(2).wrapping_sub(p2))) as u32;
-        }
-        p2 = p1;
-        p1 = v;
+        s[1] += zigzag(v.wrapping_sub(p1)) as u32;
+        s[2] += zigzag(v.wrapping_sub(p1.wrapping_mul(2).wrapping_sub(p2))) as u32;
     }
     let base = if n == 0 {
         0
@@ -539,8 +542,12 @@ fn encode_channel(
     let mut lane = [0u16; BLOCK_LEN];
     let mut r = [0u16; BLOCK_LEN];
     // De-interleave (the caller checked counts.len() == n * channels).
-    for (x, &v) in lane.iter_mut().zip(counts.iter().skip(c).step_by(channels)) {
-        *x = v;
+    for (x, v) in lane
+        .iter_mut()
+        .zip(counts.chunks_exact(channels))
+        .map(|(x, s)| (x, s.get(c)))
+    {
+        *x = v.copied().unwrap_or(0);
     }
     let x = &lane[..n];
     let (p, m) = plan(x, &mut r);

@@ -1011,9 +1011,19 @@ wire_type! {
         pub ecr_range: u8,
         pub temp_c: f32,
         pub log10_ecr_ohm: f32,
-        /// The compressed counts ([`crate::codec`] describes the format).
+        /// The compressed counts ([`crate::codec`] describes the format). Serialised as bytes:
+        /// the same bytes as a sequence of `u8` in postcard (a length, then the bytes), in one
+        /// copy rather than one call per byte.
+        #[serde(serialize_with = "packed_bytes")]
         pub data: heapless::Vec<u8, MAX_PACKED_BYTES>,
     }
+}
+
+fn packed_bytes<S: serde::Serializer>(
+    data: &heapless::Vec<u8, MAX_PACKED_BYTES>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    s.serialize_bytes(data)
 }
 
 /// Largest compressed payload of a [`PackedBlock`]: the raw form (a format byte and two bytes per
