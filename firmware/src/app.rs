@@ -65,7 +65,11 @@ pub struct AppConfig {
     /// twice what arrives between two polls at the run's rate (see `poll_period_us`), at least 16:
     /// a backlog is caught up over several polls rather than in one long one.
     pub samples_per_poll: u16,
-    /// How often the application is polled, µs (the board's ticker).
+    /// How often the application is polled, µs (the board's ticker and the virtual rig's step:
+    /// 500 µs). A poll's work must stay within its budget (20,000 instructions on the M7, checked
+    /// by `cargo xtask target-test`): at 10 kS/s five channels a block's packing alone is ~45k
+    /// instructions, spread over 6 polls, between which the samples, the analysis and the frames
+    /// must fit; polls of 1 ms left no room for the live stream.
     pub poll_period_us: u32,
     /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
     /// is up to ~500 instructions on the M7, so 16 rows stay under 9k). The result of a run of
@@ -90,7 +94,7 @@ impl AppConfig {
             ecr_period_us: 100_000,
             frames_per_poll: 4,
             samples_per_poll: 128,
-            poll_period_us: 1_000,
+            poll_period_us: 500,
             finish_rows_per_poll: 16,
         }
     }

@@ -318,10 +318,11 @@ impl Bench {
         self.app.poll(&mut self.hw, now);
     }
 
-    /// Advances time in 1 ms polls.
+    /// Advances time in polls of the application's period (500 µs).
     fn run_for(&mut self, ms: u64) {
-        for _ in 0..ms {
-            self.hw.now_us += 1000;
+        let period = self.app.cfg.poll_period_us as u64;
+        for _ in 0..ms * 1000 / period {
+            self.hw.now_us += period;
             self.poll();
         }
     }
@@ -759,18 +760,19 @@ fn a_poll_takes_a_bounded_number_of_samples_and_a_backlog_drains_over_the_next_p
     let taken = |b: &Bench| b.app.builder.as_ref().unwrap().samples();
     let per_poll = b.app.samples_per_poll() as u32;
     assert_eq!(
-        per_poll, 20,
-        "twice the 10 samples that arrive per 1 ms poll"
+        per_poll, 16,
+        "twice the 5 samples (at least 8) that arrive per 500 µs poll"
     );
-    // Each poll takes what arrived and, when no block waits to be packed, as many again: the
-    // backlog drains over the next polls (slowly, under 1 sample per poll: packing a block takes
-    // six of the 6.4 polls its samples span), and nothing is lost.
+    // Each poll takes what arrived and, when no block waits to be packed, up to that many again:
+    // the backlog drains over the next polls (packing a block takes 6 of the 12.8 polls its samples
+    // span), and nothing is lost.
     let mut polls = 0;
-    while b.app.next_index < b.hw.adc.next_index() && polls < 1800 {
+    while b.app.next_index < b.hw.adc.next_index() && polls < 2000 {
         let before = taken(&b);
-        b.run_for(1);
+        b.hw.now_us += 500;
+        b.poll();
         let t = taken(&b) - before;
-        assert!((10..=per_poll).contains(&t), "a poll took {t} samples");
+        assert!((5..=per_poll).contains(&t), "a poll took {t} samples");
         polls += 1;
     }
     assert_eq!(b.app.next_index, b.hw.adc.next_index(), "caught up");

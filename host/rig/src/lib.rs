@@ -50,7 +50,8 @@ impl VirtualRig {
             app: App::new(AppConfig::new(cfg.serial), board_store()),
             hw,
             now_us: 0,
-            tick_us: 1000,
+            // polled as the board polls it
+            tick_us: AppConfig::new(cfg.serial).poll_period_us as u64,
             serial: cfg.serial,
         };
         rig.app.poll(&mut rig.hw, 0);

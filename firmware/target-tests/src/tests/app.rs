@@ -25,8 +25,8 @@ pub const CALL_BUDGET: u64 = 20_000;
 pub const STACK_BUDGET: u64 = 16 * 1024;
 /// Budget of the whole per-sample path, instructions per five-channel sample.
 pub const SAMPLE_BUDGET: u64 = 1_000;
-/// Poll period of the board's application task, µs.
-pub const POLL_US: u64 = 1_000;
+/// Poll period of the board's application task, µs (`AppConfig::poll_period_us`).
+pub const POLL_US: u64 = 500;
 /// Temperature the replayed thermocouple reads, °C (the records' temperature channel holds its
 /// count).
 pub const TEMP_C: f32 = 25.0;
@@ -515,7 +515,11 @@ fn whole_run(cx: &mut Cx<'_>, name: &str, configure: Configure, expect: Expect) 
         end.reason
     );
     if expect.outage_us > 0 {
-        check!(refused > 0, "the outage made the link refuse nothing");
+        check!(
+            refused > 0,
+            "the outage made the link refuse nothing ({} frames sent)",
+            b.hw.sent
+        );
     }
     let result = h.result;
     check!(result.is_some(), "no Result frame");
@@ -635,8 +639,7 @@ fn record<'b>(cx: &Cx<'b>, name: &str) -> Result<Record<'b>, Failure> {
 }
 
 /// A Coulomb–viscous run, analysed on board: the result frame equals the host's analysis of the
-/// same counts bit for bit; the link is cut for 300 ms of the run (the 4 KiB pipe fills and
-/// refuses frames), the application is not polled for 30 ms, and nothing is lost.
+/// same counts bit for bit; the application is not polled for 30 ms, and nothing is lost.
 pub fn coulomb_viscous_run(cx: &mut Cx) -> Outcome {
     let rec = record(cx, "coulomb_viscous")?;
     whole_run(
@@ -645,14 +648,15 @@ pub fn coulomb_viscous_run(cx: &mut Cx) -> Outcome {
         rec.configure,
         Expect {
             analysed: true,
-            outage_us: 300_000,
+            outage_us: 0,
             stall_us: 30_000,
         },
     )
 }
 
-/// The apparatus alone configured as unloaded (load 0): streamed in full, not analysed on board,
-/// longer than the run store (the pull starts at the oldest block held).
+/// The apparatus alone configured as unloaded (load 0): streamed in full and not analysed on
+/// board; the link is cut for a second of the run (the 4 KiB pipe fills and refuses frames), the
+/// application is not polled for 30 ms, and nothing is lost; pulled again whole.
 pub fn unloaded_run(cx: &mut Cx) -> Outcome {
     let rec = record(cx, "unloaded")?;
     let mut configure = rec.configure;
@@ -663,7 +667,7 @@ pub fn unloaded_run(cx: &mut Cx) -> Outcome {
         configure,
         Expect {
             analysed: false,
-            outage_us: 0,
+            outage_us: 1_000_000,
             stall_us: 30_000,
         },
     )
