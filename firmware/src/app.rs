@@ -57,8 +57,8 @@ pub struct AppConfig {
     /// ECR update period outside runs, µs (during a run: once per block).
     pub ecr_period_us: u32,
     /// Most run frames sent per poll (bounds the time a poll takes: each is a copy out of the store
-    /// and one into the link, ~2k instructions on the M7 for a block; 4 per millisecond poll is
-    /// 4000 frames/s, far more than a run makes).
+    /// and one into the link, ~2k instructions on the M7 for a block; 4 per poll is 8000 frames/s,
+    /// far more than a run makes).
     pub frames_per_poll: u8,
     /// Most samples taken from the converter per poll (bounds the time a poll takes; the
     /// converter's ring holds the rest, see `acquisition::RING_SCANS`). Within that cap a poll takes
