@@ -6,6 +6,7 @@ use host_common::*;
 use std::path::Path;
 use tribo::cmd::campaign::{finished, Args, Plan, Point};
 use tribo::cmd::run::LinkArgs;
+use tribo::link::Address;
 use tribo_store::catalog::{Axis, Value};
 use tribo_store::{Catalog, Filter};
 
@@ -15,11 +16,11 @@ fn write_plan(dir: &Path, text: &str) -> std::path::PathBuf {
     p
 }
 
-fn args(plan: &Path, port: &Path, store: &Path) -> Args {
+fn args(plan: &Path, port: &Address, store: &Path) -> Args {
     Args {
         plan: plan.to_owned(),
         link: LinkArgs {
-            port: Some(port.to_owned()),
+            port: Some(port.clone()),
             store: Some(store.to_owned()),
         },
         no_prompt: true,
@@ -136,7 +137,8 @@ fn a_campaign_over_loads_on_the_virtual_rig_gets_the_same_dimensionless_friction
         speed: 20.0,
         ..Default::default()
     };
-    let (port, _) = rig.start().unwrap();
+    let (port, _) = rig.listen("127.0.0.1:0", |_| {}).unwrap();
+    let port = RigOnTcp::from(port);
     let d = tempfile::tempdir().unwrap();
     let store = d.path().join("runs");
     let plan_path = write_plan(

@@ -8,7 +8,6 @@ mod host_common;
 use host_common::*;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
-use tribo::link::pty::VirtualPort;
 use tribo::link::session::record_run;
 use tribo_rig::{AcquisitionFaults, LawConfig, ServeOptions, VirtualRig, VirtualRigConfig};
 
@@ -44,17 +43,16 @@ fn a_stalled_reader_gives_a_stored_run_whose_gap_the_host_reports_and_will_not_f
     };
     let rig = VirtualRig::new(cfg).unwrap();
     let truth = rig.truth().unwrap();
-    let port = VirtualPort::open().unwrap();
-    let path = port.path().to_owned();
-    port.spawn(
+    let port = RigOnTcp::serve(
         rig,
         ServeOptions {
             speed: 20.0,
             max_wait: Duration::from_millis(2),
+            ..Default::default()
         },
     );
     let store = tempfile::tempdir().unwrap();
-    let (mut link, info) = connect(&path);
+    let (mut link, info) = connect(&port);
     let o = record_run(
         &mut link,
         &info,

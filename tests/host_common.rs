@@ -1,18 +1,52 @@
-//! Shared by the host tests: a virtual rig behind a pseudo-terminal, and run plans.
+//! Shared by the host tests: a virtual rig served on a local TCP port (no pseudo-terminal, on every
+//! system), and run plans.
 #![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::net::TcpListener;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
-use tribo::link::pty::VirtualPort;
 use tribo::link::session::{record_run, Outcome, RunPlan};
-use tribo::link::Link;
-use tribo_rig::{LawConfig, ServeOptions, VirtualRig, VirtualRigConfig};
+use tribo::link::{Address, Link};
+use tribo_rig::{LawConfig, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
 use tribo_wire::{Configure, DeviceInfo};
 
-/// A virtual rig with a Coulomb–viscous contact, served on a new pseudo-terminal at `speed`× real
-/// time. Returns the port and the (μ0, μ1) a Coulomb–viscous fit should find.
-pub fn virtual_rig(mu0: f64, mu1: f64, seed: u64, speed: f64) -> (PathBuf, (f64, f64)) {
+/// A virtual rig served on a local TCP port; it stops when this is dropped. Derefs to its address.
+pub struct RigOnTcp {
+    addr: Address,
+    _rig: TcpRig,
+}
+
+impl RigOnTcp {
+    /// Serves `rig` on a free local port.
+    pub fn serve(rig: VirtualRig, opts: ServeOptions) -> RigOnTcp {
+        let l = TcpListener::bind("127.0.0.1:0").expect("a local port");
+        let rig = TcpRig::spawn(rig, l, opts, |_| {}).expect("serving the virtual rig");
+        RigOnTcp {
+            addr: Address::from(rig.addr()),
+            _rig: rig,
+        }
+    }
+
+    /// Keeps a rig started elsewhere (e.g. by `tribo::cmd::rig::VirtualArgs::listen`).
+    pub fn from(rig: TcpRig) -> RigOnTcp {
+        RigOnTcp {
+            addr: Address::from(rig.addr()),
+            _rig: rig,
+        }
+    }
+}
+
+impl std::ops::Deref for RigOnTcp {
+    type Target = Address;
+    fn deref(&self) -> &Address {
+        &self.addr
+    }
+}
+
+/// A virtual rig with a Coulomb–viscous contact, served on a local TCP port at `speed`× real time
+/// (it stops when the first value is dropped). Returns the rig and the (μ0, μ1) a Coulomb–viscous
+/// fit should find.
+pub fn virtual_rig(mu0: f64, mu1: f64, seed: u64, speed: f64) -> (RigOnTcp, (f64, f64)) {
     let cfg = VirtualRigConfig {
         law: LawConfig::CoulombViscous { mu0, mu1 },
         seed,
@@ -20,26 +54,22 @@ pub fn virtual_rig(mu0: f64, mu1: f64, seed: u64, speed: f64) -> (PathBuf, (f64,
     };
     let rig = VirtualRig::new(cfg).expect("valid virtual rig");
     let truth = rig.truth().expect("Coulomb–viscous truth");
-    let port = VirtualPort::open().expect("a pseudo-terminal");
-    let path = port.path().to_owned();
-    port.spawn(
-        rig,
-        ServeOptions {
-            speed,
-            max_wait: Duration::from_millis(2),
-        },
-    );
-    (path, truth)
+    let opts = ServeOptions {
+        speed,
+        max_wait: Duration::from_millis(2),
+        ..Default::default()
+    };
+    (RigOnTcp::serve(rig, opts), truth)
 }
 
-pub fn connect(port: &std::path::Path) -> (Link, DeviceInfo) {
-    let mut link = Link::open(port).expect("open the pty");
+pub fn connect(port: &Address) -> (Link, DeviceInfo) {
+    let mut link = Link::open(port).expect("connect to the virtual rig");
     let info = link.hello().expect("hello");
     (link, info)
 }
 
 /// Connects to `port` and records one run of [`plan`] into `store`, without abort or progress.
-pub fn record_plain_run(port: &std::path::Path, store: &std::path::Path) -> Outcome {
+pub fn record_plain_run(port: &Address, store: &std::path::Path) -> Outcome {
     let (mut link, info) = connect(port);
     record_run(
         &mut link,
@@ -89,4 +119,12 @@ pub fn assert_lossless(run: &tribo_store::Run) {
     for (i, t) in s.t.iter().enumerate() {
         assert!((t - i as f64 * dt).abs() < 1e-9, "sample {i} at {t}");
     }
+}
+
+/// Two ends of a local TCP connection: a line to play the rig on in tests.
+pub fn stream_pair() -> (std::net::TcpStream, std::net::TcpStream) {
+    let l = TcpListener::bind("127.0.0.1:0").unwrap();
+    let a = std::net::TcpStream::connect(l.local_addr().unwrap()).unwrap();
+    let (b, _) = l.accept().unwrap();
+    (a, b)
 }

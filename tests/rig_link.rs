@@ -1,28 +1,28 @@
-//! The virtual rig end to end through a pseudo-terminal — the code path used for USB — with the
-//! link failures a lab meets: a pulled cable mid-run, a killed `tribo run`, a silent port, a rig
-//! speaking another protocol.
+//! The virtual rig end to end over a local TCP connection — the link a USB rig uses, on another
+//! byte stream — with the link failures a lab meets: a pulled cable mid-run, a killed `tribo run`,
+//! a silent port, a rig speaking another protocol; and, on Unix, through a pseudo-terminal opened
+//! as a serial port.
 
 mod host_common;
 
 use host_common::*;
 use std::io::{Read, Write};
-use std::os::unix::net::UnixStream;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use tribo::link::session::{pull_run, record_run};
-use tribo::link::{Link, LinkErrorKind};
+use tribo::link::{Address, Link, LinkErrorKind};
 use tribo_store::{Catalog, Filter, Run, RunMeta, RunStatus, RunWriter};
 use tribo_wire::frame::encode_vec;
 use tribo_wire::{DeviceInfo, DeviceMsg, HostMsg};
 
 #[test]
-fn a_run_through_the_pty_is_stored_whole_and_recovers_the_simulated_contact() {
+fn a_run_over_the_link_is_stored_whole_and_recovers_the_simulated_contact() {
     let (port, truth) = virtual_rig(0.01, 0.003, 3, 20.0);
     let store = tempfile::tempdir().unwrap();
     let (mut link, info) = connect(&port);
     assert_eq!(info.protocol, tribo_wire::PROTOCOL_VERSION);
     let mut p = plan();
-    p.label = Some("pty".into());
+    p.label = Some("tcp".into());
     let t0 = Instant::now();
     let o = record_run(
         &mut link,
@@ -39,7 +39,7 @@ fn a_run_through_the_pty_is_stored_whole_and_recovers_the_simulated_contact() {
     assert_lossless(&o.run);
     let stats = link.stats();
     eprintln!(
-        "pty link: {} bytes, {} frames in {wall:.2} s ({:.0} kB/s, speed ×20), {} bad frames",
+        "tcp link: {} bytes, {} frames in {wall:.2} s ({:.0} kB/s, speed ×20), {} bad frames",
         stats.bytes_in,
         stats.frames_in,
         stats.bytes_in as f64 / wall / 1e3,
@@ -63,7 +63,7 @@ fn a_run_through_the_pty_is_stored_whole_and_recovers_the_simulated_contact() {
         m.device.as_ref().unwrap().serial,
         format!("{:016x}", info.serial)
     );
-    assert_eq!((m.load_n, m.label.as_deref()), (0.3, Some("pty")));
+    assert_eq!((m.load_n, m.label.as_deref()), (0.3, Some("tcp")));
     assert!(
         (m.temp_c.unwrap() - 22.0).abs() < 1.0,
         "room temperature: {:?}",
@@ -93,7 +93,7 @@ fn a_run_through_the_pty_is_stored_whole_and_recovers_the_simulated_contact() {
 
 /// Takes a run at `speed`× real time and pulls the cable after 30 blocks; returns the store, the
 /// interrupted run's folder, the blocks it held, and the port.
-fn run_with_cable_pulled(port: &std::path::Path) -> (tempfile::TempDir, std::path::PathBuf, usize) {
+fn run_with_cable_pulled(port: &Address) -> (tempfile::TempDir, std::path::PathBuf, usize) {
     let store = tempfile::tempdir().unwrap();
     let (mut link, info) = connect(port);
     let p = plan();
@@ -115,7 +115,7 @@ fn run_with_cable_pulled(port: &std::path::Path) -> (tempfile::TempDir, std::pat
                     firmware: tribo::link::firmware_version(&info),
                     serial: format!("{:016x}", info.serial),
                     protocol: info.protocol,
-                    port: port.display().to_string(),
+                    port: port.to_string(),
                 });
                 let mut w = RunWriter::create(store.path(), meta).unwrap();
                 w.append_frame(&f.raw).unwrap();
@@ -185,7 +185,7 @@ fn child_tribo_run() {
     };
     let args = tribo::cmd::run::Args {
         link: tribo::cmd::run::LinkArgs {
-            port: Some(port.into()),
+            port: Some(Address::parse(&port.to_string_lossy()).unwrap()),
             store: Some(store.into()),
         },
         load: 0.3,
@@ -214,7 +214,7 @@ fn child_tribo_run() {
 // The child is returned to the caller, which kills or waits for it.
 #[allow(clippy::zombie_processes)]
 fn spawn_tribo_run(
-    port: &std::path::Path,
+    port: &Address,
     store: &std::path::Path,
 ) -> (std::process::Child, std::path::PathBuf) {
     let mut child = std::process::Command::new(std::env::current_exe().unwrap())
@@ -225,7 +225,7 @@ fn spawn_tribo_run(
             "--nocapture",
             "--test-threads=1",
         ])
-        .env("TRIBO_TEST_CHILD_PORT", port)
+        .env("TRIBO_TEST_CHILD_PORT", port.to_string())
         .env("TRIBO_TEST_CHILD_STORE", store)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
@@ -252,6 +252,7 @@ fn spawn_tribo_run(
 }
 
 #[test]
+#[cfg(unix)] // Ctrl-C sent with kill(1)
 fn ctrl_c_aborts_the_run_cleanly() {
     let (port, _) = virtual_rig(0.02, 0.004, 8, 1.0);
     let store = tempfile::tempdir().unwrap();
@@ -335,7 +336,7 @@ fn a_run_longer_than_the_old_ram_window_is_completed_after_a_cable_pull() {
 #[test]
 fn a_silent_port_and_a_foreign_protocol_get_clear_errors() {
     // Nobody answers.
-    let (a, _b) = UnixStream::pair().unwrap();
+    let (a, _b) = stream_pair();
     let mut link = Link::from_stream("silent", a.try_clone().unwrap(), a);
     link.timeouts.reply = Duration::from_millis(100);
     let e = link.hello().unwrap_err();
@@ -346,7 +347,7 @@ fn a_silent_port_and_a_foreign_protocol_get_clear_errors() {
     );
 
     // A rig with a newer protocol.
-    let (a, mut b) = UnixStream::pair().unwrap();
+    let (a, mut b) = stream_pair();
     std::thread::spawn(move || {
         let mut buf = [0u8; 256];
         if b.read(&mut buf).unwrap_or(0) > 0 {
@@ -369,7 +370,7 @@ fn a_silent_port_and_a_foreign_protocol_get_clear_errors() {
     );
 
     // A port that does not exist.
-    let e = Link::open(std::path::Path::new("/dev/ttyACM-none"))
+    let e = Link::open(&Address::Serial("/dev/ttyACM-none".into()))
         .err()
         .unwrap();
     assert!(e.msg.contains("tribo devices"), "{e}");
@@ -378,7 +379,7 @@ fn a_silent_port_and_a_foreign_protocol_get_clear_errors() {
 #[test]
 fn lost_commands_are_sent_again_but_a_release_never_is() {
     // A line that swallows the first copy of every command.
-    let (a, mut b) = UnixStream::pair().unwrap();
+    let (a, mut b) = stream_pair();
     std::thread::spawn(move || {
         let mut dec = tribo_wire::Decoder::<HostMsg>::new();
         let mut seen = std::collections::HashSet::new();
@@ -417,27 +418,6 @@ fn lost_commands_are_sent_again_but_a_release_never_is() {
         "{e}"
     );
     assert_eq!(link.stats().frames_out, sent + 1);
-}
-
-#[test]
-fn devices_are_found_with_their_usb_ids() {
-    // A fake /sys/class/tty: ttyACM0/device -> the USB interface, whose parent holds the ids.
-    let sys = tempfile::tempdir().unwrap();
-    let usb = sys.path().join("usb1/1-1");
-    std::fs::create_dir_all(usb.join("1-1:1.0")).unwrap();
-    std::fs::write(usb.join("idVendor"), "0483\n").unwrap();
-    std::fs::write(usb.join("idProduct"), "5740\n").unwrap();
-    std::fs::write(usb.join("serial"), "TRIBO0001\n").unwrap();
-    let class = sys.path().join("class");
-    std::fs::create_dir_all(class.join("ttyACM0")).unwrap();
-    std::os::unix::fs::symlink(usb.join("1-1:1.0"), class.join("ttyACM0/device")).unwrap();
-    std::fs::create_dir_all(class.join("ttyS0")).unwrap();
-    let ports = tribo::link::devices::scan(&class);
-    assert_eq!(ports.len(), 1, "only USB ACM ports: {ports:?}");
-    let p = &ports[0];
-    assert_eq!(p.path, std::path::Path::new("/dev/ttyACM0"));
-    assert_eq!((p.vid, p.pid), (Some(0x0483), Some(0x5740)));
-    assert_eq!(p.serial.as_deref(), Some("TRIBO0001"));
 }
 
 #[test]
@@ -511,7 +491,8 @@ fn with_button_the_run_starts_when_the_rig_button_is_pressed() {
         speed: 20.0,
         ..Default::default()
     };
-    let (port, _) = rig.start().unwrap();
+    let (port, _) = rig.listen("127.0.0.1:0", |_| {}).unwrap();
+    let port = RigOnTcp::from(port);
     let store = tempfile::tempdir().unwrap();
     let (mut link, info) = connect(&port);
     let mut p = plan();
@@ -540,4 +521,63 @@ fn with_button_the_run_starts_when_the_rig_button_is_pressed() {
         "{}",
         o.run.header().unwrap().t_us
     );
+}
+
+#[test]
+#[cfg(unix)]
+fn a_run_through_a_pseudo_terminal_goes_through_the_serial_port_code() {
+    // `tribo rig --virtual --pty`: the host opens the terminal with the code that opens a USB rig.
+    let cfg = tribo_rig::VirtualRigConfig {
+        law: tribo_rig::LawConfig::CoulombViscous {
+            mu0: 0.02,
+            mu1: 0.004,
+        },
+        seed: 12,
+        ..Default::default()
+    };
+    let rig = tribo_rig::VirtualRig::new(cfg).unwrap();
+    let truth = rig.truth().unwrap();
+    let opts = tribo_rig::ServeOptions {
+        speed: 20.0,
+        ..Default::default()
+    };
+    let (name, _serving) = tribo::link::pty::spawn(rig, opts).unwrap();
+    let port = Address::Serial(name.clone());
+    let (mut link, info) = connect(&port);
+    // The port is the link's alone while it is open.
+    let e = Link::open(&port).err().expect("a second open is refused");
+    assert_eq!(e.kind, LinkErrorKind::Open);
+    assert!(e.msg.contains("in use"), "{e}");
+
+    let store = tempfile::tempdir().unwrap();
+    let o = record_run(
+        &mut link,
+        &info,
+        store.path(),
+        &plan(),
+        &AtomicBool::new(false),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert_lossless(&o.run);
+    assert_eq!(link.stats().bad_frames, 0);
+    let host = o.run.host_fit().expect("host fit");
+    assert_close("host fit through the terminal", host.mu0, host.mu1, truth);
+    assert_eq!(o.run.meta.device.as_ref().unwrap().port, name);
+
+    // Closed and opened again (the cable out and back in): the same rig answers the next host.
+    drop(link);
+    let (_link, again) = connect(&port);
+    assert_eq!(again.serial, info.serial);
+}
+
+#[test]
+fn a_second_host_is_turned_away_with_an_error_that_says_why() {
+    let (port, _) = virtual_rig(0.02, 0.004, 13, 1.0);
+    let (_first, _) = connect(&port);
+    let mut second = Link::open(&port).expect("the connection itself is accepted");
+    let e = second.hello().unwrap_err();
+    // Closed by the rig (not left to time out without an answer), with the reason.
+    assert_eq!(e.kind, LinkErrorKind::Closed, "{e}");
+    assert!(e.msg.contains("one host at a time"), "{e}");
 }

@@ -11,7 +11,7 @@ use tribo_store::{ErrorKind, Run};
 
 /// Records one run from a fast virtual rig; returns the store, the run folder and the port (the
 /// rig still holds the run).
-fn recorded() -> (tempfile::TempDir, PathBuf, PathBuf) {
+fn recorded() -> (tempfile::TempDir, PathBuf, RigOnTcp) {
     let (port, _) = virtual_rig(0.02, 0.004, 6, 20.0);
     let store = tempfile::tempdir().unwrap();
     let o = record_plain_run(&port, store.path());

@@ -24,11 +24,11 @@ enum Command {
     Pull(tribo::cmd::pull::Args),
     /// A series of runs over loads × temperatures × repetitions from PLAN.toml, resumable.
     Campaign(tribo::cmd::campaign::Args),
-    /// Start the virtual rig (firmware logic + physics simulator) behind a pseudo-terminal.
+    /// Start the virtual rig (firmware logic + physics simulator) on a local TCP address.
     Rig(tribo::cmd::rig::Args),
     /// Feed a recorded run back through the firmware pipeline and the simulator; report differences.
     Replay(tribo::cmd::replay::Args),
-    /// A complete run on a virtual rig through the serial path, saved, printed and drawn.
+    /// A complete run on a virtual rig in this process, through the link, saved, printed and drawn.
     Demo(tribo::cmd::demo::Args),
     /// List and filter the stored runs.
     Runs(tribo::cmd::runs::Args),

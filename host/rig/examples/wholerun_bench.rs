@@ -346,6 +346,7 @@ fn link() {
                 &ServeOptions {
                     speed,
                     max_wait: Duration::from_millis(1),
+                    ..Default::default()
                 },
             );
         });

@@ -6,19 +6,17 @@
 //! * [`VirtualRig`]: the simulator-backed hardware ([`sim::SimHardware`]) plus the application, stepped
 //!   with [`VirtualRig::advance_to`] and fed with [`VirtualRig::input`]; frames come out of
 //!   [`VirtualRig::take_output`].
-//! * [`serve`]: runs the rig in real time (or faster) over any byte stream, e.g. the master side of a
-//!   pseudo-terminal. It returns when the reader reaches end of file, like a pulled cable; the rig keeps
-//!   its stored run, so a later `serve` on the same rig answers a `Pull` of it.
+//! * [`serve`](mod@serve): the rig in real time (or faster) for a host: over any byte stream
+//!   ([`serve()`]), to successive TCP connections ([`TcpRig`]), or in-process ([`in_process`]).
 
 pub mod config;
+pub mod serve;
 pub mod sim;
 
 pub use config::{AcquisitionFaults, EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
+pub use serve::{in_process, serve, HostEvent, ServeOptions, TcpRig};
 pub use sim::SimHardware;
 
-use std::io::{self, Read, Write};
-use std::sync::mpsc;
-use std::time::{Duration, Instant};
 use tribo_firmware::app::{App, AppConfig};
 use tribo_firmware::hal::{HeaterOutput, Magnet, MagnetDrive, SampleSource, ThermocoupleFault};
 use tribo_firmware::runstore::{RunStore, BOARD_RING_BYTES, MAX_RUN_BLOCKS};
@@ -27,6 +25,8 @@ use tribo_firmware::runstore::{RunStore, BOARD_RING_BYTES, MAX_RUN_BLOCKS};
 pub struct VirtualRig {
     app: App<'static>,
     hw: SimHardware,
+    /// What the rig was built from (to rebuild it at another load).
+    cfg: VirtualRigConfig,
     now_us: u64,
     tick_us: u64,
     serial: u64,
@@ -49,12 +49,28 @@ impl VirtualRig {
         let mut rig = VirtualRig {
             app: App::new(AppConfig::new(cfg.serial), board_store()),
             hw,
+            serial: cfg.serial,
+            cfg,
             now_us: 0,
             // polled as the board polls it
             tick_us: AppConfig::new(cfg.serial).poll_period_us as u64,
-            serial: cfg.serial,
         };
         rig.app.poll(&mut rig.hw, 0);
+        Ok(rig)
+    }
+
+    /// The configuration the rig was built from.
+    pub fn config(&self) -> &VirtualRigConfig {
+        &self.cfg
+    }
+
+    /// This rig power-cycled with its load knob turned to `load_n` (the plate keeps its
+    /// temperature; the stored run and the clock start afresh). Refuses a load the rig cannot take.
+    pub fn with_load(&self, load_n: f64) -> Result<VirtualRig, String> {
+        let mut cfg = self.cfg.clone();
+        cfg.load_n = load_n;
+        let mut rig = VirtualRig::new(cfg)?;
+        rig.hw.set_plate_temp_c(self.hw.plate_temp_c());
         Ok(rig)
     }
 
@@ -129,101 +145,6 @@ impl VirtualRig {
     /// constants plus the apparatus damping in μ1 (`None` for a law without both).
     pub fn truth(&self) -> Option<(f64, f64)> {
         self.hw.truth()
-    }
-}
-
-/// How [`serve`] runs.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ServeOptions {
-    /// Device seconds per wall-clock second (1 = real time; `f64::INFINITY` = as fast as possible).
-    pub speed: f64,
-    /// Longest wait for host bytes before the simulation moves on, wall-clock.
-    pub max_wait: Duration,
-}
-
-impl Default for ServeOptions {
-    fn default() -> Self {
-        ServeOptions {
-            speed: 1.0,
-            max_wait: Duration::from_millis(2),
-        }
-    }
-}
-
-/// Serves the rig over a byte stream: host frames are read from `reader` (on a thread of its own),
-/// device frames written to `writer`, and the simulation advances with the wall clock times
-/// `opts.speed`. Returns `Ok(())` when `reader` reaches end of file or fails (the cable is pulled),
-/// and an error when `writer` fails. The rig keeps its state, stored run included: call `serve`
-/// again on the same rig to reconnect.
-///
-/// For a stream that is both (a pseudo-terminal master, a socket), pass `f.try_clone()?` and `f`.
-/// The reader thread ends at the stream's end of file (it may outlive this call until then).
-///
-/// With a pseudo-terminal, reading the master fails (EIO) once no process holds the slave open, so
-/// `serve` returns when the client closes the port: loop on `serve` to accept the next client (the
-/// stored run survives), and keep a slave descriptor open in the serving process if the client
-/// should be able to close and reopen the port without the rig noticing.
-pub fn serve<R, W>(
-    rig: &mut VirtualRig,
-    mut reader: R,
-    mut writer: W,
-    opts: &ServeOptions,
-) -> io::Result<()>
-where
-    R: Read + Send + 'static,
-    W: Write,
-{
-    if opts.speed.is_nan() || opts.speed <= 0.0 {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("speed must be > 0, got {}", opts.speed),
-        ));
-    }
-    rig.app.link_reset();
-    let (tx, rx) = mpsc::channel::<Vec<u8>>();
-    std::thread::spawn(move || {
-        let mut buf = [0u8; 4096];
-        loop {
-            match reader.read(&mut buf) {
-                Ok(0) => return,
-                Ok(n) => {
-                    if tx.send(buf[..n].to_vec()).is_err() {
-                        return;
-                    }
-                }
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(_) => return,
-            }
-        }
-    });
-    let start_wall = Instant::now();
-    let start_dev = rig.now_us;
-    let fast = !opts.speed.is_finite();
-    loop {
-        let wait = if fast { Duration::ZERO } else { opts.max_wait };
-        let mut closed = false;
-        match rx.recv_timeout(wait) {
-            Ok(bytes) => rig.input(&bytes),
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            Err(mpsc::RecvTimeoutError::Disconnected) => closed = true,
-        }
-        while let Ok(bytes) = rx.try_recv() {
-            rig.input(&bytes);
-        }
-        let target = if fast {
-            rig.now_us + 10_000
-        } else {
-            start_dev + (start_wall.elapsed().as_secs_f64() * opts.speed.max(0.0) * 1e6) as u64
-        };
-        rig.advance_to(target);
-        let out = rig.take_output();
-        if !out.is_empty() {
-            writer.write_all(&out)?;
-            writer.flush()?;
-        }
-        if closed {
-            return Ok(());
-        }
     }
 }
 

@@ -13,8 +13,8 @@
 //! ```
 
 use super::run::{abort_flag, print_outcome, LinkArgs, Ui};
+use crate::link::firmware_version;
 use crate::link::session::{record_run, HeaterPlan, RunPlan};
-use crate::link::{firmware_version, Link};
 use anyhow::{bail, Context};
 use serde::Deserialize;
 use std::io::IsTerminal;
@@ -249,9 +249,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let abort = abort_flag();
-    let port = args.link.port()?;
-    let mut link = Link::open(&port)?;
-    let info = link.hello()?;
+    let (mut link, info) = args.link.connect()?;
     eprintln!(
         "rig on {}: firmware {}, serial {:016x}",
         link.name(),

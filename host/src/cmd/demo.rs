@@ -1,10 +1,11 @@
-//! `tribo demo [--out DIR]`: a complete run on a virtual rig through the serial path, saved,
-//! printed and drawn — no hardware, no set-up.
+//! `tribo demo [--out DIR]`: a complete run on a virtual rig running in this process, through the
+//! link's frames exactly as a USB rig sends them, saved, printed and drawn — no hardware, no set-up,
+//! no socket or terminal.
 
 use super::rig::VirtualArgs;
 use super::run::{abort_flag, print_outcome, Ui};
+use crate::link::firmware_version;
 use crate::link::session::{record_run, Progress, RunPlan};
-use crate::link::{firmware_version, Link};
 use anyhow::Context;
 use std::path::PathBuf;
 use tribo_wire::Configure;
@@ -39,19 +40,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The demo, returning the recorded run (for tests).
 pub fn demo(args: &Args) -> anyhow::Result<crate::link::session::Outcome> {
     let abort = abort_flag();
-    let (port, cfg) = args.rig.start()?;
+    let (mut link, cfg) = args.rig.in_process()?;
     let say = |m: String| {
         if !args.quiet {
             eprintln!("{m}")
         }
     };
     say(format!(
-        "virtual rig on {} (contact {:?}, load {} N); running through the serial path",
-        port.display(),
-        cfg.law,
-        cfg.load_n
+        "virtual rig in this process (contact {:?}, load {} N); running through the link's frames",
+        cfg.law, cfg.load_n
     ));
-    let mut link = Link::open(&port)?;
     let info = link.hello()?;
     say(format!(
         "hello: firmware {}, serial {:016x}",
@@ -83,8 +81,8 @@ pub fn demo(args: &Args) -> anyhow::Result<crate::link::session::Outcome> {
     print_outcome(&o);
     let st = link.stats();
     println!(
-        "{:<10}{} frames, {} bytes in {wall:.3} s (configure to end of run) through the pseudo-terminal ({:.0} kB/s at ×{} \
-         speed), {} bad frames",
+        "{:<10}{} frames, {} bytes in {wall:.3} s (configure to end of run) through the in-process link ({:.0} kB/s at \
+         ×{} speed), {} bad frames",
         "link",
         st.frames_in,
         st.bytes_in,

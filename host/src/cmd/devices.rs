@@ -1,72 +1,110 @@
-//! `tribo devices`: attached rigs (USB VID/PID, serial number, firmware version).
+//! `tribo devices`: attached rigs (port, USB id, USB serial number, firmware version), found the
+//! same way on Windows, macOS and Linux.
 
-use crate::link::devices::{probe, scan};
-use std::path::{Path, PathBuf};
+use crate::link::devices::{list, probe, Port};
+use crate::link::transport::DEFAULT_VIRTUAL_RIG;
+use crate::link::Address;
 
 /// Arguments of `tribo devices`.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "A rig is a USB serial port with the id 1209:0001. Other serial ports are \
+                        listed with --all but never opened: they may belong to other instruments."
+)]
 pub struct Args {
-    /// Do not open the ports to ask for the firmware version.
+    /// Also list the serial ports that are not rigs (not opened).
+    #[arg(long)]
+    pub all: bool,
+    /// Do not open the rigs' ports to ask for their firmware version.
     #[arg(long)]
     pub no_probe: bool,
-    /// Also probe this port (e.g. a virtual rig's pseudo-terminal).
-    #[arg(long)]
-    pub port: Vec<PathBuf>,
+    /// Also ask this port: a serial port, or tcp://HOST:PORT (a virtual rig). Repeatable.
+    #[arg(long, value_name = "PORT")]
+    pub port: Vec<Address>,
+}
+
+/// A line of the table: where, what the system says of it, and what it answered to hello.
+struct Row {
+    addr: Address,
+    port: Option<Port>,
+    note: &'static str,
+    answer: Option<Result<(String, String), String>>,
 }
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut ports = scan(Path::new("/sys/class/tty"));
-    for p in &args.port {
-        ports.push(crate::link::devices::Port {
-            path: p.clone(),
-            vid: None,
-            pid: None,
-            serial: None,
-            product: None,
+    let ask = |a: &Address| (!args.no_probe).then(|| probe(a));
+    let mut rows: Vec<Row> = list()
+        .map_err(|e| anyhow::anyhow!("{e}"))?
+        .into_iter()
+        .filter(|p| args.all || p.is_rig())
+        .map(|p| {
+            let addr = Address::Serial(p.name.clone());
+            Row {
+                answer: if p.is_rig() { ask(&addr) } else { None },
+                note: if p.is_rig() { "" } else { "not a rig" },
+                addr,
+                port: Some(p),
+            }
+        })
+        .collect();
+    for a in &args.port {
+        rows.push(Row {
+            addr: a.clone(),
+            port: None,
+            note: "",
+            answer: ask(a),
         });
     }
-    let v = Path::new(super::run::DEFAULT_VIRTUAL_LINK);
-    if v.exists() && args.port.is_empty() {
-        ports.push(crate::link::devices::Port {
-            path: v.to_owned(),
-            vid: None,
-            pid: None,
-            serial: None,
-            product: Some("virtual rig".into()),
-        });
+    // A virtual rig at the default address, if one runs there.
+    if args.port.is_empty() && !args.no_probe {
+        let addr = Address::Tcp(DEFAULT_VIRTUAL_RIG.into());
+        if let Ok(a) = probe(&addr) {
+            rows.push(Row {
+                addr,
+                port: None,
+                note: "virtual rig",
+                answer: Some(Ok(a)),
+            });
+        }
     }
-    if ports.is_empty() {
+    if rows.is_empty() {
         println!(
-            "no rig attached (no /dev/ttyACM* port). Plug the rig's USB cable in (and check `dmesg`), or start a \
+            "no rig attached (no USB serial port with the rig's id 1209:0001). Plug the rig's USB cable in \
+             (see the README's set-up section for your system; `--all` lists every serial port), or start a \
              virtual rig with `tribo rig --virtual`"
         );
         return Ok(());
     }
     println!(
-        "{:<24} {:<10} {:<20} {:<10} rig serial / note",
+        "{:<26} {:<10} {:<18} {:<10} rig serial / note",
         "port", "usb id", "usb serial", "firmware"
     );
-    for p in ports {
-        let id = match (p.vid, p.pid) {
-            (Some(v), Some(d)) => format!("{v:04x}:{d:04x}"),
-            _ => "—".into(),
+    for r in rows {
+        let product = r.port.as_ref().and_then(|p| p.product.as_deref());
+        let (fw, note) = match r.answer {
+            Some(Ok((fw, serial))) => (fw, format!("{serial} {}", r.note)),
+            Some(Err(e)) => ("—".to_string(), format!("no answer: {e}")),
+            None => (
+                "—".to_string(),
+                format!(
+                    "{} {}",
+                    r.note,
+                    product.map(|p| format!("({p})")).unwrap_or_default()
+                ),
+            ),
         };
-        let (fw, note) = if args.no_probe {
-            ("—".to_string(), p.product.clone().unwrap_or_default())
-        } else {
-            match probe(&p.path) {
-                Ok((fw, serial)) => (fw, serial),
-                Err(e) => ("—".to_string(), format!("not a rig? {e}")),
-            }
+        let (id, usb_serial) = match &r.port {
+            Some(p) => (p.usb_id(), p.serial.clone().unwrap_or_else(|| "—".into())),
+            None => ("—".into(), "—".into()),
         };
         println!(
-            "{:<24} {:<10} {:<20} {:<10} {}",
-            p.path.display(),
+            "{:<26} {:<10} {:<18} {:<10} {}",
+            r.addr.to_string(),
             id,
-            p.serial.as_deref().unwrap_or("—"),
+            usb_serial,
             fw,
-            note
+            note.trim()
         );
     }
     Ok(())

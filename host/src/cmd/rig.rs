@@ -1,11 +1,15 @@
-//! `tribo rig --virtual`: the firmware's application against the physics simulator, behind a
-//! pseudo-terminal, so that `tribo run --port …` reaches it through the very code path used for USB.
+//! `tribo rig --virtual`: the firmware's application against the physics simulator, served on a
+//! local TCP address (or, on Unix, a pseudo-terminal), so that `tribo run --port tcp://…` reaches
+//! it through the link a USB rig uses. One rig process serves successive hosts, one at a time, and
+//! runs on between them. `tribo demo` runs the same rig in-process.
 
-use crate::link::pty::{make_link, VirtualPort};
+use crate::link::transport::DEFAULT_VIRTUAL_RIG;
+use crate::link::{Address, Link};
 use anyhow::{bail, Context};
+use std::net::TcpListener;
 use std::path::PathBuf;
 use std::time::Duration;
-use tribo_rig::{LawConfig, ServeOptions, VirtualRigConfig};
+use tribo_rig::{HostEvent, LawConfig, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
 
 /// The simulated rig, from a TOML file and/or flags (flags win).
 #[derive(clap::Args, Debug, Clone)]
@@ -117,63 +121,99 @@ impl VirtualArgs {
         Ok(c)
     }
 
-    /// Starts the virtual rig on a new pseudo-terminal (served on a thread); returns the port.
-    pub fn start(&self) -> anyhow::Result<(PathBuf, VirtualRigConfig)> {
-        let cfg = self.rig_config()?;
-        let port = VirtualPort::open()?;
-        let path = port.path().to_owned();
+    /// How the rig is served: speed, the knob following each run's load (unless `--fixed-load`),
+    /// the finger on the button.
+    pub fn serve_options(&self) -> anyhow::Result<ServeOptions> {
         let opts = ServeOptions {
             speed: self.speed,
             max_wait: Duration::from_millis(2),
+            follow_load: !self.fixed_load,
+            button_after_s: self.button_after,
         };
-        if let Some(b) = self.button_after {
-            if !(b.is_finite() && b >= 0.0) {
-                bail!("--button-after must be a number of seconds ≥ 0");
-            }
+        if self
+            .button_after
+            .is_some_and(|b| !(b.is_finite() && b >= 0.0))
+        {
+            bail!("--button-after must be a number of seconds ≥ 0");
         }
-        port.spawn_with(cfg.clone(), opts, !self.fixed_load, self.button_after)?;
-        Ok((path, cfg))
+        opts.validate()
+            .map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        Ok(opts)
+    }
+
+    /// The rig these arguments describe, and how to serve it.
+    pub fn build(&self) -> anyhow::Result<(VirtualRig, ServeOptions)> {
+        let cfg = self.rig_config()?;
+        let opts = self.serve_options()?;
+        let rig = VirtualRig::new(cfg).map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        Ok((rig, opts))
+    }
+
+    /// Serves the rig on `listen` (`HOST:PORT`, port 0 for any free one) on a thread of its own
+    /// until the returned handle is dropped; `events` hears of each host.
+    pub fn listen(
+        &self,
+        listen: &str,
+        events: impl FnMut(HostEvent) + Send + 'static,
+    ) -> anyhow::Result<(TcpRig, VirtualRigConfig)> {
+        let (rig, opts) = self.build()?;
+        let cfg = rig.config().clone();
+        let listener = TcpListener::bind(listen).map_err(|e| match e.kind() {
+            std::io::ErrorKind::AddrInUse => anyhow::anyhow!(
+                "{listen} is in use (by another virtual rig?): choose another address with --listen, e.g. \
+                 --listen 127.0.0.1:0 for any free port"
+            ),
+            _ => anyhow::anyhow!("cannot listen on {listen}: {e}"),
+        })?;
+        let tcp = TcpRig::spawn(rig, listener, opts, events)
+            .map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        Ok((tcp, cfg))
+    }
+
+    /// The rig in this process, and a link to it: no socket, no terminal. The rig stops when the
+    /// link is dropped.
+    pub fn in_process(&self) -> anyhow::Result<(Link, VirtualRigConfig)> {
+        let (rig, opts) = self.build()?;
+        let cfg = rig.config().clone();
+        let (from_rig, to_rig, _serving) =
+            tribo_rig::in_process(rig, opts).context("cannot start the in-process virtual rig")?;
+        Ok((
+            Link::from_stream("the in-process virtual rig", from_rig, to_rig),
+            cfg,
+        ))
     }
 }
 
 /// Arguments of `tribo rig`.
 #[derive(clap::Args, Debug)]
+#[command(after_help = "Examples:
+  tribo rig --virtual                        listen on tcp://127.0.0.1:7411
+  tribo run --port tcp://127.0.0.1:7411 --load 0.3      (in another terminal)
+  tribo rig --virtual --listen 127.0.0.1:0 --speed 10 --mu0 0.015")]
 pub struct Args {
     /// Run the virtual rig (the only kind this command can start).
     #[arg(long = "virtual")]
     pub virtual_rig: bool,
     #[command(flatten)]
     pub rig: VirtualArgs,
-    /// Symlink to the pseudo-terminal.
-    #[arg(long, default_value = super::run::DEFAULT_VIRTUAL_LINK)]
-    pub link: PathBuf,
+    /// Address to listen on, HOST:PORT (port 0: any free port; the address is printed). The rig
+    /// has no password: keep it on 127.0.0.1 unless the network is trusted.
+    #[arg(long, default_value = DEFAULT_VIRTUAL_RIG, value_name = "ADDR")]
+    pub listen: String,
+    /// Unix only: serve the rig on a pseudo-terminal instead, opened by hosts as a serial port
+    /// (through the same code as a USB rig); its name is printed.
+    #[arg(long, conflicts_with = "listen")]
+    pub pty: bool,
 }
 
-/// Runs the subcommand (until Ctrl-C).
-pub fn run(args: Args) -> anyhow::Result<()> {
-    if !args.virtual_rig {
-        bail!("`tribo rig` starts the virtual rig: add --virtual (a real rig needs no command: plug it in and use --port)");
-    }
-    let (path, cfg) = args.rig.start()?;
-    make_link(&args.link, &path)?;
-    let link = args.link.clone();
-    ctrlc::set_handler(move || {
-        let _ = std::fs::remove_file(&link);
-        eprintln!("\nvirtual rig stopped");
-        std::process::exit(0);
-    })
-    .context("cannot install the Ctrl-C handler")?;
-    println!(
-        "virtual rig listening on {} (linked as {})",
-        path.display(),
-        args.link.display()
-    );
-    println!(
-        "  m = {} kg, k = {} N/m, load {} N{}, contact {:?}, apparatus μ1 {}, seed {}, speed ×{}",
+/// The rig's settings, one line.
+fn describe(cfg: &VirtualRigConfig, a: &VirtualArgs) -> String {
+    format!(
+        "m = {} kg, k = {} N/m, load {} N{}, contact {:?}, apparatus μ1 {}, seed {}, speed ×{}",
         cfg.mass_kg,
         cfg.stiffness_n_per_m,
         cfg.load_n,
-        if args.rig.fixed_load {
+        if a.fixed_load {
             " (fixed)"
         } else {
             " (follows each run's --load)"
@@ -181,15 +221,61 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cfg.law,
         cfg.apparatus_mu1,
         cfg.seed,
-        args.rig.speed
-    );
-    println!(
-        "  try: tribo run --port {} --load {}",
-        args.link.display(),
-        cfg.load_n
-    );
-    println!("  Ctrl-C stops it");
-    loop {
-        std::thread::park();
+        a.speed
+    )
+}
+
+/// Runs the subcommand (until Ctrl-C).
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if !args.virtual_rig {
+        bail!("`tribo rig` starts the virtual rig: add --virtual (a real rig needs no command: plug it in and use --port)");
     }
+    ctrlc::set_handler(|| {
+        eprintln!("\nvirtual rig stopped");
+        std::process::exit(0);
+    })
+    .context("cannot install the Ctrl-C handler")?;
+    if args.pty {
+        return run_pty(&args);
+    }
+    let listen = args
+        .listen
+        .strip_prefix("tcp://")
+        .unwrap_or(&args.listen)
+        .to_string();
+    let (tcp, cfg) = args.rig.listen(&listen, |e| match e {
+        HostEvent::Connected(a) => eprintln!("host {a} connected"),
+        HostEvent::Disconnected(a, why) => eprintln!("host {a} gone: {why}"),
+        HostEvent::Refused(a) => eprintln!(
+            "host {a} turned away: another host is connected (the rig serves one at a time)"
+        ),
+    })?;
+    let addr = Address::from(tcp.addr());
+    println!("virtual rig listening on {addr}");
+    println!("  {}", describe(&cfg, &args.rig));
+    println!("  try: tribo run --port {addr} --load {}", cfg.load_n);
+    println!("  Ctrl-C stops it");
+    tcp.wait();
+    Ok(())
+}
+
+#[cfg(unix)]
+fn run_pty(args: &Args) -> anyhow::Result<()> {
+    let (rig, opts) = args.rig.build()?;
+    let cfg = rig.config().clone();
+    let (name, thread) =
+        crate::link::pty::spawn(rig, opts).context("cannot open a pseudo-terminal")?;
+    println!("virtual rig on the pseudo-terminal {name}");
+    println!("  {}", describe(&cfg, &args.rig));
+    println!("  try: tribo run --port {name} --load {}", cfg.load_n);
+    println!("  Ctrl-C stops it");
+    match thread.join() {
+        Ok(r) => r.context("virtual rig: the pseudo-terminal failed"),
+        Err(_) => bail!("virtual rig: its thread panicked"),
+    }
+}
+
+#[cfg(not(unix))]
+fn run_pty(_: &Args) -> anyhow::Result<()> {
+    bail!("--pty is a Unix extra: serve the rig on TCP instead (leave --pty out) and give its tcp:// address to --port")
 }

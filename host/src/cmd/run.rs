@@ -5,26 +5,26 @@
 //! the progress display and the result table.
 
 use crate::link::session::{record_run, HeaterPlan, Outcome, Progress, RunPlan};
-use crate::link::{devices, firmware_version, Link};
+use crate::link::transport::DEFAULT_VIRTUAL_RIG;
+use crate::link::{devices, firmware_version, Address, Link, LinkErrorKind};
 use anyhow::{bail, Context};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 use tribo_store::Run;
 use tribo_wire::Configure;
 
-/// Where the virtual rig's port is linked by default (`tribo rig --virtual`).
-pub const DEFAULT_VIRTUAL_LINK: &str = "/tmp/tribo-virtual-rig";
-
 /// How to reach the rig and where to store runs.
 #[derive(clap::Args, Debug, Clone)]
 pub struct LinkArgs {
-    /// Serial port of the rig (default: $TRIBO_PORT, else the only attached rig, else the virtual rig
-    /// at /tmp/tribo-virtual-rig).
-    #[arg(long, short)]
-    pub port: Option<PathBuf>,
+    /// The rig's port: a serial port as the system names it (Windows: COM3; macOS:
+    /// /dev/cu.usbmodem…; Linux: /dev/ttyACM0; `tribo devices` lists them), or tcp://HOST:PORT for
+    /// a virtual rig (`tribo rig --virtual` prints it). Default: $TRIBO_PORT, else the only attached
+    /// rig, else a virtual rig at tcp://127.0.0.1:7411.
+    #[arg(long, short, value_name = "PORT")]
+    pub port: Option<Address>,
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
     pub store: Option<PathBuf>,
@@ -37,37 +37,40 @@ impl LinkArgs {
             .unwrap_or_else(tribo_store::default_store_dir)
     }
 
-    /// The port to use, or an error listing what to do.
-    pub fn port(&self) -> anyhow::Result<PathBuf> {
+    /// The port to use, and, when no rig was named nor found and the default virtual rig's address
+    /// is tried instead, why. An error lists what to do.
+    pub fn port(&self) -> anyhow::Result<(Address, Option<String>)> {
         if let Some(p) = &self.port {
-            return Ok(p.clone());
+            return Ok((p.clone(), None));
         }
         if let Some(p) = std::env::var_os("TRIBO_PORT").filter(|p| !p.is_empty()) {
-            return Ok(p.into());
+            let p = Address::parse(&p.to_string_lossy())
+                .map_err(|e| anyhow::anyhow!("$TRIBO_PORT: {e}"))?;
+            return Ok((p, None));
         }
-        let ports = devices::scan(Path::new("/sys/class/tty"));
-        match ports.len() {
-            1 => return Ok(ports[0].path.clone()),
-            0 => {}
-            _ => bail!(
-                "several serial ports are attached ({}): choose one with --port (`tribo devices` shows which is a rig)",
-                ports.iter().map(|p| p.path.display().to_string()).collect::<Vec<_>>().join(", ")
+        let why = match devices::rigs() {
+            Ok(rigs) if rigs.len() == 1 => return Ok((Address::Serial(rigs[0].name.clone()), None)),
+            Ok(rigs) if rigs.len() > 1 => bail!(
+                "several rigs are attached ({}): choose one with --port (`tribo devices` shows their serial numbers)",
+                rigs.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", ")
             ),
-        }
-        let v = Path::new(DEFAULT_VIRTUAL_LINK);
-        if v.exists() {
-            return Ok(v.to_owned());
-        }
-        bail!(
-            "no rig found: attach one (see `tribo devices`) and give --port, or start a virtual rig with `tribo rig \
-             --virtual` in another terminal"
-        )
+            Ok(_) => "no USB serial port with the rig's id 1209:0001".to_string(),
+            Err(e) => e,
+        };
+        Ok((Address::Tcp(DEFAULT_VIRTUAL_RIG.into()), Some(why)))
     }
 
     /// Opens the link and says hello.
     pub fn connect(&self) -> anyhow::Result<(Link, tribo_wire::DeviceInfo)> {
-        let port = self.port()?;
-        let mut link = Link::open(&port)?;
+        let (port, fallback) = self.port()?;
+        let mut link = match (Link::open(&port), fallback) {
+            (Ok(l), _) => l,
+            (Err(e), Some(why)) if e.kind == LinkErrorKind::Open => bail!(
+                "no rig found ({why}; no virtual rig at {port}): attach one (see `tribo devices`) and give \
+                 --port, or start a virtual rig with `tribo rig --virtual` in another terminal"
+            ),
+            (Err(e), _) => return Err(e.into()),
+        };
         let info = link.hello()?;
         Ok((link, info))
     }

@@ -1,22 +1,27 @@
-//! The link to a rig: frames over a serial port (USB CDC) or any byte stream (a pseudo-terminal,
-//! a socket in tests).
+//! The link to a rig: frames over a serial port (USB CDC), a TCP connection (a virtual rig), or
+//! any byte stream (an in-process virtual rig, a socket in tests).
 //!
 //! * [`Link`]: hello and protocol check, commands answered by `Ack`/`Error` with timeouts and
 //!   retries, and the raw frames as received (the run store logs them byte for byte).
-//! * [`serial`]: opening a tty in raw mode; [`devices`]: finding attached rigs.
+//! * [`transport`]: what `--port` names ([`Address`]: a serial port or `tcp://HOST:PORT`) and the
+//!   byte stream each opens; [`serial`]: opening a serial port the way a rig needs;
+//!   [`devices`]: finding attached rigs.
 //! * [`session`]: a whole run (configure, heat, arm, release, stream, resume with `Pull`) and
 //!   `pull` of a run already taken.
-//! * [`pty`]: the virtual rig behind a pseudo-terminal.
+//! * [`pty`] (Unix): the virtual rig behind a pseudo-terminal.
 
 pub mod devices;
+#[cfg(unix)]
 pub mod pty;
 pub mod serial;
 pub mod session;
+pub mod transport;
+
+pub use transport::Address;
 
 use std::collections::VecDeque;
 use std::fmt;
 use std::io::{Read, Write};
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
@@ -187,9 +192,11 @@ pub struct Link {
     closed: Option<String>,
     last_bad: Option<FrameError>,
     stats: LinkStats,
-    /// Joined on drop when its reads time out by themselves (serial ports), so that the port is
-    /// closed (and unlocked) when the link is dropped.
+    /// Joined on drop when its reads time out by themselves (serial ports, sockets), so that the
+    /// port is closed (and unlocked) when the link is dropped.
     reader: Option<std::thread::JoinHandle<()>>,
+    /// What to check when the stream ends.
+    gone_hint: &'static str,
     pub timeouts: Timeouts,
 }
 
@@ -270,10 +277,18 @@ fn reader_loop(
 }
 
 impl Link {
-    /// Opens a serial port (or a pseudo-terminal) in raw mode.
-    pub fn open(port: &Path) -> Result<Link, LinkError> {
-        let (r, w) = serial::open(port)?;
-        Ok(Link::spawn(port.display().to_string(), r, w, true))
+    /// Opens the link to the rig at `addr`: a serial port (raw mode, exclusively) or a TCP
+    /// address. The link's reading thread is joined when the link is dropped, so the port is
+    /// closed (and free for the next program) once the link is gone.
+    pub fn open(addr: &Address) -> Result<Link, LinkError> {
+        let (r, w) = transport::open(addr)?;
+        let mut link = Link::spawn(addr.to_string(), r, w, true);
+        if addr.is_tcp() {
+            link.gone_hint =
+                "is the virtual rig still running? It serves one host at a time: is another \
+                              `tribo` connected to it?";
+        }
+        Ok(link)
     }
 
     /// A link over any byte stream. The reader is read on a thread of its own; a read returning 0
@@ -311,6 +326,7 @@ impl Link {
             bytes_in,
             closed: None,
             last_bad: None,
+            gone_hint: "check the cable (or restart the virtual rig)",
             stats: LinkStats::default(),
             timeouts: Timeouts::default(),
         }
@@ -337,10 +353,11 @@ impl Link {
         LinkError::new(
             LinkErrorKind::Closed,
             format!(
-                "lost the link to the rig on {} ({}): check the cable (or restart the virtual rig); what was \
-                 received is saved, and `tribo pull` fetches the rest",
+                "lost the link to the rig on {} ({}): {}; what was received is saved, and `tribo pull` \
+                 fetches the rest",
                 self.name,
-                self.closed.as_deref().unwrap_or("closed")
+                self.closed.as_deref().unwrap_or("closed"),
+                self.gone_hint
             ),
         )
     }

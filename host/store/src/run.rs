@@ -54,7 +54,7 @@ pub struct DeviceMeta {
     /// Serial number, 16 hex digits.
     pub serial: String,
     pub protocol: u16,
-    /// Port it was reached through (`/dev/ttyACM0`, a pty…).
+    /// Port it was reached through (`COM3`, `/dev/ttyACM0`, `tcp://127.0.0.1:7411`…).
     pub port: String,
 }
 

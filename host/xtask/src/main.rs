@@ -8,12 +8,15 @@
 //!   the record bundle on the host, builds the test binary for the Cortex-M7 with the firmware's
 //!   flags and profile, runs it under QEMU (`qemu-system-arm -machine mps2-an500 -icount shift=0`)
 //!   and fails unless every test passed within its budgets.
-//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the firmware,
-//!   the on-target tests.
+//! * `cargo xtask windows [--no-smoke]`: cross-builds `tribo.exe` for `x86_64-pc-windows-gnu` and
+//!   runs its smoke test under Wine (see [`windows`]).
+//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the
+//!   firmware, the on-target tests, the Windows build and its smoke test.
 
 mod elf;
 mod memory;
 mod qemu;
+mod windows;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -31,6 +34,7 @@ fn main() -> ExitCode {
     let result = match args.first().map(String::as_str) {
         Some("firmware") => firmware(&args[1..]).map(|_| ()),
         Some("target-test") => target_test(&args[1..]),
+        Some("windows") => windows::windows(&args[1..]),
         Some("ci") => ci(),
         _ => {
             eprintln!(
@@ -41,8 +45,10 @@ fn main() -> ExitCode {
                  target-test [FILTER]\n                     \
                  run the on-target tests on an emulated Cortex-M7 (QEMU; Debian package\n                     \
                  qemu-system-arm); FILTER runs only the tests whose name contains it\n  \
+                 windows [--no-smoke]\n                     \
+                 cross-build tribo.exe (mingw-w64) and smoke-test it under Wine\n  \
                  ci                 rustfmt, clippy -D warnings, all tests, firmware build,\n                     \
-                 on-target tests"
+                 on-target tests, Windows build and smoke test"
             );
             return ExitCode::from(2);
         }
@@ -109,6 +115,7 @@ fn ci() -> Result<(), String> {
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     firmware(&[])?;
     target_test(&[])?;
+    windows::windows(&[])?;
     Ok(())
 }
 
@@ -120,7 +127,7 @@ enum Toolchain {
     Debian { cargo: PathBuf, rustc: PathBuf },
 }
 
-fn rustup_has_target() -> bool {
+fn rustup_has_target(target: &str) -> bool {
     let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
     let out = Command::new(rustc).args(["--print", "sysroot"]).output();
     match out {
@@ -128,7 +135,7 @@ fn rustup_has_target() -> bool {
             let sysroot = String::from_utf8_lossy(&o.stdout).trim().to_owned();
             Path::new(&sysroot)
                 .join("lib/rustlib")
-                .join(TARGET)
+                .join(target)
                 .join("lib")
                 .is_dir()
         }
@@ -143,8 +150,9 @@ fn debian_ready() -> bool {
         && (Path::new("/usr/bin/rust-lld").exists() || Path::new("/usr/bin/ld.lld-22").exists())
 }
 
+/// How to build the firmware here, installing Debian's toolchain when needed and allowed.
 fn pick_toolchain() -> Result<Toolchain, String> {
-    if rustup_has_target() {
+    if rustup_has_target(TARGET) {
         return Ok(Toolchain::Rustup);
     }
     if !debian_ready() {
