@@ -107,7 +107,8 @@ impl VirtualRig {
     /// invalid configuration.
     pub fn new(cfg: VirtualRigConfig) -> Result<VirtualRig, String> {
         let hw = SimHardware::new(&cfg)?;
-        let mut app = new_app(cfg.serial);
+        let app_cfg = AppConfig::new(cfg.serial);
+        let mut app = App::new(app_cfg, board_store());
         app.set_boot_report(BootReport {
             cause: ResetCause::PowerOn,
             message: Default::default(),
@@ -118,7 +119,8 @@ impl VirtualRig {
             serial: cfg.serial,
             cfg,
             now_us: 0,
-            tick_us: 1000,
+            // polled as the board polls it
+            tick_us: app_cfg.poll_period_us as u64,
             tasks: Liveness::new(BOARD_TASKS, 0),
             stalled: [false; BOARD_TASKS.len()],
             next_feed_us: FEED_PERIOD_MS as u64 * 1000,

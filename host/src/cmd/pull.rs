@@ -15,8 +15,8 @@ pub struct Args {
     /// Keep the intact part of a corrupt frame log (cut the rest) and fetch what is missing.
     #[arg(long)]
     pub salvage: bool,
-    /// No progress bar or messages.
-    #[arg(long, short)]
+    /// No progress bar or messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
     pub quiet: bool,
 }
 

@@ -230,6 +230,23 @@ fn describe(cfg: &VirtualRigConfig, a: &VirtualArgs) -> String {
     )
 }
 
+/// Says which rig constants the configuration file leaves to the thesis's rig.
+fn print_defaults(a: &VirtualArgs) {
+    if let Some(p) = &a.config {
+        let d = std::fs::read_to_string(p)
+            .map_err(|e| e.to_string())
+            .and_then(|t| VirtualRigConfig::defaulted(&t))
+            .unwrap_or_default();
+        if !d.is_empty() {
+            println!(
+                "  {} does not give {}: the thesis's rig stands in (values above)",
+                p.display(),
+                d.join(", ")
+            );
+        }
+    }
+}
+
 /// Runs the subcommand (until Ctrl-C).
 pub fn run(mut args: Args) -> anyhow::Result<()> {
     // The rig's console (commands, faults, resets) follows on standard output.
@@ -260,6 +277,7 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     let addr = Address::from(tcp.addr());
     println!("virtual rig listening on {addr}");
     println!("  {}", describe(&cfg, &args.rig));
+    print_defaults(&args.rig);
     println!("  try: tribo run --port {addr} --load {}", cfg.load_n);
     println!("  Ctrl-C stops it; the rig's console follows (commands, faults, resets)");
     tcp.wait();
@@ -274,6 +292,7 @@ fn run_pty(args: &Args) -> anyhow::Result<()> {
         crate::link::pty::spawn(rig, opts).context("cannot open a pseudo-terminal")?;
     println!("virtual rig on the pseudo-terminal {name}");
     println!("  {}", describe(&cfg, &args.rig));
+    print_defaults(&args.rig);
     println!("  try: tribo run --port {name} --load {}", cfg.load_n);
     println!("  Ctrl-C stops it; the rig's console follows (commands, faults, resets)");
     match thread.join() {

@@ -125,23 +125,15 @@ pub fn safety_help() -> String {
     )
 }
 
-/// Writes to standard output; a closed pipe (`tribo run … | head`) is an error that stops the
-/// command (and so makes the rig safe), not a panic.
+/// Writes to standard output. A closed pipe (`tribo run … | head`) is an error that stops the
+/// command, unwinding through its hold on the rig (which sends `Safe`); `main` ends quietly on it
+/// (`crate::out`).
 pub fn out(text: &str) -> anyhow::Result<()> {
     use std::io::Write;
     let mut o = std::io::stdout().lock();
     o.write_all(text.as_bytes())
         .and_then(|_| o.flush())
-        .map_err(|e| {
-            if e.kind() == std::io::ErrorKind::BrokenPipe {
-                anyhow::anyhow!(
-                    "standard output was closed (the program reading it ended): stopped here, heater and magnet \
-                     switched off"
-                )
-            } else {
-                anyhow::anyhow!("cannot write to standard output: {e}")
-            }
-        })
+        .map_err(|e| anyhow::Error::new(e).context("cannot write to standard output"))
 }
 
 /// Progress bar and messages for a run.
@@ -307,7 +299,16 @@ pub fn result_table(run: &Run) -> String {
     let (o0, o1) = ob.map_or(("—".into(), "—".into()), |r| {
         (pm(r.best.mu0, r.best.mu0_se), pm(r.best.mu1, r.best.mu1_se))
     });
-    let (h0, h1) = host.map_or(("—".into(), "—".into()), |h| (num(h.mu0), num(h.mu1)));
+    let pm64 = |v: f64, se: f64| {
+        if se.is_finite() && se > 0.0 {
+            format!("{} ± {:.1e}", num(v), se)
+        } else {
+            num(v)
+        }
+    };
+    let (h0, h1) = host.map_or(("—".into(), "—".into()), |h| {
+        (pm64(h.mu0, h.mu0_se), pm64(h.mu1, h.mu1_se))
+    });
     s.push_str(&format!("{:<10}{:<26}{}\n", "μ0", o0, h0));
     s.push_str(&format!("{:<10}{:<26}{}\n", "μ1", o1, h1));
     if let Some(r) = ob {
@@ -322,10 +323,14 @@ pub fn result_table(run: &Run) -> String {
     }
     if let Some(h) = host {
         s.push_str(&format!(
-            "{:<10}envelope misfit {:.2e} of A0{}\n",
+            "{:<10}envelope misfit {:.2e} of A0, {}\n",
             "host",
             h.gap,
-            if h.converged { "" } else { " (not converged)" }
+            h.verdict.as_deref().unwrap_or(if h.converged {
+                "converged"
+            } else {
+                "not converged"
+            })
         ));
     } else if let Some(e) = &run.results.host_error {
         s.push_str(&format!("{:<10}no fit: {e}\n", "host"));
@@ -418,8 +423,8 @@ pub struct Args {
     /// Heat the plate to this temperature first, °C (15–100; default: heater off).
     #[arg(long)]
     pub temp: Option<f32>,
-    /// Runs to take in a row.
-    #[arg(long, default_value_t = 1)]
+    /// Runs to take in a row (at least 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub repeat: u32,
     /// Free label stored with the run (and in its folder name).
     #[arg(long)]
@@ -460,8 +465,8 @@ pub struct Args {
     /// Heater ramp, °C/min.
     #[arg(long, default_value_t = 10.0)]
     pub ramp: f32,
-    /// No progress bar or messages.
-    #[arg(long, short)]
+    /// No progress bar or messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
     pub quiet: bool,
 }
 
@@ -511,12 +516,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (mut link, info) = args.link.connect()?;
     // From here on every exit leaves the rig safe (see `link::hold`).
     let _hold = link.hold();
-    eprintln!(
-        "rig on {}: firmware {}, serial {:016x}",
-        link.name(),
-        firmware_version(&info),
-        info.serial
-    );
+    if !args.quiet {
+        eprintln!(
+            "rig on {}: firmware {}, serial {:016x}",
+            link.name(),
+            firmware_version(&info),
+            info.serial
+        );
+    }
     warn_about_reset(&link);
     let store = args.link.store();
     for k in 1..=args.repeat.max(1) {
@@ -524,7 +531,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if args.repeat > 1 {
             plan.repeat = Some(k);
             plan.keep_heater = k < args.repeat;
-            eprintln!("repetition {k}/{}", args.repeat);
+            if !args.quiet {
+                eprintln!("repetition {k}/{}", args.repeat);
+            }
         }
         let mut ui = Ui::new(args.quiet);
         let o = record_run(&mut link, &info, &store, &plan, &abort, &mut |p| ui.on(p));
