@@ -23,8 +23,10 @@ pub mod run;
 mod time;
 
 pub use catalog::{Catalog, CatalogRow, Filter};
-pub use log::{LogReader, LogWriter, Recovery};
-pub use run::{DeviceMeta, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples};
+pub use log::{LogHeader, LogReader, LogWriter, Recovery};
+pub use run::{
+    Completeness, DeviceMeta, Filed, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples,
+};
 pub use time::utc_now_rfc3339;
 
 use std::fmt;

@@ -565,7 +565,7 @@ fn a_v1_log_s_header_without_a_clock_still_reads() {
         _ => unreachable!(),
     };
     // The v1 header: the same fields, no clock (as firmware v1 wrote it).
-    let v1 = crate::run::v1::DeviceMsg::RunStarted(crate::run::v1::RunHeader {
+    let v1 = tribo_wire::v1::DeviceMsg::RunStarted(tribo_wire::v1::RunHeader {
         run_id: h.run_id,
         config: h.config,
         temp_c: h.temp_c,
