@@ -12,7 +12,8 @@ pub struct Args {
     pub link: LinkArgs,
     /// Run folder to complete (default: the stored copy of the rig's last run, or a new folder).
     pub run: Option<PathBuf>,
-    /// Keep the intact part of a corrupt frame log (cut the rest) and fetch what is missing.
+    /// Repair a damaged frame log: keep every record whose checksum holds, wherever the damage is
+    /// (the damaged file is kept beside it as frames.log.damaged), then fetch what is missing.
     #[arg(long)]
     pub salvage: bool,
     /// No progress bar or messages.
@@ -35,5 +36,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     ui.finish();
     let o = o?;
     print_outcome(&o);
-    Ok(())
+    match o.incomplete() {
+        // Finished, but the run is not stored whole: exit status 3.
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
 }

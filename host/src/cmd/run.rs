@@ -196,6 +196,26 @@ impl Ui {
             Progress::Pulling { from_block } => {
                 self.say(&format!("fetching the run from block {from_block} on"))
             }
+            Progress::PullRound {
+                round,
+                first,
+                blocks,
+                missing,
+                tail_from,
+            } => self.say(&match first {
+                Some(f) => format!(
+                    "pull {round}: asking for blocks {f}–{} ({missing} missing), then the run's end",
+                    f + blocks.saturating_sub(1)
+                ),
+                None if missing > 0 => format!(
+                    "pull {round}: asking for the run from block {tail_from} on ({missing} blocks missing)"
+                ),
+                None => format!("pull {round}: asking for the run from block {tail_from} on"),
+            }),
+            Progress::Backoff { wait, why } => self.say(&format!(
+                "{why}: next pull in {:.1} s",
+                wait.as_secs_f64()
+            )),
             Progress::Lost(g) => self.say(&format!(
                 "acquisition gap: the rig lost samples {}..{} ({} samples); the run goes on, and fits \
                  will not cross the gap",
@@ -288,16 +308,18 @@ pub fn print_outcome(o: &Outcome) {
     let run = &o.run;
     let samples: usize = run.blocks().map(|b| b.samples()).sum();
     println!(
-        "run {} saved in {} ({}, {} blocks, {} samples{})",
+        "run {} saved in {} ({}, {} samples{})",
         run.id(),
         run.dir().display(),
-        run.meta.status.name(),
-        run.block_count(),
+        run.completeness().summary(),
         samples,
-        if o.pulled_blocks > 0 {
-            format!(", {} fetched again with Pull", o.pulled_blocks)
-        } else {
-            String::new()
+        match (o.pulled_blocks, o.pull_rounds) {
+            (0, _) => String::new(),
+            (n, r) => format!(
+                ", {n} block{} fetched again in {r} pull{}",
+                if n == 1 { "" } else { "s" },
+                if r == 1 { "" } else { "s" }
+            ),
         }
     );
     if run.lost_samples() > 0 {
@@ -320,12 +342,17 @@ pub fn print_outcome(o: &Outcome) {
             run.dir().display()
         );
     }
+    if let Some(n) = &o.not_held {
+        println!("lost for good: {n}");
+    }
     if let Some(e) = &o.link_lost {
         println!("the link was lost: {e}");
-        println!(
-            "reconnect the rig and run `tribo pull {}` to fetch the rest",
-            run.dir().display()
-        );
+        if !run.is_complete() {
+            println!(
+                "the rig may still hold the rest: reconnect it and run `tribo pull {}`",
+                run.dir().display()
+            );
+        }
     }
     if o.aborted {
         println!("aborted: what was received is kept (status: aborted)");
@@ -454,6 +481,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ui.finish();
         let o = o.with_context(|| format!("run {k} on {}", link.name()))?;
         print_outcome(&o);
+        if let Some(e) = o.incomplete() {
+            // Finished, but the run is not stored whole: exit status 3.
+            return Err(e.into());
+        }
         if o.aborted || o.link_lost.is_some() {
             break;
         }

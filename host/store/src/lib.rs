@@ -22,7 +22,7 @@ pub mod log;
 pub mod run;
 mod time;
 
-pub use catalog::{Catalog, CatalogRow, Filter};
+pub use catalog::{Catalog, CatalogRow, Filter, Reindexed};
 pub use log::{LogHeader, LogReader, LogWriter, Recovery};
 pub use run::{
     Completeness, DeviceMeta, Filed, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples,
