@@ -387,7 +387,10 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
     }
     let cat = Catalog::open(d.path()).unwrap();
     let r = cat.reindex().unwrap();
-    assert_eq!((r.indexed, r.unreadable.len(), r.incomplete.len()), (9, 0, 0));
+    assert_eq!(
+        (r.indexed, r.unreadable.len(), r.incomplete.len()),
+        (9, 0, 0)
+    );
     let all = cat.list(&Filter::default()).unwrap();
     assert_eq!(all.len(), 9);
     let hot = cat

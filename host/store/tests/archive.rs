@@ -60,7 +60,11 @@ fn a_v1_run_folder_reads_whole_with_the_samples_v1_exported() {
     assert_eq!(run.meta.device.as_ref().unwrap().protocol, 1);
     let h = run.header().unwrap();
     assert_eq!(h.run_id, 1);
-    assert_eq!(run.clock(), SampleClock::exact(10_000), "v1: the configured rate");
+    assert_eq!(
+        run.clock(),
+        SampleClock::exact(10_000),
+        "v1: the configured rate"
+    );
     let end = run.end().unwrap();
     assert_eq!((end.blocks, end.samples), (49, 3122));
     assert_eq!(run.result().unwrap().best.mu0, 0.080_003_925);
@@ -114,7 +118,10 @@ fn a_v1_run_folder_reads_whole_with_the_samples_v1_exported() {
         ];
         assert_eq!(got, want[1..], "sample {i}");
     }
-    assert_eq!(s.ecr_range, None, "v1 firmware reported no ECR range changes");
+    assert_eq!(
+        s.ecr_range, None,
+        "v1 firmware reported no ECR range changes"
+    );
 
     // The catalog re-index lists it complete.
     let cat = Catalog::open(dir.parent().unwrap()).unwrap();
