@@ -614,7 +614,10 @@ impl Streamer<'_, '_> {
             let (missing, end_blocks, last, holes, has_header, has_result, complete) =
                 match self.writer.as_ref() {
                     Some(w) => (
-                        w.missing_blocks(),
+                        w.missing_blocks()
+                            .into_iter()
+                            .filter(|b| !w.undecodable_blocks().contains(b))
+                            .collect::<Vec<u32>>(),
                         w.end().map(|e| e.blocks),
                         w.last_block(),
                         w.event_holes(),
@@ -670,7 +673,7 @@ impl Streamer<'_, '_> {
                 missing: missing.len(),
                 tail_from,
             });
-            let before = self.writer.as_ref().map_or(0, |w| w.frames().len());
+            let before = self.writer.as_ref().map_or(0, |w| w.frames_held());
             let end = self.round(run_id, range, tail_from)?;
             match end {
                 RoundEnd::Answered | RoundEnd::Quiet => {
@@ -702,7 +705,7 @@ impl Streamer<'_, '_> {
                 event_absent = 0;
                 continue;
             };
-            let gained = w.frames().len().saturating_sub(before);
+            let gained = w.frames_held().saturating_sub(before);
             if let Some((first, count)) = range {
                 for b in first..first + count {
                     if w.block(b).is_none() && missing.contains(&b) {
@@ -1154,7 +1157,13 @@ pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
             Ok(f) => results.host = Some(f),
             Err(e) => results.host_error = Some(e),
         }
-        run.export_csv(&run.dir().join(tribo_store::run::CSV_FILE))?;
+        // A record the physics cannot take (an unloaded run has no rig constants for it) has no
+        // CSV export; the run itself is stored all the same.
+        if let Err(e) = run.export_csv(&run.dir().join(tribo_store::run::CSV_FILE)) {
+            results
+                .host_error
+                .get_or_insert_with(|| format!("no CSV export: {e}"));
+        }
     }
     run.save_results(results)?;
     Catalog::open(store)?.upsert(run)?;

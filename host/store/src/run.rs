@@ -286,6 +286,10 @@ struct Assembled {
     raw: BTreeMap<Slot, (u32, Vec<u8>)>,
     /// Some sample block came packed (protocol v2 firmware, which records each ECR range change).
     packed: bool,
+    /// The first block index not held (all before it are).
+    next_missing: u32,
+    /// Blocks held whose counts this tribo cannot unpack (a newer codec).
+    undecodable_blocks: Vec<u32>,
 }
 
 impl Assembled {
@@ -308,12 +312,17 @@ impl Assembled {
             DeviceMsg::Samples(_) | DeviceMsg::Packed(_) => match msg.sample_block() {
                 Some(Ok(b)) => {
                     self.blocks.insert(b.block, b);
+                    while self.blocks.contains_key(&self.next_missing) {
+                        self.next_missing += 1;
+                    }
                 }
                 // A packed block whose counts do not decode (a CRC-valid frame from a newer codec):
                 // kept in the log, counted as missing.
                 _ => {
                     self.undecodable += 1;
-                    return Filed::New;
+                    if let Slot::Block(k) = slot {
+                        self.undecodable_blocks.push(k);
+                    }
                 }
             },
             DeviceMsg::Result(r) => self.result = Some(r),
@@ -427,6 +436,7 @@ impl Assembled {
                 .or(self.blocks.keys().next_back().map(|b| b + 1))
                 .unwrap_or(0),
             missing: self.missing(),
+            undecodable: self.undecodable_blocks.clone(),
             event_holes: self.event_holes(),
             gaps_unaccounted: self.gaps_unaccounted(),
             lost_samples: self.gaps.values().map(|g| g.count as u64).sum(),
@@ -436,11 +446,7 @@ impl Assembled {
 
     /// The block a resumed pull should start from: the first one missing (or the next one).
     fn resume_from(&self) -> u32 {
-        let mut next = 0;
-        while self.blocks.contains_key(&next) {
-            next += 1;
-        }
-        next
+        self.next_missing
     }
 
     /// The run frames held, in the order the rig sent them (by sequence number).
@@ -465,8 +471,10 @@ pub struct Completeness {
     pub blocks_expected: Option<u32>,
     /// Blocks known to exist: from the end frame, else up to the highest block held.
     pub blocks_known: u32,
-    /// Blocks known to exist and not held.
+    /// Blocks known to exist and not held (those below included).
     pub missing: Vec<u32>,
+    /// Blocks received whose counts this tribo cannot unpack (a newer rig's codec: update tribo).
+    pub undecodable: Vec<u32>,
     /// Blocks before which run events (gaps, ECR range changes) look missing.
     pub event_holes: Vec<u32>,
     /// Samples the gaps held account for and samples the end frame says were lost, when they
@@ -530,6 +538,14 @@ impl Completeness {
         }
         if !self.missing.is_empty() {
             why.push(format!("missing {}", block_ranges(&self.missing)));
+        }
+        if !self.undecodable.is_empty() {
+            why.push(format!(
+                "block{} {} arrived but this tribo cannot unpack {} (a newer rig's codec: update tribo)",
+                if self.undecodable.len() == 1 { "" } else { "s" },
+                block_ranges(&self.undecodable),
+                if self.undecodable.len() == 1 { "it" } else { "them" }
+            ));
         }
         if !self.end {
             why.push(
@@ -1180,6 +1196,11 @@ impl RunWriter {
         self.data.completeness()
     }
 
+    /// Blocks held that this tribo cannot unpack ([`Completeness::undecodable`]).
+    pub fn undecodable_blocks(&self) -> &[u32] {
+        &self.data.undecodable_blocks
+    }
+
     /// Blocks before which run events look missing ([`Completeness::event_holes`]).
     pub fn event_holes(&self) -> Vec<u32> {
         self.data.event_holes()
@@ -1198,6 +1219,11 @@ impl RunWriter {
     /// The run frames held, in the rig's order ([`Run::frames`]).
     pub fn frames(&self) -> Vec<&[u8]> {
         self.data.frames()
+    }
+
+    /// How many run frames are held.
+    pub fn frames_held(&self) -> usize {
+        self.data.raw.len()
     }
 
     /// Syncs the log and writes the metadata with its final status; the status is derived from
