@@ -382,6 +382,7 @@ impl Assembled {
         let mut holes = vec![];
         let mut prev: Option<&SampleBlock> = None;
         let first_range = self.blocks.get(&0).map(|b| b.ecr_range);
+        let mut assumed: Option<(u32, u8)> = None;
         for b in self.blocks.values() {
             if let Some(p) = prev.filter(|p| p.block + 1 == b.block) {
                 let end = p.first_sample as u64 + p.samples() as u64;
@@ -398,16 +399,23 @@ impl Assembled {
                 }
             }
             // The range in force at the block's first sample, from the changes held (firmware
-            // before protocol v2 changed ranges without saying so).
+            // before protocol v2 changed ranges without saying so). After a hole, the block's own
+            // range stands in for the change not held, so that one lost change is one hole.
             if self.packed {
-                let range = self
+                let held = self
                     .ecr_changes
                     .range(..=b.first_sample)
                     .next_back()
-                    .map(|(_, c)| c.range)
-                    .or(first_range);
+                    .map(|(&s, c)| (s, c.range));
+                let range = match (held, assumed) {
+                    (Some((s, _)), Some((since, r))) if since > s => Some(r),
+                    (Some((_, r)), _) => Some(r),
+                    (None, Some((_, r))) => Some(r),
+                    (None, None) => first_range,
+                };
                 if range.is_some_and(|r| r != b.ecr_range) {
                     holes.push(b.block);
+                    assumed = Some((b.first_sample, b.ecr_range));
                 }
             }
             prev = Some(b);
