@@ -689,8 +689,15 @@ fn completeness_says_exactly_what_is_missing() {
     // at the first block converted on the new range; the end's count of lost samples too.
     let r = without(&|m| matches!(m, DeviceMsg::Gap(_)));
     let c = r.completeness();
-    assert_eq!((c.event_holes.clone(), c.gaps_unaccounted), (vec![15], Some((0, 100))));
-    assert!(c.summary().contains("missing before block 15"), "{}", c.summary());
+    assert_eq!(
+        (c.event_holes.clone(), c.gaps_unaccounted),
+        (vec![15], Some((0, 100)))
+    );
+    assert!(
+        c.summary().contains("missing before block 15"),
+        "{}",
+        c.summary()
+    );
     let r = without(&|m| matches!(m, DeviceMsg::EcrRange(_)));
     assert_eq!(r.completeness().event_holes, vec![10]);
     assert!(!r.is_complete());
@@ -719,11 +726,7 @@ fn a_frame_is_filed_once_and_another_run_s_frame_is_told_apart() {
         w.file_frame(&other).unwrap(),
         Filed::Differs(format!("its block {}", b.block))
     );
-    let hello = encode_vec(
-        1,
-        &DeviceMsg::Ack { seq: 4 },
-    )
-    .unwrap();
+    let hello = encode_vec(1, &DeviceMsg::Ack { seq: 4 }).unwrap();
     assert_eq!(w.file_frame(&hello).unwrap(), Filed::Other);
     assert!(w.file_frame(b"\x01\x02\x00").is_err(), "not a frame");
     for f in &all[10..] {
@@ -745,13 +748,19 @@ fn a_run_whose_log_lost_frames_is_not_complete_whatever_its_metadata_says() {
     let bytes = std::fs::read(&log).unwrap();
     std::fs::write(&log, &bytes[..bytes.len() - 30]).unwrap();
     let back = Run::open(run.dir()).unwrap();
-    assert_eq!(back.meta.status, RunStatus::Incomplete, "derived from the log");
+    assert_eq!(
+        back.meta.status,
+        RunStatus::Incomplete,
+        "derived from the log"
+    );
     assert!(back.recovery.is_some());
     let cat = Catalog::open(d.path()).unwrap();
     let r = cat.reindex().unwrap();
     assert_eq!(r.incomplete.len(), 1);
     assert!(
-        r.incomplete[0].1.starts_with("incomplete: 20 of at least 20 blocks")
+        r.incomplete[0]
+            .1
+            .starts_with("incomplete: 20 of at least 20 blocks")
             && r.incomplete[0].1.contains("torn last record"),
         "{:?}",
         r.incomplete
