@@ -44,8 +44,10 @@ fn text(o: &Output) -> String {
     )
 }
 
-/// `tribo run` in a child process; returns it once its run folder holds `blocks` blocks' worth of
-/// log, with the folder.
+/// `tribo run` in a child process; returns it once its run folder's log holds `bytes` bytes, with
+/// the folder.
+// The child is returned to the caller, which kills or waits for it.
+#[allow(clippy::zombie_processes)]
 fn spawn_run(port: &Address, store: &Path, bytes: u64) -> (std::process::Child, PathBuf) {
     let mut child = Command::new(TRIBO)
         .args([
@@ -66,7 +68,11 @@ fn spawn_run(port: &Address, store: &Path, bytes: u64) -> (std::process::Child, 
         .unwrap();
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
-        assert!(Instant::now() < deadline, "the child never recorded");
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the child never recorded");
+        }
         if let Some(d) = tribo_store::run::list_run_dirs(store).unwrap().first() {
             let len = std::fs::metadata(d.join("frames.log")).map_or(0, |m| m.len());
             if len > bytes {
