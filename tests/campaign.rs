@@ -84,6 +84,18 @@ fn campaign_resumes_without_redoing_finished_runs() {
     let dirs = tribo_store::run::list_run_dirs(&store).unwrap();
     assert_eq!(dirs.len(), 3);
     assert_eq!(finished(&plan, &store).unwrap(), plan.points());
+    // The plan gives no mass, stiffness or x0: the real rig's values stood in, and every run's
+    // metadata says so.
+    for d in &dirs {
+        let m = tribo_store::Run::open(d).unwrap().meta;
+        for k in ["mass_kg=", "stiffness_n_per_m=", "x0_m="] {
+            assert!(
+                m.defaults.iter().any(|x| x.starts_with(k)),
+                "{k} {:?}",
+                m.defaults
+            );
+        }
+    }
 
     // Interrupted campaign: repetition 2 never happened.
     let victim = dirs

@@ -14,7 +14,7 @@ use tribo_rig::{AcquisitionFaults, LawConfig, ServeOptions, VirtualRig, VirtualR
 fn fit_args(record: &std::path::Path, longest: bool) -> tribo::cmd::fit::Args {
     tribo::cmd::fit::Args {
         record: record.to_owned(),
-        law: "coulomb-viscous".into(),
+        law: tribo_physics::LawSpec::CoulombViscous,
         json: false,
         plot: None,
         mass_kg: None,

@@ -55,7 +55,7 @@
 //! verdict is `EstimatorsDisagree` (typically: the friction law is not Coulomb–viscous).
 use crate::calib::{OffsetCapture, ADC_MAX, CHANNELS};
 use crate::envelope::{HalfCycleMoments, Moments};
-use crate::fit::{self, Ols};
+use crate::fit::{self, Ols, OlsPasses, Pass};
 use crate::peaks::{PeakFitter, ReversalDetector};
 use crate::wire::{
     Channel, ChannelCal, Configure, EnvelopeShape, Estimate, OnboardResult, Verdict,
@@ -172,6 +172,8 @@ struct Pending {
 #[derive(Clone, Debug)]
 pub struct Pipeline {
     st: State,
+    /// The peak fitter (1.5 KiB of ring and table: reset in place, never rebuilt by value).
+    fitter: PeakFitter,
     records: heapless::Vec<HalfCycle, MAX_HALF_CYCLES>,
 }
 
@@ -212,7 +214,6 @@ struct State {
     vsq_n: u32,
     /// Velocity noise measured from the motion (counts), updated at each reversal.
     sv_motion: f64,
-    fitter: PeakFitter,
     moments: Moments,
     pending: Option<Pending>,
     first_sign: i8,
@@ -241,8 +242,12 @@ fn cal_ok(c: ChannelCal) -> bool {
 impl Pipeline {
     /// A pipeline for the run described by `cfg`, in the holding phase.
     pub fn new(cfg: &Configure) -> Result<Self, ConfigError> {
+        let st = Self::state(cfg)?;
+        let mut fitter = PeakFitter::new();
+        fitter.set_step(PI / st.half_period);
         Ok(Self {
-            st: Self::state(cfg)?,
+            st,
+            fitter,
             records: heapless::Vec::new(),
         })
     }
@@ -289,8 +294,6 @@ impl Pipeline {
             }
         }
         let max_samples = (max_duration * rate).min(u32::MAX as f64) as u32;
-        let mut fitter = PeakFitter::new();
-        fitter.set_step(PI / half_period);
         Ok(State {
             mass,
             stiffness,
@@ -319,7 +322,6 @@ impl Pipeline {
             vsq_sum: 0,
             vsq_n: 0,
             sv_motion: 0.0,
-            fitter,
             moments: Moments::default(),
             pending: None,
             first_sign: 1,
@@ -334,10 +336,12 @@ impl Pipeline {
         })
     }
 
-    /// Re-initialises in place for a new run: only the small state (≈ 2 KiB) is rebuilt, the
-    /// half-cycle store is cleared, never copied. On error the pipeline is left unchanged.
+    /// Re-initialises in place for a new run: only the small state (≈ 0.4 KiB) is rebuilt, the
+    /// peak fitter and the half-cycle store are cleared, never copied. On error the pipeline is left unchanged.
     pub fn reset(&mut self, cfg: &Configure) -> Result<(), ConfigError> {
         self.st = Self::state(cfg)?;
+        self.fitter.reset();
+        self.fitter.set_step(PI / self.st.half_period);
         self.records.clear();
         Ok(())
     }
@@ -479,7 +483,7 @@ impl Pipeline {
         if idx == 0 {
             self.st.x_release = self.st.cal[Channel::Displacement as usize].to_si(cx);
         }
-        self.st.fitter.push(cx);
+        self.fitter.push(cx);
         // Second difference of the velocity: white noise of variance σ² gives 6σ², the motion only
         // (ωΔt)⁴ v², taken out at the reversals (see `update_noise`).
         let cvi = cv as i32;
@@ -527,13 +531,13 @@ impl Pipeline {
         }
         if hp > 4.0 {
             self.st.half_period = hp;
-            self.st.fitter.set_step(PI / hp);
+            self.fitter.set_step(PI / hp);
         }
         self.st.last_rev = pos;
-        let wait = 1.5 * self.st.half_period + self.st.fitter.half_window() as f64 + 2.0;
+        let wait = 1.5 * self.st.half_period + self.fitter.half_window() as f64 + 2.0;
         self.st.deadline = (pos + wait) as u32;
         let centre = (pos + 0.5) as u32;
-        let due = centre.saturating_add(self.st.fitter.half_window() as u32);
+        let due = centre.saturating_add(self.fitter.half_window() as u32);
         self.st.pending = Some(Pending {
             due,
             t: pos / self.st.rate,
@@ -572,7 +576,7 @@ impl Pipeline {
     fn complete_pending(&mut self, p: Pending) {
         self.st.pending = None;
         let xc = self.st.cal[Channel::Displacement as usize];
-        let peak_count = self.st.fitter.fit_centre().unwrap_or(xc.zero as f64);
+        let peak_count = self.fitter.fit_centre().unwrap_or(xc.zero as f64);
         let peak = (xc.gain as f64 * (peak_count - xc.zero as f64)) as f32;
         let rec = HalfCycle {
             t: p.t as f32,
@@ -628,9 +632,8 @@ impl Pipeline {
         self.st.pending = None;
         self.st.moments = Moments::default();
         self.st.detector = ReversalDetector::new(self.st.detector.threshold());
-        let mut fitter = PeakFitter::new();
-        fitter.set_step(PI / self.st.half_period);
-        self.st.fitter = fitter;
+        self.fitter.reset();
+        self.fitter.set_step(PI / self.st.half_period);
         self.st.d2_from = self.st.n.saturating_add(2);
         // No half-period measured across the gap.
         self.st.last_rev = f64::NAN;
@@ -647,62 +650,283 @@ impl Pipeline {
     }
 
     /// Analyses what was recorded and returns the result (can be called at any time; normally once
-    /// [`Pipeline::is_finished`]).
+    /// [`Pipeline::is_finished`]). All at once: see [`Pipeline::finish_step`] to spread the work.
     pub fn finish(&self, run_id: u32) -> OnboardResult {
+        let mut job = self.start_finish(run_id);
+        loop {
+            if let Some(r) = self.finish_step(&mut job, u32::MAX) {
+                return r;
+            }
+        }
+    }
+
+    /// Starts the end-of-run analysis as a job of bounded steps ([`Pipeline::finish_step`]). The
+    /// pipeline must not take samples or be reset until the job is done.
+    pub fn start_finish(&self, run_id: u32) -> Finish {
         let recs: &[HalfCycle] = self.usable();
-        let nan = Estimate {
-            mu0: f32::NAN,
-            mu1: f32::NAN,
-            mu0_se: f32::NAN,
-            mu1_se: f32::NAN,
-        };
         let n_rev = recs.len();
         let cycles = (n_rev / 2).min(u16::MAX as usize) as u16;
-        let mut out = OnboardResult {
-            run_id,
-            verdict: Verdict::NoOscillation,
-            cycles,
-            frequency_hz: f32::NAN,
-            initial_amplitude_m: f32::NAN,
-            duration_s: recs
-                .last()
-                .map_or(self.st.n as f64 / self.st.rate, |r| r.t as f64)
-                as f32,
-            best: nan,
-            averaging: nan,
-            decrement: nan,
-            shape: EnvelopeShape::Straight,
-            curvature: f32::NAN,
-        };
-        // Frequency: reversals are half a damped period apart, Coulomb or not.
-        // Weighted by the squared amplitude about the reversal (the crossing time's error goes as
-        // 1/amplitude), so that reversals of tiny final half-cycles do not bias it.
-        let omega_c = fit::sqrt(self.st.stiffness / self.st.mass);
-        let timing = recs.iter().enumerate().map(|(i, r)| {
-            let m = r.moments;
-            let w = m.var_x as f64 + m.mean_v2 as f64 / (omega_c * omega_c);
-            ([i as f64], r.t as f64, w)
-        });
-        let Some(freq) = Ols::<1>::fit_weighted(timing) else {
-            return out;
-        };
-        let half_period_s = freq.coef[0];
-        let omega_cfg = fit::sqrt(self.st.stiffness / self.st.mass);
-        let omega_d = PI / half_period_s;
-        let plausible = omega_d > 0.5 * omega_cfg
-            && omega_d < 2.0 * omega_cfg
-            && fit::sqrt(freq.sigma2) < 0.05 * half_period_s;
-        if !plausible {
-            return out;
+        Finish {
+            out: OnboardResult {
+                run_id,
+                verdict: Verdict::NoOscillation,
+                cycles,
+                frequency_hz: f32::NAN,
+                initial_amplitude_m: f32::NAN,
+                duration_s: recs
+                    .last()
+                    .map_or(self.st.n as f64 / self.st.rate, |r| r.t as f64)
+                    as f32,
+                best: NAN_ESTIMATE,
+                averaging: NAN_ESTIMATE,
+                decrement: NAN_ESTIMATE,
+                shape: EnvelopeShape::Straight,
+                curvature: f32::NAN,
+            },
+            stage: Stage::Frequency(OlsPasses::new()),
+            i: 0,
+            omega_d: 0.0,
+            scale: 0.0,
+            dec: None,
+            avg: Averaging::default(),
         }
-        out.frequency_hz = (omega_d / (2.0 * PI)) as f32;
-        if cycles < MIN_CYCLES {
-            out.verdict = Verdict::TooFewCycles;
-            return out;
+    }
+
+    /// Advances the end-of-run analysis by at most `rows` rows of its regressions (a row is one
+    /// half-cycle of one pass: a few hundred instructions at most) and returns the result once it
+    /// is complete. Run to the end, the steps compute exactly what [`Pipeline::finish`] does.
+    ///
+    /// What is computed, in order: the frequency from the reversal times (weighted least squares, 3
+    /// passes); the decrement fit on the peaks (3 passes); the averaging fit: the mean displacement
+    /// (1 pass), then 4 iterations of the linear fit (3 passes), the quadratic fit (3 passes) and the
+    /// range of amplitudes (1 pass). Then the verdict.
+    pub fn finish_step(&self, job: &mut Finish, rows: u32) -> Option<OnboardResult> {
+        let recs: &[HalfCycle] = self.usable();
+        let n = recs.len();
+        let mut budget = rows;
+        loop {
+            match &mut job.stage {
+                Stage::Frequency(f) => {
+                    // Reversals are half a damped period apart, Coulomb or not. Weighted by the
+                    // squared amplitude about the reversal (the crossing time's error goes as
+                    // 1/amplitude), so that reversals of tiny final half-cycles do not bias it.
+                    let omega_c = fit::sqrt(self.st.stiffness / self.st.mass);
+                    while job.i < n {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        let i = job.i;
+                        let m = recs[i].moments;
+                        let w = m.var_x as f64 + m.mean_v2 as f64 / (omega_c * omega_c);
+                        f.row([i as f64], recs[i].t as f64, w);
+                        job.i += 1;
+                    }
+                    job.i = 0;
+                    let freq = match f.end_pass() {
+                        Pass::Again => continue,
+                        Pass::Done(None) => return Some(job.done()),
+                        Pass::Done(Some(freq)) => freq,
+                    };
+                    let half_period_s = freq.coef[0];
+                    let omega_cfg = fit::sqrt(self.st.stiffness / self.st.mass);
+                    let omega_d = PI / half_period_s;
+                    let plausible = omega_d > 0.5 * omega_cfg
+                        && omega_d < 2.0 * omega_cfg
+                        && fit::sqrt(freq.sigma2) < 0.05 * half_period_s;
+                    if !plausible {
+                        return Some(job.done());
+                    }
+                    job.out.frequency_hz = (omega_d / (2.0 * PI)) as f32;
+                    if job.out.cycles < MIN_CYCLES {
+                        job.out.verdict = Verdict::TooFewCycles;
+                        return Some(job.done());
+                    }
+                    job.omega_d = omega_d;
+                    job.scale = self.st.stiffness / self.st.load; // metres → y
+                    job.stage = Stage::Decrement(OlsPasses::new());
+                }
+                Stage::Decrement(f) => {
+                    while job.i + 1 < n {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        let i = job.i;
+                        let (a, b) = (&recs[i], &recs[i + 1]);
+                        let (sa, sb) = (self.sign(i), self.sign(i + 1));
+                        f.row([sa * a.peak as f64, sb], sb * b.peak as f64, 1.0);
+                        job.i += 1;
+                    }
+                    job.i = 0;
+                    let fitted = match f.end_pass() {
+                        Pass::Again => continue,
+                        Pass::Done(fitted) => fitted,
+                    };
+                    job.dec = fitted.and_then(|f| decrement(&f, job.scale));
+                    if n < 6 {
+                        return Some(self.conclude(job));
+                    }
+                    // Half-cycle j (1 ≤ j < n) runs from reversal j−1 to reversal j; 0 starts at
+                    // release: skipped.
+                    job.avg = Averaging {
+                        even: if (n - 1) & 1 == 0 { n - 1 } else { n - 2 },
+                        ..Averaging::default()
+                    };
+                    if job.avg.even < 2 {
+                        return Some(self.conclude(job));
+                    }
+                    job.i = 1;
+                    job.stage = Stage::Offset { sum: -0.0 };
+                }
+                Stage::Offset { sum } => {
+                    while job.i <= job.avg.even {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        *sum += recs[job.i].moments.mean_x as f64;
+                        job.i += 1;
+                    }
+                    job.avg.offset = *sum / job.avg.even as f64;
+                    self.next_iteration(job);
+                }
+                Stage::Linear(f) => {
+                    while job.i < n.saturating_sub(1) {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        if let Some((a, d)) = self.averaging_row(&job.avg, job.scale, job.i) {
+                            f.row([a], d, 1.0);
+                        }
+                        job.i += 1;
+                    }
+                    job.i = 2;
+                    let lin = match f.end_pass() {
+                        Pass::Again => continue,
+                        Pass::Done(None) => {
+                            job.avg.result = None;
+                            return Some(self.conclude(job));
+                        }
+                        Pass::Done(Some(lin)) => lin,
+                    };
+                    let (a0, a1) = (lin.intercept, lin.coef[0]);
+                    let a = &mut job.avg;
+                    a.mu0 = -PI * a0 / 2.0;
+                    a.mu1 = -2.0 * a1;
+                    a.r = a.mu0 / job.scale;
+                    if !(a.r.is_finite() && a.mu1.is_finite()) {
+                        a.result = None;
+                        return Some(self.conclude(job));
+                    }
+                    job.stage = Stage::Quadratic {
+                        lin,
+                        quad: OlsPasses::new(),
+                    };
+                }
+                Stage::Quadratic { lin, quad } => {
+                    while job.i < n.saturating_sub(1) {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        if let Some((a, d)) = self.averaging_row(&job.avg, job.scale, job.i) {
+                            quad.row([a, a * a], d, 1.0);
+                        }
+                        job.i += 1;
+                    }
+                    job.i = 2;
+                    let quad = match quad.end_pass() {
+                        Pass::Again => continue,
+                        Pass::Done(q) => q,
+                    };
+                    job.stage = Stage::Range {
+                        lin: *lin,
+                        quad,
+                        lo: f64::INFINITY,
+                        hi: f64::NEG_INFINITY,
+                    };
+                }
+                Stage::Range { lin, quad, lo, hi } => {
+                    while job.i < n.saturating_sub(1) {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        if let Some(a) = self.amplitude(&job.avg, job.scale, job.i) {
+                            (*lo, *hi) = (lo.min(a), hi.max(a));
+                        }
+                        job.i += 1;
+                    }
+                    let (shape, curvature) = match quad {
+                        Some(q) => (shape_of(q, *lo, *hi), q.coef[1]),
+                        None => (EnvelopeShape::Straight, f64::NAN),
+                    };
+                    let a = &mut job.avg;
+                    let Some(estimate) = estimate(
+                        a.mu0,
+                        a.mu1,
+                        lin.cov(0, 0) * PI * PI / 4.0,
+                        lin.cov(1, 1) * 4.0,
+                    ) else {
+                        a.result = None;
+                        return Some(self.conclude(job));
+                    };
+                    a.result = Some(Fitted {
+                        estimate,
+                        offset: a.offset,
+                        shape,
+                        curvature,
+                    });
+                    a.iteration += 1;
+                    if a.iteration == AVERAGING_ITERATIONS {
+                        return Some(self.conclude(job));
+                    }
+                    self.next_iteration(job);
+                }
+                Stage::Done => return Some(job.out),
+            }
         }
-        let scale = self.st.stiffness / self.st.load; // metres → y
-        let dec = self.decrement(scale);
-        let avg = self.averaging(scale, omega_d);
+    }
+
+    /// Starts an iteration of the averaging fit: the envelope about each half-cycle's centre
+    /// `offset − s_j r` and Ω from the previous iteration's μ0 and μ1, with the measured noise
+    /// variance taken out of the mean square.
+    fn next_iteration(&self, job: &mut Finish) {
+        let a = &mut job.avg;
+        a.omega = job.omega_d / fit::sqrt((1.0 - 0.25 * a.mu1 * a.mu1).max(0.25));
+        a.r_now = a.r;
+        let (nx, nv) = self.st.noise_var;
+        let gv = self.st.cal[Channel::Velocity as usize].gain as f64;
+        let nv = nv.max(self.st.sv_motion * self.st.sv_motion * gv * gv);
+        a.noise = nx + nv / (a.omega * a.omega);
+        // Half-cycles last exactly π/ω_d (Coulomb or not): nominal spacing, free of the timing
+        // noise of reversals at tiny amplitude.
+        a.dtau = 2.0 * PI * a.omega / job.omega_d;
+        job.i = 2;
+        job.stage = Stage::Linear(OlsPasses::new());
+    }
+
+    /// Envelope of half-cycle `j` in y units (see [`Pipeline::next_iteration`]).
+    fn amplitude(&self, a: &Averaging, scale: f64, j: usize) -> Option<f64> {
+        let centre = a.offset - self.sign(j) * a.r_now;
+        let ms = self.usable().get(j)?.moments.mean_square(centre, a.omega) - a.noise;
+        Some(fit::sqrt(ms.max(0.0)) * scale)
+    }
+
+    /// Row `j` of the averaging fit: the amplitude and its central difference over two
+    /// half-cycles.
+    fn averaging_row(&self, a: &Averaging, scale: f64, j: usize) -> Option<(f64, f64)> {
+        let amp = |j| self.amplitude(a, scale, j);
+        Some((amp(j)?, (amp(j + 1)? - amp(j.checked_sub(1)?)?) / a.dtau))
+    }
+
+    /// The verdict, from the two estimators.
+    fn conclude(&self, job: &mut Finish) -> OnboardResult {
+        let dec = job.dec.take();
+        let avg = job.avg.result.take();
+        let out = &mut job.out;
         if let Some(d) = &dec {
             out.decrement = d.estimate;
         }
@@ -711,7 +935,7 @@ impl Pipeline {
             out.shape = a.shape;
             out.curvature = a.curvature as f32;
             let mu1 = a.estimate.mu1 as f64;
-            let omega = omega_d / fit::sqrt((1.0 - 0.25 * mu1 * mu1).max(0.25));
+            let omega = job.omega_d / fit::sqrt((1.0 - 0.25 * mu1 * mu1).max(0.25));
             out.frequency_hz = (omega / (2.0 * PI)) as f32;
         }
         let centre = dec
@@ -722,7 +946,7 @@ impl Pipeline {
             out.initial_amplitude_m = (self.st.x_release as f64 - c).abs() as f32;
         }
         let (verdict, best) = match (&dec, &avg) {
-            (None, None) => (Verdict::NoOscillation, nan),
+            (None, None) => (Verdict::NoOscillation, NAN_ESTIMATE),
             (Some(d), None) => (Verdict::EstimatorsDisagree, d.estimate),
             (None, Some(a)) => (Verdict::EstimatorsDisagree, a.estimate),
             (Some(d), Some(a)) => combine(&d.estimate, &a.estimate),
@@ -741,7 +965,7 @@ impl Pipeline {
         if !all_finite && out.verdict == Verdict::Ok {
             out.verdict = Verdict::NoOscillation;
         }
-        out
+        job.done()
     }
 
     /// Peak sign (+1 maximum) of reversal `i`.
@@ -753,120 +977,115 @@ impl Pipeline {
             -s
         }
     }
+}
 
-    fn decrement(&self, scale: f64) -> Option<Fitted> {
-        let recs: &[HalfCycle] = self.usable();
-        let rows = recs.windows(2).enumerate().filter_map(|(i, w)| {
-            let (a, b) = (w.first()?, w.get(1)?);
-            let (sa, sb) = (self.sign(i), self.sign(i + 1));
-            Some(([sa * a.peak as f64, sb], sb * b.peak as f64))
-        });
-        let f = Ols::<2>::fit(rows)?;
-        let (beta, d, gamma) = (f.intercept, f.coef[0], f.coef[1]);
-        if !(d > 0.0 && d < 2.0) {
-            return None;
-        }
-        let r = -beta / (1.0 + d);
-        let offset = gamma / (1.0 + d);
-        let l = -fit::ln(d) / PI;
-        let q = 1.0 + l * l;
-        let zeta = l / fit::sqrt(q);
-        let mu1 = 2.0 * zeta;
-        let mu0 = r * scale;
-        let dmu1_dd = 2.0 / (q * fit::sqrt(q)) * (-1.0 / (PI * d));
-        let g0 = [
-            -scale / (1.0 + d),
-            scale * beta / ((1.0 + d) * (1.0 + d)),
-            0.0,
-        ];
-        let g1 = [0.0, dmu1_dd, 0.0];
-        let estimate = estimate(mu0, mu1, f.var_of(&g0), f.var_of(&g1))?;
-        Some(Fitted {
-            estimate,
-            offset,
-            shape: EnvelopeShape::Straight,
-            curvature: 0.0,
-        })
+const NAN_ESTIMATE: Estimate = Estimate {
+    mu0: f32::NAN,
+    mu1: f32::NAN,
+    mu0_se: f32::NAN,
+    mu1_se: f32::NAN,
+};
+
+/// Iterations of the averaging fit (each refines the centres and Ω with the previous μ0, μ1).
+const AVERAGING_ITERATIONS: u8 = 4;
+
+/// The end-of-run analysis in progress (see [`Pipeline::finish_step`]).
+#[derive(Clone, Debug)]
+pub struct Finish {
+    out: OnboardResult,
+    stage: Stage,
+    /// Next row of the current pass.
+    i: usize,
+    omega_d: f64,
+    /// Metres → y.
+    scale: f64,
+    dec: Option<Fitted>,
+    avg: Averaging,
+}
+
+impl Finish {
+    /// True once [`Pipeline::finish_step`] has returned the result.
+    pub fn is_done(&self) -> bool {
+        matches!(self.stage, Stage::Done)
     }
 
-    fn averaging(&self, scale: f64, omega_d: f64) -> Option<Fitted> {
-        let recs: &[HalfCycle] = self.usable();
-        let n = recs.len();
-        if n < 6 {
-            return None;
-        }
-        // Half-cycle j (1 ≤ j < n) runs from reversal j−1 to reversal j; 0 starts at release: skipped.
-        let even = if (n - 1) & 1 == 0 { n - 1 } else { n - 2 };
-        if even < 2 {
-            return None;
-        }
-        let offset = recs
-            .iter()
-            .skip(1)
-            .take(even)
-            .map(|r| r.moments.mean_x as f64)
-            .sum::<f64>()
-            / even as f64;
-        let (mut r, mut mu1) = (0.0f64, 0.0f64);
-        let mut result = None;
-        for _ in 0..4 {
-            let omega = omega_d / fit::sqrt((1.0 - 0.25 * mu1 * mu1).max(0.25));
-            // Envelope of half-cycle j, in y units, about its centre offset − s_j r, with the
-            // measured noise variance taken out of the mean square.
-            let r_now = r;
-            let (nx, nv) = self.st.noise_var;
-            let gv = self.st.cal[Channel::Velocity as usize].gain as f64;
-            let nv = nv.max(self.st.sv_motion * self.st.sv_motion * gv * gv);
-            let noise = nx + nv / (omega * omega);
-            let amp = move |j: usize| -> Option<f64> {
-                let centre = offset - self.sign(j) * r_now;
-                let ms = recs.get(j)?.moments.mean_square(centre, omega) - noise;
-                Some(fit::sqrt(ms.max(0.0)) * scale)
-            };
-            // Half-cycles last exactly π/ω_d (Coulomb or not): nominal spacing, free of the timing
-            // noise of reversals at tiny amplitude.
-            let dtau = 2.0 * PI * omega / omega_d;
-            let row = move |j: usize| -> Option<(f64, f64)> {
-                Some((amp(j)?, (amp(j + 1)? - amp(j - 1)?) / dtau))
-            };
-            let lin = Ols::<1>::fit(
-                (2..n.saturating_sub(1))
-                    .filter_map(row)
-                    .map(|(a, d)| ([a], d)),
-            )?;
-            let (a0, a1) = (lin.intercept, lin.coef[0]);
-            let mu0 = -PI * a0 / 2.0;
-            mu1 = -2.0 * a1;
-            r = mu0 / scale;
-            if !(r.is_finite() && mu1.is_finite()) {
-                return None;
-            }
-            let quad = Ols::<2>::fit(
-                (2..n.saturating_sub(1))
-                    .filter_map(row)
-                    .map(|(a, d)| ([a, a * a], d)),
-            );
-            let (lo, hi) = (2..n.saturating_sub(1))
-                .filter_map(amp)
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
-                    (lo.min(a), hi.max(a))
-                });
-            let (shape, curvature) = match quad {
-                Some(q) => (shape_of(&q, lo, hi), q.coef[1]),
-                None => (EnvelopeShape::Straight, f64::NAN),
-            };
-            let est = estimate(mu0, mu1, lin.cov(0, 0) * PI * PI / 4.0, lin.cov(1, 1) * 4.0)?;
-            result = Some(Fitted {
-                estimate: est,
-                offset,
-                shape,
-                curvature,
-            });
-        }
-        result
+    fn done(&mut self) -> OnboardResult {
+        self.stage = Stage::Done;
+        self.out
     }
 }
 
+#[derive(Clone, Debug)]
+enum Stage {
+    Frequency(OlsPasses<1>),
+    Decrement(OlsPasses<2>),
+    Offset {
+        sum: f64,
+    },
+    Linear(OlsPasses<1>),
+    Quadratic {
+        lin: Ols<1>,
+        quad: OlsPasses<2>,
+    },
+    Range {
+        lin: Ols<1>,
+        quad: Option<Ols<2>>,
+        lo: f64,
+        hi: f64,
+    },
+    Done,
+}
+
+/// The averaging fit's state across its iterations.
+#[derive(Clone, Debug, Default)]
+struct Averaging {
+    /// Half-cycles used for the mean displacement (an even number).
+    even: usize,
+    /// Mean displacement (the centre of oscillation), m.
+    offset: f64,
+    /// Coulomb shift (m) and μ0, μ1 of the last iteration.
+    r: f64,
+    mu0: f64,
+    mu1: f64,
+    iteration: u8,
+    /// This iteration's constants: Coulomb shift, Ω, noise mean square, half-cycle spacing in τ.
+    r_now: f64,
+    omega: f64,
+    noise: f64,
+    dtau: f64,
+    result: Option<Fitted>,
+}
+
+/// The decrement estimator from its regression `X_{n+1} = D X_n − r (1 + D)` on signed peaks.
+fn decrement(f: &Ols<2>, scale: f64) -> Option<Fitted> {
+    let (beta, d, gamma) = (f.intercept, f.coef[0], f.coef[1]);
+    if !(d > 0.0 && d < 2.0) {
+        return None;
+    }
+    let r = -beta / (1.0 + d);
+    let offset = gamma / (1.0 + d);
+    let l = -fit::ln(d) / PI;
+    let q = 1.0 + l * l;
+    let zeta = l / fit::sqrt(q);
+    let mu1 = 2.0 * zeta;
+    let mu0 = r * scale;
+    let dmu1_dd = 2.0 / (q * fit::sqrt(q)) * (-1.0 / (PI * d));
+    let g0 = [
+        -scale / (1.0 + d),
+        scale * beta / ((1.0 + d) * (1.0 + d)),
+        0.0,
+    ];
+    let g1 = [0.0, dmu1_dd, 0.0];
+    let estimate = estimate(mu0, mu1, f.var_of(&g0), f.var_of(&g1))?;
+    Some(Fitted {
+        estimate,
+        offset,
+        shape: EnvelopeShape::Straight,
+        curvature: 0.0,
+    })
+}
+
+#[derive(Clone, Debug)]
 struct Fitted {
     estimate: Estimate,
     /// Displacement of the centre of oscillation in the calibrated frame (m).
@@ -1351,6 +1570,62 @@ mod tests {
         let mean = vals.iter().sum::<f64>() / 6.0;
         let sd = (vals.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / 5.0).sqrt();
         assert!(se > 0.0 && sd < 5.0 * se, "scatter {sd:.2e} vs SE {se:.2e}");
+    }
+
+    /// The end-of-run analysis spread over steps of any size gives exactly the one-call result
+    /// (bit for bit, NaNs included), and a step never takes more rows than it is allowed.
+    #[test]
+    fn finish_in_steps_equals_finish_in_one_call() {
+        let bits = |r: &OnboardResult| {
+            let e = |e: &Estimate| [e.mu0, e.mu1, e.mu0_se, e.mu1_se].map(f32::to_bits);
+            (
+                (r.run_id, r.verdict, r.cycles, r.shape),
+                [
+                    r.frequency_hz,
+                    r.initial_amplitude_m,
+                    r.duration_s,
+                    r.curvature,
+                ]
+                .map(f32::to_bits),
+                [e(&r.best), e(&r.averaging), e(&r.decrement)],
+            )
+        };
+        // Ok, too few cycles, and a run refused mid-way (no motion at all).
+        let runs = [
+            (0.05, 0.005, 0.01, 1.0, 21),
+            (0.7, 0.2, 0.01, 1.0, 22),
+            (0.2, 0.0, 0.0011, 4.0, 23),
+        ];
+        for (load, mu0, mu1, noise, seed) in runs {
+            let mut p = Pipeline::new(&configure(load, 40.0)).unwrap();
+            let one = simulate_into(&mut p, load, mu0, mu1, noise, seed).result;
+            for rows in [1u32, 7, 64] {
+                let mut job = p.start_finish(7);
+                let mut steps = 0u32;
+                let stepped = loop {
+                    steps += 1;
+                    if let Some(r) = p.finish_step(&mut job, rows) {
+                        break r;
+                    }
+                    assert!(steps < 1_000_000, "never finished");
+                };
+                assert!(job.is_done());
+                assert_eq!(
+                    bits(&stepped),
+                    bits(&one),
+                    "{rows} rows per step: {stepped:?}"
+                );
+                // 35 passes over the half-cycles at most, so the steps are bounded accordingly
+                let half_cycles = p.half_cycles().len() as u32;
+                assert!(steps <= 35 * (half_cycles + 1) / rows + 36, "{steps} steps");
+            }
+        }
+        let quiet = Pipeline::new(&configure(0.2, 1.0)).unwrap();
+        let mut job = quiet.start_finish(1);
+        assert_eq!(
+            quiet.finish_step(&mut job, 1).map(|r| r.verdict),
+            Some(Verdict::NoOscillation)
+        );
     }
 
     #[test]

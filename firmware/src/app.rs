@@ -31,12 +31,13 @@
 //! is answered by `Error { Malformed }`. Nothing a host sends can make it panic.
 
 use crate::acquisition::{select, BlockBuilder};
-use crate::analysis::{ConfigError, Phase, Pipeline, StopReason};
+use crate::analysis::{ConfigError, Finish, Phase, Pipeline, StopReason};
 use crate::ecr::{count_to_volts, settling_samples, Ecr, RangeTrack};
 use crate::hal::{AnalogSample, Hardware, Lamps, MagnetDrive, ANALOG_CHANNELS};
 use crate::heater::{Heater, HeaterConfig};
 use crate::release::{check_interlocks, Debouncer, MagnetEvent, Release, ReleaseConfig};
 use crate::runstore::{Read, RunStore};
+use crate::wire::codec::Packer;
 use crate::wire::frame::MAX_FRAME;
 use crate::wire::{
     Channel, Configure, Decoder, DeviceError, DeviceInfo, DeviceMsg, EcrRangeChange, Encoder,
@@ -55,12 +56,26 @@ pub struct AppConfig {
     pub heater_period_us: u32,
     /// ECR update period outside runs, µs (during a run: once per block).
     pub ecr_period_us: u32,
-    /// Most run frames sent per poll (bounds the time a poll takes).
+    /// Most run frames sent per poll (bounds the time a poll takes: each is a copy out of the store
+    /// and one into the link, ~2k instructions on the M7 for a block; 4 per poll is 8000 frames/s,
+    /// far more than a run makes).
     pub frames_per_poll: u8,
     /// Most samples taken from the converter per poll (bounds the time a poll takes; the
-    /// converter's ring holds the rest, see `acquisition::RING_SCANS`). At least the samples of
-    /// one poll period at the highest rate, with room to catch up after a slow poll.
+    /// converter's ring holds the rest, see `acquisition::RING_SCANS`). Within that cap a poll takes
+    /// twice what arrives between two polls at the run's rate (see `poll_period_us`), at least 16:
+    /// a backlog is caught up over several polls rather than in one long one.
     pub samples_per_poll: u16,
+    /// How often the application is polled, µs (the board's ticker and the virtual rig's step:
+    /// 500 µs). A poll's work must stay within its budget (20,000 instructions on the M7, checked
+    /// by `cargo xtask target-test`): at 10 kS/s five channels a block's packing alone is ~45k
+    /// instructions, spread over 6 polls, between which the samples, the analysis and the frames
+    /// must fit; polls of 1 ms left no room for the live stream.
+    pub poll_period_us: u32,
+    /// Rows of the end-of-run regressions computed per poll (the fit is spread over polls; a row
+    /// is up to ~500 instructions on the M7, so 16 rows stay under 9k). The result of a run of
+    /// n half-cycles comes about 35 n / 16 polls after the pin stopped: 0.04 s for 20 half-cycles,
+    /// 4.5 s for the longest run the analysis takes (2048).
+    pub finish_rows_per_poll: u32,
 }
 
 impl AppConfig {
@@ -77,8 +92,10 @@ impl AppConfig {
             heater: HeaterConfig::default(),
             heater_period_us: 100_000,
             ecr_period_us: 100_000,
-            frames_per_poll: 32,
+            frames_per_poll: 4,
             samples_per_poll: 128,
+            poll_period_us: 500,
+            finish_rows_per_poll: 16,
         }
     }
 }
@@ -98,6 +115,26 @@ enum Want {
     End,
 }
 
+/// A run whose samples are all in, waiting for its end-of-run analysis (spread over polls): the
+/// run is still `Running` until its result and end frames exist.
+struct Ending {
+    /// The fit in progress (`None`: the run is not analysed).
+    job: Option<Finish>,
+    reason: EndReason,
+    blocks: u32,
+    samples: u32,
+}
+
+/// A completed block being packed (a channel per poll) and framed before it goes to the store.
+struct Packing {
+    seq: u32,
+    blk: SampleBlock,
+    packed: PackedBlock,
+    packer: Packer,
+    /// Every channel is packed: the next step frames and stores it.
+    packed_all: bool,
+}
+
 /// The application (see the module docs).
 pub struct App<'a> {
     cfg: AppConfig,
@@ -108,7 +145,19 @@ pub struct App<'a> {
     heater: Heater,
     ecr: Ecr,
     store: RunStore<'a>,
+    /// The on-board analysis: allocated once by [`App::new`] and reset in place for each run
+    /// (building one by value at run time puts its 43 KiB in the caller's stack frame);
+    /// `pipeline_ready` says whether it is configured for the current run (an unloaded run is not
+    /// analysed).
     pipeline: Option<Pipeline>,
+    pipeline_ready: bool,
+    ending: Option<Ending>,
+    /// The last completed blocks, on their way to the store, oldest first (see
+    /// [`App::pack_step`]): two, so that a block completing while the previous one is still being
+    /// packed (the last, partial block of a run; a poll late) waits rather than forcing it.
+    packing: heapless::Deque<Packing, 2>,
+    /// Blocks handed to `packing` since start-up (tells a poll whether it completed one).
+    blocks_completed: u32,
     builder: Option<BlockBuilder>,
     decoder: Decoder<HostMsg>,
     encoder: Encoder,
@@ -155,7 +204,11 @@ impl<'a> App<'a> {
             heater: Heater::new(cfg.heater),
             ecr: Ecr::new(),
             store,
-            pipeline: None,
+            pipeline: Pipeline::new(&Configure::real_rig(0.3)).ok(),
+            pipeline_ready: false,
+            ending: None,
+            packing: heapless::Deque::new(),
+            blocks_completed: 0,
             builder: None,
             decoder: Decoder::new(),
             encoder: Encoder::new(),
@@ -277,7 +330,7 @@ impl<'a> App<'a> {
                 None => {}
             }
         }
-        self.pump(hw);
+        self.pump(hw, self.cfg.frames_per_poll);
     }
 
     /// Runs everything that depends on time: magnet, heater, ECR, button, acquisition, sending.
@@ -338,9 +391,36 @@ impl<'a> App<'a> {
                 self.error(hw, code, None);
             }
         }
-        self.drain(hw);
+        // One poll does a bounded amount of work (on the M7 a budget of 20,000 instructions, checked
+        // by `cargo xtask target-test`): the samples of one poll period; then, if none of them
+        // completed a block, a step of the block being packed (a channel, ~9k on the M7, or its
+        // framing) and one frame to the link; if a block was completed (its hand-over is itself
+        // work), only the framing of a block already packed. With nothing to pack: more samples if
+        // a backlog waits (up to twice a poll's worth in all; never while a block waits to be
+        // packed, so that blocks cannot complete faster than they are packed), then frames to the
+        // link, then a part of the end-of-run fit.
+        let (arrivals, limit) = (self.samples_arriving(), self.samples_per_poll());
+        let blocks = self.blocks_completed;
+        let mut behind = self.drain(hw, arrivals);
         self.store.service(hw);
-        self.pump(hw);
+        let completed = self.blocks_completed != blocks;
+        let stepped = if completed {
+            self.packing.front().is_some_and(|p| p.packed_all) && self.pack_step()
+        } else {
+            self.pack_step()
+        };
+        if stepped {
+            // One frame rides along, so that the live stream keeps up with the blocks however busy
+            // the packing is (at 20 kS/s it packs in six polls of every 6.4).
+            self.pump(hw, 1);
+        } else if self.packing.is_empty() {
+            if behind {
+                behind = self.drain(hw, limit.saturating_sub(arrivals));
+            }
+            if !behind && self.pump(hw, self.cfg.frames_per_poll) == 0 {
+                self.analyse_step();
+            }
+        }
         let lamps = self.lamps(now);
         hw.set_lamps(lamps);
     }
@@ -491,15 +571,11 @@ impl<'a> App<'a> {
         }
         // What the on-board analysis cannot take is refused now rather than discovered after the run,
         // except an unloaded run (load 0: the apparatus alone), which runs without on-board analysis.
+        // (No pipeline is built here, even as a fallback: its 43 KiB would be in this call's stack
+        // frame. App::new allocates the one pipeline.)
         let refused = match &mut self.pipeline {
             Some(p) => p.reset(&c).err(),
-            None => match Pipeline::new(&c) {
-                Ok(p) => {
-                    self.pipeline = Some(p);
-                    None
-                }
-                Err(e) => Some(e),
-            },
+            None => None,
         };
         match refused {
             None | Some(ConfigError::Load) => {}
@@ -518,14 +594,10 @@ impl<'a> App<'a> {
             (_, Some(c)) => c,
         };
         self.release.hold(hw, self.now_us);
-        match &mut self.pipeline {
-            Some(p) => {
-                if p.reset(&cfg).is_err() {
-                    self.pipeline = None;
-                }
-            }
-            None => self.pipeline = Pipeline::new(&cfg).ok(),
-        }
+        self.pipeline_ready = match &mut self.pipeline {
+            Some(p) => p.reset(&cfg).is_ok(),
+            None => false,
+        };
         hw.adc_stop();
         // A converter that does not start is caught by the release interlock (NotSampling).
         self.clock = hw.adc_start(cfg.sample_rate_hz);
@@ -555,7 +627,7 @@ impl<'a> App<'a> {
             return Err(ErrorCode::Interlock(Interlock::NotSampling));
         };
         // Samples converted before this instant belong to the hold.
-        self.drain(hw);
+        self.drain(hw, self.cfg.samples_per_poll as usize);
         if self.state != RigState::Armed {
             return Err(ErrorCode::Interlock(Interlock::NotArmed));
         }
@@ -563,7 +635,7 @@ impl<'a> App<'a> {
         // The run's sample 0 is the first conversion to begin after the magnet lets go.
         self.release.release(hw, now);
         self.run_base = hw.adc_next_index();
-        if let Some(p) = &mut self.pipeline {
+        if let Some(p) = self.pipeline.as_mut().filter(|_| self.pipeline_ready) {
             p.release();
         }
         self.run_id = self.run_id.wrapping_add(1).max(1);
@@ -617,6 +689,8 @@ impl<'a> App<'a> {
         if self.events_free() == 0 {
             return false;
         }
+        // The block being packed goes first: records stay in the order they happened.
+        self.finish_packing();
         let seq = self.next_seq();
         match self.encoder.encode(seq, &event, &mut self.out) {
             Ok(frame) => self.store.push_event(frame),
@@ -629,37 +703,53 @@ impl<'a> App<'a> {
         MAX_RUN_EVENTS.saturating_sub(self.store.events() as usize)
     }
 
-    /// Moves converted samples to the hold capture or to the run, at most
-    /// [`AppConfig::samples_per_poll`] per call (the converter's ring holds the rest until the next
-    /// poll; a reader that falls a whole ring behind loses samples, which the indices then show).
-    fn drain<H: Hardware>(&mut self, hw: &mut H) {
+    /// Samples arriving per poll period at the run's rate (at least 8).
+    fn samples_arriving(&self) -> usize {
+        let rate = self.config.map_or(0, |c| c.sample_rate_hz) as u64;
+        let per_poll = rate * self.cfg.poll_period_us as u64 / 1_000_000;
+        (per_poll.max(8) as usize).min(self.cfg.samples_per_poll as usize)
+    }
+
+    /// Most samples one poll takes (see [`AppConfig::samples_per_poll`]).
+    pub fn samples_per_poll(&self) -> usize {
+        (2 * self.samples_arriving())
+            .max(16)
+            .min(self.cfg.samples_per_poll as usize)
+    }
+
+    /// Moves converted samples to the hold capture or to the run, at most `limit` (the converter's
+    /// ring holds the rest until the next poll; a reader that falls a whole ring behind loses
+    /// samples, which the indices then show). Returns true when it stopped at that limit (samples
+    /// may still be waiting).
+    fn drain<H: Hardware>(&mut self, hw: &mut H, limit: usize) -> bool {
         const CHUNK: usize = 32;
         let mut buf = [[0u16; ANALOG_CHANNELS]; CHUNK];
-        let mut budget = self.cfg.samples_per_poll as usize;
+        let mut budget = limit;
         while budget > 0 {
-            if !matches!(self.state, RigState::Armed | RigState::Running) {
-                return;
+            if !matches!(self.state, RigState::Armed | RigState::Running) || self.ending.is_some() {
+                return false;
             }
             let want = budget.min(CHUNK);
             let batch = hw.adc_read(&mut buf[..want]);
             if batch.first > self.next_index {
                 self.lost(hw, self.next_index, batch.first);
                 if !matches!(self.state, RigState::Armed | RigState::Running) {
-                    return;
+                    return false;
                 }
             }
             self.next_index = self.next_index.max(batch.end());
             let n = batch.len.min(want);
             for (k, s) in buf.iter().take(n).enumerate() {
                 if self.take_sample(hw, s, batch.first + k as u64) {
-                    return;
+                    return false;
                 }
             }
             budget -= n;
             if n < want {
-                return;
+                return false;
             }
         }
+        true
     }
 
     /// Stream samples `from .. to` were lost by the acquisition. In a run: the block in progress is
@@ -687,7 +777,7 @@ impl<'a> App<'a> {
         if let Some(blk) = self.builder.as_mut().and_then(|b| b.gap(end)) {
             self.store_block(hw, blk);
         }
-        if let Some(p) = &mut self.pipeline {
+        if let Some(p) = self.pipeline.as_mut().filter(|_| self.pipeline_ready) {
             p.gap(count);
         }
         let gap = Gap {
@@ -705,10 +795,12 @@ impl<'a> App<'a> {
     /// One sample, with its index in the converter's stream; returns true when it ended the run.
     fn take_sample<H: Hardware>(&mut self, hw: &mut H, s: &AnalogSample, index: u64) -> bool {
         let temp = self.heater.temp_c();
-        let Some(cfg) = self.config else { return false };
+        let Some(cfg) = &self.config else {
+            return false;
+        };
         match self.state {
             RigState::Armed => {
-                if let Some(p) = &mut self.pipeline {
+                if let Some(p) = self.pipeline.as_mut().filter(|_| self.pipeline_ready) {
                     let mut sel = [0u16; CHANNELS];
                     let n = select(
                         cfg.channels,
@@ -736,15 +828,21 @@ impl<'a> App<'a> {
                 };
                 let mut sel = [0u16; CHANNELS];
                 let n = b.select(s, temp, &mut sel);
-                let block = b.push(s, temp, i);
-                let phase = self.pipeline.as_mut().map(|p| p.push(&sel[..n]));
+                let block = b.push_selected(&sel[..n], temp, i);
+                let max_samples = cfg.max_samples();
+                let ready = self.pipeline_ready;
+                let phase = self
+                    .pipeline
+                    .as_mut()
+                    .filter(|_| ready)
+                    .map(|p| p.push(&sel[..n]));
                 if let Some(blk) = block {
                     self.store_block(hw, blk);
                 }
                 let reason = match phase {
                     Some(Phase::Finished(StopReason::MaxDuration)) => Some(EndReason::MaxDuration),
                     Some(Phase::Finished(_)) => Some(EndReason::Stopped),
-                    _ if i.saturating_add(1) >= cfg.max_samples() => Some(EndReason::MaxDuration),
+                    _ if i.saturating_add(1) >= max_samples => Some(EndReason::MaxDuration),
                     _ => None,
                 };
                 if let Some(r) = reason {
@@ -818,21 +916,62 @@ impl<'a> App<'a> {
             None => f32::NAN,
         };
         blk.temp_c = self.heater.temp_c();
+        // Both places taken: the oldest is packed and stored now, whatever it costs.
+        if self.packing.is_full() {
+            while self.pack_step() && self.packing.is_full() {}
+        }
         let seq = self.next_seq();
+        self.blocks_completed = self.blocks_completed.wrapping_add(1);
         // Cannot fail for a block the builder made (consistent, at most BLOCK_LEN samples).
-        if let Ok(p) = PackedBlock::pack(&blk) {
-            let k = p.block;
-            if let Ok(frame) = self
-                .encoder
-                .encode(seq, &DeviceMsg::Packed(p), &mut self.out)
+        if let Ok(packed) = PackedBlock::start(&blk) {
+            let _ = self.packing.push_back(Packing {
+                seq,
+                blk,
+                packed,
+                packer: Packer::new(),
+                packed_all: false,
+            });
+        }
+    }
+
+    /// Packs one channel of the block on its way to the store, or, once all are, frames it and
+    /// stores it. False when there was nothing to do.
+    fn pack_step(&mut self) -> bool {
+        let Some(p) = self.packing.front_mut() else {
+            return false;
+        };
+        if !p.packed_all {
+            match p.packed.pack_step(&p.blk, &mut p.packer) {
+                Ok(done) => p.packed_all = done,
+                // Cannot happen for a block the builder made; dropped rather than stalling.
+                Err(_) => {
+                    self.packing.pop_front();
+                }
+            }
+            return true;
+        }
+        if let Some(p) = self.packing.pop_front() {
+            let k = p.packed.block;
+            if let Ok(frame) =
+                self.encoder
+                    .encode(p.seq, &DeviceMsg::Packed(p.packed), &mut self.out)
             {
                 self.store.push_block(k, frame);
             }
         }
+        true
     }
 
+    /// Packs and stores the blocks on their way to the store now, whatever it costs (another record
+    /// must follow them: an event, the end of the run).
+    fn finish_packing(&mut self) {
+        while self.pack_step() {}
+    }
+
+    /// Ends the run: no sample is taken after this; the result and end frames follow once the
+    /// end-of-run analysis is done ([`App::analyse_step`], a bounded part of it per poll).
     fn end_run<H: Hardware>(&mut self, hw: &mut H, reason: EndReason) {
-        if self.state != RigState::Running {
+        if self.state != RigState::Running || self.ending.is_some() {
             return;
         }
         if let Some(blk) = self.builder.as_mut().and_then(BlockBuilder::flush) {
@@ -843,17 +982,52 @@ impl<'a> App<'a> {
             .builder
             .as_ref()
             .map_or((0, 0), |b| (b.blocks(), b.samples()));
-        let mut result = match &self.pipeline {
-            Some(p) => p.finish(self.run_id),
-            None => unanalysed(
-                self.run_id,
-                samples,
-                self.config.map_or(1, |c| c.sample_rate_hz),
-            ),
+        // The result and end frames wait for the last blocks to be packed and, in an analysed
+        // run, for the fit: both spread over the next polls.
+        let job = self
+            .pipeline
+            .as_ref()
+            .filter(|_| self.pipeline_ready)
+            .map(|p| p.start_finish(self.run_id));
+        self.ending = Some(Ending {
+            job,
+            reason,
+            blocks,
+            samples,
+        });
+        info!("run {} over", self.run_id);
+    }
+
+    /// Advances the end-of-run analysis, if one is pending, by a bounded number of rows; once it
+    /// is done and the last block is stored, stores the result and end frames.
+    fn analyse_step(&mut self) {
+        if !self.packing.is_empty() {
+            return;
+        }
+        let rate = self.config.map_or(1, |c| c.sample_rate_hz);
+        let Some(e) = &mut self.ending else { return };
+        let result = match (self.pipeline.as_ref(), &mut e.job) {
+            (Some(p), Some(job)) => p.finish_step(job, self.cfg.finish_rows_per_poll),
+            _ => Some(unanalysed(self.run_id, e.samples, rate)),
         };
+        let Some(result) = result else { return };
+        if let Some(e) = self.ending.take() {
+            self.complete_run(result, e.reason, e.blocks, e.samples);
+        }
+    }
+
+    /// Stores the result and end frames of the run; it is finished.
+    fn complete_run(
+        &mut self,
+        mut result: OnboardResult,
+        reason: EndReason,
+        blocks: u32,
+        samples: u32,
+    ) {
         if reason == EndReason::Aborted {
             result.verdict = Verdict::Aborted;
         }
+        self.finish_packing();
         let seq = self.next_seq();
         if let Ok(frame) = self
             .encoder
@@ -882,10 +1056,11 @@ impl<'a> App<'a> {
 
     /// Sends run frames from the store while the link takes them: first the blocks a
     /// [`HostMsg::PullBlocks`] asked for, then the stream (live, or a [`HostMsg::Pull`]). At most
-    /// `frames_per_poll` records are looked at per call; every frame is sent as stored, so this is
-    /// copying only.
-    fn pump<H: Hardware>(&mut self, hw: &mut H) {
-        for _ in 0..self.cfg.frames_per_poll {
+    /// `frames` records are looked at per call; every frame is sent as stored, so this is copying
+    /// only. Returns how many frames the link took.
+    fn pump<H: Hardware>(&mut self, hw: &mut H, frames: u8) -> u8 {
+        let mut sent = 0;
+        for _ in 0..frames {
             if let Some((k, end)) = self.range {
                 if k >= end || k >= self.store.blocks() {
                     self.range = None;
@@ -898,21 +1073,22 @@ impl<'a> App<'a> {
                 match self.store.read(hw, pos, &mut self.out) {
                     Read::Frame { len, .. } => {
                         if !hw.send_frame(&self.out[..len]) {
-                            return;
+                            return sent;
                         }
+                        sent += 1;
                         self.range = Some((k + 1, end));
                     }
-                    Read::Busy => return,
+                    Read::Busy => return sent,
                     Read::Lost { .. } | Read::End => self.range = Some((k + 1, end)),
                 }
                 continue;
             }
-            let Some(want) = self.want else { return };
+            let Some(want) = self.want else { return sent };
             let (len, next) = match want {
                 Want::Header { from_block } => {
                     let Some(h) = self.store.header() else {
                         self.want = None;
-                        return;
+                        return sent;
                     };
                     self.out[..h.len()].copy_from_slice(h);
                     (h.len(), Some(Want::Blocks(from_block)))
@@ -920,13 +1096,13 @@ impl<'a> App<'a> {
                 Want::Blocks(k) => {
                     match self.store.start_of_block(hw, k) {
                         Some(pos) => self.want = Some(Want::From(pos)),
-                        None => return,
+                        None => return sent,
                     }
                     continue;
                 }
                 Want::From(pos) => match self.store.read(hw, pos, &mut self.out) {
                     Read::Frame { len, next } => (len, Some(Want::From(next))),
-                    Read::Busy => return,
+                    Read::Busy => return sent,
                     Read::Lost { next } => {
                         self.want = Some(Want::From(next));
                         continue;
@@ -934,28 +1110,34 @@ impl<'a> App<'a> {
                     Read::End => {
                         if self.store.result().is_none() {
                             // More may come (a run in progress).
-                            return;
+                            return sent;
                         }
                         self.want = Some(Want::Result);
                         continue;
                     }
                 },
                 Want::Result => {
-                    let Some(r) = self.store.result() else { return };
+                    let Some(r) = self.store.result() else {
+                        return sent;
+                    };
                     self.out[..r.len()].copy_from_slice(r);
                     (r.len(), Some(Want::End))
                 }
                 Want::End => {
-                    let Some(e) = self.store.end() else { return };
+                    let Some(e) = self.store.end() else {
+                        return sent;
+                    };
                     self.out[..e.len()].copy_from_slice(e);
                     (e.len(), None)
                 }
             };
             if !hw.send_frame(&self.out[..len]) {
-                return;
+                return sent;
             }
+            sent += 1;
             self.want = next;
         }
+        sent
     }
 }
 

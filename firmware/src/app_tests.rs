@@ -318,10 +318,11 @@ impl Bench {
         self.app.poll(&mut self.hw, now);
     }
 
-    /// Advances time in 1 ms polls.
+    /// Advances time in polls of the application's period (500 µs).
     fn run_for(&mut self, ms: u64) {
-        for _ in 0..ms {
-            self.hw.now_us += 1000;
+        let period = self.app.cfg.poll_period_us as u64;
+        for _ in 0..ms * 1000 / period {
+            self.hw.now_us += period;
             self.poll();
         }
     }
@@ -549,7 +550,8 @@ fn button_releases_only_when_armed_and_is_debounced() {
     assert!(b.hw.released_at.is_some());
 }
 
-/// Runs to the end and returns all frames sent.
+/// Runs to the end (the run's end frame sent: frames follow the state by a few polls) and
+/// returns all frames sent.
 fn full_run(b: &mut Bench) -> Vec<(Vec<u8>, Frame<DeviceMsg>)> {
     b.ready();
     b.take();
@@ -558,7 +560,10 @@ fn full_run(b: &mut Bench) -> Vec<(Vec<u8>, Frame<DeviceMsg>)> {
     for _ in 0..3000 {
         b.run_for(1);
         frames.extend(b.take());
-        if b.app.state() == RigState::Finished {
+        if frames
+            .iter()
+            .any(|f| matches!(f.1.msg, DeviceMsg::RunEnded(_)))
+        {
             break;
         }
     }
@@ -745,25 +750,36 @@ fn a_reader_stall_is_a_gap_frame_with_the_exact_missing_samples_and_the_run_goes
 #[test]
 fn a_poll_takes_a_bounded_number_of_samples_and_a_backlog_drains_over_the_next_polls() {
     let mut b = Bench::new();
-    b.hw.stop_s = 1.0;
+    b.hw.stop_s = 3.0;
     b.ready();
     assert_eq!(b.command(HostMsg::Release).0, Ok(()));
     b.run_for(50);
-    // 150 ms without reading: 1500 samples wait in the 2048-scan ring (none lost).
-    b.hw.adc.stall_reader(b.hw.now_us + 150_000);
-    b.run_for(150);
+    // 100 ms without reading: 1000 samples wait in the 2048-scan ring (none lost).
+    b.hw.adc.stall_reader(b.hw.now_us + 100_000);
+    b.run_for(100);
     let taken = |b: &Bench| b.app.builder.as_ref().unwrap().samples();
-    let before = taken(&b);
-    b.run_for(1);
-    let per_poll = b.app.cfg.samples_per_poll as u32;
+    let per_poll = b.app.samples_per_poll() as u32;
     assert_eq!(
-        taken(&b) - before,
-        per_poll,
-        "one poll takes at most samples_per_poll"
+        per_poll, 16,
+        "twice the 5 samples (at least 8) that arrive per 500 µs poll"
     );
-    // Taking 128 a poll while 10 arrive, the backlog is gone within 13 polls, nothing lost.
-    b.run_for(14);
-    assert_eq!(b.app.next_index, b.hw.adc.next_index());
+    // Each poll takes what arrived and, when no block waits to be packed, up to that many again:
+    // the backlog drains over the next polls (packing a block takes 6 of the 12.8 polls its samples
+    // span), and nothing is lost.
+    let mut polls = 0;
+    while b.app.next_index < b.hw.adc.next_index() && polls < 2000 {
+        let before = taken(&b);
+        b.hw.now_us += 500;
+        b.poll();
+        let t = taken(&b) - before;
+        assert!((5..=per_poll).contains(&t), "a poll took {t} samples");
+        polls += 1;
+    }
+    assert_eq!(b.app.next_index, b.hw.adc.next_index(), "caught up");
+    assert!(
+        polls > 100,
+        "{polls} polls: faster than the packing allows?"
+    );
     let msgs = b.msgs();
     assert!(!msgs.iter().any(|m| matches!(m, DeviceMsg::Gap(_))));
     assert_eq!(b.app.status().overruns, 0);
@@ -1389,4 +1405,43 @@ fn lamps_show_idle_armed_running_and_fault() {
         "fault: red blinking {reds:?}"
     );
     assert!(!b.hw.lamps.green);
+}
+
+/// The end-of-run fit is spread over polls: once the pin has stopped the run stays `Running`
+/// (no new run can be configured or armed) until the result and end frames exist, some polls
+/// later, and the result is the pipeline's one-call result.
+#[test]
+fn the_end_of_run_fit_is_spread_over_polls() {
+    let mut b = Bench::new();
+    b.app.cfg.finish_rows_per_poll = 4;
+    b.ready();
+    b.send(HostMsg::Release);
+    let mut analysing_polls = 0;
+    for _ in 0..3000 {
+        b.run_for(1);
+        if b.app.ending.is_some() {
+            analysing_polls += 1;
+            assert_eq!(b.app.state(), RigState::Running);
+            if analysing_polls == 2 {
+                let (r, _) = b.command(HostMsg::Configure(Configure::real_rig(0.3)));
+                assert_eq!(r, Err(ErrorCode::Busy));
+                assert!(b.app.store().end().is_none());
+            }
+        }
+        if b.app.state() == RigState::Finished {
+            break;
+        }
+    }
+    let p = b.app.pipeline.as_ref().unwrap();
+    let half_cycles = p.half_cycles().len();
+    assert!(half_cycles > 10, "{half_cycles}");
+    // 4 rows per poll over ~35 passes of the half-cycles
+    assert!(analysing_polls > half_cycles, "{analysing_polls} polls");
+    let one_call = p.finish(b.app.run_id());
+    let stored = b
+        .app
+        .store()
+        .result()
+        .map(|f| decode_one::<DeviceMsg>(f).unwrap().msg);
+    assert_eq!(stored, Some(DeviceMsg::Result(one_call)));
 }

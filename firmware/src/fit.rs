@@ -83,6 +83,25 @@ pub fn cos(phi: f64) -> f64 {
     sum
 }
 
+/// Sine for |φ| ≤ π (Taylor series to full precision); the argument is clamped to that range.
+pub fn sin(phi: f64) -> f64 {
+    let p = if phi.is_nan() {
+        0.0
+    } else {
+        phi.clamp(-core::f64::consts::PI, core::f64::consts::PI)
+    };
+    let p2 = p * p;
+    let mut term = p;
+    let mut sum = p;
+    let mut k = 1.0;
+    for _ in 0..16 {
+        k += 2.0;
+        term *= -p2 / ((k - 1.0) * k);
+        sum += term;
+    }
+    sum
+}
+
 /// Ordinary least squares `y = b + Σ c_i x_i` with `P` regressors plus an intercept, computed in
 /// centred form (two passes over the data) for conditioning.
 #[derive(Clone, Copy, Debug)]
@@ -117,72 +136,15 @@ impl<const P: usize> Ols<P> {
     where
         I: Iterator<Item = ([f64; P], f64, f64)> + Clone,
     {
-        let rows = rows.filter(|r| r.2.is_finite() && r.2 > 0.0);
-        let mut n = 0usize;
-        let mut sw = 0.0f64;
-        let mut mx = [0.0f64; P];
-        let mut my = 0.0f64;
-        for (x, y, w) in rows.clone() {
-            n += 1;
-            sw += w;
-            for (m, xi) in mx.iter_mut().zip(x.iter()) {
-                *m += w * xi;
+        let mut passes = OlsPasses::new();
+        loop {
+            for (x, y, w) in rows.clone() {
+                passes.row(x, y, w);
             }
-            my += w * y;
-        }
-        if n < P + 2 || sw.is_nan() || sw <= 0.0 {
-            return None;
-        }
-        for m in mx.iter_mut() {
-            *m /= sw;
-        }
-        my /= sw;
-        // weights normalised to a mean of 1
-        let wn = n as f64 / sw;
-        let mut sxx = [[0.0f64; P]; P];
-        let mut sxy = [0.0f64; P];
-        for (x, y, w) in rows.clone() {
-            let w = w * wn;
-            let mut d = [0.0f64; P];
-            for ((di, xi), m) in d.iter_mut().zip(x.iter()).zip(mx.iter()) {
-                *di = xi - m;
-            }
-            let dy = y - my;
-            for (i, row) in sxx.iter_mut().enumerate() {
-                let di = w * d.get(i).copied().unwrap_or(0.0);
-                for (s, dj) in row.iter_mut().zip(d.iter()) {
-                    *s += di * dj;
-                }
-                if let Some(s) = sxy.get_mut(i) {
-                    *s += di * dy;
-                }
+            if let Pass::Done(fit) = passes.end_pass() {
+                return fit;
             }
         }
-        let inv = invert(sxx)?;
-        let mut coef = [0.0f64; P];
-        for (c, row) in coef.iter_mut().zip(inv.iter()) {
-            *c = row.iter().zip(sxy.iter()).map(|(a, b)| a * b).sum();
-        }
-        let intercept = my - coef.iter().zip(mx.iter()).map(|(c, m)| c * m).sum::<f64>();
-        let mut rss = 0.0;
-        for (x, y, w) in rows {
-            let pred = intercept + coef.iter().zip(x.iter()).map(|(c, xi)| c * xi).sum::<f64>();
-            rss += w * wn * (y - pred) * (y - pred);
-        }
-        let sigma2 = rss / (n - P - 1) as f64;
-        let fit = Self {
-            n,
-            intercept,
-            coef,
-            mean_x: mx,
-            inv,
-            sigma2,
-        };
-        let finite = intercept.is_finite()
-            && sigma2.is_finite()
-            && coef.iter().all(|c| c.is_finite())
-            && inv.iter().flatten().all(|c| c.is_finite());
-        finite.then_some(fit)
     }
 
     /// Covariance of parameters `i` and `j`, numbered 0 = intercept, 1.. = slopes.
@@ -222,6 +184,168 @@ impl<const P: usize> Ols<P> {
             }
         }
         v
+    }
+}
+
+/// What [`OlsPasses::end_pass`] says.
+#[derive(Clone, Copy, Debug)]
+pub enum Pass<const P: usize> {
+    /// Feed the same rows again, in the same order.
+    Again,
+    /// The fit ([`Ols::fit_weighted`]'s answer).
+    Done(Option<Ols<P>>),
+}
+
+/// [`Ols::fit_weighted`] one row at a time: the same rows are fed three times (means, centred
+/// sums, residuals), each pass closed by [`OlsPasses::end_pass`]. The arithmetic is the very same,
+/// so the fit is identical bit for bit; a caller can spread the rows over as many calls as it likes
+/// (the end-of-run analysis does, so that no poll of the application runs long).
+#[derive(Clone, Copy, Debug)]
+pub struct OlsPasses<const P: usize> {
+    pass: u8,
+    n: usize,
+    sw: f64,
+    mx: [f64; P],
+    my: f64,
+    wn: f64,
+    sxx: [[f64; P]; P],
+    sxy: [f64; P],
+    inv: [[f64; P]; P],
+    coef: [f64; P],
+    intercept: f64,
+    rss: f64,
+}
+
+impl<const P: usize> Default for OlsPasses<P> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const P: usize> OlsPasses<P> {
+    pub const fn new() -> Self {
+        OlsPasses {
+            pass: 0,
+            n: 0,
+            sw: 0.0,
+            mx: [0.0; P],
+            my: 0.0,
+            wn: 0.0,
+            sxx: [[0.0; P]; P],
+            sxy: [0.0; P],
+            inv: [[0.0; P]; P],
+            coef: [0.0; P],
+            intercept: 0.0,
+            rss: 0.0,
+        }
+    }
+
+    /// Which pass is being fed (0, 1, 2; 3 once done).
+    pub fn pass(&self) -> u8 {
+        self.pass
+    }
+
+    /// Feeds one row to the current pass (ignored when its weight is not finite and positive).
+    pub fn row(&mut self, x: [f64; P], y: f64, w: f64) {
+        if !(w.is_finite() && w > 0.0) {
+            return;
+        }
+        match self.pass {
+            0 => {
+                self.n += 1;
+                self.sw += w;
+                for (m, xi) in self.mx.iter_mut().zip(x.iter()) {
+                    *m += w * xi;
+                }
+                self.my += w * y;
+            }
+            1 => {
+                let w = w * self.wn;
+                let mut d = [0.0f64; P];
+                for ((di, xi), m) in d.iter_mut().zip(x.iter()).zip(self.mx.iter()) {
+                    *di = xi - m;
+                }
+                let dy = y - self.my;
+                for (i, row) in self.sxx.iter_mut().enumerate() {
+                    let di = w * d.get(i).copied().unwrap_or(0.0);
+                    for (s, dj) in row.iter_mut().zip(d.iter()) {
+                        *s += di * dj;
+                    }
+                    if let Some(s) = self.sxy.get_mut(i) {
+                        *s += di * dy;
+                    }
+                }
+            }
+            2 => {
+                let pred = self.intercept
+                    + self
+                        .coef
+                        .iter()
+                        .zip(x.iter())
+                        .map(|(c, xi)| c * xi)
+                        .sum::<f64>();
+                self.rss += w * self.wn * (y - pred) * (y - pred);
+            }
+            _ => {}
+        }
+    }
+
+    /// Closes the current pass.
+    pub fn end_pass(&mut self) -> Pass<P> {
+        self.pass = self.pass.saturating_add(1);
+        match self.pass {
+            1 => {
+                if self.n < P + 2 || self.sw.is_nan() || self.sw <= 0.0 {
+                    return self.fail();
+                }
+                for m in self.mx.iter_mut() {
+                    *m /= self.sw;
+                }
+                self.my /= self.sw;
+                // weights normalised to a mean of 1
+                self.wn = self.n as f64 / self.sw;
+                Pass::Again
+            }
+            2 => {
+                let Some(inv) = invert(self.sxx) else {
+                    return self.fail();
+                };
+                self.inv = inv;
+                for (c, row) in self.coef.iter_mut().zip(inv.iter()) {
+                    *c = row.iter().zip(self.sxy.iter()).map(|(a, b)| a * b).sum();
+                }
+                self.intercept = self.my
+                    - self
+                        .coef
+                        .iter()
+                        .zip(self.mx.iter())
+                        .map(|(c, m)| c * m)
+                        .sum::<f64>();
+                Pass::Again
+            }
+            3 => {
+                let sigma2 = self.rss / (self.n - P - 1) as f64;
+                let fit = Ols {
+                    n: self.n,
+                    intercept: self.intercept,
+                    coef: self.coef,
+                    mean_x: self.mx,
+                    inv: self.inv,
+                    sigma2,
+                };
+                let finite = fit.intercept.is_finite()
+                    && sigma2.is_finite()
+                    && fit.coef.iter().all(|c| c.is_finite())
+                    && fit.inv.iter().flatten().all(|c| c.is_finite());
+                Pass::Done(finite.then_some(fit))
+            }
+            _ => self.fail(),
+        }
+    }
+
+    fn fail(&mut self) -> Pass<P> {
+        self.pass = 3;
+        Pass::Done(None)
     }
 }
 
@@ -323,6 +447,7 @@ mod tests {
         for i in -30..=30 {
             let p = i as f64 * 0.1;
             assert!((cos(p) - p.cos()).abs() < 1e-15, "cos {p}");
+            assert!((sin(p) - p.sin()).abs() < 1e-15, "sin {p}");
         }
     }
 

@@ -6,7 +6,8 @@
 pub mod cmd;
 pub mod exit;
 pub mod link;
-mod load;
+pub mod load;
+pub mod out;
 
 pub use load::{load_for_fit, load_record, Holes, LONGEST_CLEAN_STRETCH_FLAG};
 

@@ -5,9 +5,16 @@ use clap::{Parser, Subcommand};
 /// disagreements between model and measurement.
 ///
 /// Every command works without hardware against the simulated rig; start with `tribo demo`.
+///
+/// Exit status: 0 done; 1 error (the message says what to do next); 2 usage (a wrong command
+/// line); 3 finished but incomplete (a record that cannot be analysed, a fit that did not converge,
+/// a run with missing data): everything usable was printed or kept.
 #[derive(Parser)]
 #[command(name = "tribo", version, about, long_about)]
 struct Cli {
+    /// No progress bars or progress messages (results, warnings and errors are still printed).
+    #[arg(short, long, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -37,8 +44,10 @@ enum Command {
     /// Simulate the rig's free response from a friction law and write a record (CSV).
     Sim(tribo::cmd::sim::Args),
     /// Fit a friction law (coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre) to a record.
+    #[command(long_about = tribo::cmd::fit::LONG_ABOUT)]
     Fit(tribo::cmd::fit::Args),
     /// Find what a friction law misses in a record, add it, and show the gap shrink.
+    #[command(long_about = tribo::cmd::explain::LONG_ABOUT)]
     Explain(tribo::cmd::explain::Args),
     /// Figures (SVG/PNG) and a self-contained HTML page of a run, a record or a campaign.
     Report(tribo::cmd::report::Args),
@@ -47,9 +56,13 @@ enum Command {
 /// Errors are printed as the chain of their causes, one per line, without a backtrace (which
 /// `anyhow` would add whenever `RUST_BACKTRACE` is set): a lab user needs what went wrong and what to
 /// do next, not the program's stack.
+///
+/// A closed standard output (`tribo runs | head -1`) ends the program quietly with status 0.
 fn main() -> std::process::ExitCode {
+    tribo::out::install_pipe_hook();
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) if tribo::out::is_broken_pipe(&e) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             let status = tribo::exit::status_of(&e);
             let label = match status {
@@ -66,20 +79,23 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    let quiet = cli.quiet;
     match cli.command {
         Command::Onboard(a) => tribo::cmd::onboard::run(a),
         Command::Devices(a) => tribo::cmd::devices::run(a),
-        Command::Run(a) => tribo::cmd::run::run(a),
-        Command::Pull(a) => tribo::cmd::pull::run(a),
-        Command::Campaign(a) => tribo::cmd::campaign::run(a),
+        Command::Run(a) => tribo::cmd::run::run(tribo::cmd::run::Args { quiet, ..a }),
+        Command::Pull(a) => tribo::cmd::pull::run(tribo::cmd::pull::Args { quiet, ..a }),
+        Command::Campaign(a) => {
+            tribo::cmd::campaign::run(tribo::cmd::campaign::Args { quiet, ..a })
+        }
         Command::Rig(a) => tribo::cmd::rig::run(a),
         Command::Replay(a) => tribo::cmd::replay::run(a),
-        Command::Demo(a) => tribo::cmd::demo::run(a),
-        Command::Runs(a) => tribo::cmd::runs::run(a),
+        Command::Demo(a) => tribo::cmd::demo::run(tribo::cmd::demo::Args { quiet, ..a }),
+        Command::Runs(a) => tribo::cmd::runs::run(tribo::cmd::runs::Args { quiet, ..a }),
         Command::Table(a) => tribo::cmd::table::run(a),
-        Command::Sim(a) => tribo::cmd::sim::run(a),
+        Command::Sim(a) => tribo::cmd::sim::run(tribo::cmd::sim::Args { quiet, ..a }),
         Command::Fit(a) => tribo::cmd::fit::run(a),
-        Command::Explain(a) => tribo::cmd::explain::run(a),
+        Command::Explain(a) => tribo::cmd::explain::run(tribo::cmd::explain::Args { quiet, ..a }),
         Command::Report(a) => tribo::cmd::report::run(a),
     }
 }

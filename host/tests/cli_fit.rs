@@ -9,27 +9,6 @@ fn tribo(args: &[&str]) -> std::process::Output {
         .expect("run tribo")
 }
 
-fn number_array(json: &str, key: &str) -> Vec<f64> {
-    let start = json
-        .find(&format!("\"{key}\": ["))
-        .unwrap_or_else(|| panic!("no {key} in {json}"));
-    let rest = &json[start + key.len() + 5..];
-    let end = rest.find(']').unwrap();
-    rest[..end]
-        .split(',')
-        .map(|s| s.trim().parse().unwrap())
-        .collect()
-}
-
-fn number(json: &str, key: &str) -> f64 {
-    let start = json
-        .find(&format!("\"{key}\": "))
-        .unwrap_or_else(|| panic!("no {key} in {json}"));
-    let rest = &json[start + key.len() + 4..];
-    let end = rest.find([',', '}']).unwrap();
-    rest[..end].trim().parse().unwrap()
-}
-
 #[test]
 fn sim_then_fit_json_recovers_the_constants() {
     let dir = std::env::temp_dir().join(format!("tribo-cli-fit-{}", std::process::id()));
@@ -67,21 +46,47 @@ fn sim_then_fit_json_recovers_the_constants() {
     let json = String::from_utf8(out.stdout).unwrap();
     let json = json.trim();
     assert!(json.starts_with('{') && json.ends_with('}') && json.lines().count() == 1);
-    assert!(json.contains("\"law\": \"coulomb-viscous\""), "{json}");
-    let mu = number_array(json, "mu");
-    assert_eq!(mu.len(), 2);
+    let v: serde_json::Value = serde_json::from_str(json).unwrap();
+    assert_eq!(v["law"], "coulomb-viscous", "{json}");
+    assert_eq!(v["verdict"], "adequate", "{json}");
+    let nums = |key: &str| -> Vec<f64> {
+        v[key]
+            .as_array()
+            .unwrap_or_else(|| panic!("no {key} in {json}"))
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let (mu, se) = (nums("mu"), nums("mu_se"));
+    assert_eq!((mu.len(), se.len()), (2, 2));
     assert!(
         (mu[0] - 0.03).abs() < 1e-3 && (mu[1] - 0.012).abs() < 2e-4,
         "{mu:?}"
     );
-    let gap = number(json, "gap");
+    // The truth within a few standard errors, which are small but not zero.
+    for (j, truth) in [0.03, 0.012].into_iter().enumerate() {
+        assert!(
+            se[j] > 0.0 && (mu[j] - truth).abs() < 4.0 * se[j],
+            "{mu:?} ± {se:?}"
+        );
+    }
+    let gap = v["gap"].as_f64().unwrap();
+    let floor = v["noise_floor"].as_f64().unwrap();
     assert!((0.0..1e-2).contains(&gap), "gap {gap}");
+    assert!(gap <= 1.5 * floor, "gap {gap} vs noise floor {floor}");
+    assert_eq!(v["defaults"], serde_json::json!([]));
+    assert_eq!(v["rig"]["load_n_from"], "record");
 
     // The quadratic law on the same record: three constants, μ2 ≈ 0.
     let out = tribo(&["fit", rec_s, "--law", "quadratic", "--json"]);
-    let json = String::from_utf8(out.stdout).unwrap();
-    let mu = number_array(&json, "mu");
-    assert_eq!(mu.len(), 3, "{json}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mu: Vec<f64> = v["mu"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert_eq!(mu.len(), 3, "{v}");
     assert!(mu[2].abs() < 1e-3, "{mu:?}");
 
     // Windowed fits (thesis Tables 6–7): contiguous amplitude windows, and on a record whose law
@@ -138,7 +143,11 @@ fn sim_then_fit_json_recovers_the_constants() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("line 3") && !err.contains("panicked"), "{err}");
     let out = tribo(&["fit", rec_s, "--law", "cubic-banana"]);
-    assert!(!out.status.success());
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "an unknown law is a usage error"
+    );
     assert!(String::from_utf8_lossy(&out.stderr).contains("unknown law"));
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -196,7 +205,13 @@ fn a_record_with_a_hole_is_refused_unless_the_longest_clean_stretch_is_asked_for
     assert!(out.status.success(), "{err}");
     assert!(err.contains("longest clean stretch"), "{err}");
     // The first 0.9 s: the constants are still the simulated ones.
-    let mu = number_array(&String::from_utf8_lossy(&out.stdout), "mu");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mu: Vec<f64> = v["mu"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
     assert!(
         (mu[0] - 0.03).abs() < 1e-3 && (mu[1] - 0.012).abs() < 1e-3,
         "{mu:?}"

@@ -316,8 +316,11 @@ async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64) {
         return;
     };
     let store = RunStore::new(mem.ring, mem.index);
-    let mut app = App::new(AppConfig::new(serial), store);
-    let mut ticker = Ticker::every(Duration::from_millis(1));
+    let cfg = AppConfig::new(serial);
+    let mut app = App::new(cfg, store);
+    // The application's period (500 µs: a poll's share of the work stays within its budget, see
+    // `AppConfig::poll_period_us`).
+    let mut ticker = Ticker::every(Duration::from_micros(cfg.poll_period_us as u64));
     loop {
         match select(shared.rx.receive(), ticker.next()).await {
             // The receiver's mark of a new host connection: no half frame of the previous one is

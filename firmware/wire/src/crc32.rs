@@ -3,8 +3,11 @@
 
 const POLY: u32 = 0xEDB8_8320;
 
-const TABLE: [u32; 256] = {
-    let mut table = [0u32; 256];
+/// `TABLES[0]` is the classic byte table; `TABLES[k][i]` is the CRC of byte `i` followed by `k` zero
+/// bytes, so four bytes are folded in with four lookups ("slicing by 4": about half the instructions
+/// per byte of the byte table on the M7, for 3 KiB more of constants).
+const TABLES: [[u32; 256]; 4] = {
+    let mut t = [[0u32; 256]; 4];
     let mut i = 0;
     while i < 256 {
         let mut c = i as u32;
@@ -13,10 +16,20 @@ const TABLE: [u32; 256] = {
             c = if c & 1 != 0 { POLY ^ (c >> 1) } else { c >> 1 };
             k += 1;
         }
-        table[i] = c;
+        t[0][i] = c;
         i += 1;
     }
-    table
+    let mut k = 1;
+    while k < 4 {
+        let mut i = 0;
+        while i < 256 {
+            let prev = t[k - 1][i];
+            t[k][i] = (prev >> 8) ^ t[0][(prev & 0xFF) as usize];
+            i += 1;
+        }
+        k += 1;
+    }
+    t
 };
 
 /// A running CRC-32, for data that arrives in pieces.
@@ -35,9 +48,18 @@ impl Crc32 {
     }
 
     pub fn update(&mut self, data: &[u8]) {
+        let [t0, t1, t2, t3] = &TABLES;
         let mut c = self.0;
-        for &b in data {
-            c = TABLE[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
+        let mut words = data.chunks_exact(4);
+        for w in &mut words {
+            c ^= u32::from_le_bytes([w[0], w[1], w[2], w[3]]);
+            c = t3[(c & 0xFF) as usize]
+                ^ t2[((c >> 8) & 0xFF) as usize]
+                ^ t1[((c >> 16) & 0xFF) as usize]
+                ^ t0[(c >> 24) as usize];
+        }
+        for &b in words.remainder() {
+            c = t0[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
         }
         self.0 = c;
     }

@@ -747,9 +747,21 @@ impl Counts {
 
 impl Serialize for Counts {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        CountsBytes(&self.0).serialize(s)
+    }
+}
+
+/// Counts serialised as [`Counts`] is: little-endian bytes.
+struct CountsBytes<'a>(&'a [u16]);
+
+impl Serialize for CountsBytes<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        if self.0.len() > MAX_BLOCK_COUNTS {
+            return Err(serde::ser::Error::custom("more counts than a block holds"));
+        }
         let mut bytes = [0u8; 2 * MAX_BLOCK_COUNTS];
-        for (i, c) in self.0.iter().enumerate() {
-            bytes[2 * i..2 * i + 2].copy_from_slice(&c.to_le_bytes());
+        for (pair, c) in bytes.chunks_exact_mut(2).zip(self.0.iter()) {
+            pair.copy_from_slice(&c.to_le_bytes());
         }
         s.serialize_bytes(&bytes[..2 * self.0.len()])
     }
@@ -999,9 +1011,19 @@ wire_type! {
         pub ecr_range: u8,
         pub temp_c: f32,
         pub log10_ecr_ohm: f32,
-        /// The compressed counts ([`crate::codec`] describes the format).
+        /// The compressed counts ([`crate::codec`] describes the format). Serialised as bytes:
+        /// the same bytes as a sequence of `u8` in postcard (a length, then the bytes), in one
+        /// copy rather than one call per byte.
+        #[serde(serialize_with = "packed_bytes")]
         pub data: heapless::Vec<u8, MAX_PACKED_BYTES>,
     }
+}
+
+fn packed_bytes<S: serde::Serializer>(
+    data: &heapless::Vec<u8, MAX_PACKED_BYTES>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    s.serialize_bytes(data)
 }
 
 /// Largest compressed payload of a [`PackedBlock`]: the raw form (a format byte and two bytes per

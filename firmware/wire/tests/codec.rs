@@ -291,3 +291,26 @@ fn malformed_headers_are_named() {
     assert_eq!(decoded(&raw[..8], 4, 1), Err(CodecError::RawLength));
     assert_eq!(decoded(&data[..3], 4, 1), Err(CodecError::Truncated));
 }
+
+/// A packer step encodes one channel: a five-channel block takes five steps (the firmware packs
+/// one per poll), and the steps give the one-call encoding.
+#[test]
+fn a_packer_step_is_one_channel() {
+    use tribo_wire::codec::{encode, raw_len, Packer};
+    let counts: Vec<u16> = (0..64 * 5u32)
+        .map(|i| 30_000 + ((i * 7919) % 977) as u16)
+        .collect();
+    let mut whole = vec![0u8; raw_len(64, 5)];
+    let n = encode(&counts, 64, 5, &mut whole).unwrap();
+    let mut stepped = vec![0u8; raw_len(64, 5)];
+    let mut p = Packer::new();
+    let mut steps = 0;
+    let m = loop {
+        steps += 1;
+        if let Some(m) = p.step(&counts, 64, 5, &mut stepped).unwrap() {
+            break m;
+        }
+    };
+    assert_eq!(steps, 5);
+    assert_eq!(&stepped[..m], &whole[..n]);
+}

@@ -249,37 +249,33 @@ pub fn write_report(
          <h1>tribo explain</h1>\n<p>Base law: <b>{}</b>. Gap {:.3e} &rarr; {:.3e}.</p>\n",
         ex.base, ex.gap_initial, ex.gap_final
     );
-    if ex.steps.is_empty() {
-        h.push_str("<p>No missing effect: the base law explains the record.</p>\n");
-    } else {
+    let _ = writeln!(h, "<p><b>{}</b></p>", esc(&ex.answer()));
+    if !ex.steps.is_empty() {
         h.push_str(
-            "<table><tr><th>effect</th><th>gap before</th><th>gap after</th><th>ΔBIC</th>\
-             <th>parameters</th></tr>\n",
+            "<table><tr><th>effect</th><th>gap before</th><th>gap after</th><th>evidence \
+             (threshold)</th><th>parameters (± one standard error)</th></tr>\n",
         );
         for s in &ex.steps {
             let params: Vec<String> = s
                 .params
                 .iter()
-                .map(|(k, v)| format!("{k} = {v:.4e}"))
+                .map(|(k, v)| {
+                    let se = s.params_se.get(k).copied().unwrap_or(f64::NAN);
+                    format!("{k} = {v:.4e} ± {se:.1e}")
+                })
                 .collect();
             let _ = writeln!(
                 h,
-                "<tr><td>{}</td><td>{:.3e}</td><td>{:.3e}</td><td>{:.0}</td><td>{}</td></tr>",
+                "<tr><td>{}</td><td>{:.3e}</td><td>{:.3e}</td><td>{:.0} ({:.1})</td><td>{}</td></tr>",
                 s.effect,
                 s.gap_before,
                 s.gap_after,
-                s.delta_bic,
-                params.join("<br>")
+                s.evidence.value,
+                s.evidence.threshold,
+                esc(&params.join("<br>")).replace("&lt;br&gt;", "<br>")
             );
         }
         h.push_str("</table>\n");
-    }
-    if !ex.ambiguous.is_empty() {
-        let _ = writeln!(
-            h,
-            "<p>Unresolved: {} explain the remainder about equally well.</p>",
-            ex.ambiguous.join(", ")
-        );
     }
     for f in &figs {
         let _ = writeln!(h, "<p><img src=\"{f}\" alt=\"{f}\" width=\"900\"></p>");

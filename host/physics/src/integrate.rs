@@ -241,7 +241,12 @@ impl Simulator {
 
     /// Velocity is zero: apply the stick rule and pick the new sliding direction.
     fn at_rest(&mut self) {
-        let r = self.model.spring(self.s[0]);
+        // A law with memory keeps pushing through the reversal: its force joins the spring's.
+        let r = if self.model.law.has_state() {
+            self.model.spring(self.s[0]) + self.model.law.force(0.0, self.s[2], 0.0)
+        } else {
+            self.model.spring(self.s[0])
+        };
         if let Some(mus) = self.stick {
             if r.abs() <= mus {
                 self.stuck = true;

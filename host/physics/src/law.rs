@@ -88,6 +88,16 @@ pub enum FrictionLaw {
     LuGre(LuGre),
     /// Modified LuGre of Lu et al. (ch. 1 eq. 20–23).
     ModifiedLuGre(ModifiedLuGre),
+    /// Friction with a memory time (a first-order lag, the "few-ms memory" of the force behind the
+    /// velocity, ch. 4.4): the force `f = z` relaxes towards a memoryless law with time constant
+    /// `memory` (dimensionless τ; in seconds `memory / Ω`): `dz/dτ = (f_steady(y') − z) / memory`.
+    /// At the release `z = 0`: the friction builds up as the pin starts to slide.
+    Lagged {
+        /// The steady (memoryless) law.
+        steady: Box<FrictionLaw>,
+        /// Memory time (τ units, > 0).
+        memory: f64,
+    },
 }
 
 /// LuGre parameters, dimensionless: `f = σ0 z + σ1 dz/dτ + σ2 y'`,
@@ -244,14 +254,18 @@ impl FrictionLaw {
             FrictionLaw::Dahl { .. } => "dahl".into(),
             FrictionLaw::LuGre(_) => "lugre".into(),
             FrictionLaw::ModifiedLuGre(_) => "modified-lugre".into(),
+            FrictionLaw::Lagged { .. } => "lagged".into(),
         }
     }
 
-    /// True if the law has an internal state `z` (Dahl, LuGre, modified LuGre).
+    /// True if the law has an internal state `z` (Dahl, LuGre, modified LuGre, lagged).
     pub fn has_state(&self) -> bool {
         matches!(
             self,
-            FrictionLaw::Dahl { .. } | FrictionLaw::LuGre(_) | FrictionLaw::ModifiedLuGre(_)
+            FrictionLaw::Dahl { .. }
+                | FrictionLaw::LuGre(_)
+                | FrictionLaw::ModifiedLuGre(_)
+                | FrictionLaw::Lagged { .. }
         )
     }
 
@@ -265,6 +279,8 @@ impl FrictionLaw {
             FrictionLaw::HessSoom { mu_b, .. } => *mu_b != 0.0,
             FrictionLaw::ModifiedLuGre(p) => p.mu_c != 0.0,
             FrictionLaw::Dahl { .. } | FrictionLaw::LuGre(_) => false,
+            // The force is continuous, but its rate jumps with the steady law's sgn(y').
+            FrictionLaw::Lagged { steady, .. } => steady.is_discontinuous(),
         }
     }
 
@@ -285,7 +301,13 @@ impl FrictionLaw {
 
     /// Rate of the internal state, `dz/dτ` (0 for memoryless laws).
     pub fn dz(&self, v: f64, z: f64) -> f64 {
+        self.dz_on(v, z, 0.0)
+    }
+
+    /// [`FrictionLaw::dz`] on the branch `dir` (see [`FrictionLaw::force`]).
+    pub fn dz_on(&self, v: f64, z: f64, dir: f64) -> f64 {
         match self {
+            FrictionLaw::Lagged { steady, memory } => (steady.force(v, 0.0, dir) - z) / memory,
             FrictionLaw::Dahl { sigma, mu_c, alpha } => {
                 let s = sgn_on(v, 0.0);
                 let base = (1.0 - sigma * z * s / mu_c).max(0.0);
@@ -349,6 +371,7 @@ impl FrictionLaw {
                 sgn_on(v, dir) * mu_b / (1.0 + c1 * v * v) + c2 * v
             }
             FrictionLaw::Dahl { sigma, .. } => sigma * z,
+            FrictionLaw::Lagged { .. } => z,
             FrictionLaw::LuGre(p) => p.sigma0 * z + p.sigma1 * self.dz(v, z) + p.sigma2 * v,
             FrictionLaw::ModifiedLuGre(p) => {
                 let s = p.s(v);
@@ -365,6 +388,7 @@ impl FrictionLaw {
     pub fn steady_force(&self, v: f64) -> f64 {
         match self {
             FrictionLaw::Dahl { mu_c, .. } => mu_c * sgn_on(v, 0.0),
+            FrictionLaw::Lagged { steady, .. } => steady.steady_force(v),
             FrictionLaw::LuGre(p) => p.g(v) * sgn_on(v, 0.0) + p.sigma2 * v,
             FrictionLaw::ModifiedLuGre(p) => {
                 let s = p.s(v);
@@ -451,6 +475,15 @@ impl FrictionLaw {
                 {
                     return bad("need sigma0, alpha0, v_s > 0 and l2 > l1");
                 }
+            }
+            FrictionLaw::Lagged { steady, memory } => {
+                if !(memory.is_finite() && *memory > 0.0) {
+                    return bad("need a memory time > 0");
+                }
+                if steady.has_state() {
+                    return bad("the steady law must be memoryless");
+                }
+                steady.validate()?;
             }
         }
         Ok(())

@@ -20,6 +20,7 @@ pub mod law;
 pub mod model;
 pub mod record;
 pub mod sensor;
+pub mod uncertainty;
 
 pub use identify::{FitResult, LawSpec};
 pub use integrate::{simulate, Method, SimError, Simulator, State, Trajectory};

@@ -206,7 +206,7 @@ impl Model {
         [
             v,
             -self.spring(y) - self.apparatus_mu1 * v - f,
-            self.law.dz(v, z),
+            self.law.dz_on(v, z, dir),
         ]
     }
 

@@ -4,8 +4,10 @@
 //!   three required columns), rig constants in leading comment lines `# mass_kg=…`,
 //!   `# stiffness_n_per_m=…`, `# load_n=…`.
 //! - Dimensionless CSV: header `tau,y,ydot` (the rig is [`Rig::UNIT`]).
-//! - Runs recorded by `tribo` (not defined yet): [`Record::load`] dispatches on the path — a
-//!   directory is where a stored run will be read; today it reports a clear error.
+//! - Header keys (`# key=value`, each at most once): `mass_kg`, `stiffness_n_per_m`, `load_n` (all
+//!   three or none), and `force_cutoff_hz` (the force channel's low-pass, when it has one).
+//! - Runs recorded by `tribo` are folders, read by the `tribo` crate; [`Record::load`] refuses them
+//!   with a clear error.
 
 use crate::model::Rig;
 use std::fmt::Write as _;
@@ -42,11 +44,43 @@ pub struct Record {
     pub rig: Option<Rig>,
     /// Units of the columns.
     pub units: Units,
+    /// Low-pass cut-off of the force channel (the charge amplifier's, Hz), when the record says
+    /// (`# force_cutoff_hz=300`); `None` = not stated.
+    pub force_cutoff_hz: Option<f64>,
 }
 
-/// Error reading or validating a record.
+/// What kind of problem a [`RecordError`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordErrorKind {
+    /// The file could not be read.
+    Io,
+    /// The text is not a record (encoding, header, a field that is not a number, a repeated key…).
+    Syntax,
+    /// A sample is NaN or infinite: the record is readable but cannot be analysed.
+    NonFinite,
+    /// The values are inconsistent (lengths, time not increasing, rig constants out of range).
+    Invalid,
+}
+
+/// Error reading or validating a record: the message (which names the file, line and column for
+/// parse errors) and its kind.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RecordError(pub String);
+pub struct RecordError(pub String, pub RecordErrorKind);
+
+impl RecordError {
+    /// An error of kind `kind`.
+    pub fn new(kind: RecordErrorKind, msg: impl Into<String>) -> RecordError {
+        RecordError(msg.into(), kind)
+    }
+    /// An [`RecordErrorKind::Invalid`] error.
+    pub fn invalid(msg: impl Into<String>) -> RecordError {
+        RecordError(msg.into(), RecordErrorKind::Invalid)
+    }
+    /// The kind.
+    pub fn kind(&self) -> RecordErrorKind {
+        self.1
+    }
+}
 
 impl std::fmt::Display for RecordError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -56,7 +90,30 @@ impl std::fmt::Display for RecordError {
 impl std::error::Error for RecordError {}
 
 fn err<T>(msg: impl Into<String>) -> Result<T, RecordError> {
-    Err(RecordError(msg.into()))
+    Err(RecordError::invalid(msg))
+}
+
+/// A parse error at a line and column (both from 1; the column counts characters).
+fn at<T>(line: usize, col: usize, msg: impl std::fmt::Display) -> Result<T, RecordError> {
+    Err(RecordError::new(
+        RecordErrorKind::Syntax,
+        format!("line {line}, column {col}: {msg}"),
+    ))
+}
+
+/// The header keys a record may give (`# key=value` comment lines).
+pub const HEADER_KEYS: [&str; 4] = ["mass_kg", "stiffness_n_per_m", "load_n", "force_cutoff_hz"];
+
+/// Line and column (from 1, columns in characters) of byte `offset` of `text`.
+fn line_col(text: &[u8], offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+    let start = before
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(0, |i| i + 1);
+    let col = String::from_utf8_lossy(&before[start..]).chars().count() + 1;
+    (line, col)
 }
 
 impl Record {
@@ -71,6 +128,7 @@ impl Record {
             ecr: None,
             rig,
             units,
+            force_cutoff_hz: None,
         }
     }
 
@@ -88,10 +146,9 @@ impl Record {
         match self.units {
             Units::Dimensionless => Ok(Rig::UNIT),
             Units::Si => self.rig.ok_or_else(|| {
-                RecordError(
+                RecordError::invalid(
                     "record has no rig constants: add `# mass_kg=…`, `# stiffness_n_per_m=…`, \
-                     `# load_n=…` comment lines or pass them on the command line"
-                        .into(),
+                     `# load_n=…` comment lines or pass them on the command line",
                 )
             }),
         }
@@ -106,28 +163,36 @@ impl Record {
         }
     }
 
-    /// Checks lengths, finiteness, increasing time, at least 8 samples, and the rig.
+    /// The channels present, by name, with their samples.
+    pub fn channels(&self) -> Vec<(&'static str, &[f64])> {
+        let mut v: Vec<(&'static str, &[f64])> =
+            vec![("t", &self.t), ("x", &self.x), ("v", &self.v)];
+        for (name, c) in [("ft", &self.ft), ("temp", &self.temp), ("ecr", &self.ecr)] {
+            if let Some(c) = c {
+                v.push((name, c));
+            }
+        }
+        v
+    }
+
+    /// Checks lengths, finiteness, increasing time, at least 8 samples, and the rig. A non-finite
+    /// sample is a [`RecordErrorKind::NonFinite`] error.
     pub fn validate(&self) -> Result<(), RecordError> {
         let n = self.t.len();
         if n < 8 {
             return err(format!("record too short: {n} samples (need at least 8)"));
         }
-        let cols: [(&str, Option<&Vec<f64>>); 6] = [
-            ("t", Some(&self.t)),
-            ("x", Some(&self.x)),
-            ("v", Some(&self.v)),
-            ("ft", self.ft.as_ref()),
-            ("temp", self.temp.as_ref()),
-            ("ecr", self.ecr.as_ref()),
-        ];
-        for (name, c) in cols {
-            if let Some(c) = c {
-                if c.len() != n {
-                    return err(format!("column {name} has {} samples, t has {n}", c.len()));
-                }
-                if let Some(i) = c.iter().position(|v| !v.is_finite()) {
-                    return err(format!("column {name}: non-finite value at sample {i}"));
-                }
+        for (name, c) in self.channels() {
+            if c.len() != n {
+                return err(format!("column {name} has {} samples, t has {n}", c.len()));
+            }
+        }
+        for (name, c) in self.channels() {
+            if let Some(i) = c.iter().position(|v| !v.is_finite()) {
+                return Err(RecordError::new(
+                    RecordErrorKind::NonFinite,
+                    format!("column {name}: non-finite value {} at sample {i}", c[i]),
+                ));
             }
         }
         if let Some(i) = self.t.windows(2).position(|w| w[1] <= w[0]) {
@@ -137,54 +202,114 @@ impl Record {
             ));
         }
         if let Some(r) = &self.rig {
-            r.validate().map_err(RecordError)?;
+            r.validate().map_err(RecordError::invalid)?;
+        }
+        if let Some(fc) = self.force_cutoff_hz {
+            if !(fc.is_finite() && fc > 0.0) {
+                return err(format!("force_cutoff_hz must be > 0, got {fc}"));
+            }
         }
         Ok(())
     }
 
     /// Loads a record, dispatching on the path: a directory is a run recorded by `tribo`
-    /// (extension point, not yet supported), anything else is parsed as CSV (SI or
-    /// dimensionless, told apart by the header).
+    /// (read by the `tribo` crate, not here), anything else is parsed as CSV (SI or
+    /// dimensionless, told apart by the header). Errors name the file (and the line and column
+    /// of a parse error).
     pub fn load(path: &Path) -> Result<Record, RecordError> {
         if path.is_dir() {
             return err(format!(
-                "{}: reading runs recorded by `tribo` is not supported yet; export it as CSV",
+                "{}: reading runs recorded by `tribo` is not supported here; export it as CSV",
                 path.display()
             ));
         }
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| RecordError(format!("{}: {e}", path.display())))?;
-        Record::from_csv_str(&text).map_err(|e| RecordError(format!("{}: {}", path.display(), e.0)))
+        let bytes = std::fs::read(path).map_err(|e| {
+            RecordError::new(RecordErrorKind::Io, format!("{}: {e}", path.display()))
+        })?;
+        Record::from_csv_bytes(&bytes)
+            .map_err(|e| RecordError(format!("{}: {}", path.display(), e.0), e.1))
     }
 
-    /// Parses CSV text (SI or dimensionless).
+    /// Parses CSV bytes: UTF-8 (a leading byte-order mark is skipped); a byte that is not UTF-8
+    /// is an error at its line and column.
+    pub fn from_csv_bytes(bytes: &[u8]) -> Result<Record, RecordError> {
+        match std::str::from_utf8(bytes) {
+            Ok(text) => Record::from_csv_str(text),
+            Err(e) => {
+                let (line, col) = line_col(bytes, e.valid_up_to());
+                at(
+                    line,
+                    col,
+                    format!(
+                        "not UTF-8 text (byte 0x{:02x}); save the file as UTF-8",
+                        bytes[e.valid_up_to()]
+                    ),
+                )
+            }
+        }
+    }
+
+    /// Parses CSV text (SI or dimensionless). A leading byte-order mark is skipped. Strict: every
+    /// field must be a number, every row as long as the header, a header key (`# key=value`)
+    /// and a column name may appear once; errors give the line and column. Values that parse but
+    /// are not finite (`inf`, `NaN`, `1e999`) are [`RecordErrorKind::NonFinite`] errors.
     pub fn from_csv_str(text: &str) -> Result<Record, RecordError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut rig_vals: [Option<f64>; 3] = [None; 3];
-        let mut header: Option<Vec<String>> = None;
+        let mut force_cutoff_hz: Option<f64> = None;
+        // Every `# key=value` seen: key → line.
+        let mut keys: Vec<(String, usize)> = Vec::new();
+        let mut header: Option<(Vec<String>, usize)> = None;
         let mut cols: Vec<Vec<f64>> = Vec::new();
-        for (ln, line) in text.lines().enumerate() {
-            let line = line.trim();
+        for (ln, raw) in text.lines().enumerate() {
+            let line_no = ln + 1;
+            let indent = raw.chars().take_while(|c| c.is_whitespace()).count();
+            let line = raw.trim();
             if line.is_empty() {
                 continue;
             }
             if let Some(c) = line.strip_prefix('#') {
-                if let Some((k, v)) = c.split_once('=') {
-                    let k = k.trim();
-                    let idx = match k {
-                        "mass_kg" => Some(0),
-                        "stiffness_n_per_m" => Some(1),
-                        "load_n" => Some(2),
-                        _ => None,
-                    };
-                    if let Some(i) = idx {
-                        let val: f64 = v.trim().parse().map_err(|_| {
-                            RecordError(format!(
-                                "line {}: bad value for {k}: {:?}",
-                                ln + 1,
-                                v.trim()
-                            ))
-                        })?;
+                let Some((k, v)) = c.split_once('=') else {
+                    continue;
+                };
+                let key = k.trim();
+                let is_key = !key.is_empty()
+                    && key
+                        .chars()
+                        .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+                    && !key.starts_with(|ch: char| ch.is_ascii_digit());
+                if !is_key {
+                    continue; // free text that happens to contain '='
+                }
+                let key_col = indent + 1 + c.find(key).unwrap_or(0) + 1;
+                if let Some((_, first)) = keys.iter().find(|(k, _)| k == key) {
+                    return at(
+                        line_no,
+                        key_col,
+                        format!("header key {key} given again (first on line {first}); keep one"),
+                    );
+                }
+                keys.push((key.to_string(), line_no));
+                let slot = match key {
+                    "mass_kg" => Some(0),
+                    "stiffness_n_per_m" => Some(1),
+                    "load_n" => Some(2),
+                    "force_cutoff_hz" => Some(3),
+                    _ => None,
+                };
+                if let Some(i) = slot {
+                    let val_col = indent + 1 + c.find('=').unwrap_or(0) + 2;
+                    let val: f64 = v.trim().parse().or_else(|_| {
+                        at(
+                            line_no,
+                            val_col,
+                            format!("bad value for {key}: {:?} (a number)", v.trim()),
+                        )
+                    })?;
+                    if i < 3 {
                         rig_vals[i] = Some(val);
+                    } else {
+                        force_cutoff_hz = Some(val);
                     }
                 }
                 continue;
@@ -192,56 +317,93 @@ impl Record {
             match &header {
                 None => {
                     let h: Vec<String> = line.split(',').map(|s| s.trim().to_string()).collect();
+                    let mut col = indent + 1;
+                    for (i, name) in h.iter().enumerate() {
+                        if let Some(j) = h[..i].iter().position(|n| n == name) {
+                            return at(
+                                line_no,
+                                col,
+                                format!(
+                                    "column {name:?} appears twice (columns {} and {})",
+                                    j + 1,
+                                    i + 1
+                                ),
+                            );
+                        }
+                        col += line.split(',').nth(i).map_or(0, |f| f.chars().count()) + 1;
+                    }
                     cols = vec![Vec::new(); h.len()];
-                    header = Some(h);
+                    header = Some((h, line_no));
                 }
-                Some(h) => {
+                Some((h, _)) => {
                     let fields: Vec<&str> = line.split(',').collect();
                     if fields.len() != h.len() {
-                        return err(format!(
-                            "line {}: {} fields, header has {} (truncated file?)",
-                            ln + 1,
-                            fields.len(),
-                            h.len()
-                        ));
+                        return at(
+                            line_no,
+                            line.chars().count() + indent + 1,
+                            format!(
+                                "{} fields, the header has {} (truncated file?)",
+                                fields.len(),
+                                h.len()
+                            ),
+                        );
                     }
+                    let mut col = indent + 1;
                     for (i, f) in fields.iter().enumerate() {
-                        let v: f64 = f.trim().parse().map_err(|_| {
-                            RecordError(format!(
-                                "line {}: column {}: not a number: {:?}",
-                                ln + 1,
-                                h[i],
-                                f.trim()
-                            ))
+                        let fcol = col + f.chars().take_while(|c| c.is_whitespace()).count();
+                        let v: f64 = f.trim().parse().or_else(|_| {
+                            at(
+                                line_no,
+                                fcol,
+                                format!("column {}: not a number: {:?}", h[i], f.trim()),
+                            )
                         })?;
                         if !v.is_finite() {
-                            return err(format!(
-                                "line {}: column {}: non-finite value",
-                                ln + 1,
-                                h[i]
+                            return Err(RecordError::new(
+                                RecordErrorKind::NonFinite,
+                                format!(
+                                    "line {line_no}, column {fcol}: column {}: non-finite value {:?}",
+                                    h[i],
+                                    f.trim()
+                                ),
                             ));
                         }
                         cols[i].push(v);
+                        col += f.chars().count() + 1;
                     }
                 }
             }
         }
-        let Some(h) = header else {
-            return err("no header line (expected `t_s,x_m,v_m_s` or `tau,y,ydot`)");
+        let Some((h, header_line)) = header else {
+            return at(
+                text.lines().count().max(1),
+                1,
+                "no header line (expected `t_s,x_m,v_m_s` or `tau,y,ydot`)",
+            );
         };
         let find = |name: &str| h.iter().position(|c| c == name);
         let take =
             |i: Option<usize>, cols: &mut Vec<Vec<f64>>| i.map(|i| std::mem::take(&mut cols[i]));
         let rec = if let (Some(it), Some(ix), Some(iv)) = (find("t_s"), find("x_m"), find("v_m_s"))
         {
-            let rig =
-                match rig_vals {
-                    [Some(m), Some(k), Some(n)] => Some(Rig::new(m, k, n).map_err(RecordError)?),
-                    [None, None, None] => None,
-                    _ => return err(
-                        "incomplete rig constants: need all of mass_kg, stiffness_n_per_m, load_n",
-                    ),
-                };
+            let rig = match rig_vals {
+                [Some(m), Some(k), Some(n)] => {
+                    Some(Rig::new(m, k, n).map_err(RecordError::invalid)?)
+                }
+                [None, None, None] => None,
+                _ => {
+                    let missing: Vec<&str> = ["mass_kg", "stiffness_n_per_m", "load_n"]
+                        .iter()
+                        .zip(rig_vals)
+                        .filter(|(_, v)| v.is_none())
+                        .map(|(k, _)| *k)
+                        .collect();
+                    return err(format!(
+                        "incomplete rig constants: {} missing (give all of mass_kg, stiffness_n_per_m, load_n)",
+                        missing.join(", ")
+                    ));
+                }
+            };
             let (ift, itemp, iecr) = (find("ft_n"), find("temp_c"), find("ecr_ohm"));
             Record {
                 t: take(Some(it), &mut cols).unwrap_or_default(),
@@ -252,6 +414,7 @@ impl Record {
                 ecr: take(iecr, &mut cols),
                 rig,
                 units: Units::Si,
+                force_cutoff_hz,
             }
         } else if let (Some(it), Some(iy), Some(iv)) = (find("tau"), find("y"), find("ydot")) {
             Record::new(
@@ -262,10 +425,14 @@ impl Record {
                 Units::Dimensionless,
             )
         } else {
-            return err(format!(
-                "unknown header {:?}: expected `t_s,x_m,v_m_s[,ft_n][,temp_c][,ecr_ohm]` or `tau,y,ydot`",
-                h.join(",")
-            ));
+            return at(
+                header_line,
+                1,
+                format!(
+                    "unknown header {:?}: expected `t_s,x_m,v_m_s[,ft_n][,temp_c][,ecr_ohm]` or `tau,y,ydot`",
+                    h.join(",")
+                ),
+            );
         };
         rec.validate()?;
         Ok(rec)
@@ -286,6 +453,9 @@ impl Record {
                     let _ = writeln!(s, "# mass_kg={}", r.mass_kg);
                     let _ = writeln!(s, "# stiffness_n_per_m={}", r.stiffness_n_per_m);
                     let _ = writeln!(s, "# load_n={}", r.load_n);
+                }
+                if let (Some(fc), Some(_)) = (self.force_cutoff_hz, &self.ft) {
+                    let _ = writeln!(s, "# force_cutoff_hz={fc}");
                 }
                 s.push_str("t_s,x_m,v_m_s");
                 let extra: Vec<(&str, &Vec<f64>)> = [
@@ -316,7 +486,7 @@ impl Record {
     /// Writes the record as CSV to `path`.
     pub fn save(&self, path: &Path) -> Result<(), RecordError> {
         std::fs::write(path, self.to_csv_string())
-            .map_err(|e| RecordError(format!("{}: {e}", path.display())))
+            .map_err(|e| RecordError::new(RecordErrorKind::Io, format!("{}: {e}", path.display())))
     }
 
     /// Dimensionless view `(τ, y, y')` using the record's rig.

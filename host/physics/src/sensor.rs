@@ -193,6 +193,7 @@ impl SensorModel {
             *v = quant(*v + self.force_noise_n * rng.normal(), self.force_range_n);
         }
         rec.ft = Some(f);
+        rec.force_cutoff_hz = self.force_cutoff_hz.filter(|_| dt > 0.0);
         if let Some(th) = self.thermal {
             rec.temp = Some(
                 rec.t

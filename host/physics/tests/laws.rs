@@ -537,3 +537,72 @@ fn duffing_frequency_shifts_with_amplitude_as_averaging_predicts() {
         );
     }
 }
+
+/// Friction with a memory time T (first-order lag): after each velocity reversal the force, which
+/// was `−μ0` (opposing the old direction), relaxes as `μ0 (1 − 2 e^{−t/T})` and so crosses zero
+/// `T ln 2` after the velocity does; with T → 0 the law is the memoryless one.
+#[test]
+fn lagged_friction_reverses_t_ln2_after_the_velocity_and_tends_to_its_steady_law() {
+    let (mu0, mu1, memory) = (0.02, 0.002, 0.3);
+    let lagged = |m: f64| FrictionLaw::Lagged {
+        steady: Box::new(FrictionLaw::coulomb_viscous(mu0, mu1)),
+        memory: m,
+    };
+    let taus = grid(40_001, 0.001);
+    let tr = simulate(
+        &Model::new(lagged(memory)),
+        2.5,
+        0.0,
+        &taus,
+        Method::dopri(1e-10),
+    )
+    .unwrap();
+    let crossings = |v: &[f64]| -> Vec<f64> {
+        (1..v.len())
+            .filter(|&i| v[i - 1] * v[i] < 0.0)
+            .map(|i| taus[i - 1] + 0.001 * v[i - 1].abs() / (v[i - 1] - v[i]).abs())
+            .collect()
+    };
+    let (vz, fz) = (crossings(&tr.ydot), crossings(&tr.f));
+    assert!(vz.len() >= 10, "{} reversals", vz.len());
+    // Pair each velocity reversal (after the first) with the next force reversal.
+    let lags: Vec<f64> = vz
+        .iter()
+        .skip(1)
+        .filter_map(|&t| fz.iter().find(|&&f| f > t).map(|f| f - t))
+        .collect();
+    let mean = lags.iter().sum::<f64>() / lags.len() as f64;
+    // The viscous part shifts the zero slightly; within 10 % of T ln 2.
+    let want = memory * std::f64::consts::LN_2;
+    assert!((mean - want).abs() < 0.1 * want, "lag {mean} vs {want}");
+    // A vanishing memory: the envelope of the memoryless law (until 20 % of the amplitude).
+    let a = |tr: &Trajectory| -> Vec<f64> {
+        tr.y.iter()
+            .zip(&tr.ydot)
+            .map(|(y, v)| y.hypot(*v))
+            .collect()
+    };
+    let short = simulate(
+        &Model::new(lagged(1e-4)),
+        2.5,
+        0.0,
+        &taus,
+        Method::dopri(1e-10),
+    )
+    .unwrap();
+    let plain = simulate(
+        &Model::new(FrictionLaw::coulomb_viscous(mu0, mu1)),
+        2.5,
+        0.0,
+        &taus,
+        Method::dopri(1e-10),
+    )
+    .unwrap();
+    let (as_, ap) = (a(&short), a(&plain));
+    let n = ap.iter().position(|&x| x < 0.5).unwrap_or(ap.len());
+    let worst = (0..n).map(|i| (as_[i] - ap[i]).abs()).fold(0.0, f64::max);
+    assert!(worst < 1e-3, "memory 1e-4 differs by {worst}");
+    // With memory the friction does less work near each reversal: the envelope decays slower.
+    let al = a(&tr);
+    assert!(al[n - 1] > ap[n - 1], "{} vs {}", al[n - 1], ap[n - 1]);
+}

@@ -216,8 +216,8 @@ fn fit_windows_on_an_si_record_reports_si_coefficients_and_json() {
         );
         assert_eq!(x.fit.p_si, rig.p_of_mu(&x.fit.mu));
         let j = x.to_json();
-        assert!(j.starts_with("{\"a_start\": ") && j.ends_with("}}"), "{j}");
-        assert!(j.contains("\"fit\": {\"law\": \"coulomb-viscous\""), "{j}");
+        assert!(j.starts_with("{\"a_start\":") && j.ends_with("}}"), "{j}");
+        assert!(j.contains("\"fit\":{\"law\":\"coulomb-viscous\""), "{j}");
     }
     assert!(w[0].a_start > w[1].a_start && w[1].a_start > w[2].a_start);
     assert!(fit_windows(&rec, LawSpec::CoulombViscous, 0, &FitOptions::default()).is_err());

@@ -299,5 +299,6 @@ pub fn campaign_report(
         figures,
         notes,
         png: inputs.png,
+        not_analysable: None,
     })
 }

@@ -77,6 +77,9 @@ pub struct Report {
     pub notes: Vec<String>,
     /// Also write PNG files.
     pub png: bool,
+    /// Why the record cannot be analysed (no oscillation, too few half cycles, a saturated
+    /// channel…), if so: the report then shows the motion but no fitted constant.
+    pub not_analysable: Option<String>,
 }
 
 /// One written figure.
@@ -96,6 +99,8 @@ pub struct ReportFiles {
     pub figures: Vec<FigureFile>,
     /// Same as [`Report::notes`].
     pub notes: Vec<String>,
+    /// Same as [`Report::not_analysable`].
+    pub not_analysable: Option<String>,
 }
 
 fn io_err(path: &Path, e: std::io::Error) -> ReportError {
@@ -133,5 +138,6 @@ pub fn write_report(report: &Report, out_dir: &Path) -> Result<ReportFiles, Repo
         html: html_path,
         figures: files,
         notes: report.notes.clone(),
+        not_analysable: report.not_analysable.clone(),
     })
 }

@@ -157,9 +157,20 @@ pub fn record_report(rec: &Record, inputs: &ReportInputs) -> Result<Report, Repo
     let opts = &inputs.options;
     let mut notes = Vec::new();
 
+    // A record that cannot be analysed gets its motion drawn, and no fitted constant.
+    let not_analysable = identify::screen(&view.tau, &view.y, &view.ydot)
+        .err()
+        .map(|e| e.to_string());
+    if let Some(why) = &not_analysable {
+        notes.push(format!("not analysable: {why}; no law is fitted"));
+    }
     // Fits: the ones given, then the missing laws.
-    let mut fits: Vec<FitResult> = inputs.fits.clone();
-    for spec in &opts.laws {
+    let mut fits: Vec<FitResult> = if not_analysable.is_some() {
+        Vec::new()
+    } else {
+        inputs.fits.clone()
+    };
+    for spec in opts.laws.iter().filter(|_| not_analysable.is_none()) {
         if fits.iter().any(|f| f.law == spec.name()) {
             continue;
         }
@@ -178,7 +189,7 @@ pub fn record_report(rec: &Record, inputs: &ReportInputs) -> Result<Report, Repo
         &mut notes,
     )?);
     figures.push(law_figure(&view, &fits, inputs.onboard.as_ref()));
-    if opts.windows >= 2 {
+    if opts.windows >= 2 && not_analysable.is_none() {
         match windows_figure(&view, opts) {
             Ok(f) => figures.push(f),
             Err(e) => notes.push(format!("windowed fits skipped: {e}")),
@@ -223,6 +234,7 @@ pub fn record_report(rec: &Record, inputs: &ReportInputs) -> Result<Report, Repo
         figures,
         notes,
         png: opts.png,
+        not_analysable,
     })
 }
 
@@ -321,7 +333,7 @@ fn envelope_figure(
     p.series
         .push(Series::line("measured", 7, decimate(&measured, bins)).with_style(Style::Line(3)));
     let data = EnvelopeData::new(&v.tau, &v.y, &v.ydot, bins.max(50))
-        .map_err(|e| ReportError::Input(e.0))?;
+        .map_err(|e| ReportError::Input(e.to_string()))?;
     for (i, f) in fits.iter().enumerate() {
         match identify::simulated_envelope(&data, f.friction_law(), fit_opts) {
             Ok(env) => p.series.push(
@@ -670,6 +682,19 @@ pub fn count_cycles(y: &[f64], ydot: &[f64]) -> f64 {
 }
 
 /// Four significant digits, scientific outside 1e-3 … 1e5.
+/// `value ± se`, the value rounded to the standard error's second significant digit.
+fn pm(v: f64, se: f64) -> String {
+    if !(se.is_finite() && se > 0.0) {
+        return format!("{} ± ?", num(v));
+    }
+    let digits = (1 - se.log10().floor() as i32).max(0) as usize;
+    if digits > 8 || !v.is_finite() {
+        format!("{} ± {se:.1e}", num(v))
+    } else {
+        format!("{v:.digits$} ± {se:.digits$}")
+    }
+}
+
 fn num(x: f64) -> String {
     if !x.is_finite() {
         "—".into()
@@ -794,7 +819,9 @@ fn summary(
                 .map(|s| s.powers())
                 .unwrap_or_else(|_| (0..f.mu.len()).collect());
             let mu = |j: usize| match f.mu.get(j) {
-                Some(&m) if fitted.contains(&j) => num(m),
+                Some(&m) if fitted.contains(&j) => {
+                    pm(m, f.mu_se.get(j).copied().unwrap_or(f64::NAN))
+                }
                 _ => "—".to_string(),
             };
             vec![
@@ -802,13 +829,13 @@ fn summary(
                 mu(0),
                 mu(1),
                 mu(2),
-                format!("{:.3} %", 100.0 * f.gap),
-                f.shape.name().into(),
                 format!(
-                    "{} ({} it.)",
-                    if f.converged { "yes" } else { "no" },
-                    f.iterations
+                    "{:.3} % ({:.2} × noise floor)",
+                    100.0 * f.gap,
+                    f.gap_ratio()
                 ),
+                f.shape.name().into(),
+                format!("{} ({} it.)", f.verdict.name(), f.iterations),
             ]
         })
         .collect();
@@ -830,7 +857,7 @@ fn summary(
         }
     }
     s.push_str(&table(
-        &["estimate", "μ0", "μ1", "μ2", "gap", "shape", "converged"],
+        &["estimate", "μ0", "μ1", "μ2", "gap", "shape", "verdict"],
         &res,
     ));
     if let (Some(o), Some(cv)) = (
@@ -849,7 +876,10 @@ fn summary(
     }
     s.push_str(
         "<p>μ_j are the dimensionless constants of f(y′) = Σ μ_j |y′|^j sgn(y′) (thesis eq. 10–13, \
-         y = kx/N, τ = Ωt); gap = RMS(measured − fitted envelope) / initial amplitude.</p>\n",
+         y = kx/N, τ = Ωt), ± one standard error; gap = RMS(measured − fitted envelope) / initial \
+         amplitude, and the noise floor the envelope's measurement noise on the same scale. \
+         Verdicts: adequate (gap ≤ 1.5 × noise floor), inadequate (the law misses something: \
+         <code>tribo explain</code>), not-converged.</p>\n",
     );
     s
 }

@@ -61,11 +61,16 @@ pub fn run_inputs(run: &Run) -> ReportInputs {
         meta.push((
             "stored host fit".into(),
             format!(
-                "{}: μ0 = {:.5}, μ1 = {:.5}, gap {:.3} %",
+                "{}: μ0 = {:.5} ± {:.1e}, μ1 = {:.5} ± {:.1e}, gap {:.3} %{}",
                 h.law,
                 h.mu0,
+                h.mu0_se,
                 h.mu1,
-                100.0 * h.gap
+                h.mu1_se,
+                100.0 * h.gap,
+                h.verdict
+                    .as_deref()
+                    .map_or(String::new(), |v| format!(" ({v})"))
             ),
         ));
     }

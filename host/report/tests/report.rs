@@ -416,5 +416,9 @@ fn a_dimensionless_record_is_reported_in_dimensionless_units() {
         .find(|l| l.contains("host fit: coulomb-viscous"))
         .unwrap()
         .to_string();
-    assert!(row.contains("<td>0.05000</td><td>0.02000</td>"), "{row}");
+    assert!(
+        row.contains("<td>0.05000 ± ") && row.contains("<td>0.02000 ± "),
+        "{row}"
+    );
+    assert!(row.contains("adequate"), "{row}");
 }

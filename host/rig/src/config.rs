@@ -163,6 +163,17 @@ impl Default for EcrModel {
     }
 }
 
+/// The constants of the rig itself that a configuration may give (the rest — noise, thermal, ECR —
+/// describe the simulation).
+pub const RIG_CONSTANTS: [&str; 6] = [
+    "mass_kg",
+    "stiffness_n_per_m",
+    "load_n",
+    "x0_m",
+    "apparatus_mu1",
+    "law",
+];
+
 /// Acquisition faults to induce (test flags), each at most once per run, timed from the release:
 ///
 /// ```toml
@@ -243,6 +254,18 @@ impl VirtualRigConfig {
         Ok(c)
     }
 
+    /// The rig constants a TOML description leaves to their defaults (of `mass_kg`,
+    /// `stiffness_n_per_m`, `load_n`, `x0_m`, `apparatus_mu1`, `law`): what `tribo rig` says stood
+    /// in for them.
+    pub fn defaulted(text: &str) -> Result<Vec<&'static str>, String> {
+        let t: toml::Table =
+            toml::from_str(text).map_err(|e| format!("virtual rig configuration: {e}"))?;
+        Ok(RIG_CONSTANTS
+            .into_iter()
+            .filter(|k| !t.contains_key(*k))
+            .collect())
+    }
+
     /// Checks the ranges the simulator needs.
     pub fn validate(&self) -> Result<(), String> {
         let pos = |name: &str, v: f64| {
@@ -297,5 +320,19 @@ impl VirtualRigConfig {
             .to_law()
             .validate()
             .map_err(|e| format!("law: {e}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_constants_a_file_leaves_out_are_named() {
+        let d = VirtualRigConfig::defaulted("load_n = 0.2\n[law]\nkind = \"coulomb\"\nmu0 = 0.1\n")
+            .unwrap();
+        assert_eq!(d, ["mass_kg", "stiffness_n_per_m", "x0_m", "apparatus_mu1"]);
+        assert_eq!(VirtualRigConfig::defaulted("").unwrap(), RIG_CONSTANTS);
+        assert!(VirtualRigConfig::defaulted("load_n = = 1").is_err());
     }
 }

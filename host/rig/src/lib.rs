@@ -46,13 +46,15 @@ impl VirtualRig {
     /// A rig at time 0, pin held nowhere (magnet off), heater off. Refuses an invalid configuration.
     pub fn new(cfg: VirtualRigConfig) -> Result<VirtualRig, String> {
         let hw = SimHardware::new(&cfg)?;
+        let app_cfg = AppConfig::new(cfg.serial);
         let mut rig = VirtualRig {
-            app: App::new(AppConfig::new(cfg.serial), board_store()),
+            app: App::new(app_cfg, board_store()),
             hw,
             serial: cfg.serial,
             cfg,
             now_us: 0,
-            tick_us: 1000,
+            // polled as the board polls it
+            tick_us: app_cfg.poll_period_us as u64,
         };
         rig.app.poll(&mut rig.hw, 0);
         Ok(rig)

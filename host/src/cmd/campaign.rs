@@ -150,6 +150,33 @@ impl Plan {
         v
     }
 
+    /// The rig constants the plan leaves out, for which the real rig's values stand in (said at the
+    /// start and recorded in every run's metadata).
+    pub fn defaults(&self) -> Vec<String> {
+        let real = Configure::real_rig(0.3);
+        [
+            (
+                "mass_kg",
+                self.mass_kg.is_none(),
+                format!("{} kg", real.rig.mass_kg),
+            ),
+            (
+                "stiffness_n_per_m",
+                self.stiffness_n_per_m.is_none(),
+                format!("{} N/m", real.rig.stiffness_n_per_m),
+            ),
+            (
+                "x0_m",
+                self.x0_m.is_none(),
+                format!("{} m", real.initial_amplitude_m),
+            ),
+        ]
+        .into_iter()
+        .filter(|(_, missing, _)| *missing)
+        .map(|(k, _, v)| format!("{k}={v}"))
+        .collect()
+    }
+
     pub fn config(&self, load: f32) -> Configure {
         let mut c = Configure::real_rig(load);
         if let Some(v) = self.rate_hz {
@@ -212,8 +239,8 @@ pub struct Args {
     /// Show what would be run and what is already done, and stop.
     #[arg(long)]
     pub dry_run: bool,
-    /// No progress bar or messages.
-    #[arg(long, short)]
+    /// No progress bar or messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
     pub quiet: bool,
 }
 
@@ -234,6 +261,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         done.len(),
         todo.len()
     );
+    let defaults = plan.defaults();
+    if !defaults.is_empty() {
+        println!(
+            "  the plan does not give {}: the real rig's values stand in (recorded with every run)",
+            defaults.join(", ")
+        );
+    }
     if args.dry_run || todo.is_empty() {
         for p in &todo {
             println!(
@@ -250,12 +284,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let abort = abort_flag();
     let (mut link, info) = args.link.connect()?;
-    eprintln!(
-        "rig on {}: firmware {}, serial {:016x}",
-        link.name(),
-        firmware_version(&info),
-        info.serial
-    );
+    if !args.quiet {
+        eprintln!(
+            "rig on {}: firmware {}, serial {:016x}",
+            link.name(),
+            firmware_version(&info),
+            info.serial
+        );
+    }
     let mut last_load: Option<f32> = None;
     for (i, p) in todo.iter().enumerate() {
         if abort.load(Ordering::Relaxed) {
@@ -271,15 +307,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             std::io::stdin().read_line(&mut s)?;
         }
         last_load = Some(p.load_n);
-        eprintln!(
-            "[{}/{}] load {} N, {}, repetition {}/{}",
-            i + 1,
-            todo.len(),
-            p.load_n,
-            p.temp_c.map_or("heater off".into(), |t| format!("{t} °C")),
-            p.repeat,
-            plan.repeats
-        );
+        if !args.quiet {
+            eprintln!(
+                "[{}/{}] load {} N, {}, repetition {}/{}",
+                i + 1,
+                todo.len(),
+                p.load_n,
+                p.temp_c.map_or("heater off".into(), |t| format!("{t} °C")),
+                p.repeat,
+                plan.repeats
+            );
+        }
         let mut rp = RunPlan::new(plan.config(p.load_n));
         rp.heater = p.temp_c.map(|t| HeaterPlan {
             setpoint_c: t,
@@ -294,6 +332,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rp.lubricant = plan.lubricant.clone();
         rp.campaign = Some(plan.name.clone());
         rp.repeat = Some(p.repeat);
+        rp.defaults = defaults.clone();
         let mut ui = Ui::new(args.quiet);
         let o = record_run(&mut link, &info, &store, &rp, &abort, &mut |e| ui.on(e));
         ui.finish();

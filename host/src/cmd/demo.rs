@@ -21,8 +21,8 @@ pub struct Args {
     /// No figures.
     #[arg(long)]
     pub no_report: bool,
-    /// No progress bar or messages.
-    #[arg(long, short)]
+    /// No progress bar or messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
     pub quiet: bool,
 }
 

@@ -2,35 +2,69 @@
 //! explain a record, name the missing physics, add it and show the gap shrink (issue 7). The logic
 //! lives in the `tribo-explain` crate.
 
-use anyhow::{bail, Context, Result};
+use crate::exit::Incomplete;
+use crate::load::load_analysable_for_fit;
+use crate::{out, outln};
+use anyhow::{bail, Result};
 use clap::Parser;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use tribo_explain::{report::write_report, Effect, ExplainOptions, Prepared};
 use tribo_physics::identify::LawSpec;
 
-/// Explain the disagreement between a friction law and a record.
-///
-/// Fits the base law, measures where it disagrees (envelope residual against amplitude and time,
-/// windowed fits, frequency against amplitude, force lag and dissipated energy when `ft_n` exists,
-/// temperature drift when `temp_c` exists), then scores each candidate effect — quadratic-velocity,
-/// stribeck, frictional-lag, cubic-stiffness, thermal-drift, sensor-lag — by how much adding it
-/// explains (BIC on the envelope + force residuals), adds the best one when the evidence is clear,
-/// refits, and repeats until nothing significant is left.
-///
-/// `--json` prints one object `{"missing_effects": [...], "steps": [{"effect", "gap_before",
-/// "gap_after", "delta_bic", "params"}], "gap_initial", "gap_final", ...}`. The gap is RMS(measured
-/// − fitted envelope) / initial amplitude, extended to the force channel as
-/// √(gap_envelope² + gap_force²).
-///
-/// A record with holes (samples the rig lost, blocks not received, a time axis that jumps) is
-/// refused; `--longest-clean-stretch` explains the longest stretch of consecutive samples instead.
+fn base_law(s: &str) -> Result<LawSpec, String> {
+    match s.parse::<LawSpec>()? {
+        LawSpec::LuGre => Err(
+            "the base law must be polynomial: coulomb, viscous, coulomb-viscous, quadratic, poly:N"
+                .into(),
+        ),
+        l => Ok(l),
+    }
+}
+
+fn effect(s: &str) -> Result<Effect, String> {
+    Effect::from_name(s.trim()).ok_or_else(|| {
+        format!(
+            "unknown effect {s:?}: use {}",
+            Effect::ALL.map(|e| e.name()).join(", ")
+        )
+    })
+}
+
+/// The long `--help` of the command.
+pub const LONG_ABOUT: &str = "Explain the disagreement between a friction law and a record.
+
+Fits the base law to every channel (envelope from displacement and velocity; friction force when
+`ft_n` exists; temperature when `temp_c` exists), measures where it disagrees, then tries each
+candidate effect — quadratic-velocity, stribeck, frictional-lag, cubic-stiffness, thermal-drift,
+sensor-lag. An effect is named only if adding it shrinks the misfit by more than chance would,
+judged with a noise model of the residuals that includes their correlation (an effective sample
+count per channel), and removes a material part of the misfit above the noise floor. The best one
+is added, the model refitted, and the search repeats. If a misfit well above the noise floor
+remains, the answer is \"unexplained: N % of the gap remains; not one of the known effects\" —
+never a guess.
+
+`--json` prints one object: `conclusion` (base-adequate, explained, partly-explained,
+unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_before`,
+`gap_after`, `evidence`, `params` and `params_se`), `gap_initial`, `gap_final`, `noise_floor`,
+`unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source`, the base and final models,
+every round's candidates and the diagnostics. The gap is RMS(measured − fitted envelope) /
+initial amplitude, extended to the force channel as √(gap_envelope² + gap_force²).
+
+Exit status 3 (and nothing explained) for a record that cannot be analysed.
+
+A record with holes (samples the rig lost, blocks not received, a time axis that jumps) is
+refused; `--longest-clean-stretch` explains the longest stretch of consecutive samples instead.";
+
+///  Explain the disagreement between a friction law and a record.
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` with rig constants, or `tau,y,ydot`).
     pub record: PathBuf,
     /// Base law: coulomb, viscous, coulomb-viscous, quadratic, poly:N.
-    #[arg(long, default_value = "coulomb-viscous")]
-    pub base: String,
+    #[arg(long, default_value = "coulomb-viscous", value_parser = base_law)]
+    pub base: LawSpec,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -38,11 +72,18 @@ pub struct Args {
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Only consider these effects (comma-separated names).
-    #[arg(long, value_delimiter = ',')]
-    pub only: Vec<String>,
+    #[arg(long, value_delimiter = ',', value_parser = effect)]
+    pub only: Vec<Effect>,
     /// At most this many effects are added.
     #[arg(long, default_value_t = 3)]
     pub max_steps: usize,
+    /// Low-pass of the force channel (Hz), if the record does not state it (`# force_cutoff_hz=`);
+    /// without either, the better of none and the rig's 300 Hz is taken, and the output says so.
+    #[arg(long)]
+    pub force_cutoff_hz: Option<f64>,
+    /// No progress messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
+    pub quiet: bool,
     /// If the record has holes (samples the rig lost, blocks not received), use the longest
     /// stretch of consecutive samples instead of refusing.
     #[arg(long)]
@@ -51,50 +92,65 @@ pub struct Args {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> Result<()> {
-    let base: LawSpec = args.base.parse().map_err(anyhow::Error::msg)?;
+    let base: LawSpec = args.base;
     let mut opts = ExplainOptions {
         base,
         max_steps: args.max_steps,
+        force_cutoff_hz: args.force_cutoff_hz,
         ..ExplainOptions::default()
     };
     if !args.only.is_empty() {
-        opts.candidates = args
-            .only
-            .iter()
-            .map(|n| {
-                Effect::from_name(n.trim()).with_context(|| {
-                    format!(
-                        "unknown effect {n:?}: use {}",
-                        Effect::ALL.map(|e| e.name()).join(", ")
-                    )
-                })
-            })
-            .collect::<Result<_>>()?;
+        opts.candidates = args.only.clone();
     }
     let holes = if args.longest_clean_stretch {
         crate::Holes::LongestCleanStretch
     } else {
         crate::Holes::Refuse
     };
-    let record = crate::load_for_fit(&args.record, holes)?;
+    let record = load_analysable_for_fit(&args.record, holes)?;
+    let not_analysable = |e: tribo_explain::ExplainError| -> anyhow::Error {
+        if e.is_not_analysable() {
+            Incomplete(format!(
+                "{}: {e}; nothing is explained",
+                args.record.display()
+            ))
+            .into()
+        } else {
+            anyhow::Error::new(e).context(format!("{}", args.record.display()))
+        }
+    };
     let data = Prepared::new(
         &record,
         opts.max_env_points,
         opts.max_force_points,
         opts.force_cutoff_hz,
     )
-    .with_context(|| format!("{}", args.record.display()))?;
-    let ex = tribo_explain::explain_prepared(&data, &opts)
-        .with_context(|| format!("{}", args.record.display()))?;
-    if args.json {
-        println!("{}", ex.to_json());
+    .map_err(not_analysable)?;
+    let bar = if args.quiet || !std::io::stderr().is_terminal() {
+        ProgressBar::hidden()
     } else {
-        print!("{}", ex.to_text());
+        let b = ProgressBar::new_spinner();
+        b.set_style(
+            ProgressStyle::with_template("{spinner} explain: {msg} [{elapsed}]")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        );
+        b.enable_steady_tick(std::time::Duration::from_millis(120));
+        b
+    };
+    let result = tribo_explain::explain_with_progress(&data, &opts, &mut |what, _, _| {
+        bar.set_message(what.to_string())
+    });
+    bar.finish_and_clear();
+    let (ex, data) = result.map_err(not_analysable)?;
+    if args.json {
+        outln!("{}", ex.to_json())?;
+    } else {
+        out!("{}", ex.to_text())?;
     }
     if let Some(dir) = &args.report {
         let page = write_report(&data, &ex, dir)?;
         if !args.json {
-            println!("report: {}", page.display());
+            outln!("report: {}", page.display())?;
         }
     }
     if !ex.gap_final.is_finite() {

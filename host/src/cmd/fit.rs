@@ -1,41 +1,71 @@
-//! `tribo fit`: identify a friction law from a record (thesis ch. 3.5).
+//! `tribo fit`: identify a friction law from a record (thesis ch. 3.5), with the standard error of
+//! every constant, the record's noise floor and a verdict.
 
+use crate::exit::Incomplete;
+use crate::load::{apply_rig_flags, load_analysable_for_fit, recorded_defaults, RigFlags, RigUsed};
+use crate::{out, outln};
 use anyhow::{Context, Result};
 use clap::Parser;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use tribo_physics::envelope::mark_crandall;
 use tribo_physics::identify::{
-    fit, fit_windows, simulated_envelope, EnvelopeData, FitOptions, FitResult, LawSpec, WindowFit,
+    fit, fit_windows, scaled_envelope, EnvelopeData, FitError, FitOptions, FitResult, FitVerdict,
+    LawSpec, WindowFit, ADEQUATE_RATIO, NUMERICAL_FLOOR,
 };
-use tribo_physics::{Record, Rig};
+use tribo_physics::Record;
 
-/// Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
-///
-/// RECORD is a CSV with header `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` and rig constants in
-/// `# mass_kg=…`, `# stiffness_n_per_m=…`, `# load_n=…` comment lines (the flags below override
-/// them), or a dimensionless CSV `tau,y,ydot`.
-///
-/// `--json` prints one object `{"law", "mu": [μ0, μ1, …], "gap", "p_si", "params", "iterations",
-/// "converged", "shape", "y0", "points"}`: `mu` are the dimensionless constants of seed eq. 10–13 in
-/// order of j, `gap` the RMS envelope difference divided by the initial amplitude, `shape` the
-/// envelope shape (straight/convex/concave/mixed) the fitted law predicts.
-///
-/// `--windows N` also fits the law on N successive windows of equal amplitude drop (thesis
-/// ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains
-/// `"windows": [{"a_start", "a_end", "tau_start", "tau_end", "fit": {…}}, …]`. Constants that
-/// drift from window to window mean the law misses an amplitude-dependent term.
-///
-/// A record with holes is refused: a run whose rig lost samples (its acquisition gaps), a run with
-/// blocks not received, a CSV whose time axis jumps. `--longest-clean-stretch` fits the longest
-/// stretch of consecutive samples instead (and says which on stderr).
+/// clap value parser of a law name (`coulomb`, `viscous`, `coulomb-viscous`, `quadratic`, `poly:N`,
+/// `lugre`): an unknown name is a usage error.
+pub fn law_spec(s: &str) -> Result<LawSpec, String> {
+    s.parse()
+}
+
+/// The long `--help` of the command.
+pub const LONG_ABOUT: &str = "Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
+
+RECORD is a CSV with header `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]` and rig constants in
+`# mass_kg=…`, `# stiffness_n_per_m=…`, `# load_n=…` comment lines (the flags below override
+them; a constant neither gives takes the real rig's value, and the output says so), a
+dimensionless CSV `tau,y,ydot`, or a run folder of the store.
+
+Every constant comes with its standard error (±, one standard deviation: from the Jacobian at the
+optimum, with the residuals' correlation taken into account). The *noise floor* is the
+envelope's measurement noise read from the record itself; the *gap* is the RMS difference
+between measured and fitted envelopes. Both are relative to the initial amplitude. The verdict:
+
+  adequate       converged, gap ≤ 1.5 × noise floor: the law describes the record
+  inadequate     converged, gap above that: the law misses something (try `tribo explain`)
+  not-converged  the iteration limit came first: the constants are not trustworthy (status 3)
+  not-analysable no oscillation, too few half cycles, a saturated channel or a non-finite
+                 sample: nothing is fitted, no constant printed (status 3)
+
+`--json` prints one object: `law`, `verdict`, `mu` and `mu_se` (dimensionless constants of seed
+eq. 10–13 in order of j and their standard errors), `gap`, `noise_floor`, `p_si`, `p_si_se` (SI
+coefficients of μ(v) = Σ p_j v^j, v in m/s), `params`, `params_se`, `iterations`, `converged`,
+`shape` (straight/convex/concave/mixed), `y0`, `y0_se` (fitted initial amplitude), `points`,
+`n_eff` (effectively independent residuals), `half_cycles`, `record`, `rig` (the constants used
+and where each came from: record, flag, default) and `defaults` (the constants a default stood in
+for). A record that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"reason\",
+\"message\"}`.
+
+`--windows N` also fits the law on N successive windows of equal amplitude drop (thesis
+ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains
+`\"windows\": [{\"a_start\", \"a_end\", \"tau_start\", \"tau_end\", \"fit\": {…}}, …]`. Constants that
+drift from window to window mean the law misses an amplitude-dependent term.
+
+A record with holes is refused: a run whose rig lost samples (its acquisition gaps), a run with
+blocks not received, a CSV whose time axis jumps. `--longest-clean-stretch` fits the longest
+stretch of consecutive samples instead (and says which on stderr).";
+
+///  Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
 #[derive(Parser, Debug)]
 pub struct Args {
-    /// The record (CSV).
+    /// The record (CSV, or a run folder).
     pub record: PathBuf,
     /// Law: coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre.
-    #[arg(long, default_value = "coulomb-viscous")]
-    pub law: String,
+    #[arg(long, default_value = "coulomb-viscous", value_parser = law_spec)]
+    pub law: LawSpec,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -65,78 +95,164 @@ pub struct Args {
 
 /// Runs `tribo fit`.
 pub fn run(a: Args) -> Result<()> {
-    let spec: LawSpec = a.law.parse().map_err(anyhow::Error::msg)?;
+    let spec = a.law;
     let holes = if a.longest_clean_stretch {
         crate::Holes::LongestCleanStretch
     } else {
         crate::Holes::Refuse
     };
-    let mut rec = crate::load_for_fit(&a.record, holes)?;
-    if a.mass_kg.is_some() || a.stiffness.is_some() || a.load_n.is_some() {
-        let base = rec.rig.unwrap_or(Rig::REAL);
-        rec.rig = Some(
-            Rig::new(
-                a.mass_kg.unwrap_or(base.mass_kg),
-                a.stiffness.unwrap_or(base.stiffness_n_per_m),
-                a.load_n.unwrap_or(base.load_n),
-            )
-            .map_err(anyhow::Error::msg)?,
-        );
-    }
+    let mut rec = load_analysable_for_fit(&a.record, holes)?;
+    let rig = apply_rig_flags(
+        &mut rec,
+        RigFlags {
+            mass_kg: a.mass_kg,
+            stiffness_n_per_m: a.stiffness,
+            load_n: a.load_n,
+        },
+        &recorded_defaults(&a.record),
+    )?;
     let opts = FitOptions {
         apparatus_mu1: a.apparatus_mu1,
         ..FitOptions::default()
     };
-    let r = fit(&rec, spec, &opts)?;
+    let r = match fit(&rec, spec, &opts) {
+        Ok(r) => r,
+        Err(FitError::NotAnalysable(why)) => {
+            if a.json {
+                let j = serde_json::json!({
+                    "record": a.record.display().to_string(),
+                    "verdict": "not-analysable",
+                    "reason": why.name(),
+                    "message": why.to_string(),
+                    "rig": rig,
+                    "defaults": rig.defaults(),
+                });
+                outln!("{j}")?;
+            }
+            return Err(Incomplete(format!(
+                "{}: not analysable: {why}; no constant is fitted",
+                a.record.display()
+            ))
+            .into());
+        }
+        Err(e) => return Err(e).with_context(|| format!("{}", a.record.display())),
+    };
     let windows = if a.windows > 0 {
         fit_windows(&rec, spec, a.windows, &opts)?
     } else {
         Vec::new()
     };
     if a.json {
-        let mut j = r.to_json();
+        let mut j = serde_json::to_value(&r)?;
+        j["record"] = a.record.display().to_string().into();
+        j["rig"] = serde_json::to_value(rig)?;
+        j["defaults"] = serde_json::to_value(rig.defaults())?;
         if a.windows > 0 {
-            let items: Vec<String> = windows.iter().map(WindowFit::to_json).collect();
-            j.pop(); // the closing brace
-            let _ = write!(j, ", \"windows\": [{}]}}", items.join(", "));
+            j["windows"] = serde_json::to_value(&windows)?;
         }
-        println!("{j}");
+        outln!("{j}")?;
     } else {
-        print!("{}", table(&r));
+        out!("{}", table(&a.record.display().to_string(), &rig, &r))?;
         if a.windows > 0 {
-            print!("{}", window_table(&windows));
+            out!("{}", window_table(&windows))?;
         }
     }
     if let Some(p) = &a.plot {
         let svg = figure(&rec, &r, spec, &opts)?;
         std::fs::write(p, svg).with_context(|| format!("writing {}", p.display()))?;
     }
+    if r.verdict == FitVerdict::NotConverged {
+        return Err(Incomplete(format!(
+            "{}: the fit did not converge in {} iterations; its constants are not trustworthy",
+            a.record.display(),
+            r.iterations
+        ))
+        .into());
+    }
     Ok(())
 }
 
-fn table(r: &FitResult) -> String {
+/// `value ± se` with the value rounded to the standard error's second significant digit (`?` when
+/// the standard error is unknown).
+pub fn pm(v: f64, se: f64) -> String {
+    if !v.is_finite() {
+        return "—".into();
+    }
+    if !(se.is_finite() && se > 0.0) {
+        return format!("{v:.6e} ± ?");
+    }
+    let mag = v.abs().max(se);
+    if !(1e-4..1e5).contains(&mag) {
+        return format!("{v:.4e} ± {se:.1e}");
+    }
+    let digits = (1 - se.log10().floor() as i32).max(0) as usize;
+    if digits > 8 {
+        return format!("{v:.6e} ± {se:.1e}");
+    }
+    format!("{v:.digits$} ± {se:.digits$}")
+}
+
+fn table(record: &str, rig: &RigUsed, r: &FitResult) -> String {
     let mut s = String::new();
+    let _ = writeln!(s, "record     {record}");
+    let _ = writeln!(s, "rig        {}", rig.describe());
     let _ = writeln!(s, "law        {}", r.law);
+    let unit = |j: usize| match j {
+        0 => String::new(),
+        1 => " s/m".to_string(),
+        j => format!(" (s/m)^{j}"),
+    };
+    let fitted = |j: usize| {
+        r.law
+            .parse::<LawSpec>()
+            .map_or(true, |l| l == LawSpec::LuGre || l.powers().contains(&j))
+    };
     for (j, (m, p)) in r.mu.iter().zip(&r.p_si).enumerate() {
-        let _ = writeln!(s, "mu{j:<8} {m:>14.6e}    (p{j} = {p:.6e} in SI, v in m/s)");
+        if !fitted(j) {
+            continue;
+        }
+        let _ = writeln!(
+            s,
+            "mu{j:<8} {:<30} p{j} = {}{}",
+            pm(*m, r.mu_se[j]),
+            pm(*p, r.p_si_se[j]),
+            unit(j)
+        );
+    }
+    if r.law == "lugre" {
+        let _ = writeln!(
+            s,
+            "mu_s       {}   (LuGre static level; σ0, σ1, v_s fixed)",
+            pm(r.params[1], r.params_se[1])
+        );
     }
     let _ = writeln!(
         s,
-        "gap        {:.3e}  (RMS envelope difference / initial amplitude)",
-        r.gap
+        "gap        {:.3e} = {:.2} × the noise floor {:.3e}{}  (RMS envelope difference and noise, / initial amplitude)",
+        r.gap,
+        r.gap_ratio(),
+        r.noise_floor,
+        if r.noise_floor <= NUMERICAL_FLOOR {
+            " (the simulation's resolution: a noiseless record)"
+        } else {
+            ""
+        }
     );
     let _ = writeln!(s, "shape      {}", r.shape.name());
     let _ = writeln!(
         s,
-        "fit        {} iterations, {}, {} envelope points",
-        r.iterations,
-        if r.converged {
-            "converged"
-        } else {
-            "NOT converged"
-        },
-        r.points
+        "fit        {} iterations, {} envelope points ({:.0} effectively independent), {} half cycles",
+        r.iterations, r.points, r.n_eff, r.half_cycles
     );
+    let _ = writeln!(s, "verdict    {}", r.verdict.sentence());
+    if r.verdict == FitVerdict::Inadequate {
+        let _ = writeln!(
+            s,
+            "           (gap > {ADEQUATE_RATIO} × noise floor; the ± hold for the law's best \
+             approximation of the record, not for a law that describes it)"
+        );
+    }
+    let _ = writeln!(s, "±          one standard error");
     s
 }
 
@@ -163,6 +279,11 @@ fn window_table(w: &[WindowFit]) -> String {
             let _ = write!(s, " {m:>13.5e}");
         }
         let _ = writeln!(s, " {:>10.3e}", x.fit.gap);
+        let _ = write!(s, "{:>39}", "± ");
+        for m in &x.fit.mu_se {
+            let _ = write!(s, " {m:>13.1e}");
+        }
+        let _ = writeln!(s);
     }
     s
 }
@@ -171,8 +292,8 @@ fn window_table(w: &[WindowFit]) -> String {
 fn figure(rec: &Record, r: &FitResult, spec: LawSpec, opts: &FitOptions) -> Result<String> {
     let (tau, y, ydot) = rec.dimensionless()?;
     let data = EnvelopeData::new(&tau, &y, &ydot, 1500).map_err(anyhow::Error::msg)?;
-    let fitted =
-        simulated_envelope(&data, spec.law(&r.params), opts).map_err(anyhow::Error::msg)?;
+    let fitted = scaled_envelope(&data, spec.law(&r.params), r.initial_scale(&data), opts)
+        .map_err(anyhow::Error::msg)?;
     let measured = {
         let a = mark_crandall(&y, &ydot);
         let stride = a.len().div_ceil(1500);

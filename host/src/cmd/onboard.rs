@@ -12,7 +12,7 @@ use crate::firmware::analysis::Pipeline;
 use crate::firmware::calib;
 use crate::physics::Record;
 use crate::wire::{
-    Channel, ChannelCal, ChannelSet, Configure, Estimate, OnboardResult, RigConstants,
+    Channel, ChannelCal, ChannelSet, Configure, Estimate, OnboardResult, RigConstants, Verdict,
 };
 use anyhow::{bail, Context};
 use std::fmt::Write as _;
@@ -29,14 +29,36 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Runs the subcommand.
+/// Runs the subcommand. A record the pipeline refuses (too few cycles, no oscillation, a saturated
+/// channel, a non-finite sample) ends with status 3 and no coefficients (JSON: `null`s).
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let record = crate::load_record(&args.record)?;
+    let record = crate::load::load_for_analysis(&args.record)?;
+    // The host's screening first: a record clipped by another acquisition's converter looks
+    // unsaturated to the pipeline, whose converter range is made to span the record.
+    if let Ok((tau, y, ydot)) = record.dimensionless() {
+        if let Err(why) = tribo_physics::identify::screen(&tau, &y, &ydot) {
+            return Err(crate::exit::Incomplete(format!(
+                "{}: not analysable: {why}; no coefficients",
+                args.record.display()
+            ))
+            .into());
+        }
+    }
     let result = analyse(&record).with_context(|| format!("{}", args.record.display()))?;
+    let usable = matches!(result.verdict, Verdict::Ok | Verdict::EstimatorsDisagree);
     if args.json {
-        println!("{}", to_json(&result));
-    } else {
-        print!("{}", to_text(&result));
+        crate::outln!("{}", to_json(&result))?;
+    } else if usable {
+        crate::out!("{}", to_text(&result))?;
+    }
+    if !usable {
+        return Err(crate::exit::Incomplete(format!(
+            "{}: not analysable by the on-board pipeline: {} ({} cycles); no coefficients",
+            args.record.display(),
+            result.verdict.name(),
+            result.cycles
+        ))
+        .into());
     }
     Ok(())
 }
@@ -149,39 +171,50 @@ fn num(v: f32) -> String {
     }
 }
 
-fn estimate_json(e: &Estimate) -> String {
-    format!(
-        "{{\"mu0\": {}, \"mu1\": {}, \"mu0_se\": {}, \"mu1_se\": {}}}",
-        num(e.mu0),
-        num(e.mu1),
-        num(e.mu0_se),
-        num(e.mu1_se)
-    )
+/// `f32` as a JSON number (`null` when not finite), printed as the shortest decimal that reads back
+/// as the same `f32`.
+fn jnum(v: f32) -> serde_json::Value {
+    if v.is_finite() {
+        format!("{v}")
+            .parse::<f64>()
+            .ok()
+            .and_then(serde_json::Number::from_f64)
+            .map_or(serde_json::Value::Null, serde_json::Value::Number)
+    } else {
+        serde_json::Value::Null
+    }
+}
+
+fn estimate_json(e: &Estimate) -> serde_json::Value {
+    serde_json::json!({
+        "mu0": jnum(e.mu0),
+        "mu1": jnum(e.mu1),
+        "mu0_se": jnum(e.mu0_se),
+        "mu1_se": jnum(e.mu1_se),
+    })
 }
 
 /// The result as one JSON object: `mu0`, `mu1`, `mu0_se`, `mu1_se` (the value shown to the
-/// technician), `cycles`, `envelope_shape`, `verdict`, `frequency_hz`, `curvature`,
-/// `initial_amplitude_m`, `duration_s`, and the two estimators under `averaging` and `decrement`.
-/// Unavailable numbers are `null`.
+/// technician and its standard error), `cycles`, `envelope_shape`, `verdict`, `frequency_hz`,
+/// `curvature`, `initial_amplitude_m`, `duration_s`, and the two estimators under `averaging` and
+/// `decrement`. Unavailable numbers are `null`.
 pub fn to_json(r: &OnboardResult) -> String {
-    format!(
-        "{{\"mu0\": {}, \"mu1\": {}, \"mu0_se\": {}, \"mu1_se\": {}, \"cycles\": {}, \"envelope_shape\": \"{}\", \
-         \"verdict\": \"{}\", \"frequency_hz\": {}, \"curvature\": {}, \"initial_amplitude_m\": {}, \
-         \"duration_s\": {}, \"averaging\": {}, \"decrement\": {}}}",
-        num(r.best.mu0),
-        num(r.best.mu1),
-        num(r.best.mu0_se),
-        num(r.best.mu1_se),
-        r.cycles,
-        r.shape.name(),
-        r.verdict.name(),
-        num(r.frequency_hz),
-        num(r.curvature),
-        num(r.initial_amplitude_m),
-        num(r.duration_s),
-        estimate_json(&r.averaging),
-        estimate_json(&r.decrement),
-    )
+    serde_json::json!({
+        "mu0": jnum(r.best.mu0),
+        "mu1": jnum(r.best.mu1),
+        "mu0_se": jnum(r.best.mu0_se),
+        "mu1_se": jnum(r.best.mu1_se),
+        "cycles": r.cycles,
+        "envelope_shape": r.shape.name(),
+        "verdict": r.verdict.name(),
+        "frequency_hz": jnum(r.frequency_hz),
+        "curvature": jnum(r.curvature),
+        "initial_amplitude_m": jnum(r.initial_amplitude_m),
+        "duration_s": jnum(r.duration_s),
+        "averaging": estimate_json(&r.averaging),
+        "decrement": estimate_json(&r.decrement),
+    })
+    .to_string()
 }
 
 /// The result as a short table for the terminal.
@@ -197,7 +230,17 @@ pub fn to_text(r: &OnboardResult) -> String {
             num(e.mu1_se)
         );
     };
-    let _ = writeln!(s, "verdict    {}", r.verdict.name());
+    let _ = writeln!(
+        s,
+        "verdict    {}{}",
+        r.verdict.name(),
+        if r.verdict == Verdict::EstimatorsDisagree {
+            " — the decrement and averaging estimators disagree beyond their ±: the \
+             Coulomb–viscous law may not describe this record (`tribo fit`, `tribo explain`)"
+        } else {
+            ""
+        }
+    );
     let _ = writeln!(
         s,
         "cycles     {}   frequency {} Hz   x0 {} m   duration {} s",
@@ -209,6 +252,7 @@ pub fn to_text(r: &OnboardResult) -> String {
     row(&mut s, "best", &r.best);
     row(&mut s, "averaging", &r.averaging);
     row(&mut s, "decrement", &r.decrement);
+    let _ = writeln!(s, "±          one standard error");
     let _ = writeln!(
         s,
         "envelope   {} (a2 = {})",
@@ -275,16 +319,12 @@ mod tests {
             "{r:?}"
         );
         let j = to_json(&r);
-        for key in [
-            "\"mu0\":",
-            "\"mu1\":",
-            "\"cycles\":",
-            "\"envelope_shape\": \"",
-            "\"mu0_se\":",
-            "\"verdict\": \"ok\"",
-        ] {
-            assert!(j.contains(key), "{key} missing in {j}");
+        let v: serde_json::Value = serde_json::from_str(&j).unwrap();
+        for key in ["mu0", "mu1", "cycles", "envelope_shape", "mu0_se", "mu1_se"] {
+            assert!(!v[key].is_null(), "{key} missing in {j}");
         }
+        assert_eq!(v["verdict"], "ok");
+        assert_eq!(v["mu0"].as_f64().unwrap() as f32, r.best.mu0);
         assert!(!j.contains("NaN") && !j.contains("inf"));
     }
 
@@ -293,10 +333,10 @@ mod tests {
         let rec = exact_record(0.7, 0.2, 0.01, 10_000.0, 1.0);
         let r = analyse(&rec).unwrap();
         assert_eq!(r.verdict, crate::wire::Verdict::TooFewCycles);
-        let j = to_json(&r);
+        let v: serde_json::Value = serde_json::from_str(&to_json(&r)).unwrap();
         assert!(
-            j.contains("\"mu0\": null") && j.contains("too-few-cycles"),
-            "{j}"
+            v["mu0"].is_null() && v["verdict"] == "too-few-cycles",
+            "{v}"
         );
     }
 

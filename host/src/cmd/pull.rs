@@ -16,8 +16,8 @@ pub struct Args {
     /// (the damaged file is kept beside it as frames.log.damaged), then fetch what is missing.
     #[arg(long)]
     pub salvage: bool,
-    /// No progress bar or messages.
-    #[arg(long, short)]
+    /// No progress bar or messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
     pub quiet: bool,
 }
 

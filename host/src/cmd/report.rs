@@ -1,10 +1,10 @@
 //! `tribo report RUN|RECORD|CAMPAIGN`: figures (SVG, PNG) and one self-contained HTML page.
 //!
 //! The work is done by `tribo-report`; this is the glue that tells what the argument names.
+use crate::outln;
 use anyhow::{bail, Context};
 use std::path::{Path, PathBuf};
 use tribo_physics::identify::LawSpec;
-use tribo_physics::Record;
 use tribo_report::{write_record_report, ReportFiles, ReportInputs};
 use tribo_store::{Catalog, Filter, Run};
 
@@ -32,9 +32,10 @@ pub struct Args {
     #[arg(
         long,
         default_value = "coulomb,viscous,coulomb-viscous,quadratic",
-        value_delimiter = ','
+        value_delimiter = ',',
+        value_parser = super::fit::law_spec
     )]
-    pub laws: Vec<String>,
+    pub laws: Vec<LawSpec>,
     /// Write SVG only (no PNG).
     #[arg(long)]
     pub no_png: bool,
@@ -62,11 +63,7 @@ fn clean(name: &str) -> String {
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = Path::new(&args.target);
-    let laws = args
-        .laws
-        .iter()
-        .map(|l| l.parse::<LawSpec>().map_err(anyhow::Error::msg))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let laws = args.laws.clone();
     let out_for = |name: &str| {
         args.out
             .clone()
@@ -92,7 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("reading the samples of {}", path.display()))?;
         write_record_report(&rec, &inputs, &out_for(run.id()))?
     } else if path.is_file() {
-        let rec = Record::load(path)?;
+        let rec = crate::load::load_for_analysis(path)?;
         let stem = path
             .file_stem()
             .map_or("record".into(), |s| s.to_string_lossy().into_owned());
@@ -112,12 +109,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         campaign(&args, &out_for(&args.target))?
     };
-    print_files(&files);
-    match incomplete {
+    print_files(&files)?;
+    if let Some(e) = incomplete {
         // The report is written, but of an incomplete run: exit status 3.
-        Some(e) => Err(e.into()),
-        None => Ok(()),
+        return Err(e.into());
     }
+    if let Some(why) = &files.not_analysable {
+        return Err(crate::exit::Incomplete(format!(
+            "{}: not analysable: {why}; the report shows the motion and no fitted constant",
+            args.target
+        ))
+        .into());
+    }
+    Ok(())
 }
 
 fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
@@ -170,17 +174,18 @@ fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
     Ok(tribo_report::write_campaign_report(&points, &inputs, out)?)
 }
 
-fn print_files(files: &ReportFiles) {
-    println!("report: {}", files.html.display());
+fn print_files(files: &ReportFiles) -> std::io::Result<()> {
+    outln!("report: {}", files.html.display())?;
     for f in &files.figures {
         match &f.png {
-            Some(p) => println!("  {:<20} {} {}", f.name, f.svg.display(), p.display()),
-            None => println!("  {:<20} {}", f.name, f.svg.display()),
+            Some(p) => outln!("  {:<20} {} {}", f.name, f.svg.display(), p.display())?,
+            None => outln!("  {:<20} {}", f.name, f.svg.display())?,
         }
     }
     for n in &files.notes {
-        println!("  note: {n}");
+        outln!("  note: {n}")?;
     }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -197,7 +202,7 @@ mod tests {
             out,
             store: None,
             label: false,
-            laws: vec!["coulomb-viscous".into()],
+            laws: vec![LawSpec::CoulombViscous],
             no_png: true,
         }
     }
@@ -240,9 +245,7 @@ mod tests {
         a.store = Some(dir.join("no-store"));
         let e = run(a).unwrap_err().to_string();
         assert!(e.contains("no run store"), "{e}");
-        let mut a = args(csv.to_str().unwrap(), Some(out.clone()));
-        a.laws = vec!["cubic-spline".into()];
-        assert!(run(a).is_err());
+        assert!(super::super::fit::law_spec("cubic-spline").is_err());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -225,6 +225,23 @@ fn describe(cfg: &VirtualRigConfig, a: &VirtualArgs) -> String {
     )
 }
 
+/// Says which rig constants the configuration file leaves to the thesis's rig.
+fn print_defaults(a: &VirtualArgs) {
+    if let Some(p) = &a.config {
+        let d = std::fs::read_to_string(p)
+            .map_err(|e| e.to_string())
+            .and_then(|t| VirtualRigConfig::defaulted(&t))
+            .unwrap_or_default();
+        if !d.is_empty() {
+            println!(
+                "  {} does not give {}: the thesis's rig stands in (values above)",
+                p.display(),
+                d.join(", ")
+            );
+        }
+    }
+}
+
 /// Runs the subcommand (until Ctrl-C).
 pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.virtual_rig {
@@ -253,6 +270,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let addr = Address::from(tcp.addr());
     println!("virtual rig listening on {addr}");
     println!("  {}", describe(&cfg, &args.rig));
+    print_defaults(&args.rig);
     println!("  try: tribo run --port {addr} --load {}", cfg.load_n);
     println!("  Ctrl-C stops it");
     tcp.wait();
@@ -267,6 +285,7 @@ fn run_pty(args: &Args) -> anyhow::Result<()> {
         crate::link::pty::spawn(rig, opts).context("cannot open a pseudo-terminal")?;
     println!("virtual rig on the pseudo-terminal {name}");
     println!("  {}", describe(&cfg, &args.rig));
+    print_defaults(&args.rig);
     println!("  try: tribo run --port {name} --load {}", cfg.load_n);
     println!("  Ctrl-C stops it");
     match thread.join() {

@@ -277,7 +277,16 @@ pub fn result_table(run: &Run) -> String {
     let (o0, o1) = ob.map_or(("—".into(), "—".into()), |r| {
         (pm(r.best.mu0, r.best.mu0_se), pm(r.best.mu1, r.best.mu1_se))
     });
-    let (h0, h1) = host.map_or(("—".into(), "—".into()), |h| (num(h.mu0), num(h.mu1)));
+    let pm64 = |v: f64, se: f64| {
+        if se.is_finite() && se > 0.0 {
+            format!("{} ± {:.1e}", num(v), se)
+        } else {
+            num(v)
+        }
+    };
+    let (h0, h1) = host.map_or(("—".into(), "—".into()), |h| {
+        (pm64(h.mu0, h.mu0_se), pm64(h.mu1, h.mu1_se))
+    });
     s.push_str(&format!("{:<10}{:<26}{}\n", "μ0", o0, h0));
     s.push_str(&format!("{:<10}{:<26}{}\n", "μ1", o1, h1));
     if let Some(r) = ob {
@@ -292,10 +301,14 @@ pub fn result_table(run: &Run) -> String {
     }
     if let Some(h) = host {
         s.push_str(&format!(
-            "{:<10}envelope misfit {:.2e} of A0{}\n",
+            "{:<10}envelope misfit {:.2e} of A0, {}\n",
             "host",
             h.gap,
-            if h.converged { "" } else { " (not converged)" }
+            h.verdict.as_deref().unwrap_or(if h.converged {
+                "converged"
+            } else {
+                "not converged"
+            })
         ));
     } else if let Some(e) = &run.results.host_error {
         s.push_str(&format!("{:<10}no fit: {e}\n", "host"));
@@ -371,8 +384,8 @@ pub struct Args {
     /// Heat the plate to this temperature first, °C (15–100; default: heater off).
     #[arg(long)]
     pub temp: Option<f32>,
-    /// Runs to take in a row.
-    #[arg(long, default_value_t = 1)]
+    /// Runs to take in a row (at least 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub repeat: u32,
     /// Free label stored with the run (and in its folder name).
     #[arg(long)]
@@ -413,8 +426,8 @@ pub struct Args {
     /// Heater ramp, °C/min.
     #[arg(long, default_value_t = 10.0)]
     pub ramp: f32,
-    /// No progress bar or messages.
-    #[arg(long, short)]
+    /// No progress bar or messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
     pub quiet: bool,
 }
 
@@ -462,19 +475,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let abort = abort_flag();
     let (mut link, info) = args.link.connect()?;
-    eprintln!(
-        "rig on {}: firmware {}, serial {:016x}",
-        link.name(),
-        firmware_version(&info),
-        info.serial
-    );
+    if !args.quiet {
+        eprintln!(
+            "rig on {}: firmware {}, serial {:016x}",
+            link.name(),
+            firmware_version(&info),
+            info.serial
+        );
+    }
     let store = args.link.store();
     for k in 1..=args.repeat.max(1) {
         let mut plan = plan.clone();
         if args.repeat > 1 {
             plan.repeat = Some(k);
             plan.keep_heater = k < args.repeat;
-            eprintln!("repetition {k}/{}", args.repeat);
+            if !args.quiet {
+                eprintln!("repetition {k}/{}", args.repeat);
+            }
         }
         let mut ui = Ui::new(args.quiet);
         let o = record_run(&mut link, &info, &store, &plan, &abort, &mut |p| ui.on(p));

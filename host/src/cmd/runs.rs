@@ -1,7 +1,8 @@
 //! `tribo runs`: lists and filters the runs of the store (from its SQLite catalog).
 
+use crate::outln;
 use std::path::PathBuf;
-use tribo_store::{Catalog, Filter};
+use tribo_store::{Catalog, Filter, RunStatus};
 
 /// Arguments of `tribo runs`. The `lost` column counts the samples a run's rig lost (acquisition
 /// gaps: the run went on, and fits will not cross them).
@@ -10,26 +11,42 @@ pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
     pub store: Option<PathBuf>,
+    /// Runs of this campaign (its `name` in PLAN.toml).
     #[arg(long)]
     pub campaign: Option<String>,
     /// Runs whose label contains this.
     #[arg(long)]
     pub label: Option<String>,
-    /// complete, incomplete, aborted or recording.
-    #[arg(long)]
+    /// Runs in this state.
+    #[arg(long, value_parser = status_names())]
     pub status: Option<String>,
-    /// Load range, N: `0.2` or `0.1..0.4`.
-    #[arg(long)]
-    pub load: Option<String>,
-    /// Temperature range, °C: `60` or `25..60`.
-    #[arg(long)]
-    pub temp: Option<String>,
+    /// Load range, N: `0.2` (±0.0005) or `0.1..0.4`.
+    #[arg(long, value_parser = load_range)]
+    pub load: Option<(f64, f64)>,
+    /// Temperature range, °C: `60` (±0.5) or `25..60`.
+    #[arg(long, value_parser = temp_range)]
+    pub temp: Option<(f64, f64)>,
     /// Rebuild the catalog from the run folders first.
     #[arg(long)]
     pub reindex: bool,
     /// Print the run folders only (for scripts).
     #[arg(long)]
     pub paths: bool,
+    /// No progress messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
+    pub quiet: bool,
+}
+
+fn status_names() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(RunStatus::ALL.map(RunStatus::name))
+}
+
+fn load_range(s: &str) -> Result<(f64, f64), String> {
+    parse_range(s, "load").map_err(|e| e.to_string())
+}
+
+fn temp_range(s: &str) -> Result<(f64, f64), String> {
+    parse_range(s, "temp").map_err(|e| e.to_string())
 }
 
 /// `a` or `a..b` as an inclusive range.
@@ -40,13 +57,17 @@ pub fn parse_range(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
             .ok()
             .filter(|v| v.is_finite())
             .ok_or_else(|| {
-                anyhow::anyhow!(
-                    "--{what} {s:?}: not a number or range; write e.g. `0.3` or `0.1..0.4`"
-                )
+                anyhow::anyhow!("{s:?} is not a number or range; write e.g. `0.3` or `0.1..0.4`")
             })
     };
     match s.split_once("..") {
-        Some((a, b)) => Ok((num(a)?, num(b)?)),
+        Some((a, b)) => {
+            let (a, b) = (num(a)?, num(b)?);
+            if a > b {
+                anyhow::bail!("--{what} {s:?}: empty range; write the smaller bound first");
+            }
+            Ok((a, b))
+        }
         None => {
             let v = num(s)?;
             // A single value matches what rounds to it.
@@ -72,11 +93,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let rows = cat.list(&Filter::default())?;
     if args.reindex || folders != rows.len() || rows.iter().any(|r| r.completeness.is_empty()) {
         let r = cat.reindex()?;
-        eprintln!(
-            "catalog rebuilt from the run folders: {} runs, {} of them incomplete",
-            r.indexed,
-            r.incomplete.len()
-        );
+        if !args.quiet {
+            eprintln!(
+                "catalog rebuilt from the run folders: {} runs, {} of them incomplete",
+                r.indexed,
+                r.incomplete.len()
+            );
+        }
+        // What is incomplete is said even when quiet: it is a finding, not progress.
         for (d, why) in &r.incomplete {
             eprintln!("{}: {why}", d.display());
         }
@@ -90,31 +114,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         status: args.status,
         ..Default::default()
     };
-    if let Some(l) = &args.load {
-        let (a, b) = parse_range(l, "load")?;
+    if let Some((a, b)) = args.load {
         f.load_min = Some(a);
         f.load_max = Some(b);
     }
-    if let Some(t) = &args.temp {
-        let (a, b) = parse_range(t, "temp")?;
+    if let Some((a, b)) = args.temp {
         f.temp_min = Some(a);
         f.temp_max = Some(b);
     }
     let rows = cat.list(&f)?;
     if args.paths {
         for r in rows {
-            println!("{}", r.path.display());
+            outln!("{}", r.path.display())?;
         }
         return Ok(());
     }
     if rows.is_empty() {
-        println!("no run matches (try `tribo runs --reindex` if folders were copied in by hand)");
+        outln!("no run matches (try `tribo runs --reindex` if folders were copied in by hand)")?;
         return Ok(());
     }
     let any_lost = rows.iter().any(|r| r.lost_samples > 0);
     let incomplete = rows.iter().any(|r| r.status != "complete");
     let opt = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.5}"));
-    println!(
+    outln!(
         "{:<44} {:<10} {:>11} {:>6} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
         "run",
         "status",
@@ -128,9 +150,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "μ1 rig",
         "μ0 host",
         "μ1 host"
-    );
+    )?;
     for r in rows {
-        println!(
+        outln!(
             "{:<44} {:<10} {:>11} {:>6} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
             r.id,
             r.status,
@@ -151,19 +173,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             opt(r.onboard_mu1),
             opt(r.host_mu0),
             opt(r.host_mu1),
-        );
+        )?;
     }
     if incomplete {
-        println!(
+        outln!(
             "blocks: held/in the run (? = the run's end was not received); an incomplete run is \
              completed by `tribo pull RUN` while the rig holds it"
-        );
+        )?;
     }
     if any_lost {
-        println!(
+        outln!(
             "lost: samples the rig's acquisition lost (its gap frames); fits refuse to cross a gap: \
              `tribo fit --longest-clean-stretch RUN` fits the longest stretch without one"
-        );
+        )?;
     }
     Ok(())
 }

@@ -86,6 +86,9 @@ pub struct Args {
     /// Output CSV file.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// No progress messages: set by `tribo -q`/`--quiet`.
+    #[arg(skip)]
+    pub quiet: bool,
 }
 
 /// The law of `--law` with constants `--mu`.
@@ -159,12 +162,14 @@ pub fn run(a: Args) -> Result<()> {
     }
     rec.save(&a.output)
         .with_context(|| format!("writing {}", a.output.display()))?;
-    eprintln!(
-        "wrote {} samples ({} law, μ = {:?}) to {}",
-        rec.len(),
-        model.law.name(),
-        a.mu,
-        a.output.display()
-    );
+    if !a.quiet {
+        eprintln!(
+            "wrote {} samples ({} law, μ = {:?}) to {}",
+            rec.len(),
+            model.law.name(),
+            a.mu,
+            a.output.display()
+        );
+    }
     Ok(())
 }

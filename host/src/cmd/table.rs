@@ -1,6 +1,7 @@
 //! `tribo table --rows temp --cols load --value mu0`: campaign tables (the thesis's Tables 5–7)
 //! with the spread over repetitions (mean ± sd).
 
+use crate::outln;
 use std::path::PathBuf;
 use tribo_store::catalog::{Axis, Value};
 use tribo_store::{Catalog, Filter};
@@ -11,14 +12,14 @@ pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
     pub store: Option<PathBuf>,
-    /// `temp` or `load`.
-    #[arg(long, default_value = "temp")]
+    /// What the rows are: `temp` or `load`.
+    #[arg(long, default_value = "temp", value_parser = ["temp", "load"])]
     pub rows: String,
-    /// `load` or `temp`.
-    #[arg(long, default_value = "load")]
+    /// What the columns are: `load` or `temp`.
+    #[arg(long, default_value = "load", value_parser = ["temp", "load"])]
     pub cols: String,
     /// mu0 or mu1 (host fit, as the thesis), onboard-mu0 or onboard-mu1 (the rig's).
-    #[arg(long, default_value = "mu0")]
+    #[arg(long, default_value = "mu0", value_parser = ["mu0", "mu1", "onboard-mu0", "onboard-mu1"])]
     pub value: String,
     /// Only this campaign's runs.
     #[arg(long)]
@@ -48,14 +49,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
     )?;
     if t.rows.is_empty() {
-        println!(
+        outln!(
             "no complete run with a {} value in {}: nothing to tabulate",
             args.value,
             store.display()
-        );
+        )?;
         return Ok(());
     }
-    println!("{} (mean ± sd over repetitions, (n) runs)", args.value);
-    print!("{}", t.render());
+    outln!("{} (mean ± sd over repetitions, (n) runs)", args.value)?;
+    crate::out!("{}", t.render())?;
     Ok(())
 }

@@ -41,6 +41,8 @@ pub struct RunPlan {
     pub lubricant: Option<String>,
     pub campaign: Option<String>,
     pub repeat: Option<u32>,
+    /// Rig constants a default stood in for (recorded in the run's metadata).
+    pub defaults: Vec<String>,
 }
 
 impl RunPlan {
@@ -55,6 +57,7 @@ impl RunPlan {
             lubricant: None,
             campaign: None,
             repeat: None,
+            defaults: Vec::new(),
         }
     }
 }
@@ -929,6 +932,7 @@ pub fn record_run(
         meta.lubricant = plan.lubricant.clone();
         meta.campaign = plan.campaign.clone();
         meta.repeat = plan.repeat;
+        meta.defaults = plan.defaults.clone();
         meta.temp_setpoint_c = plan.heater.map(|h| h.setpoint_c as f64);
         meta.device = Some(device_meta(info, &port));
         Ok(RunWriter::create(store, meta)?)
@@ -1135,13 +1139,16 @@ pub fn host_fit(run: &Run) -> Result<HostFit, String> {
         tribo_physics::LawSpec::CoulombViscous,
         &FitOptions::default(),
     )
-    .map_err(|e| e.0)?;
+    .map_err(|e| e.to_string())?;
     Ok(HostFit {
         law: r.law.clone(),
         mu0: r.mu.first().copied().unwrap_or(f64::NAN),
         mu1: r.mu.get(1).copied().unwrap_or(f64::NAN),
         gap: r.gap,
         converged: r.converged,
+        mu0_se: r.mu_se.first().copied().unwrap_or(f64::NAN),
+        mu1_se: r.mu_se.get(1).copied().unwrap_or(f64::NAN),
+        verdict: Some(r.verdict.name().into()),
     })
 }
 

@@ -105,6 +105,36 @@ pub struct Filter {
     pub temp_max: Option<f64>,
 }
 
+impl Filter {
+    /// Checks the filter: a known status, finite ranges whose minimum is not above the maximum. A
+    /// filter that can match nothing by construction is an error, not an empty list.
+    pub fn check(&self) -> Result<()> {
+        if let Some(st) = &self.status {
+            st.parse::<crate::RunStatus>()?;
+        }
+        for (what, lo, hi) in [
+            ("load", self.load_min, self.load_max),
+            ("temperature", self.temp_min, self.temp_max),
+        ] {
+            if lo.is_some_and(|v| !v.is_finite()) || hi.is_some_and(|v| !v.is_finite()) {
+                return Err(StoreError::new(
+                    ErrorKind::Invalid,
+                    format!("{what} range must be finite"),
+                ));
+            }
+            if let (Some(a), Some(b)) = (lo, hi) {
+                if a > b {
+                    return Err(StoreError::new(
+                        ErrorKind::Invalid,
+                        format!("{what} range {a}..{b} is empty: write the smaller bound first"),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// What a campaign table's rows or columns are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Axis {
@@ -368,8 +398,9 @@ impl Catalog {
         Ok(out)
     }
 
-    /// Runs matching `f`, oldest first.
+    /// Runs matching `f`, oldest first; an invalid filter ([`Filter::check`]) is an error.
     pub fn list(&self, f: &Filter) -> Result<Vec<CatalogRow>> {
+        f.check()?;
         let mut stmt = self
             .conn
             .prepare(

@@ -35,6 +35,14 @@ pub enum RunStatus {
 }
 
 impl RunStatus {
+    /// Every status, in the order a run goes through them.
+    pub const ALL: [RunStatus; 4] = [
+        RunStatus::Recording,
+        RunStatus::Complete,
+        RunStatus::Aborted,
+        RunStatus::Incomplete,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             RunStatus::Recording => "recording",
@@ -42,6 +50,24 @@ impl RunStatus {
             RunStatus::Aborted => "aborted",
             RunStatus::Incomplete => "incomplete",
         }
+    }
+}
+
+impl std::str::FromStr for RunStatus {
+    type Err = StoreError;
+    fn from_str(s: &str) -> Result<RunStatus> {
+        RunStatus::ALL
+            .into_iter()
+            .find(|x| x.name() == s)
+            .ok_or_else(|| {
+                StoreError::new(
+                    ErrorKind::Invalid,
+                    format!(
+                        "unknown run status {s:?}: use {}",
+                        RunStatus::ALL.map(RunStatus::name).join(", ")
+                    ),
+                )
+            })
     }
 }
 
@@ -97,6 +123,10 @@ pub struct RunMeta {
     pub device_run_id: Option<u32>,
     /// The full configuration sent to the rig.
     pub config: Configure,
+    /// Rig constants (`mass_kg`, `stiffness_n_per_m`, `x0_m`, …) that no plan or flag gave, for
+    /// which a default stood in (a campaign plan that leaves them out takes the real rig's).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub defaults: Vec<String>,
 }
 
 impl RunMeta {
@@ -122,6 +152,7 @@ impl RunMeta {
             device: None,
             device_run_id: None,
             config,
+            defaults: Vec::new(),
         }
     }
 
@@ -170,6 +201,18 @@ pub struct HostFit {
     /// RMS envelope misfit relative to the initial amplitude.
     pub gap: f64,
     pub converged: bool,
+    /// Standard errors of μ0 and μ1 (`NaN` in results written before they were recorded).
+    #[serde(default = "nan")]
+    pub mu0_se: f64,
+    #[serde(default = "nan")]
+    pub mu1_se: f64,
+    /// The fit's verdict (`adequate`, `inadequate`, `not-converged`); `None` in older results.
+    #[serde(default)]
+    pub verdict: Option<String>,
+}
+
+fn nan() -> f64 {
+    f64::NAN
 }
 
 /// `result.toml`.

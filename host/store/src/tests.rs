@@ -375,6 +375,9 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
                 mu1: 0.01,
                 gap: 0.001,
                 converged: true,
+                mu0_se: 1e-4,
+                mu1_se: 1e-5,
+                verdict: Some("adequate".into()),
             };
             let mut res = run.results.clone();
             res.host = Some(host);

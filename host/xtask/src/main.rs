@@ -4,13 +4,18 @@
 //!   prints its flash and RAM use. Uses the rustup target when it is installed; otherwise Debian's
 //!   `rustc-web`/`cargo-web`/`rust-web-src`/`lld-22` with `RUSTC_BOOTSTRAP=1 -Z build-std=core`,
 //!   installing those packages first when they are missing and we may (root, apt-get present).
+//! * `cargo xtask target-test [FILTER]`: the on-target tests (`firmware/target-tests`): generates
+//!   the record bundle on the host, builds the test binary for the Cortex-M7 with the firmware's
+//!   flags and profile, runs it under QEMU (`qemu-system-arm -machine mps2-an500 -icount shift=0`)
+//!   and fails unless every test passed within its budgets.
 //! * `cargo xtask windows [--no-smoke]`: cross-builds `tribo.exe` for `x86_64-pc-windows-gnu` and
 //!   runs its smoke test under Wine (see [`windows`]).
 //! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the
-//!   firmware, the Windows build and its smoke test.
+//!   firmware, the on-target tests, the Windows build and its smoke test.
 
 mod elf;
 mod memory;
+mod qemu;
 mod windows;
 
 use std::path::{Path, PathBuf};
@@ -18,6 +23,7 @@ use std::process::{Command, ExitCode};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 const BOARD: &str = "tribo-board";
+const TARGET_TESTS: &str = "tribo-target-tests";
 const PROFILE: &str = "firmware";
 const DEBIAN_PACKAGES: [&str; 4] = ["rustc-web", "cargo-web", "rust-web-src", "lld-22"];
 /// Least stack the AXI SRAM must leave after the static data (the stack grows down from its end).
@@ -27,6 +33,7 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("firmware") => firmware(&args[1..]).map(|_| ()),
+        Some("target-test") => target_test(&args[1..]),
         Some("windows") => windows::windows(&args[1..]),
         Some("ci") => ci(),
         _ => {
@@ -35,10 +42,13 @@ fn main() -> ExitCode {
                  tasks:\n  \
                  firmware [--run]   build the STM32H743 firmware ELF and print its size\n                     \
                  (--run: flash it with probe-rs and show the defmt log)\n  \
+                 target-test [FILTER]\n                     \
+                 run the on-target tests on an emulated Cortex-M7 (QEMU; Debian package\n                     \
+                 qemu-system-arm); FILTER runs only the tests whose name contains it\n  \
                  windows [--no-smoke]\n                     \
                  cross-build tribo.exe (mingw-w64) and smoke-test it under Wine\n  \
                  ci                 rustfmt, clippy -D warnings, all tests, firmware build,\n                     \
-                 Windows build and smoke test"
+                 on-target tests, Windows build and smoke test"
             );
             return ExitCode::from(2);
         }
@@ -75,7 +85,7 @@ fn run(cmd: &mut Command) -> Result<(), String> {
     }
 }
 
-fn show(cmd: &Command) -> String {
+pub(crate) fn show(cmd: &Command) -> String {
     let mut s: Vec<String> = cmd
         .get_envs()
         .filter_map(|(k, v)| Some(format!("{}={}", k.to_str()?, v?.to_str()?)))
@@ -104,6 +114,7 @@ fn ci() -> Result<(), String> {
     ]))?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     firmware(&[])?;
+    target_test(&[])?;
     windows::windows(&[])?;
     Ok(())
 }
@@ -180,11 +191,10 @@ fn is_root() -> bool {
         .unwrap_or(false)
 }
 
-fn firmware(args: &[String]) -> Result<PathBuf, String> {
-    let flash = args.iter().any(|a| a == "--run");
-    let toolchain = pick_toolchain()?;
+/// A cargo command for the ARM target with `toolchain`, and the target directory it uses.
+fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
     let root = root();
-    let (mut cmd, target_dir) = match &toolchain {
+    let (mut cmd, target_dir) = match toolchain {
         Toolchain::Rustup => {
             let dir = root.join("target");
             (cargo(), dir)
@@ -204,6 +214,13 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         }
     };
     cmd.env("CARGO_TARGET_DIR", &target_dir);
+    (cmd, target_dir)
+}
+
+fn firmware(args: &[String]) -> Result<PathBuf, String> {
+    let flash = args.iter().any(|a| a == "--run");
+    let toolchain = pick_toolchain()?;
+    let (mut cmd, target_dir) = cross_cargo(&toolchain);
     cmd.args([
         if flash { "run" } else { "build" },
         "-p",
@@ -234,7 +251,7 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         size.data,
         size.vectors,
     );
-    let memory_x = root.join("memory.x");
+    let memory_x = root().join("firmware/board/memory.x");
     let text =
         std::fs::read_to_string(&memory_x).map_err(|e| format!("{}: {e}", memory_x.display()))?;
     let regions = memory::regions(&text)?;
@@ -281,4 +298,55 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         return Err(over.join("; "));
     }
     Ok(elf_path)
+}
+
+/// The on-target tests (see the module docs): bundle, cross-build, QEMU.
+fn target_test(args: &[String]) -> Result<(), String> {
+    let filter = match args {
+        [] => "",
+        [f] if !f.starts_with('-') => f.as_str(),
+        _ => return Err("usage: cargo xtask target-test [FILTER]".into()),
+    };
+    let qemu = match qemu::find() {
+        Ok(q) => q,
+        // As for the firmware toolchain: installed when we may (root, apt-get present).
+        Err(e) if Path::new("/usr/bin/apt-get").exists() && is_root() => {
+            eprintln!("xtask: {} is not installed; installing it", qemu::QEMU);
+            run(Command::new("apt-get").arg("update").arg("-q"))?;
+            run(Command::new("apt-get").args(["install", "-y", "-q", "qemu-system-arm"]))
+                .map_err(|i| format!("{i}\n{e}"))?;
+            qemu::find()?
+        }
+        Err(e) => return Err(e),
+    };
+    let started = std::time::Instant::now();
+    let bytes = tribo_target_tests::generate::bundle()
+        .map_err(|e| format!("generating the record bundle: {e}"))?;
+    let dir = root().join("target/target-tests");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let bundle = dir.join("bundle.bin");
+    // Rewritten only when it changed, so that an unchanged bundle does not relink the binary.
+    if std::fs::read(&bundle).ok().as_deref() != Some(&bytes[..]) {
+        std::fs::write(&bundle, &bytes).map_err(|e| format!("{}: {e}", bundle.display()))?;
+    }
+    eprintln!(
+        "xtask: record bundle {} ({:.0} KiB) generated in {:.1} s",
+        bundle.display(),
+        bytes.len() as f64 / 1024.0,
+        started.elapsed().as_secs_f64()
+    );
+    let toolchain = pick_toolchain()?;
+    let (mut cmd, target_dir) = cross_cargo(&toolchain);
+    cmd.env("TRIBO_TARGET_BUNDLE", &bundle).args([
+        "build",
+        "-p",
+        TARGET_TESTS,
+        "--target",
+        TARGET,
+        "--profile",
+        PROFILE,
+    ]);
+    run(&mut cmd)?;
+    let elf = target_dir.join(TARGET).join(PROFILE).join(TARGET_TESTS);
+    qemu::run(&qemu, &elf, filter)
 }

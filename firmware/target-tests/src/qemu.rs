@@ -1,0 +1,244 @@
+//! The platform under the tests: QEMU's `mps2-an500` (Cortex-M7, double-precision FPU) run with
+//! `-icount shift=0 -semihosting-config enable=on,target=native`.
+//!
+//! * Output and exit status through semihosting (`debug::exit`: 0 when every test passed).
+//! * Instructions: the CMSDK APB timer 0 (25 MHz) counts down once per 40 instructions under
+//!   `-icount shift=0` (one instruction = 1 ns of virtual time), exact and repeatable; DWT CYCCNT
+//!   reads 0 in this QEMU.
+//! * Stack: [`Qemu::measure`] paints [`WINDOW`] bytes below the caller's stack pointer, runs the
+//!   call, and finds the lowest word no longer painted (the high-water mark of that call).
+//! * Panics and faults print what happened and exit non-zero (QEMU's default handlers would loop).
+//!
+//! The only `unsafe` of the crate is here: memory-mapped timer registers, stack painting, the
+//! semihosting command line, the fault handler signature.
+#![allow(unsafe_code)]
+
+use core::fmt::Write;
+use core::ptr::{read_volatile, write_volatile};
+use cortex_m_rt::{entry, exception, ExceptionFrame};
+use cortex_m_semihosting::{debug, hio, nr, syscall1};
+use tribo_target_tests::replay::Clock;
+use tribo_target_tests::{run, tests::TESTS, Bundle, Cost, Cx, Probe};
+
+#[cfg(tribo_bundle)]
+static BUNDLE: &[u8] = include_bytes!(env!("TRIBO_TARGET_BUNDLE"));
+#[cfg(not(tribo_bundle))]
+static BUNDLE: &[u8] = &[];
+
+const TIMER0_CTRL: *mut u32 = 0x4000_0000 as *mut u32;
+const TIMER0_VALUE: *mut u32 = 0x4000_0004 as *mut u32;
+const TIMER0_RELOAD: *mut u32 = 0x4000_0008 as *mut u32;
+/// Instructions per timer tick (25 MHz timer, 1 GHz of instructions under `-icount shift=0`).
+const INSTRUCTIONS_PER_TICK: u64 = 40;
+/// Bytes painted below the caller's stack pointer by [`Qemu::measure`]: twice the budget, so a
+/// call over budget is measured, not just detected.
+const WINDOW: usize = 32 * 1024;
+const PAINT: u32 = 0xCCCC_CCCC;
+
+extern "C" {
+    /// Lowest address of the stack (cortex-m-rt's linker script).
+    static _stack_end: u32;
+}
+
+fn start_timer() {
+    // SAFETY: the CMSDK APB timer 0 registers of the mps2-an500 are at these addresses; nothing
+    // else uses the timer.
+    unsafe {
+        write_volatile(TIMER0_RELOAD, u32::MAX);
+        write_volatile(TIMER0_VALUE, u32::MAX);
+        write_volatile(TIMER0_CTRL, 1);
+    }
+}
+
+/// Timer ticks since [`start_timer`] (it counts down from `u32::MAX`).
+#[inline(always)]
+fn ticks() -> u32 {
+    // SAFETY: reading the timer's VALUE register has no side effect.
+    u32::MAX - unsafe { read_volatile(TIMER0_VALUE) }
+}
+
+fn instructions() -> Option<u64> {
+    Some(ticks() as u64 * INSTRUCTIONS_PER_TICK)
+}
+
+/// The call being measured, never inlined into the measuring frame (its stack must lie below the
+/// painted stack pointer).
+#[inline(never)]
+fn call(f: &mut dyn FnMut()) {
+    f()
+}
+
+struct Qemu {
+    stack_end: usize,
+}
+
+impl Probe for Qemu {
+    fn platform(&self) -> &'static str {
+        "Cortex-M7 (QEMU mps2-an500, -icount shift=0)"
+    }
+
+    fn resolution(&self) -> u64 {
+        INSTRUCTIONS_PER_TICK
+    }
+
+    fn count(&mut self, f: &mut dyn FnMut()) -> Option<u64> {
+        let t0 = ticks();
+        call(f);
+        let t1 = ticks();
+        Some(t1.wrapping_sub(t0) as u64 * INSTRUCTIONS_PER_TICK)
+    }
+
+    #[inline(never)]
+    fn measure(&mut self, f: &mut dyn FnMut()) -> Cost {
+        let sp = cortex_m::register::msp::read() as usize & !3;
+        let lo = sp.saturating_sub(WINDOW).max(self.stack_end);
+        let mut a = lo;
+        while a < sp {
+            // SAFETY: [lo, sp) is stack below this frame's stack pointer: unused until `call` below,
+            // no interrupt is enabled, and it lies inside the RAM reserved for the stack.
+            unsafe { write_volatile(a as *mut u32, PAINT) };
+            a += 4;
+        }
+        let t0 = ticks();
+        call(f);
+        let t1 = ticks();
+        let mut a = lo;
+        // SAFETY: reading back the same stack words.
+        while a < sp && unsafe { read_volatile(a as *const u32) } == PAINT {
+            a += 4;
+        }
+        Cost {
+            instructions: Some(t1.wrapping_sub(t0) as u64 * INSTRUCTIONS_PER_TICK),
+            stack: Some((sp - a) as u32),
+        }
+    }
+
+    fn clock(&self) -> Clock {
+        instructions
+    }
+}
+
+/// Semihosting stdout (writes nothing if the host refused it).
+struct Out(Option<hio::HostStream>);
+
+impl Write for Out {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        match &mut self.0 {
+            Some(h) => h.write_str(s),
+            None => Ok(()),
+        }
+    }
+}
+
+fn out() -> Out {
+    Out(hio::hstdout().ok())
+}
+
+/// The test filter: what follows the program name on the semihosting command line (QEMU's
+/// `-append`), if anything.
+fn filter(buf: &mut [u8; 128]) -> &str {
+    #[repr(C)]
+    struct Block {
+        ptr: *mut u8,
+        len: usize,
+    }
+    let mut block = Block {
+        ptr: buf.as_mut_ptr(),
+        len: buf.len() - 1,
+    };
+    // SAFETY: SYS_GET_CMDLINE writes at most `len` bytes into `buf` and updates `len`; the block
+    // outlives the call.
+    let r = unsafe { syscall1(nr::GET_CMDLINE, &mut block as *mut Block as usize) };
+    if r != 0 {
+        return "";
+    }
+    let line = core::str::from_utf8(&buf[..block.len.min(buf.len())]).unwrap_or("");
+    let line = line.trim_end_matches('\0').trim();
+    line.split_once(' ').map_or("", |(_, rest)| rest.trim())
+}
+
+/// Checks the counter against straight-line code of known length: 10,000 `nop`s (the counter's
+/// word, not ours, is what every figure rests on).
+fn calibrate(probe: &mut Qemu) -> (Option<u64>, Option<u64>) {
+    let empty = probe.count(&mut || {});
+    let nops = probe.count(&mut || {
+        // SAFETY: `nop` has no effect.
+        unsafe {
+            core::arch::asm!(
+                ".rept 10000",
+                "nop",
+                ".endr",
+                options(nomem, nostack, preserves_flags)
+            )
+        }
+    });
+    (empty, nops)
+}
+
+#[entry]
+fn main() -> ! {
+    start_timer();
+    let mut out = out();
+    let stack_end = core::ptr::addr_of!(_stack_end) as usize;
+    let mut probe = Qemu { stack_end };
+    let (empty, nops) = calibrate(&mut probe);
+    let _ = writeln!(
+        out,
+        "instruction counter: an empty call counts {}, 10000 nops count {} (±{})",
+        empty.unwrap_or(0),
+        nops.unwrap_or(0),
+        INSTRUCTIONS_PER_TICK
+    );
+    let mut cmdline = [0u8; 128];
+    let filter = filter(&mut cmdline);
+    let bundle = match Bundle::parse(BUNDLE) {
+        Ok(b) => Some(b),
+        Err(e) => {
+            let _ = writeln!(
+                out,
+                "no usable record bundle ({e:?}, {} bytes): the tests that need one fail",
+                BUNDLE.len()
+            );
+            None
+        }
+    };
+    let summary = {
+        let mut cx = Cx::new(&mut probe, &mut out, bundle.as_ref());
+        run(&mut cx, TESTS, filter)
+    };
+    debug::exit(if summary.ok() {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo<'_>) -> ! {
+    let mut out = out();
+    let _ = writeln!(out, "\npanicked: {info}\n\ntest result: FAILED (panic)");
+    debug::exit(debug::EXIT_FAILURE);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+#[exception]
+unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
+    let mut out = out();
+    let _ = writeln!(out, "\nHardFault: {ef:?}\n\ntest result: FAILED (fault)");
+    debug::exit(debug::EXIT_FAILURE);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+#[exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    let mut out = out();
+    let _ = writeln!(
+        out,
+        "\nunexpected exception {irqn}\n\ntest result: FAILED (fault)"
+    );
+    debug::exit(debug::EXIT_FAILURE);
+}

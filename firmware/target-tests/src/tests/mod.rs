@@ -1,0 +1,26 @@
+//! The tests, and [`TESTS`], the one list the runner goes through (in this order).
+
+pub mod app;
+pub mod parts;
+pub mod pipeline;
+pub mod store;
+pub mod wire;
+
+use crate::{test, Test};
+
+/// Every on-target test. Add yours here: `test!(module::function)`.
+pub const TESTS: &[Test] = &[
+    test!(wire::crc_known_vectors),
+    test!(wire::cobs_round_trip),
+    test!(wire::frames_match_the_host),
+    test!(wire::decoder_resynchronises),
+    test!(wire::framing_costs),
+    test!(store::wraps_and_reads_back_and_recovers),
+    test!(parts::block_path),
+    test!(parts::analysis_setup),
+    test!(pipeline::unloaded),
+    test!(pipeline::coulomb_viscous),
+    test!(pipeline::noisy),
+    test!(app::coulomb_viscous_run),
+    test!(app::unloaded_run),
+];

@@ -1,0 +1,113 @@
+//! The screening that decides whether a record can be fitted at all: it must refuse what cannot be
+//! analysed (no oscillation, too few half cycles, a clipped channel, a non-finite sample) and pass
+//! every ordinary noisy record — a false "saturated" or "too few half cycles" would withhold a
+//! result that exists.
+
+use tribo_physics::identify::{screen, NotAnalysable, MIN_HALF_CYCLES};
+use tribo_physics::integrate::Method;
+use tribo_physics::sensor::{generate, RecordSpec, SensorModel};
+use tribo_physics::{FrictionLaw, Model, Record, Rig};
+
+fn record(load_n: f64, law: FrictionLaw, seed: u64, vel_noise: f64) -> Record {
+    let spec = RecordSpec {
+        rig: Rig::new(0.04, 1150.0, load_n).unwrap(),
+        x0_m: 667e-6,
+        v0_m_s: 0.0,
+        duration_s: 1.0,
+        rate_hz: 10_000.0,
+    };
+    let s = SensorModel {
+        seed,
+        vel_noise_m_s: vel_noise,
+        ..SensorModel::default()
+    };
+    generate(&spec, &Model::new(law), Method::dopri(1e-9), Some(&s)).unwrap()
+}
+
+fn screened(rec: &Record) -> Result<usize, NotAnalysable> {
+    let (t, y, v) = rec.dimensionless().unwrap();
+    screen(&t, &y, &v).map(|s| s.half_cycles)
+}
+
+#[test]
+fn ordinary_noisy_records_all_pass() {
+    let mut seed = 0;
+    for (load, law) in [
+        (0.3, FrictionLaw::coulomb_viscous(0.02, 0.01)),
+        (0.1, FrictionLaw::coulomb_viscous(0.005, 0.002)),
+        (0.7, FrictionLaw::quadratic(0.02, 0.004, 0.003)),
+    ] {
+        for vel_noise in [2e-5, 6e-5] {
+            for _ in 0..40 {
+                seed += 1;
+                let r = screened(&record(load, law.clone(), seed, vel_noise));
+                assert!(
+                    r.is_ok(),
+                    "N = {load}, {law:?}, noise {vel_noise}, seed {seed}: {r:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn what_cannot_be_analysed_is_refused_with_its_reason() {
+    let good = record(0.3, FrictionLaw::coulomb_viscous(0.02, 0.01), 1, 2e-5);
+    // 44 half cycles above the noise in this second of motion.
+    assert!(screened(&good).unwrap() > 40);
+    // A displacement converter clipping at 85 % of x0: the first few peaks only.
+    let mut clip = good.clone();
+    let lim = 0.85 * good.x.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    clip.x.iter_mut().for_each(|x| *x = x.clamp(-lim, lim));
+    assert!(
+        matches!(
+            screened(&clip),
+            Err(NotAnalysable::Saturated {
+                channel: "displacement",
+                ..
+            })
+        ),
+        "{:?}",
+        screened(&clip)
+    );
+    // A velocity converter clipping at 90 % of the peak speed.
+    let mut vclip = good.clone();
+    let vlim = 0.9 * good.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    vclip.v.iter_mut().for_each(|v| *v = v.clamp(-vlim, vlim));
+    assert!(matches!(
+        screened(&vclip),
+        Err(NotAnalysable::Saturated {
+            channel: "velocity",
+            ..
+        })
+    ));
+    // The pin held at x0, never released.
+    let mut held = good.clone();
+    held.x.iter_mut().for_each(|x| *x = 667e-6);
+    held.v.iter_mut().for_each(|v| *v = 0.0);
+    assert!(matches!(
+        screened(&held),
+        Err(NotAnalysable::NoOscillation { .. })
+    ));
+    // A Coulomb contact that stops after a half cycle or two.
+    let short = record(0.3, FrictionLaw::coulomb(0.8), 2, 2e-5);
+    match screened(&short) {
+        Err(NotAnalysable::TooFewHalfCycles { found, need }) => {
+            assert!(found < MIN_HALF_CYCLES && need == MIN_HALF_CYCLES)
+        }
+        other => panic!("{other:?}"),
+    }
+    // Rig constants off by a factor 9 in mass, either way: the extrema are a third of, or three,
+    // natural half periods apart.
+    for (mass, apart) in [(0.36, "0.33"), (0.04 / 9.0, "3.00")] {
+        let mut wrong = good.clone();
+        wrong.rig = Some(Rig::new(mass, 1150.0, 0.3).unwrap());
+        match screened(&wrong) {
+            Err(NotAnalysable::NoOscillation { reason }) => assert!(
+                reason.contains("check the rig constants") && reason.contains(apart),
+                "{reason}"
+            ),
+            other => panic!("{other:?}"),
+        }
+    }
+}

@@ -1,0 +1,61 @@
+//! Standard output of the commands, written so that a closed pipe ends `tribo` quietly.
+//!
+//! `println!` panics when stdout is a pipe whose reader has gone (`tribo runs | head -1`): Rust
+//! ignores `SIGPIPE`, so the write fails with `EPIPE` and the macro panics. The commands write
+//! through [`outln!`](crate::outln) / [`out!`](crate::out) instead, which return the
+//! [`std::io::Error`]; `main` recognises a broken pipe anywhere in an error's chain
+//! ([`is_broken_pipe`]) and exits with status 0 without a word, as `grep`, `ripgrep` and the
+//! coreutils do when their reader has what it wanted. As a last resort for output written with
+//! `println!` elsewhere, [`install_pipe_hook`] turns that panic into the same quiet exit.
+
+/// `writeln!` to standard output, returning `std::io::Result<()>`.
+#[macro_export]
+macro_rules! outln {
+    () => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout().lock())
+    }};
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout().lock(), $($arg)*)
+    }};
+}
+
+/// `write!` to standard output (then flushed), returning `std::io::Result<()>`.
+#[macro_export]
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let mut o = std::io::stdout().lock();
+        write!(o, $($arg)*).and_then(|_| o.flush())
+    }};
+}
+
+/// True if `e` (or any of its causes) is a write to a closed pipe.
+pub fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// Makes the panic of `println!`/`print!` on a closed standard output (`failed printing to stdout:
+/// Broken pipe`) a quiet exit with status 0; any other panic is reported as before.
+pub fn install_pipe_hook() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        let epipe = format!("{}", std::io::Error::from(std::io::ErrorKind::BrokenPipe));
+        if msg.starts_with("failed printing to stdout")
+            && (msg.contains("os error 32") || msg.contains(&epipe))
+        {
+            std::process::exit(crate::exit::Status::Ok.code().into());
+        }
+        default(info)
+    }));
+}
