@@ -14,6 +14,7 @@
 //! | `power_cut_after_the_run` | the rig power-cycled after a run taken with the cable out | pulled from the rig's flash; bit-identical to before the cut |
 //! | `power_cut_during_the_run` | the rig power-cycled mid-run | stored as far as the rig's flash kept it; "restarted during the run"; exit 3 |
 //! | `a_run_longer_than_the_rig_keeps` | 60 s at 20 kS/s × 5 channels: the rig loses the middle | the blocks the rig holds, bit-identical; exactly the others missing, "no longer holds"; exit 3 |
+//! | `events_an_older_host_did_not_store_are_fetched_into_the_same_run` | a stored run without its gap and ECR frames | recognised as the rig's run, events fetched; bit-identical |
 //!
 //! The host `kill -9` row runs the real `tribo` binary: `host/tests/crash.rs`.
 
@@ -520,4 +521,52 @@ fn a_run_longer_than_the_rig_keeps() {
         "{n}"
     );
     eprintln!("{inc}");
+}
+
+#[test]
+fn events_an_older_host_did_not_store_are_fetched_into_the_same_run() {
+    // A run with acquisition gaps and ECR range changes, stored by a host that kept only header,
+    // blocks, result and end (as tribo did before it stored run events): the pull recognises the
+    // run as the rig's (same header) and adds the events, instead of taking it for another run.
+    let cfg = VirtualRigConfig {
+        law: LawConfig::CoulombViscous {
+            mu0: 0.01,
+            mu1: 0.004,
+        },
+        seed: 22,
+        acquisition: AcquisitionFaults {
+            stall_reader_after_ms: Some(500),
+            stall_reader_ms: 200,
+            adc_overrun_after_ms: None,
+        },
+        ..Default::default()
+    };
+    let mut bench = Bench::new(VirtualRig::new(cfg).unwrap());
+    let store = tempfile::tempdir().unwrap();
+    let o = record(&mut bench, Faults::default(), store.path()).unwrap();
+    let id = o.run.header().unwrap().run_id;
+    let truth = bench.rig_frames(id);
+    let dir = o.run.dir().to_owned();
+    let old: Vec<Vec<u8>> = truth
+        .iter()
+        .filter(|f| !matches!(msg(f), DeviceMsg::Gap(_) | DeviceMsg::EcrRange(_)))
+        .cloned()
+        .collect();
+    assert!(old.len() < truth.len(), "the run has events");
+    let log = dir.join("frames.log");
+    std::fs::remove_file(&log).unwrap();
+    let mut w = tribo_store::LogWriter::create(&log, Some(2)).unwrap();
+    for f in &old {
+        w.append(f).unwrap();
+    }
+    drop(w);
+    let stored = Run::open(&dir).unwrap();
+    assert!(!stored.is_complete(), "events are part of the run");
+    assert!(stored.completeness().summary().contains("run events"));
+    let o = pull(&mut bench, Faults::default(), store.path(), None, false);
+    assert_eq!(o.run.dir(), dir, "the same run, completed");
+    assert!(o.warnings.is_empty(), "{:?}", o.warnings);
+    assert_eq!(o.pulled_blocks, 0, "no block fetched: only the events");
+    // The log now holds every frame once (the events appended after the rest).
+    assert_bit_identical(&o.run, &truth);
 }

@@ -1,5 +1,8 @@
-//! `tribo pull [RUN]`: fetches the rig's last run, resuming after the last block already stored
-//! (or completes the run folder RUN).
+//! `tribo pull [RUN]`: completes a stored run from the rig — the stored copy of the rig's last run
+//! (found by the rig's serial number and run number), or the run folder RUN — fetching exactly the
+//! blocks it lacks and the run's end, with retries while the rig answers; or fetches the rig's last
+//! run into a new folder. Exits 3 when the run is still not whole (the rig no longer holds part of
+//! it, or stopped answering), saying exactly what is missing and why.
 
 use super::run::{print_outcome, LinkArgs, Ui};
 use crate::link::session::pull_run;

@@ -355,6 +355,9 @@ impl Streamer<'_, '_> {
             if !self.asked_header && !self.pulling && self.writer.is_none() {
                 if let Some(run_id) = run_of(&f.frame.msg) {
                     self.asked_header = true;
+                    // The run is this one (earlier runs' frames were filtered out above): the
+                    // pulls after the stream ask for its header again if this one is lost too.
+                    self.run_id.get_or_insert(run_id);
                     match self.link.command(HostMsg::Pull {
                         run_id,
                         from_block: 0,
