@@ -14,6 +14,7 @@
 //! | `power_cut_after_the_run` | the rig power-cycled after a run taken with the cable out | pulled from the rig's flash; bit-identical to before the cut |
 //! | `power_cut_during_the_run` | the rig power-cycled mid-run | stored as far as the rig's flash kept it; "restarted during the run"; exit 3 |
 //! | `a_run_longer_than_the_rig_keeps` | 60 s at 20 kS/s × 5 channels: the rig loses the middle | the blocks the rig holds, bit-identical; exactly the others missing, "no longer holds"; exit 3 |
+//! | `a_rig_that_stops_hearing_is_not_said_to_have_lost_the_blocks` | blocks lost live, then the rig hears no more pulls | `run` exits 3 saying the rig may still hold them; a later pull completes the run |
 //! | `events_an_older_host_did_not_store_are_fetched_into_the_same_run` | a stored run without its gap and ECR frames | recognised as the rig's run, events fetched; bit-identical |
 //!
 //! The host `kill -9` row runs the real `tribo` binary: `host/tests/crash.rs`.
@@ -569,4 +570,37 @@ fn events_an_older_host_did_not_store_are_fetched_into_the_same_run() {
     assert_eq!(o.pulled_blocks, 0, "no block fetched: only the events");
     // The log now holds every frame once (the events appended after the rest).
     assert_bit_identical(&o.run, &truth);
+}
+
+#[test]
+fn a_rig_that_stops_hearing_is_not_said_to_have_lost_the_blocks() {
+    // Blocks 10–19 lost on the way; after the release the rig hears nothing more: the pulls go
+    // unanswered. `tribo run` must not claim the rig no longer holds the blocks.
+    let mut bench = Bench::new(rig(0.02, 36));
+    let store = tempfile::tempdir().unwrap();
+    let faults = Faults {
+        drop_always: Some(|m| matches!(m, DeviceMsg::Packed(p) if (10..20).contains(&p.block))),
+        deaf_after_host_frames: Some(6),
+        ..Faults::default()
+    };
+    let t0 = std::time::Instant::now();
+    let o = record(&mut bench, faults, store.path()).unwrap();
+    eprintln!("gave up after {:.1} s", t0.elapsed().as_secs_f64());
+    assert_eq!(o.run.missing_blocks(), (10..20).collect::<Vec<_>>());
+    assert!(o.not_held.is_none(), "{:?}", o.not_held);
+    let e = o.link_lost.as_ref().expect("the rig did not answer");
+    assert_eq!(e.kind, tribo::link::LinkErrorKind::NoAnswer);
+    let inc = o.incomplete().expect("exit 3").0;
+    assert!(
+        inc.contains("missing 10–19")
+            && inc.contains("may still hold")
+            && !inc.contains("no longer"),
+        "{inc}"
+    );
+    // It did: a pull over a sound line fetches exactly those.
+    let id = o.run.header().unwrap().run_id;
+    let truth = bench.rig_frames(id);
+    let o = pull(&mut bench, Faults::default(), store.path(), None, false);
+    assert_bit_identical(&o.run, &truth);
+    assert_eq!(o.pulled_blocks, 10);
 }

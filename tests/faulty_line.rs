@@ -32,6 +32,10 @@ pub struct Faults {
     pub spare_host_frames: u64,
     /// Rig frames dropped once each, the first time one matching it passes.
     pub drop_once: Vec<fn(&DeviceMsg) -> bool>,
+    /// Rig frames dropped every time.
+    pub drop_always: Option<fn(&DeviceMsg) -> bool>,
+    /// Host frames after this many never reach the rig (a line dead one way).
+    pub deaf_after_host_frames: Option<u64>,
     /// Rig-to-host bytes after which the line is cut (the cable pulled).
     pub cut_after_bytes: Option<u64>,
 }
@@ -170,6 +174,10 @@ impl Read for Down {
                 let s = &self.shared;
                 s.stats.rig_frames.fetch_add(1, Ordering::Relaxed);
                 if let Ok(f) = decode_one::<DeviceMsg>(&frame) {
+                    if s.faults.drop_always.is_some_and(|d| d(&f.msg)) {
+                        s.stats.rig_dropped.fetch_add(1, Ordering::Relaxed);
+                        continue;
+                    }
                     let mut once = s.dropped_once.lock().unwrap();
                     if let Some(i) = (0..s.faults.drop_once.len())
                         .find(|&i| !once[i] && (s.faults.drop_once[i])(&f.msg))
@@ -224,6 +232,10 @@ impl Write for Up {
             let mut frame = std::mem::take(&mut self.cur);
             let s = &self.shared;
             let n = s.stats.host_frames.fetch_add(1, Ordering::Relaxed) + 1;
+            if s.faults.deaf_after_host_frames.is_some_and(|k| n > k) {
+                s.stats.host_dropped.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
             let fate = s.fate();
             if n >= s.faults.spare_host_frames {
                 s.live.store(true, Ordering::Relaxed);

@@ -359,7 +359,11 @@ pub fn print_outcome(o: &Outcome) {
         println!("lost for good: {n}");
     }
     if let Some(e) = &o.link_lost {
-        println!("the link was lost: {e}");
+        if e.kind == LinkErrorKind::NoAnswer {
+            println!("the rig stopped answering: {e}");
+        } else {
+            println!("the link was lost: {e}");
+        }
         if !run.is_complete() {
             println!(
                 "the rig may still hold the rest: reconnect it and run `tribo pull {}`",

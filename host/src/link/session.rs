@@ -149,7 +149,12 @@ impl Outcome {
             n.clone()
         } else if let Some(e) = &self.link_lost {
             format!(
-                "the link was lost ({e}); the rig may still hold the rest: reconnect it and run `tribo pull {dir}`"
+                "{} ({e}); the rig may still hold the rest: reconnect it and run `tribo pull {dir}`",
+                if e.kind == LinkErrorKind::NoAnswer {
+                    "the rig stopped answering"
+                } else {
+                    "the link was lost"
+                }
             )
         } else if self.aborted {
             format!("aborted before the whole run arrived; `tribo pull {dir}` fetches what the rig holds")
@@ -1178,4 +1183,28 @@ pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
     run.save_results(results)?;
     Catalog::open(store)?.upsert(run)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn missing_blocks_are_asked_for_in_few_ranges() {
+        assert_eq!(merged_ranges(&[]), vec![]);
+        assert_eq!(merged_ranges(&[5]), vec![(5, 1)]);
+        // Ranges closer than the slack are joined (the held blocks between are asked again).
+        assert_eq!(merged_ranges(&[3, 4, 5, 40, 41]), vec![(3, 39)]);
+        let far = 5 + MERGE_SLACK + 1;
+        assert_eq!(merged_ranges(&[3, 4, 5, far]), vec![(3, 3), (far, 1)]);
+        // Every missing block is in exactly one range.
+        let missing: Vec<u32> = (0..2000).filter(|b| b % 97 == 0 || b % 211 < 3).collect();
+        let r = merged_ranges(&missing);
+        for b in &missing {
+            assert_eq!(r.iter().filter(|(f, c)| (*f..f + c).contains(b)).count(), 1);
+        }
+        assert!(r
+            .windows(2)
+            .all(|w| w[0].0 + w[0].1 + MERGE_SLACK <= w[1].0));
+    }
 }
