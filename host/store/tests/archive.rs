@@ -173,3 +173,80 @@ fn the_log_s_recorded_protocol_picks_the_decoder() {
     let f = tribo_wire::v1::decode(&records[0]).unwrap();
     assert!(matches!(f.msg, DeviceMsg::RunStarted(h) if h.clock == SampleClock::exact(10_000)));
 }
+
+/// `fixtures/v2-run`: written by this version (frame log format v2, protocol v2: packed blocks, a
+/// run header with its sample clock, ECR range change frames), made with `tribo demo --mu0 0.08
+/// --mu1 0.004 --seed 7 --speed inf --no-report`; pinned so that a later change of the format or
+/// of the frames cannot pass unnoticed.
+#[test]
+fn the_v2_fixture_reads_whole_with_the_samples_it_was_made_with() {
+    let b = std::fs::read(fixture("v2-run/frames.log")).unwrap();
+    assert_eq!((b.len(), crc32(&b)), (9_719, 0xf9b0_6733));
+    let (_store, dir) = copy_of("v2-run");
+    let log = LogReader::read(&dir.join("frames.log"), false).unwrap();
+    assert_eq!(log.header, LogHeader::current(Some(2)));
+    let run = Run::open(&dir).unwrap();
+    let c = run.completeness();
+    assert!(c.is_complete(), "{}", c.summary());
+    assert_eq!(run.undecodable_records(), 0);
+    let kinds = |f: &&[u8]| match tribo_wire::frame::decode_one::<DeviceMsg>(f).unwrap().msg {
+        DeviceMsg::Packed(_) => 'b',
+        DeviceMsg::EcrRange(_) => 'e',
+        DeviceMsg::RunStarted(_) => 'h',
+        DeviceMsg::Result(_) => 'r',
+        DeviceMsg::RunEnded(_) => 'z',
+        _ => '?',
+    };
+    // The frames in the rig's order: header, ECR range changes among the packed blocks, result, end.
+    let shape: String = run.frames().iter().map(kinds).collect();
+    assert_eq!(
+        shape,
+        format!("he{}e{}e{}rz", "b".repeat(4), "b".repeat(38), "b".repeat(7))
+    );
+    assert_eq!(c.summary(), "complete: 49 of 49 blocks");
+    assert_eq!(run.ecr_changes().count(), 3);
+    let s = run.samples_si().unwrap();
+    let rows: [(usize, [f64; 5]); 3] = [
+        (
+            0,
+            [
+                0.0,
+                6.669311551377177e-4,
+                -1.85394287109375e-3,
+                -3.0517578125e-4,
+                2.1990966796875e1,
+            ],
+        ),
+        (
+            995,
+            [
+                9.95e-2,
+                -1.796264696167782e-4,
+                6.491851806640625e-2,
+                2.4932861328125e-2,
+                2.19146728515625e1,
+            ],
+        ),
+        (
+            3119,
+            [
+                3.119e-1,
+                -1.5258789289873675e-6,
+                -3.814697265625e-5,
+                1.739501953125e-3,
+                2.196044921875e1,
+            ],
+        ),
+    ];
+    assert_eq!(s.len(), 3120);
+    for (i, want) in rows {
+        assert!((s.t[i] - want[0]).abs() < 1e-12, "t[{i}] = {}", s.t[i]);
+        let got = [
+            s.x[i],
+            s.v[i],
+            s.force.as_ref().unwrap()[i],
+            s.temp_c.as_ref().unwrap()[i],
+        ];
+        assert_eq!(got, want[1..], "sample {i}");
+    }
+}
