@@ -201,7 +201,7 @@ fn the_v2_fixture_reads_whole_with_the_samples_it_was_made_with() {
     let shape: String = run.frames().iter().map(kinds).collect();
     assert_eq!(
         shape,
-        format!("he{}e{}e{}rz", "b".repeat(4), "b".repeat(38), "b".repeat(7))
+        format!("he{}e{}e{}rz", "b".repeat(4), "b".repeat(40), "b".repeat(5))
     );
     assert_eq!(c.summary(), "complete: 49 of 49 blocks");
     assert_eq!(run.ecr_changes().count(), 3);
