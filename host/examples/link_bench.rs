@@ -17,7 +17,6 @@
 //! Compression: each packed block against its protocol v1 `Samples` frame (unpacked counts), and
 //! the counts' bytes (2 per count) against the packed data.
 
-use std::io::Read;
 use std::net::{TcpListener, TcpStream};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -137,15 +136,7 @@ fn main() {
     // 2. The host stack alone: the run's bytes from memory, through a Link, into a run folder.
     let bytes: Vec<u8> = frames.concat();
     let n = bytes.len();
-    let (w, mut r) = std::os::unix::net::UnixStream::pair().unwrap();
-    let feeder = std::thread::spawn(move || {
-        use std::io::Write;
-        let mut w = w;
-        w.write_all(&bytes).unwrap();
-    });
-    let _ = &mut r;
-    let reader = std::io::BufReader::with_capacity(1 << 16, r.try_clone().unwrap());
-    let mut link = Link::from_stream("memory", reader.take(n as u64), std::io::sink());
+    let mut link = Link::from_stream("memory", std::io::Cursor::new(bytes), std::io::sink());
     let header = match decode_one::<DeviceMsg>(&frames[0]).unwrap().msg {
         DeviceMsg::RunStarted(h) => h,
         _ => unreachable!(),
@@ -161,7 +152,6 @@ fn main() {
         }
     }
     let wall = t0.elapsed().as_secs_f64();
-    let _ = feeder.join();
     assert!(w.is_complete());
     report("host alone", got, n as u64, samples, wall);
 
