@@ -189,8 +189,12 @@ enum RoundEnd {
     Lost(LinkError),
 }
 
-/// Answered pulls after which a block (or the end) the rig never sent counts as not held.
+/// Answered pulls after which a block (or the end) the rig never sent counts as not held; twice as
+/// many on a line that has garbled frames (a held block lost four times in a row on a line that
+/// loses one frame in five would otherwise pass for one the rig lacks, once in a few hundred).
 const NOT_HELD_AFTER: u32 = 4;
+/// Fruitless rounds in a row (nothing new, or no answer) after which the pulls stop.
+const MAX_FRUITLESS: u32 = 2 * NOT_HELD_AFTER + 2;
 /// Most pull rounds for one run (each fetches a range of missing blocks, or fails to).
 const MAX_ROUNDS: u32 = 400;
 /// Unanswered pull rounds in a row after which the rig counts as gone.
@@ -613,9 +617,11 @@ impl Streamer<'_, '_> {
         let mut tail_absent = 0u32;
         let mut event_absent = 0u32;
         let mut unanswered = 0u32;
+        let mut fruitless = 0u32;
         let mut backoff = BACKOFF_START;
         let mut checked = !check;
         for _ in 0..MAX_ROUNDS {
+            let needed = self.evidence_needed();
             let Some(run_id) = self
                 .run_id
                 .or_else(|| self.writer.as_ref().and_then(|w| w.meta().device_run_id))
@@ -644,7 +650,7 @@ impl Streamer<'_, '_> {
             let ask: Vec<u32> = missing
                 .iter()
                 .copied()
-                .filter(|b| absent.get(b).copied().unwrap_or(0) < NOT_HELD_AFTER)
+                .filter(|b| absent.get(b).copied().unwrap_or(0) < needed)
                 .collect();
             // Blocks only once the stored run is known to be the rig's (else they could go into
             // an older run with the same number).
@@ -654,7 +660,7 @@ impl Streamer<'_, '_> {
                 None
             };
             let want_end = end_blocks.is_none() || !has_result;
-            let events = !holes.is_empty() && event_absent < NOT_HELD_AFTER;
+            let events = !holes.is_empty() && event_absent < needed;
             let tail_from = if !has_header {
                 0
             } else if events {
@@ -669,11 +675,11 @@ impl Streamer<'_, '_> {
                 }
             };
             let useful = range.is_some()
-                || (want_end && tail_absent < NOT_HELD_AFTER)
+                || (want_end && tail_absent < needed)
                 || events
                 || !has_header
                 || !checked;
-            if !useful {
+            if !useful || fruitless >= MAX_FRUITLESS {
                 break;
             }
             self.rounds += 1;
@@ -700,6 +706,7 @@ impl Streamer<'_, '_> {
                 RoundEnd::Lost(e) => return Ok(Some(e)),
                 RoundEnd::NoAnswer(e) => {
                     unanswered += 1;
+                    fruitless += 1;
                     if unanswered >= MAX_UNANSWERED {
                         return Ok(Some(e));
                     }
@@ -719,7 +726,7 @@ impl Streamer<'_, '_> {
             let gained = w.frames_held().saturating_sub(before);
             if let Some((first, count)) = range {
                 for b in first..first + count {
-                    if w.block(b).is_none() && missing.contains(&b) {
+                    if w.block(b).is_none() && missing.binary_search(&b).is_ok() {
                         *absent.entry(b).or_default() += 1;
                     }
                 }
@@ -731,13 +738,25 @@ impl Streamer<'_, '_> {
                 event_absent += 1;
             }
             if gained == 0 {
+                fruitless += 1;
                 self.back_off(&mut backoff, "the last pull brought nothing new".into());
             } else {
+                fruitless = 0;
                 backoff = BACKOFF_START;
             }
         }
-        self.conclude(&absent, tail_absent, event_absent);
+        let needed = self.evidence_needed();
+        self.conclude(&absent, tail_absent, event_absent, needed);
         Ok(None)
+    }
+
+    /// Answered pulls without a frame after which the rig counts as not holding it.
+    fn evidence_needed(&self) -> u32 {
+        if self.link.stats().bad_frames > 0 {
+            2 * NOT_HELD_AFTER
+        } else {
+            NOT_HELD_AFTER
+        }
     }
 
     fn back_off(&mut self, backoff: &mut Duration, why: String) {
@@ -755,6 +774,7 @@ impl Streamer<'_, '_> {
         absent: &std::collections::BTreeMap<u32, u32>,
         tail_absent: u32,
         event_absent: u32,
+        needed: u32,
     ) {
         let Some(w) = self.writer.as_ref() else {
             return;
@@ -766,11 +786,11 @@ impl Streamer<'_, '_> {
         let gone: Vec<u32> = w
             .missing_blocks()
             .into_iter()
-            .filter(|b| absent.get(b).copied().unwrap_or(0) >= NOT_HELD_AFTER)
+            .filter(|b| absent.get(b).copied().unwrap_or(0) >= needed)
             .collect();
         if !gone.is_empty() {
             said.push(format!(
-                "the rig answered {NOT_HELD_AFTER} pulls for sample block{} {} ({} in all) without sending \
+                "the rig answered {needed} pulls for sample block{} {} ({} in all) without sending \
                  them, so it no longer holds them: the rig keeps a whole run in RAM and flash (about 60 s with \
                  all five channels at 10 kS/s, half that at 20 kS/s; after a power cut, what its flash held, \
                  about the first 35 s), and this run was longer, or the power went during it",
@@ -779,17 +799,17 @@ impl Streamer<'_, '_> {
                 gone.len()
             ));
         }
-        if (w.end().is_none() || !w.has_result()) && tail_absent >= NOT_HELD_AFTER {
+        if (w.end().is_none() || !w.has_result()) && tail_absent >= needed {
             said.push(format!(
-                "the rig answered {NOT_HELD_AFTER} pulls for the run's end without sending it and is not \
+                "the rig answered {needed} pulls for the run's end without sending it and is not \
                  running the run: it holds the run only up to block {} with no end — it restarted during the \
                  run (a power cut or a reset) and kept what had reached its flash; the rest was never stored",
                 w.last_block().map_or("0".into(), |b| b.to_string())
             ));
         }
-        if !w.event_holes().is_empty() && event_absent >= NOT_HELD_AFTER {
+        if !w.event_holes().is_empty() && event_absent >= needed {
             said.push(format!(
-                "the rig answered {NOT_HELD_AFTER} pulls without sending the run events (acquisition gaps, ECR \
+                "the rig answered {needed} pulls without sending the run events (acquisition gaps, ECR \
                  range changes) that blocks {} show are missing",
                 block_ranges(&w.event_holes())
             ));
