@@ -87,11 +87,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("no run store at {}: take a run with `tribo run` or `tribo demo`, or point --store at one", store.display());
     }
     let cat = Catalog::open(&store)?;
-    // Folders the catalog does not know (a killed recorder, runs copied in), or rows from a tribo
-    // that did not record completeness: rebuild it.
+    // Folders the catalog does not know (a killed recorder, runs copied in), logs changed since
+    // they were catalogued (a pull completed one, a copy truncated one), or rows from a tribo that
+    // did not record completeness: rebuild it.
     let folders = tribo_store::run::list_run_dirs(&store)?.len();
     let rows = cat.list(&Filter::default())?;
-    if args.reindex || folders != rows.len() || rows.iter().any(|r| r.completeness.is_empty()) {
+    if args.reindex
+        || folders != rows.len()
+        || rows.iter().any(|r| r.completeness.is_empty())
+        || !cat.stale()?.is_empty()
+    {
         let r = cat.reindex()?;
         if !args.quiet {
             eprintln!(

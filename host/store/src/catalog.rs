@@ -38,7 +38,8 @@ CREATE TABLE IF NOT EXISTS runs (
     lost_samples INTEGER NOT NULL DEFAULT 0,
     blocks INTEGER NOT NULL DEFAULT 0,
     blocks_expected INTEGER,
-    completeness TEXT NOT NULL DEFAULT ''
+    completeness TEXT NOT NULL DEFAULT '',
+    log_stamp TEXT NOT NULL DEFAULT ''
 );
 CREATE INDEX IF NOT EXISTS runs_campaign ON runs(campaign);
 ";
@@ -268,6 +269,22 @@ impl Table {
     }
 }
 
+/// The frame log's size and modification time, `bytes:nanoseconds` (empty when unreadable): what
+/// tells a catalogued run whose log changed since.
+fn log_stamp(dir: &Path) -> String {
+    std::fs::metadata(dir.join(crate::run::LOG_FILE))
+        .ok()
+        .map(|m| {
+            let t = m
+                .modified()
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0, |d| d.as_nanos());
+            format!("{}:{t}", m.len())
+        })
+        .unwrap_or_default()
+}
+
 /// The SQLite catalog of a store.
 pub struct Catalog {
     conn: Connection,
@@ -300,6 +317,7 @@ impl Catalog {
             ("blocks", "INTEGER NOT NULL DEFAULT 0"),
             ("blocks_expected", "INTEGER"),
             ("completeness", "TEXT NOT NULL DEFAULT ''"),
+            ("log_stamp", "TEXT NOT NULL DEFAULT ''"),
         ] {
             let has: bool = conn
                 .query_row(
@@ -335,8 +353,8 @@ impl Catalog {
             .execute(
                 "INSERT OR REPLACE INTO runs (id,path,created,status,label,sample,lubricant,campaign,repeat,\
                  load_n,temp_c,firmware,serial,samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,\
-                 host_mu0,host_mu1,host_gap,lost_samples,blocks,blocks_expected,completeness) \
-                 VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23,?24,?25,?26)",
+                 host_mu0,host_mu1,host_gap,lost_samples,blocks,blocks_expected,completeness,log_stamp) \
+                 VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23,?24,?25,?26,?27)",
                 params![
                     m.id,
                     run.dir().to_string_lossy(),
@@ -364,6 +382,7 @@ impl Catalog {
                     c.blocks_held as i64,
                     c.blocks_expected.map(|b| b as i64),
                     c.summary(),
+                    log_stamp(run.dir()),
                 ],
             )
             .map_err(|e| db_err("insert", e))?;
@@ -396,6 +415,27 @@ impl Catalog {
             }
         }
         Ok(out)
+    }
+
+    /// Run folders whose frame log changed (size or time) since they were catalogued, or that the
+    /// catalog does not know: its rows for them may say what the logs no longer hold.
+    pub fn stale(&self) -> Result<Vec<PathBuf>> {
+        let mut stmt = self
+            .conn
+            .prepare("SELECT id, log_stamp FROM runs")
+            .map_err(|e| db_err("query", e))?;
+        let known: BTreeMap<String, String> = stmt
+            .query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, String>(1)?)))
+            .map_err(|e| db_err("query", e))?
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|e| db_err("query", e))?;
+        Ok(list_run_dirs(&self.root)?
+            .into_iter()
+            .filter(|d| {
+                let id = d.file_name().map(|n| n.to_string_lossy().into_owned());
+                id.and_then(|id| known.get(&id)) != Some(&log_stamp(d))
+            })
+            .collect())
     }
 
     /// Runs matching `f`, oldest first; an invalid filter ([`Filter::check`]) is an error.

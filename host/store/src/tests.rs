@@ -773,4 +773,8 @@ fn a_run_whose_log_lost_frames_is_not_complete_whatever_its_metadata_says() {
         (row.status.as_str(), row.blocks, row.blocks_expected),
         ("incomplete", 20, None)
     );
+    // The catalog knows when a log changed after it was indexed.
+    assert!(cat.stale().unwrap().is_empty());
+    std::fs::write(&log, &bytes[..bytes.len() / 2]).unwrap();
+    assert_eq!(cat.stale().unwrap(), vec![run.dir().to_owned()]);
 }
