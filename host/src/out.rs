@@ -6,7 +6,9 @@
 //! [`std::io::Error`]; `main` recognises a broken pipe anywhere in an error's chain
 //! ([`is_broken_pipe`]) and exits with status 0 without a word, as `grep`, `ripgrep` and the
 //! coreutils do when their reader has what it wanted. As a last resort for output written with
-//! `println!` elsewhere, [`install_pipe_hook`] turns that panic into the same quiet exit.
+//! `println!` elsewhere, [`install_pipe_hook`] turns that panic into the same quiet exit. Either
+//! way a rig the command holds is left safe (`link::hold`: the hold's drop, or `make_all_safe`
+//! before the hook's exit).
 
 /// `writeln!` to standard output, returning `std::io::Result<()>`.
 #[macro_export]
@@ -54,6 +56,8 @@ pub fn install_pipe_hook() {
         if msg.starts_with("failed printing to stdout")
             && (msg.contains("os error 32") || msg.contains(&epipe))
         {
+            // Exiting here skips the destructors: a rig this process holds is made safe first.
+            crate::link::hold::make_all_safe();
             std::process::exit(crate::exit::Status::Ok.code().into());
         }
         default(info)

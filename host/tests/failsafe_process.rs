@@ -4,8 +4,8 @@
 //!
 //! * `kill -9` of `tribo run` while it heats: the rig's lease expires and it drives heater and magnet
 //!   off by itself, within the lease of the last frame it heard (real time, default lease).
-//! * `tribo run --temp 40 --repeat 2 | true`: the closed pipe stops `tribo`, which sends `Safe` on
-//!   its way out: the heater is off before any lease runs out.
+//! * `tribo run --temp 40 --repeat 2 | true`: the closed pipe stops `tribo` (quietly, status 0, as
+//!   `grep` would), which sends `Safe` on its way out: the heater is off before any lease runs out.
 //! * SIGTERM while heating: a clean stop, `Safe` sent.
 //! * A rig that resets (HardFault) while `tribo` settles the heater: settling stops with the reason.
 //! * A held session (in-process rig, real time): the heartbeat thread alone keeps the lease through
@@ -210,9 +210,9 @@ fn tribo_run_into_a_closed_pipe_makes_the_rig_safe_on_its_way_out() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("standard output was closed"), "{err}");
-    assert!(!err.contains("panicked"), "{err}");
+    // A reader that ended is not an error (as with grep): quiet, status 0.
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked") && !err.contains("error"), "{err}");
     // Heated, recorded one run, then stopped: the rig heard `Safe`, and before its lease ran out.
     rig.wait_for("host: heater to 40.0 °C", Duration::from_secs(5));
     rig.wait_for("host: release", Duration::from_secs(5));

@@ -19,8 +19,8 @@ use crate::bundle::Record;
 use tribo_firmware::acquisition::clock::BOARD_TIMER_HZ;
 use tribo_firmware::acquisition::{Batch, ConverterModel};
 use tribo_firmware::hal::{
-    AnalogSample, Button, EcrFrontEnd, FlashGeometry, HeaterOutput, Lamps, Led, Link, Magnet,
-    MagnetDrive, RunFlash, SampleSource, Thermocouple, ThermocoupleFault, ANALOG_CHANNELS,
+    AnalogSample, Button, ConverterRead, EcrFrontEnd, FlashGeometry, HeaterOutput, Lamps, Led,
+    Link, Magnet, MagnetDrive, RunFlash, SampleSource, Thermocouple, ANALOG_CHANNELS,
 };
 use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::wire::SampleClock;
@@ -72,7 +72,8 @@ pub struct Replay<'r> {
     erase: Option<u32>,
     // heater, ECR, button, lamps
     /// What the thermocouple reads.
-    pub temp: Result<f32, ThermocoupleFault>,
+    /// Plate temperature the converter reads, °C (a configured MAX31856, cold junction at 25 °C).
+    pub temp: f32,
     pub heater_duty: f32,
     /// Transimpedance output the ECR front end reads, V.
     pub ecr_output_v: f32,
@@ -103,7 +104,7 @@ impl<'r> Replay<'r> {
             adc: ConverterModel::new(BOARD_TIMER_HZ),
             flash: MemFlash::new(flash, FlashGeometry::H743_BANK2).with_h743_timing(),
             erase: None,
-            temp: Ok(25.0),
+            temp: 25.0,
             heater_duty: 0.0,
             ecr_output_v: 1.0,
             ecr_source_v: 0.0,
@@ -191,8 +192,11 @@ impl Magnet for Replay<'_> {
 }
 
 impl Thermocouple for Replay<'_> {
-    fn read_thermocouple(&mut self) -> Result<f32, ThermocoupleFault> {
-        self.temp
+    fn read_thermocouple(&mut self) -> Option<ConverterRead> {
+        Some(ConverterRead {
+            regs: tribo_firmware::thermocouple::encode(self.temp, 25.0, 0),
+            age_us: 0,
+        })
     }
 }
 

@@ -8,6 +8,7 @@
 //!   reports every bad frame and resynchronises on the next zero byte.
 //! * [`codec`]: block compression (per-channel prediction, Rice codes) of [`PackedBlock`]s.
 //! * [`crc32`]: the CRC-32 (IEEE 802.3 / ISO-HDLC) used by the frames.
+//! * [`v1`]: protocol v1's messages, frozen, to read the frame logs of runs recorded with it.
 //!
 //! Compatibility rule: variant 0 of [`HostMsg`] and [`DeviceMsg`] is `Hello`, and [`DeviceInfo`] starts
 //! with the protocol number. Those never change, so any host can read any firmware's hello and refuse
@@ -18,6 +19,7 @@ pub mod codec;
 pub mod crc32;
 pub mod frame;
 pub mod msg;
+pub mod v1;
 
 pub use frame::{Decoder, EncodeError, Encoder, Frame, FrameError};
 pub use msg::*;

@@ -15,6 +15,9 @@ pub fn run_inputs(run: &Run) -> ReportInputs {
         ("run".to_string(), m.id.clone()),
         ("created".into(), m.created.clone()),
         ("status".into(), m.status.name().into()),
+        // What the frame log holds, never what the metadata claims: "complete: 156 of 156
+        // blocks", or "incomplete: 79 of 156 blocks (missing …)".
+        ("completeness".into(), run.completeness().summary()),
     ];
     for (k, v) in [
         ("label", &m.label),
@@ -42,12 +45,17 @@ pub fn run_inputs(run: &Run) -> ReportInputs {
         meta.push(("firmware".into(), d.firmware.clone()));
         meta.push(("rig serial".into(), d.serial.clone()));
     }
-    let missing = run.missing_blocks().len();
-    if missing > 0 {
+    if !run.is_complete() {
         meta.push((
-            "missing sample blocks".into(),
-            format!("{missing} (pull the run again to fill them)"),
+            "to complete it".into(),
+            format!(
+                "`tribo pull {}` fetches what is missing while the rig holds it",
+                run.dir().display()
+            ),
         ));
+    }
+    if let Some(r) = &run.recovery {
+        meta.push(("frame log".into(), r.to_string()));
     }
     if let Some(h) = run.host_fit() {
         meta.push((

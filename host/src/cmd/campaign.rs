@@ -351,6 +351,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             )
         })?;
         print_outcome(&o)?;
+        if let Some(e) = o.incomplete() {
+            // A run of the campaign is not stored whole: stop, say how to resume, exit status 3.
+            return Err(anyhow::Error::new(e).context(format!(
+                "campaign interrupted: run `tribo campaign {}` again to resume where it stopped (an \
+                 incomplete run is taken again)",
+                args.plan.display()
+            )));
+        }
         if o.aborted || o.link_lost.is_some() {
             println!(
                 "campaign interrupted: run `tribo campaign {}` again to resume where it stopped",

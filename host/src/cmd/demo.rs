@@ -34,7 +34,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         o.run.dir().display(),
         o.run.dir().display()
     );
-    Ok(())
+    match o.incomplete() {
+        // The run is not stored whole: exit status 3.
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
 }
 
 /// The demo, returning the recorded run (for tests).

@@ -1,5 +1,8 @@
-//! `tribo pull [RUN]`: fetches the rig's last run, resuming after the last block already stored
-//! (or completes the run folder RUN).
+//! `tribo pull [RUN]`: completes a stored run from the rig — the stored copy of the rig's last run
+//! (found by the rig's serial number and run number), or the run folder RUN — fetching exactly the
+//! blocks it lacks and the run's end, with retries while the rig answers; or fetches the rig's last
+//! run into a new folder. Exits 3 when the run is still not whole (the rig no longer holds part of
+//! it, or stopped answering), saying exactly what is missing and why.
 
 use super::run::{print_outcome, LinkArgs, Ui};
 use crate::link::session::pull_run;
@@ -12,7 +15,8 @@ pub struct Args {
     pub link: LinkArgs,
     /// Run folder to complete (default: the stored copy of the rig's last run, or a new folder).
     pub run: Option<PathBuf>,
-    /// Keep the intact part of a corrupt frame log (cut the rest) and fetch what is missing.
+    /// Repair a damaged frame log: keep every record whose checksum holds, wherever the damage is
+    /// (the damaged file is kept beside it as frames.log.damaged), then fetch what is missing.
     #[arg(long)]
     pub salvage: bool,
     /// No progress bar or messages: set by `tribo -q`/`--quiet`.
@@ -35,5 +39,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     ui.finish();
     let o = o?;
     print_outcome(&o)?;
-    Ok(())
+    match o.incomplete() {
+        // Finished, but the run is not stored whole: exit status 3.
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
 }

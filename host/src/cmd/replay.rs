@@ -12,7 +12,7 @@
 //!   envelope leaves the simulated one, the law stops describing the contact.
 
 use crate::firmware::analysis::{Phase, Pipeline};
-use anyhow::{bail, Context};
+use anyhow::bail;
 use std::path::PathBuf;
 use tribo_physics::envelope::mark_crandall;
 use tribo_physics::identify::FitOptions;
@@ -224,11 +224,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(r) = &run.recovery {
         eprintln!("warning: {r}");
     }
-    let replayed = replay_pipeline(&run).context("replaying through the firmware pipeline")?;
+    let c = run.completeness();
+    // An incomplete run is replayed as far as it goes, said so, and ends with exit status 3.
+    let incomplete = (!c.is_complete()).then(|| {
+        crate::exit::Incomplete(format!(
+            "run {} is {}: the replay covers what is stored only; `tribo pull {}` fetches the rest while the \
+             rig holds it",
+            run.id(),
+            c.summary(),
+            args.run.display()
+        ))
+    });
+    println!("{}: {}", run.id(), c.summary());
+    let replayed = match replay_pipeline(&run) {
+        Ok(r) => r,
+        Err(e) => {
+            let e = e.context("replaying through the firmware pipeline");
+            return Err(match incomplete {
+                Some(i) => anyhow::Error::new(i).context(format!("{e:#}")),
+                None => e,
+            });
+        }
+    };
     println!(
-        "replayed {} blocks of {} through the firmware pipeline",
+        "replayed {} blocks of {} through the firmware pipeline{}",
         run.block_count(),
-        run.id()
+        run.id(),
+        if incomplete.is_some() {
+            " (an incomplete run: the replayed result is not the whole run's)"
+        } else {
+            ""
+        }
     );
     match run.result() {
         None => {
@@ -265,7 +291,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if !(mu0.is_finite() && mu1.is_finite() && mu0 >= 0.0 && mu1 >= 0.0) {
         println!("no usable μ0/μ1 to simulate (μ0 = {mu0}, μ1 = {mu1})");
-        return Ok(());
+        return incomplete.map_or(Ok(()), |i| Err(i.into()));
     }
     let rows = envelope_vs_simulation(&run, mu0, mu1)?;
     let a0 = rows.first().map_or(1.0, |r| r.2.max(1e-12));
@@ -300,5 +326,5 @@ pub fn run(args: Args) -> anyhow::Result<()> {
              Coulomb–viscous law stops describing the contact there; try `tribo fit --law quadratic` or windowed fits"
         ),
     }
-    Ok(())
+    incomplete.map_or(Ok(()), |i| Err(i.into()))
 }

@@ -69,8 +69,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .clone()
             .unwrap_or_else(|| PathBuf::from(format!("report-{}", clean(name))))
     };
+    let mut incomplete = None;
     let files = if path.is_dir() && path.join("meta.toml").is_file() {
         let run = Run::open(path)?;
+        if !run.is_complete() {
+            incomplete = Some(crate::exit::Incomplete(format!(
+                "the report of run {} shows what is stored, and the run is {}: `tribo pull {}` fetches the rest \
+                 while the rig holds it",
+                run.id(),
+                run.completeness().summary(),
+                path.display()
+            )));
+        }
         let mut inputs = tribo_report::store::run_inputs(&run);
         inputs.options.laws = laws;
         inputs.options.png = !args.no_png;
@@ -100,6 +110,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         campaign(&args, &out_for(&args.target))?
     };
     print_files(&files)?;
+    if let Some(e) = incomplete {
+        // The report is written, but of an incomplete run: exit status 3.
+        return Err(e.into());
+    }
     if let Some(why) = &files.not_analysable {
         return Err(crate::exit::Incomplete(format!(
             "{}: not analysable: {why}; the report shows the motion and no fitted constant",

@@ -238,6 +238,26 @@ impl Ui {
             Progress::Pulling { from_block } => {
                 self.say(&format!("fetching the run from block {from_block} on"))
             }
+            Progress::PullRound {
+                round,
+                first,
+                blocks,
+                missing,
+                tail_from,
+            } => self.say(&match first {
+                Some(f) => format!(
+                    "pull {round}: asking for blocks {f}–{} ({missing} missing), then the run's end",
+                    f + blocks.saturating_sub(1)
+                ),
+                None if missing > 0 => format!(
+                    "pull {round}: asking for the run from block {tail_from} on ({missing} blocks missing)"
+                ),
+                None => format!("pull {round}: asking for the run from block {tail_from} on"),
+            }),
+            Progress::Backoff { wait, why } => self.say(&format!(
+                "{why}: next pull in {:.1} s",
+                wait.as_secs_f64()
+            )),
             Progress::Lost(g) => self.say(&format!(
                 "acquisition gap: the rig lost samples {}..{} ({} samples); the run goes on, and fits \
                  will not cross the gap",
@@ -347,16 +367,18 @@ pub fn print_outcome(o: &Outcome) -> anyhow::Result<()> {
     use std::fmt::Write;
     let _ = writeln!(
         s,
-        "run {} saved in {} ({}, {} blocks, {} samples{})",
+        "run {} saved in {} ({}, {} samples{})",
         run.id(),
         run.dir().display(),
-        run.meta.status.name(),
-        run.block_count(),
+        run.completeness().summary(),
         samples,
-        if o.pulled_blocks > 0 {
-            format!(", {} fetched again with Pull", o.pulled_blocks)
-        } else {
-            String::new()
+        match (o.pulled_blocks, o.pull_rounds) {
+            (0, _) => String::new(),
+            (n, r) => format!(
+                ", {n} block{} fetched again in {r} pull{}",
+                if n == 1 { "" } else { "s" },
+                if r == 1 { "" } else { "s" }
+            ),
         }
     );
     if run.lost_samples() > 0 {
@@ -370,7 +392,8 @@ pub fn print_outcome(o: &Outcome) -> anyhow::Result<()> {
                 )
             })
             .collect();
-        println!(
+        let _ = writeln!(
+            s,
             "acquisition gaps: the rig lost {} samples (samples {}); fits refuse to cross a gap: \
              `tribo fit {} {}` fits the longest stretch without one",
             run.lost_samples(),
@@ -379,13 +402,22 @@ pub fn print_outcome(o: &Outcome) -> anyhow::Result<()> {
             run.dir().display()
         );
     }
+    if let Some(n) = &o.not_held {
+        let _ = writeln!(s, "lost for good: {n}");
+    }
     if let Some(e) = &o.link_lost {
-        let _ = writeln!(s, "the link was lost: {e}");
-        let _ = writeln!(
-            s,
-            "reconnect the rig and run `tribo pull {}` to fetch the rest",
-            run.dir().display()
-        );
+        if e.kind == LinkErrorKind::NoAnswer {
+            let _ = writeln!(s, "the rig stopped answering: {e}");
+        } else {
+            let _ = writeln!(s, "the link was lost: {e}");
+        }
+        if !run.is_complete() {
+            let _ = writeln!(
+                s,
+                "the rig may still hold the rest: reconnect it and run `tribo pull {}`",
+                run.dir().display()
+            );
+        }
     }
     if o.aborted {
         let _ = writeln!(s, "aborted: what was received is kept (status: aborted)");
@@ -540,6 +572,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ui.finish();
         let o = o.with_context(|| format!("run {k} on {}", link.name()))?;
         print_outcome(&o)?;
+        if let Some(e) = o.incomplete() {
+            // Finished, but the run is not stored whole: exit status 3.
+            return Err(e.into());
+        }
         if o.aborted || o.link_lost.is_some() {
             break;
         }

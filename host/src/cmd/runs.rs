@@ -87,15 +87,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("no run store at {}: take a run with `tribo run` or `tribo demo`, or point --store at one", store.display());
     }
     let cat = Catalog::open(&store)?;
-    // Folders the catalog does not know (a killed recorder, runs copied in): rebuild it.
+    // Folders the catalog does not know (a killed recorder, runs copied in), logs changed since
+    // they were catalogued (a pull completed one, a copy truncated one), or rows from a tribo that
+    // did not record completeness: rebuild it.
     let folders = tribo_store::run::list_run_dirs(&store)?.len();
-    let known = cat.list(&Filter::default())?.len();
-    if args.reindex || folders != known {
-        let (n, bad) = cat.reindex()?;
+    let rows = cat.list(&Filter::default())?;
+    if args.reindex
+        || folders != rows.len()
+        || rows.iter().any(|r| r.completeness.is_empty())
+        || !cat.stale()?.is_empty()
+    {
+        let r = cat.reindex()?;
         if !args.quiet {
-            eprintln!("catalog rebuilt from the run folders: {n} runs");
+            eprintln!(
+                "catalog rebuilt from the run folders: {} runs, {} of them incomplete",
+                r.indexed,
+                r.incomplete.len()
+            );
         }
-        for (d, e) in bad {
+        // What is incomplete is said even when quiet: it is a finding, not progress.
+        for (d, why) in &r.incomplete {
+            eprintln!("{}: {why}", d.display());
+        }
+        for (d, e) in &r.unreadable {
             eprintln!("skipped {}: {e}", d.display());
         }
     }
@@ -125,11 +139,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let any_lost = rows.iter().any(|r| r.lost_samples > 0);
+    let incomplete = rows.iter().any(|r| r.status != "complete");
     let opt = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.5}"));
     outln!(
-        "{:<44} {:<10} {:>6} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
+        "{:<44} {:<10} {:>11} {:>6} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
         "run",
         "status",
+        "blocks",
         "lost",
         "load N",
         "°C",
@@ -142,9 +158,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     for r in rows {
         outln!(
-            "{:<44} {:<10} {:>6} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
+            "{:<44} {:<10} {:>11} {:>6} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
             r.id,
             r.status,
+            match r.blocks_expected {
+                Some(m) => format!("{}/{m}", r.blocks),
+                None => format!("{}/?", r.blocks),
+            },
             if r.lost_samples > 0 {
                 r.lost_samples.to_string()
             } else {
@@ -158,6 +178,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             opt(r.onboard_mu1),
             opt(r.host_mu0),
             opt(r.host_mu1),
+        )?;
+    }
+    if incomplete {
+        outln!(
+            "blocks: held/in the run (? = the run's end was not received); an incomplete run is \
+             completed by `tribo pull RUN` while the rig holds it"
         )?;
     }
     if any_lost {

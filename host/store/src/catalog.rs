@@ -35,7 +35,11 @@ CREATE TABLE IF NOT EXISTS runs (
     host_mu0 REAL,
     host_mu1 REAL,
     host_gap REAL,
-    lost_samples INTEGER NOT NULL DEFAULT 0
+    lost_samples INTEGER NOT NULL DEFAULT 0,
+    blocks INTEGER NOT NULL DEFAULT 0,
+    blocks_expected INTEGER,
+    completeness TEXT NOT NULL DEFAULT '',
+    log_stamp TEXT NOT NULL DEFAULT ''
 );
 CREATE INDEX IF NOT EXISTS runs_campaign ON runs(campaign);
 ";
@@ -68,6 +72,25 @@ pub struct CatalogRow {
     pub host_gap: Option<f64>,
     /// Samples the rig lost (acquisition gaps reported by the run's gap frames).
     pub lost_samples: u64,
+    /// Sample blocks held.
+    pub blocks: u64,
+    /// Blocks the run has (from its end frame; `None` when the end is missing).
+    pub blocks_expected: Option<u64>,
+    /// What the log holds, in one line: `complete: 156 of 156 blocks`, `incomplete: 79 of 156
+    /// blocks (missing …)` ([`crate::Completeness::summary`]).
+    pub completeness: String,
+}
+
+/// What [`Catalog::reindex`] found.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Reindexed {
+    /// Runs indexed.
+    pub indexed: usize,
+    /// Run folders that could not be read, with why.
+    pub unreadable: Vec<(PathBuf, String)>,
+    /// Runs indexed that are not stored whole, with their completeness (`incomplete: N of M
+    /// blocks …`).
+    pub incomplete: Vec<(PathBuf, String)>,
 }
 
 /// Which runs to list.
@@ -246,6 +269,22 @@ impl Table {
     }
 }
 
+/// The frame log's size and modification time, `bytes:nanoseconds` (empty when unreadable): what
+/// tells a catalogued run whose log changed since.
+fn log_stamp(dir: &Path) -> String {
+    std::fs::metadata(dir.join(crate::run::LOG_FILE))
+        .ok()
+        .map(|m| {
+            let t = m
+                .modified()
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0, |d| d.as_nanos());
+            format!("{}:{t}", m.len())
+        })
+        .unwrap_or_default()
+}
+
 /// The SQLite catalog of a store.
 pub struct Catalog {
     conn: Connection,
@@ -270,21 +309,28 @@ impl Catalog {
             .map_err(|e| db_err("open", e))?;
         conn.execute_batch(SCHEMA)
             .map_err(|e| db_err("schema", e))?;
-        // A catalog made before the acquisition gaps were recorded: add their column (its runs
-        // ended at their first overrun, so they have none).
-        let has_lost: bool = conn
-            .query_row(
-                "SELECT COUNT(*) FROM pragma_table_info('runs') WHERE name = 'lost_samples'",
-                [],
-                |r| r.get::<_, i64>(0),
-            )
-            .map_err(|e| db_err("schema", e))?
-            > 0;
-        if !has_lost {
-            conn.execute_batch(
-                "ALTER TABLE runs ADD COLUMN lost_samples INTEGER NOT NULL DEFAULT 0",
-            )
-            .map_err(|e| db_err("schema", e))?;
+        // A catalog made by an earlier tribo: add the columns it lacks (acquisition gaps: its runs
+        // ended at their first overrun, so they have none; block counts and completeness: filled
+        // in by the next re-index, which `tribo runs` makes when it sees them empty).
+        for (column, decl) in [
+            ("lost_samples", "INTEGER NOT NULL DEFAULT 0"),
+            ("blocks", "INTEGER NOT NULL DEFAULT 0"),
+            ("blocks_expected", "INTEGER"),
+            ("completeness", "TEXT NOT NULL DEFAULT ''"),
+            ("log_stamp", "TEXT NOT NULL DEFAULT ''"),
+        ] {
+            let has: bool = conn
+                .query_row(
+                    "SELECT COUNT(*) FROM pragma_table_info('runs') WHERE name = ?1",
+                    [column],
+                    |r| r.get::<_, i64>(0),
+                )
+                .map_err(|e| db_err("schema", e))?
+                > 0;
+            if !has {
+                conn.execute_batch(&format!("ALTER TABLE runs ADD COLUMN {column} {decl}"))
+                    .map_err(|e| db_err("schema", e))?;
+            }
         }
         Ok(Catalog {
             conn,
@@ -302,9 +348,13 @@ impl Catalog {
         let samples: u64 = run.blocks().map(|b| b.samples() as u64).sum();
         let ob = run.result();
         let host = run.host_fit();
+        let c = run.completeness();
         self.conn
             .execute(
-                "INSERT OR REPLACE INTO runs VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23)",
+                "INSERT OR REPLACE INTO runs (id,path,created,status,label,sample,lubricant,campaign,repeat,\
+                 load_n,temp_c,firmware,serial,samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,\
+                 host_mu0,host_mu1,host_gap,lost_samples,blocks,blocks_expected,completeness,log_stamp) \
+                 VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23,?24,?25,?26,?27)",
                 params![
                     m.id,
                     run.dir().to_string_lossy(),
@@ -320,7 +370,7 @@ impl Catalog {
                     m.device.as_ref().map(|d| d.firmware.clone()),
                     m.device.as_ref().map(|d| d.serial.clone()),
                     samples as i64,
-                    run.missing_blocks().len() as i64,
+                    c.missing.len() as i64,
                     ob.map(|r| r.verdict.name()),
                     ob.map(|r| r.cycles),
                     ob.map(|r| r.best.mu0 as f64).filter(|v| v.is_finite()),
@@ -329,30 +379,63 @@ impl Catalog {
                     host.map(|h| h.mu1).filter(|v| v.is_finite()),
                     host.map(|h| h.gap).filter(|v| v.is_finite()),
                     run.lost_samples() as i64,
+                    c.blocks_held as i64,
+                    c.blocks_expected.map(|b| b as i64),
+                    c.summary(),
+                    log_stamp(run.dir()),
                 ],
             )
             .map_err(|e| db_err("insert", e))?;
         Ok(())
     }
 
-    /// Rebuilds the catalog from the run folders. Returns the runs indexed and the folders that
-    /// could not be read (with why).
-    pub fn reindex(&self) -> Result<(usize, Vec<(PathBuf, String)>)> {
+    /// Rebuilds the catalog from the run folders, each run's status and completeness read from its
+    /// frame log (never from what its metadata claims). Returns what was indexed, the folders that
+    /// could not be read (with why) and the runs that are not stored whole.
+    pub fn reindex(&self) -> Result<Reindexed> {
         self.conn
             .execute("DELETE FROM runs", [])
             .map_err(|e| db_err("reindex", e))?;
-        let mut n = 0;
-        let mut bad = Vec::new();
+        let mut out = Reindexed::default();
         for dir in list_run_dirs(&self.root)? {
             match Run::open(&dir) {
                 Ok(run) => {
                     self.upsert(&run)?;
-                    n += 1;
+                    out.indexed += 1;
+                    let c = run.completeness();
+                    if !c.is_complete() {
+                        let mut why = c.summary();
+                        if let Some(r) = &run.recovery {
+                            why.push_str(&format!("; the log: {r}"));
+                        }
+                        out.incomplete.push((dir, why));
+                    }
                 }
-                Err(e) => bad.push((dir, e.msg)),
+                Err(e) => out.unreadable.push((dir, e.msg)),
             }
         }
-        Ok((n, bad))
+        Ok(out)
+    }
+
+    /// Run folders whose frame log changed (size or time) since they were catalogued, or that the
+    /// catalog does not know: its rows for them may say what the logs no longer hold.
+    pub fn stale(&self) -> Result<Vec<PathBuf>> {
+        let mut stmt = self
+            .conn
+            .prepare("SELECT id, log_stamp FROM runs")
+            .map_err(|e| db_err("query", e))?;
+        let known: BTreeMap<String, String> = stmt
+            .query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, String>(1)?)))
+            .map_err(|e| db_err("query", e))?
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|e| db_err("query", e))?;
+        Ok(list_run_dirs(&self.root)?
+            .into_iter()
+            .filter(|d| {
+                let id = d.file_name().map(|n| n.to_string_lossy().into_owned());
+                id.and_then(|id| known.get(&id)) != Some(&log_stamp(d))
+            })
+            .collect())
     }
 
     /// Runs matching `f`, oldest first; an invalid filter ([`Filter::check`]) is an error.
@@ -362,7 +445,8 @@ impl Catalog {
             .conn
             .prepare(
                 "SELECT id,path,created,status,label,sample,lubricant,campaign,repeat,load_n,temp_c,firmware,serial,\
-                 samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,host_mu0,host_mu1,host_gap,lost_samples FROM runs \
+                 samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,host_mu0,host_mu1,host_gap,lost_samples,\
+                 blocks,blocks_expected,completeness FROM runs \
                  WHERE (?1 IS NULL OR campaign = ?1) AND (?2 IS NULL OR instr(label, ?2) > 0) \
                  AND (?3 IS NULL OR status = ?3) AND (?4 IS NULL OR load_n >= ?4 - 1e-9) \
                  AND (?5 IS NULL OR load_n <= ?5 + 1e-9) AND (?6 IS NULL OR temp_c >= ?6 - 1e-9) \
@@ -399,6 +483,9 @@ impl Catalog {
                         host_mu1: r.get(20)?,
                         host_gap: r.get(21)?,
                         lost_samples: r.get::<_, i64>(22)? as u64,
+                        blocks: r.get::<_, i64>(23)? as u64,
+                        blocks_expected: r.get::<_, Option<i64>>(24)?.map(|b| b as u64),
+                        completeness: r.get(25)?,
                     })
                 },
             )

@@ -12,7 +12,15 @@
 //! The frame log ([`log`]) is the truth; everything else can be rebuilt from it and the
 //! metadata. A killed process or a pulled cable never corrupts what was already written: each record
 //! is written with one `write` call and carries its length and CRC, so at worst the last record is
-//! torn, and [`log::LogReader`] / [`RunWriter::resume`] cut it off and say so.
+//! torn, and [`log::LogReader`] / [`RunWriter::resume`] cut it off and say so. Damage elsewhere is
+//! an error that names the place, unless salvaged: then every record whose CRC holds is kept.
+//!
+//! What a run holds is read from its log, never taken from its metadata: [`Run::completeness`]
+//! says which blocks are missing (acquisition gaps the rig reported are not), whether run events,
+//! the result or the end are missing, in one line (`incomplete: 79 of 156 blocks (missing …)`);
+//! [`Run::open`] derives the run's status from it. A frame is filed once ([`RunWriter::file_frame`]:
+//! a copy received again is compared, not logged), so a complete run's log holds exactly the rig's
+//! frames ([`Run::frames`], in the rig's order).
 //!
 //! The [`catalog`] indexes all runs of a store in SQLite (`catalog.sqlite` at the store's root); it
 //! is an index only and [`catalog::Catalog::reindex`] rebuilds it from the folders.
@@ -22,9 +30,11 @@ pub mod log;
 pub mod run;
 mod time;
 
-pub use catalog::{Catalog, CatalogRow, Filter};
-pub use log::{LogReader, LogWriter, Recovery};
-pub use run::{DeviceMeta, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples};
+pub use catalog::{Catalog, CatalogRow, Filter, Reindexed};
+pub use log::{LogHeader, LogReader, LogWriter, Recovery};
+pub use run::{
+    Completeness, DeviceMeta, Filed, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples,
+};
 pub use time::utc_now_rfc3339;
 
 use std::fmt;

@@ -1,6 +1,6 @@
 //! A run folder: [`RunWriter`] records one, [`Run`] reads one back.
 
-use crate::log::{LogContents, LogReader, LogWriter, Recovery};
+use crate::log::{LogContents, LogHeader, LogReader, LogWriter, Recovery};
 use crate::{ErrorKind, Result, StoreError};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -8,7 +8,6 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tribo_physics::record::Units;
 use tribo_physics::{Record, Rig};
-use tribo_wire::frame::decode_one;
 use tribo_wire::{
     Channel, Configure, DeviceMsg, EcrRangeChange, EndReason, Gap, OnboardResult, RunEnd,
     RunHeader, SampleBlock, SampleClock,
@@ -260,6 +259,57 @@ impl Samples {
     }
 }
 
+/// Where a run frame belongs in a run (what a second copy of it is compared with).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Slot {
+    Header,
+    Block(u32),
+    Gap(u32),
+    Ecr(u32),
+    Result,
+    End,
+}
+
+impl Slot {
+    fn of(msg: &DeviceMsg) -> Option<Slot> {
+        Some(match msg {
+            DeviceMsg::RunStarted(_) => Slot::Header,
+            DeviceMsg::Samples(b) => Slot::Block(b.block),
+            DeviceMsg::Packed(p) => Slot::Block(p.block),
+            DeviceMsg::Gap(g) => Slot::Gap(g.first_sample),
+            DeviceMsg::EcrRange(e) => Slot::Ecr(e.first_sample),
+            DeviceMsg::Result(_) => Slot::Result,
+            DeviceMsg::RunEnded(_) => Slot::End,
+            _ => return None,
+        })
+    }
+
+    fn name(self) -> String {
+        match self {
+            Slot::Header => "its run header".into(),
+            Slot::Block(k) => format!("its block {k}"),
+            Slot::Gap(s) => format!("its acquisition gap at sample {s}"),
+            Slot::Ecr(s) => format!("its ECR range change at sample {s}"),
+            Slot::Result => "its on-board result".into(),
+            Slot::End => "its end frame".into(),
+        }
+    }
+}
+
+/// What filing a frame into a run did ([`RunWriter::file_frame`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Filed {
+    /// A frame of the run not held before: logged.
+    New,
+    /// The very frame (same bytes) is already held: not logged again.
+    Same,
+    /// The run holds another frame in its place: the frame is of another run (not logged). Says
+    /// which part differs.
+    Differs(String),
+    /// Not a run frame (hello, status, …): not logged.
+    Other,
+}
+
 /// The messages of a log, sorted into a run.
 #[derive(Debug, Clone, Default)]
 struct Assembled {
@@ -269,28 +319,54 @@ struct Assembled {
     end: Option<RunEnd>,
     /// Records that were not frames of this protocol, or packed blocks that did not unpack (count).
     undecodable: usize,
-    /// Blocks received twice with different contents.
-    conflicts: Vec<u32>,
+    /// Run frames received twice with different contents.
+    conflicts: Vec<String>,
     /// Acquisition gaps the rig reported, by first sample.
     gaps: BTreeMap<u32, Gap>,
     /// ECR range changes the rig reported, by first sample.
     ecr_changes: BTreeMap<u32, EcrRangeChange>,
+    /// Every run frame held, as received (sequence number, bytes), by its place in the run.
+    raw: BTreeMap<Slot, (u32, Vec<u8>)>,
+    /// Some sample block came packed (protocol v2 firmware, which records each ECR range change).
+    packed: bool,
+    /// The first block index not held (all before it are).
+    next_missing: u32,
+    /// Blocks held whose counts this tribo cannot unpack (a newer codec).
+    undecodable_blocks: Vec<u32>,
 }
 
 impl Assembled {
-    fn add(&mut self, msg: DeviceMsg) {
+    /// Files one decoded frame (`raw`: its bytes, `seq`: its sequence number).
+    fn add(&mut self, seq: u32, raw: &[u8], msg: DeviceMsg) -> Filed {
+        let Some(slot) = Slot::of(&msg) else {
+            return Filed::Other;
+        };
+        if let Some((_, held)) = self.raw.get(&slot) {
+            if held[..] == *raw {
+                return Filed::Same;
+            }
+            let what = slot.name();
+            self.conflicts.push(what.clone());
+            return Filed::Differs(what);
+        }
+        self.packed |= matches!(msg, DeviceMsg::Packed(_));
         match msg {
-            DeviceMsg::RunStarted(h) if self.header.is_none() => self.header = Some(h),
+            DeviceMsg::RunStarted(h) => self.header = Some(h),
             DeviceMsg::Samples(_) | DeviceMsg::Packed(_) => match msg.sample_block() {
-                Some(Ok(b)) => match self.blocks.get(&b.block) {
-                    Some(old) if *old != b => self.conflicts.push(b.block),
-                    Some(_) => {}
-                    None => {
-                        self.blocks.insert(b.block, b);
+                Some(Ok(b)) => {
+                    self.blocks.insert(b.block, b);
+                    while self.blocks.contains_key(&self.next_missing) {
+                        self.next_missing += 1;
                     }
-                },
-                // A packed block whose counts do not decode (a CRC-valid frame from a newer codec).
-                _ => self.undecodable += 1,
+                }
+                // A packed block whose counts do not decode (a CRC-valid frame from a newer codec):
+                // kept in the log, counted as missing.
+                _ => {
+                    self.undecodable += 1;
+                    if let Slot::Block(k) = slot {
+                        self.undecodable_blocks.push(k);
+                    }
+                }
             },
             DeviceMsg::Result(r) => self.result = Some(r),
             DeviceMsg::RunEnded(e) => self.end = Some(e),
@@ -302,6 +378,8 @@ impl Assembled {
             }
             _ => {}
         }
+        self.raw.insert(slot, (seq, raw.to_vec()));
+        Filed::New
     }
 
     /// Whether this event frame is already filed.
@@ -313,11 +391,13 @@ impl Assembled {
         }
     }
 
-    fn from_records(records: &[Vec<u8>]) -> Assembled {
+    fn from_records(records: &[Vec<u8>], protocol: Option<u16>) -> Assembled {
         let mut a = Assembled::default();
         for r in records {
-            match decode_record(r) {
-                Some(m) => a.add(m),
+            match decode_record(protocol, r) {
+                Some(f) => {
+                    a.add(f.seq, r, f.msg);
+                }
                 None => a.undecodable += 1,
             }
         }
@@ -336,58 +416,230 @@ impl Assembled {
             .collect()
     }
 
+    /// Blocks before which run events (acquisition gaps, ECR range changes) the rig must have sent
+    /// are not held, judged from what the held blocks say: a jump in sample index that the gaps
+    /// held do not cover exactly, or a packed block (v2 firmware) converted on an ECR range that the
+    /// range changes held do not explain. (Events after the last block show in no block: a pull of
+    /// the run's end brings them.)
+    fn event_holes(&self) -> Vec<u32> {
+        let mut holes = vec![];
+        let mut prev: Option<&SampleBlock> = None;
+        let first_range = self.blocks.get(&0).map(|b| b.ecr_range);
+        let mut assumed: Option<(u32, u8)> = None;
+        for b in self.blocks.values() {
+            if let Some(p) = prev.filter(|p| p.block + 1 == b.block) {
+                let end = p.first_sample as u64 + p.samples() as u64;
+                let jump = (b.first_sample as u64).saturating_sub(end);
+                let covered: u64 = self
+                    .gaps
+                    .range(end.min(u32::MAX as u64) as u32..b.first_sample)
+                    .map(|(_, g)| g.count as u64)
+                    .sum();
+                if jump != covered {
+                    holes.push(b.block);
+                    prev = Some(b);
+                    continue;
+                }
+            }
+            // The range in force at the block's first sample, from the changes held (firmware
+            // before protocol v2 changed ranges without saying so). After a hole, the block's own
+            // range stands in for the change not held, so that one lost change is one hole.
+            if self.packed {
+                let held = self
+                    .ecr_changes
+                    .range(..=b.first_sample)
+                    .next_back()
+                    .map(|(&s, c)| (s, c.range));
+                let range = match (held, assumed) {
+                    (Some((s, _)), Some((since, r))) if since > s => Some(r),
+                    (Some((_, r)), _) => Some(r),
+                    (None, Some((_, r))) => Some(r),
+                    (None, None) => first_range,
+                };
+                if range.is_some_and(|r| r != b.ecr_range) {
+                    holes.push(b.block);
+                    assumed = Some((b.first_sample, b.ecr_range));
+                }
+            }
+            prev = Some(b);
+        }
+        holes
+    }
+
+    /// Samples the gaps held account for, against what the end frame says the rig lost.
+    fn gaps_unaccounted(&self) -> Option<(u64, u64)> {
+        let held: u64 = self.gaps.values().map(|g| g.count as u64).sum();
+        let end = self.end?;
+        (end.overruns as u64 != held).then_some((held, end.overruns as u64))
+    }
+
+    fn completeness(&self) -> Completeness {
+        let held = self.blocks.len() as u32;
+        Completeness {
+            header: self.header.is_some(),
+            result: self.result.is_some(),
+            end: self.end.is_some(),
+            blocks_held: held,
+            blocks_expected: self.end.map(|e| e.blocks),
+            blocks_known: self
+                .end
+                .map(|e| e.blocks)
+                .or(self.blocks.keys().next_back().map(|b| b + 1))
+                .unwrap_or(0),
+            missing: self.missing(),
+            undecodable: self.undecodable_blocks.clone(),
+            event_holes: self.event_holes(),
+            gaps_unaccounted: self.gaps_unaccounted(),
+            lost_samples: self.gaps.values().map(|g| g.count as u64).sum(),
+            conflicts: self.conflicts.len(),
+        }
+    }
+
     /// The block a resumed pull should start from: the first one missing (or the next one).
     fn resume_from(&self) -> u32 {
-        let mut next = 0;
-        while self.blocks.contains_key(&next) {
-            next += 1;
+        self.next_missing
+    }
+
+    /// The run frames held, in the order the rig sent them (by sequence number).
+    fn frames(&self) -> Vec<&[u8]> {
+        let mut v: Vec<&(u32, Vec<u8>)> = self.raw.values().collect();
+        v.sort_by_key(|(seq, _)| *seq);
+        v.into_iter().map(|(_, r)| &r[..]).collect()
+    }
+}
+
+/// How much of a run is held: what a command says before it calls a run complete.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Completeness {
+    /// The run header (configuration, clock) is held.
+    pub header: bool,
+    /// The on-board result is held (every run the rig ends has one, even aborted ones).
+    pub result: bool,
+    /// The end frame is held: then the run's number of blocks is known.
+    pub end: bool,
+    pub blocks_held: u32,
+    /// Blocks the run has, from its end frame.
+    pub blocks_expected: Option<u32>,
+    /// Blocks known to exist: from the end frame, else up to the highest block held.
+    pub blocks_known: u32,
+    /// Blocks known to exist and not held (those below included).
+    pub missing: Vec<u32>,
+    /// Blocks received whose counts this tribo cannot unpack (a newer rig's codec: update tribo).
+    pub undecodable: Vec<u32>,
+    /// Blocks before which run events (gaps, ECR range changes) look missing.
+    pub event_holes: Vec<u32>,
+    /// Samples the gaps held account for and samples the end frame says were lost, when they
+    /// differ.
+    pub gaps_unaccounted: Option<(u64, u64)>,
+    /// Samples the rig itself lost (its gap frames): part of a complete run, not missing data.
+    pub lost_samples: u64,
+    /// Run frames received twice with different contents.
+    pub conflicts: usize,
+}
+
+/// Block indices as ranges: `3, 7–9, 12`.
+pub fn block_ranges(blocks: &[u32]) -> String {
+    let mut out: Vec<String> = vec![];
+    let mut i = 0;
+    while i < blocks.len() {
+        let mut j = i;
+        while j + 1 < blocks.len() && blocks[j + 1] == blocks[j] + 1 {
+            j += 1;
         }
-        next
+        out.push(if i == j {
+            blocks[i].to_string()
+        } else {
+            format!("{}–{}", blocks[i], blocks[j])
+        });
+        i = j + 1;
+    }
+    out.join(", ")
+}
+
+impl Completeness {
+    /// Header, every block, the run's events, its result and its end.
+    pub fn is_complete(&self) -> bool {
+        self.header
+            && self.result
+            && self.end
+            && self.missing.is_empty()
+            && self.event_holes.is_empty()
+            && self.gaps_unaccounted.is_none()
+    }
+
+    /// One line: `complete: 156 of 156 blocks`, or `incomplete: 79 of 156 blocks (missing …)`.
+    pub fn summary(&self) -> String {
+        let mut s = if self.is_complete() {
+            format!(
+                "complete: {} of {} blocks",
+                self.blocks_held, self.blocks_held
+            )
+        } else {
+            match self.blocks_expected {
+                Some(m) => format!("incomplete: {} of {m} blocks", self.blocks_held),
+                None => format!(
+                    "incomplete: {} of at least {} blocks",
+                    self.blocks_held, self.blocks_known
+                ),
+            }
+        };
+        let mut why: Vec<String> = vec![];
+        if !self.header {
+            why.push("no run header".into());
+        }
+        if !self.missing.is_empty() {
+            why.push(format!("missing {}", block_ranges(&self.missing)));
+        }
+        if !self.undecodable.is_empty() {
+            why.push(format!(
+                "block{} {} arrived but this tribo cannot unpack {} (a newer rig's codec: update tribo)",
+                if self.undecodable.len() == 1 { "" } else { "s" },
+                block_ranges(&self.undecodable),
+                if self.undecodable.len() == 1 { "it" } else { "them" }
+            ));
+        }
+        if !self.end {
+            why.push(
+                "the run's end was not received, so how many blocks it has is not known".into(),
+            );
+        } else if !self.result {
+            why.push("the on-board result was not received".into());
+        }
+        if !self.event_holes.is_empty() {
+            why.push(format!(
+                "run events (acquisition gaps, ECR range changes) missing before block{} {}",
+                if self.event_holes.len() == 1 { "" } else { "s" },
+                block_ranges(&self.event_holes)
+            ));
+        }
+        if let Some((held, said)) = self.gaps_unaccounted {
+            why.push(format!(
+                "the rig reported {said} lost samples, the gap frames held account for {held}"
+            ));
+        }
+        if self.conflicts > 0 {
+            why.push(format!(
+                "{} frames arrived twice with different contents (kept the first)",
+                self.conflicts
+            ));
+        }
+        if self.lost_samples > 0 {
+            why.push(format!(
+                "the rig's acquisition lost {} samples (its gap frames say which)",
+                self.lost_samples
+            ));
+        }
+        if !why.is_empty() {
+            s.push_str(&format!(" ({})", why.join("; ")));
+        }
+        s
     }
 }
 
-/// Protocol v1 run headers, which had no sample clock: logs recorded before it stay readable (their
-/// samples are at the configured rate, as v1 assumed).
-pub(crate) mod v1 {
-    use serde::{Deserialize, Serialize};
-    use tribo_wire::{Configure, DeviceError, DeviceInfo, Status};
-
-    #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
-    pub struct RunHeader {
-        pub run_id: u32,
-        pub config: Configure,
-        pub temp_c: f32,
-        pub t_us: u64,
-    }
-
-    /// The first variants of v1's `DeviceMsg`, in its order, up to the run header.
-    #[derive(Debug, Clone, Serialize, Deserialize)]
-    #[allow(clippy::large_enum_variant, dead_code)]
-    pub enum DeviceMsg {
-        Hello(DeviceInfo),
-        Ack { seq: u32 },
-        Error(DeviceError),
-        Status(Status),
-        RunStarted(RunHeader),
-    }
-}
-
-/// A logged frame's message: this protocol's, or a v1 run header (given the exact configured rate
-/// as its clock).
-fn decode_record(raw: &[u8]) -> Option<DeviceMsg> {
-    if let Ok(f) = decode_one::<DeviceMsg>(raw) {
-        return Some(f.msg);
-    }
-    match decode_one::<v1::DeviceMsg>(raw).ok()?.msg {
-        v1::DeviceMsg::RunStarted(h) => Some(DeviceMsg::RunStarted(RunHeader {
-            run_id: h.run_id,
-            config: h.config,
-            temp_c: h.temp_c,
-            t_us: h.t_us,
-            clock: SampleClock::exact(h.config.sample_rate_hz),
-        })),
-        _ => None,
-    }
+/// A logged frame: decoded with the protocol the log says the rig spoke (`None`: not recorded;
+/// then today's protocol, else v1's).
+fn decode_record(protocol: Option<u16>, raw: &[u8]) -> Option<tribo_wire::Frame<DeviceMsg>> {
+    tribo_wire::v1::decode_as(protocol, raw).ok()
 }
 
 fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
@@ -439,9 +691,35 @@ pub struct Run {
     dir: PathBuf,
     pub meta: RunMeta,
     pub results: Results,
-    /// What had to be cut off the frame log's end, if anything.
+    /// What had to be cut off the frame log's end (or, salvaging, skipped), if anything.
     pub recovery: Option<Recovery>,
     data: Assembled,
+    log_header: LogHeader,
+}
+
+/// A run's status from what its log holds: `Complete` only when every frame of the run is there;
+/// `recorded` (the metadata's) says whether it was aborted or is still being recorded.
+fn derive_status(recorded: RunStatus, data: &Assembled) -> RunStatus {
+    let aborted = recorded == RunStatus::Aborted
+        || matches!(
+            data.end,
+            Some(RunEnd {
+                reason: EndReason::Aborted,
+                ..
+            })
+        );
+    if data.completeness().is_complete() {
+        if aborted {
+            RunStatus::Aborted
+        } else {
+            RunStatus::Complete
+        }
+    } else {
+        match recorded {
+            RunStatus::Aborted | RunStatus::Recording => recorded,
+            _ => RunStatus::Incomplete,
+        }
+    }
 }
 
 impl Run {
@@ -482,19 +760,43 @@ impl Run {
             Err(e) if e.kind == ErrorKind::NotFound => Results::default(),
             Err(e) => return Err(e),
         };
-        let LogContents { records, recovery } = LogReader::read(&dir.join(LOG_FILE), salvage)?;
-        let data = Assembled::from_records(&records);
+        let LogContents {
+            header,
+            records,
+            recovery,
+        } = LogReader::read(&dir.join(LOG_FILE), salvage)?;
+        let data = Assembled::from_records(&records, header.protocol);
         let mut results = results;
         if results.onboard.is_none() {
             results.onboard = data.result;
         }
+        let mut meta = meta;
+        // The log is the truth: a run whose log lost frames since it was finished is not complete.
+        meta.status = derive_status(meta.status, &data);
         Ok(Run {
             dir: dir.to_owned(),
             meta,
             results,
             recovery,
             data,
+            log_header: header,
         })
+    }
+
+    /// How much of the run is held (blocks, events, result, end).
+    pub fn completeness(&self) -> Completeness {
+        self.data.completeness()
+    }
+
+    /// The run frames held, byte for byte as the rig sent them, in the rig's order (by sequence
+    /// number), each once: for a complete run, exactly the frames the rig stored.
+    pub fn frames(&self) -> Vec<&[u8]> {
+        self.data.frames()
+    }
+
+    /// The frame log's header (its format, and the wire protocol of its frames).
+    pub fn log_header(&self) -> LogHeader {
+        self.log_header
     }
 
     pub fn dir(&self) -> &Path {
@@ -593,9 +895,10 @@ impl Run {
         out
     }
 
-    /// All blocks and the end received, nothing missing.
+    /// Every frame of the run held: header, blocks, events, result and end
+    /// ([`Completeness::is_complete`]).
     pub fn is_complete(&self) -> bool {
-        self.data.end.is_some() && self.data.missing().is_empty() && self.data.header.is_some()
+        self.data.completeness().is_complete()
     }
 
     /// The configuration the samples were taken with (the rig's header, else the metadata's).
@@ -781,7 +1084,10 @@ impl RunWriter {
         };
         meta.status = RunStatus::Recording;
         write_toml_atomic(&dir.join(META_FILE), &meta)?;
-        let log = LogWriter::create(&dir.join(LOG_FILE))?;
+        let log = LogWriter::create(
+            &dir.join(LOG_FILE),
+            meta.device.as_ref().map(|d| d.protocol),
+        )?;
         Ok(RunWriter {
             dir,
             meta,
@@ -796,8 +1102,12 @@ impl RunWriter {
     /// was cut, if anything.
     pub fn resume(dir: &Path, salvage: bool) -> Result<(RunWriter, Option<Recovery>)> {
         let meta: RunMeta = read_toml(&dir.join(META_FILE))?;
-        let (log, contents) = LogWriter::reopen(&dir.join(LOG_FILE), salvage)?;
-        let data = Assembled::from_records(&contents.records);
+        let (log, contents) = LogWriter::reopen(
+            &dir.join(LOG_FILE),
+            salvage,
+            meta.device.as_ref().map(|d| d.protocol),
+        )?;
+        let data = Assembled::from_records(&contents.records, contents.header.protocol);
         Ok((
             RunWriter {
                 dir: dir.to_owned(),
@@ -825,15 +1135,41 @@ impl RunWriter {
     /// Logs one raw wire frame (as received) and files the message it holds. Frames that do not
     /// decode are refused (the link layer asks again for them).
     pub fn append_frame(&mut self, raw: &[u8]) -> Result<()> {
-        let msg = match decode_one::<DeviceMsg>(raw) {
-            Ok(f) => f.msg,
-            Err(e) => decode_record(raw).ok_or_else(|| {
-                StoreError::new(
-                    ErrorKind::Invalid,
-                    format!("refusing to log a bad frame: {e}"),
-                )
-            })?,
+        let f = self.decode(raw)?;
+        self.log_frame(raw, f)
+    }
+
+    /// Files one raw wire frame (as received) into the run: logs it if the run does not hold it
+    /// yet; a frame the run already holds byte for byte is not logged twice; a frame whose place
+    /// the run holds with other bytes is of another run, and is not logged either (the caller
+    /// decides). Frames that do not decode are refused.
+    pub fn file_frame(&mut self, raw: &[u8]) -> Result<Filed> {
+        let f = self.decode(raw)?;
+        let Some(slot) = Slot::of(&f.msg) else {
+            return Ok(Filed::Other);
         };
+        if let Some((_, held)) = self.data.raw.get(&slot) {
+            return Ok(if held[..] == *raw {
+                Filed::Same
+            } else {
+                Filed::Differs(slot.name())
+            });
+        }
+        self.log_frame(raw, f)?;
+        Ok(Filed::New)
+    }
+
+    fn decode(&self, raw: &[u8]) -> Result<tribo_wire::Frame<DeviceMsg>> {
+        tribo_wire::v1::decode_as(self.log.header().protocol, raw).map_err(|e| {
+            StoreError::new(
+                ErrorKind::Invalid,
+                format!("refusing to log a bad frame: {e}"),
+            )
+        })
+    }
+
+    fn log_frame(&mut self, raw: &[u8], f: tribo_wire::Frame<DeviceMsg>) -> Result<()> {
+        let msg = f.msg;
         let is_header = matches!(msg, DeviceMsg::RunStarted(_));
         let is_end = matches!(msg, DeviceMsg::RunEnded(_) | DeviceMsg::Result(_));
         if let DeviceMsg::RunStarted(h) = &msg {
@@ -843,7 +1179,7 @@ impl RunWriter {
             }
         }
         self.log.append(raw)?;
-        self.data.add(msg);
+        self.data.add(f.seq, raw, msg);
         if is_header {
             // The rig's run id is how `tribo pull` finds this folder again, even if this process
             // is killed before `finish`.
@@ -901,29 +1237,56 @@ impl RunWriter {
         self.data.resume_from()
     }
 
-    /// Header, end and every block present.
+    /// Header, every block and event, result and end present ([`Completeness::is_complete`]).
     pub fn is_complete(&self) -> bool {
-        self.data.header.is_some() && self.data.end.is_some() && self.data.missing().is_empty()
+        self.data.completeness().is_complete()
+    }
+
+    /// How much of the run is held.
+    pub fn completeness(&self) -> Completeness {
+        self.data.completeness()
+    }
+
+    /// Blocks held that this tribo cannot unpack ([`Completeness::undecodable`]).
+    pub fn undecodable_blocks(&self) -> &[u32] {
+        &self.data.undecodable_blocks
+    }
+
+    /// Blocks before which run events look missing ([`Completeness::event_holes`]).
+    pub fn event_holes(&self) -> Vec<u32> {
+        self.data.event_holes()
+    }
+
+    /// The highest block held, if any.
+    pub fn last_block(&self) -> Option<u32> {
+        self.data.blocks.keys().next_back().copied()
+    }
+
+    /// Whether the on-board result is held.
+    pub fn has_result(&self) -> bool {
+        self.data.result.is_some()
+    }
+
+    /// The run frames held, in the rig's order ([`Run::frames`]).
+    pub fn frames(&self) -> Vec<&[u8]> {
+        self.data.frames()
+    }
+
+    /// How many run frames are held.
+    pub fn frames_held(&self) -> usize {
+        self.data.raw.len()
     }
 
     /// Syncs the log and writes the metadata with its final status; the status is derived from
     /// what was received unless `aborted`. Returns the run read back.
     pub fn finish(mut self, aborted: bool) -> Result<Run> {
         self.log.sync()?;
-        let ended_by_abort = matches!(
-            self.data.end,
-            Some(RunEnd {
-                reason: EndReason::Aborted,
-                ..
-            })
-        );
-        self.meta.status = if self.is_complete() && !aborted && !ended_by_abort {
-            RunStatus::Complete
-        } else if aborted || ended_by_abort {
+        let recorded = if aborted {
             RunStatus::Aborted
         } else {
             RunStatus::Incomplete
         };
+        self.meta.status = derive_status(recorded, &self.data);
         write_toml_atomic(&self.dir.join(META_FILE), &self.meta)?;
         Run::open(&self.dir)
     }

@@ -389,8 +389,11 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
         }
     }
     let cat = Catalog::open(d.path()).unwrap();
-    let (n, bad) = cat.reindex().unwrap();
-    assert_eq!((n, bad.len()), (9, 0));
+    let r = cat.reindex().unwrap();
+    assert_eq!(
+        (r.indexed, r.unreadable.len(), r.incomplete.len()),
+        (9, 0, 0)
+    );
     let all = cat.list(&Filter::default()).unwrap();
     assert_eq!(all.len(), 9);
     let hot = cat
@@ -568,7 +571,7 @@ fn a_v1_log_s_header_without_a_clock_still_reads() {
         _ => unreachable!(),
     };
     // The v1 header: the same fields, no clock (as firmware v1 wrote it).
-    let v1 = crate::run::v1::DeviceMsg::RunStarted(crate::run::v1::RunHeader {
+    let v1 = tribo_wire::v1::DeviceMsg::RunStarted(tribo_wire::v1::RunHeader {
         run_id: h.run_id,
         config: h.config,
         temp_c: h.temp_c,
@@ -585,4 +588,193 @@ fn a_v1_log_s_header_without_a_clock_still_reads() {
     assert_eq!((hh.run_id, hh.t_us), (h.run_id, h.t_us));
     assert_eq!(run.clock(), SampleClock::exact(10_000));
     assert_eq!(run.samples_si().unwrap().t[10], 0.001);
+}
+
+/// The frames of a packed (v2) run of 20 blocks: the ECR range goes from 2 to 3 at block 10 (its
+/// change frame sent before block 9, as the rig does), and 100 samples are lost before block 15
+/// (a gap frame after block 14); the end says so. Frames in the rig's order.
+fn v2_run() -> Vec<Vec<u8>> {
+    let cfg = Configure::real_rig(0.3);
+    let base = packed(&run_frames(&cfg, 20, 0.02));
+    let mut out = vec![];
+    let mut seq = 100;
+    let mut push = |out: &mut Vec<Vec<u8>>, m: DeviceMsg| {
+        seq += 1;
+        out.push(encode_vec(seq, &m).unwrap());
+    };
+    for f in &base {
+        match decode_one::<DeviceMsg>(f).unwrap().msg {
+            DeviceMsg::Packed(p) => {
+                let mut b = p.unpack().unwrap();
+                if b.block == 9 {
+                    push(
+                        &mut out,
+                        DeviceMsg::EcrRange(EcrRangeChange {
+                            run_id: 7,
+                            first_sample: 10 * BLOCK_LEN as u32,
+                            range: 3,
+                            settling: 5,
+                        }),
+                    );
+                }
+                b.ecr_range = if b.block >= 10 { 3 } else { 2 };
+                if b.block >= 15 {
+                    b.first_sample += 100;
+                }
+                push(&mut out, DeviceMsg::Packed(PackedBlock::pack(&b).unwrap()));
+                if b.block == 14 {
+                    push(
+                        &mut out,
+                        DeviceMsg::Gap(Gap {
+                            run_id: 7,
+                            first_sample: 15 * BLOCK_LEN as u32,
+                            count: 100,
+                        }),
+                    );
+                }
+            }
+            DeviceMsg::RunEnded(mut e) => {
+                e.overruns = 100;
+                push(&mut out, DeviceMsg::RunEnded(e));
+            }
+            m => push(&mut out, m),
+        }
+    }
+    out
+}
+
+fn kind(f: &[u8]) -> DeviceMsg {
+    decode_one::<DeviceMsg>(f).unwrap().msg
+}
+
+#[test]
+fn completeness_says_exactly_what_is_missing() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let all = v2_run();
+    let whole = record(d.path(), &cfg, &all, |_| {});
+    let c = whole.completeness();
+    assert!(c.is_complete(), "{}", c.summary());
+    assert_eq!(
+        c.summary(),
+        "complete: 20 of 20 blocks (the rig's acquisition lost 100 samples (its gap frames say which))"
+    );
+    assert_eq!(whole.meta.status, RunStatus::Complete);
+    // The rig's frames, in its order, each once.
+    assert_eq!(
+        whole.frames(),
+        all.iter().map(|f| &f[..]).collect::<Vec<_>>()
+    );
+    let without = |drop: &dyn Fn(&DeviceMsg) -> bool| -> Run {
+        let fr: Vec<Vec<u8>> = all.iter().filter(|f| !drop(&kind(f))).cloned().collect();
+        record(d.path(), &cfg, &fr, |_| {})
+    };
+    let r = without(&|m| matches!(m, DeviceMsg::Packed(p) if [3, 7, 8, 9].contains(&p.block)));
+    assert_eq!(
+        r.completeness().summary(),
+        "incomplete: 16 of 20 blocks (missing 3, 7–9; the rig's acquisition lost 100 samples (its gap \
+         frames say which))"
+    );
+    assert_eq!(r.meta.status, RunStatus::Incomplete);
+    let r = without(&|m| matches!(m, DeviceMsg::RunEnded(_)));
+    assert!(r
+        .completeness()
+        .summary()
+        .starts_with("incomplete: 20 of at least 20 blocks (the run's end was not received"));
+    let r = without(&|m| matches!(m, DeviceMsg::Result(_)));
+    assert!(r
+        .completeness()
+        .summary()
+        .starts_with("incomplete: 20 of 20 blocks (the on-board result was not received"));
+    let r = without(&|m| matches!(m, DeviceMsg::RunStarted(_)));
+    assert!(r.completeness().summary().contains("no run header"));
+    // The events: a gap frame lost shows at the block after the jump it explains, a range change
+    // at the first block converted on the new range; the end's count of lost samples too.
+    let r = without(&|m| matches!(m, DeviceMsg::Gap(_)));
+    let c = r.completeness();
+    assert_eq!(
+        (c.event_holes.clone(), c.gaps_unaccounted),
+        (vec![15], Some((0, 100)))
+    );
+    assert!(
+        c.summary().contains("missing before block 15"),
+        "{}",
+        c.summary()
+    );
+    let r = without(&|m| matches!(m, DeviceMsg::EcrRange(_)));
+    assert_eq!(r.completeness().event_holes, vec![10]);
+    assert!(!r.is_complete());
+}
+
+#[test]
+fn a_frame_is_filed_once_and_another_run_s_frame_is_told_apart() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let all = v2_run();
+    let mut w = RunWriter::create(d.path(), RunMeta::new(cfg)).unwrap();
+    for f in &all[..10] {
+        assert_eq!(w.file_frame(f).unwrap(), Filed::New);
+    }
+    assert_eq!(w.file_frame(&all[3]).unwrap(), Filed::Same);
+    // The same block of another run (other counts): not logged, and said which.
+    let DeviceMsg::Packed(p) = kind(&all[3]) else {
+        panic!()
+    };
+    let mut b = p.unpack().unwrap();
+    let mut c: Vec<u16> = b.counts.to_vec();
+    c[0] ^= 1;
+    b.counts = Counts::from_slice(&c).unwrap();
+    let other = encode_vec(3, &DeviceMsg::Packed(PackedBlock::pack(&b).unwrap())).unwrap();
+    assert_eq!(
+        w.file_frame(&other).unwrap(),
+        Filed::Differs(format!("its block {}", b.block))
+    );
+    let hello = encode_vec(1, &DeviceMsg::Ack { seq: 4 }).unwrap();
+    assert_eq!(w.file_frame(&hello).unwrap(), Filed::Other);
+    assert!(w.file_frame(b"\x01\x02\x00").is_err(), "not a frame");
+    for f in &all[10..] {
+        w.file_frame(f).unwrap();
+    }
+    let run = w.finish(false).unwrap();
+    assert!(run.is_complete());
+    let log = crate::LogReader::read(&run.dir().join(run::LOG_FILE), false).unwrap();
+    assert_eq!(log.records, all, "each frame logged once, in arrival order");
+}
+
+#[test]
+fn a_run_whose_log_lost_frames_is_not_complete_whatever_its_metadata_says() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let run = record(d.path(), &cfg, &v2_run(), |_| {});
+    assert_eq!(run.meta.status, RunStatus::Complete);
+    let log = run.dir().join(run::LOG_FILE);
+    let bytes = std::fs::read(&log).unwrap();
+    std::fs::write(&log, &bytes[..bytes.len() - 30]).unwrap();
+    let back = Run::open(run.dir()).unwrap();
+    assert_eq!(
+        back.meta.status,
+        RunStatus::Incomplete,
+        "derived from the log"
+    );
+    assert!(back.recovery.is_some());
+    let cat = Catalog::open(d.path()).unwrap();
+    let r = cat.reindex().unwrap();
+    assert_eq!(r.incomplete.len(), 1);
+    assert!(
+        r.incomplete[0]
+            .1
+            .starts_with("incomplete: 20 of at least 20 blocks")
+            && r.incomplete[0].1.contains("torn last record"),
+        "{:?}",
+        r.incomplete
+    );
+    let row = &cat.list(&Filter::default()).unwrap()[0];
+    assert_eq!(
+        (row.status.as_str(), row.blocks, row.blocks_expected),
+        ("incomplete", 20, None)
+    );
+    // The catalog knows when a log changed after it was indexed.
+    assert!(cat.stale().unwrap().is_empty());
+    std::fs::write(&log, &bytes[..bytes.len() / 2]).unwrap();
+    assert_eq!(cat.stale().unwrap(), vec![run.dir().to_owned()]);
 }

@@ -197,7 +197,7 @@ impl<'a, 'r> Bench<'a, 'r> {
     pub fn new(cx: &Cx<'_>, rec: Record<'r>, store: RunStore<'a>, flash: &'r mut [u8]) -> Self {
         let mut hw = Replay::new(rec, flash);
         hw.clock = cx.probe_clock();
-        hw.temp = Ok(TEMP_C);
+        hw.temp = TEMP_C;
         Bench {
             app: App::new(AppConfig::new(0x7E57), store),
             hw,

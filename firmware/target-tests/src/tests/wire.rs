@@ -5,11 +5,11 @@ use crate::{check, check_eq, Cx, Outcome};
 use tribo_firmware::wire::crc32::{crc32, Crc32};
 use tribo_firmware::wire::frame::{cobs_decode_in_place, cobs_encode, decode_one, MAX_FRAME};
 use tribo_firmware::wire::{
-    BootReport, ChannelSet, Configure, Counts, Decoder, DeviceError, DeviceInfo, DeviceMsg,
-    EcrRangeChange, EndReason, EnvelopeShape, ErrorCode, Estimate, FaultReason, FaultReport, Field,
-    FrameError, Gap, HeaterFault, HeaterSetpoint, HostMsg, Interlock, OnboardResult, PackedBlock,
-    ResetCause, RigState, RunEnd, RunHeader, SampleBlock, SampleClock, Status, Verdict, BLOCK_LEN,
-    MAX_BLOCK_COUNTS, PROTOCOL_VERSION,
+    BootReport, ChannelSet, Configure, Control, Counts, Decoder, DeviceError, DeviceInfo,
+    DeviceMsg, EcrRangeChange, EndReason, EnvelopeShape, ErrorCode, Estimate, FaultReason,
+    FaultReport, Field, FrameError, Gap, HeaterFault, HeaterSetpoint, HostMsg, Interlock,
+    OnboardResult, PackedBlock, ResetCause, RigState, RunEnd, RunHeader, SampleBlock, SampleClock,
+    Status, Verdict, BLOCK_LEN, MAX_BLOCK_COUNTS, PROTOCOL_VERSION,
 };
 use tribo_firmware::wire::{Encoder, Frame};
 
@@ -86,6 +86,14 @@ pub fn vector(i: usize) -> Option<(u32, Vector)> {
             samples: 1_000_000,
             overruns: 0,
             uptime_ms: u64::MAX,
+            last_fault: Some(FaultReport {
+                reason: FaultReason::Heater(HeaterFault::Runaway),
+                uptime_ms: 1 << 35,
+                temp_c: 61.5,
+            }),
+            faults: 2,
+            reset_cause: ResetCause::Watchdog,
+            control: Control::StandAlone,
         })),
         14 => Vector::Device(DeviceMsg::RunStarted(RunHeader {
             run_id: 7,
