@@ -51,6 +51,18 @@ pub struct ReadTiming {
     pub reads: u64,
 }
 
+/// What the replayed MAX31856 answers (the board hands the application its register file and the
+/// reading's age).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Converter {
+    /// A configured converter reading [`Replay::temp`] with the cold junction at 25 °C, fresh.
+    Reads,
+    /// This register file, fresh (a faulty converter, wire or bus).
+    Answers(tribo_firmware::thermocouple::Registers),
+    /// The last good reading, taken at this time (µs): the converter task stopped publishing.
+    StaleSince(u64),
+}
+
 /// The replay hardware (see the module docs).
 pub struct Replay<'r> {
     rec: Record<'r>,
@@ -71,9 +83,10 @@ pub struct Replay<'r> {
     /// (starting an erase is a register write), so that work must not count as the application's.
     erase: Option<u32>,
     // heater, ECR, button, lamps
-    /// What the thermocouple reads.
     /// Plate temperature the converter reads, °C (a configured MAX31856, cold junction at 25 °C).
     pub temp: f32,
+    /// What the converter answers instead (fault injection, see [`Converter`]).
+    pub converter: Converter,
     pub heater_duty: f32,
     /// Transimpedance output the ECR front end reads, V.
     pub ecr_output_v: f32,
@@ -105,6 +118,7 @@ impl<'r> Replay<'r> {
             flash: MemFlash::new(flash, FlashGeometry::H743_BANK2).with_h743_timing(),
             erase: None,
             temp: 25.0,
+            converter: Converter::Reads,
             heater_duty: 0.0,
             ecr_output_v: 1.0,
             ecr_source_v: 0.0,
@@ -193,9 +207,17 @@ impl Magnet for Replay<'_> {
 
 impl Thermocouple for Replay<'_> {
     fn read_thermocouple(&mut self) -> Option<ConverterRead> {
-        Some(ConverterRead {
-            regs: tribo_firmware::thermocouple::encode(self.temp, 25.0, 0),
-            age_us: 0,
+        let good = || tribo_firmware::thermocouple::encode(self.temp, 25.0, 0);
+        Some(match self.converter {
+            Converter::Reads => ConverterRead {
+                regs: good(),
+                age_us: 0,
+            },
+            Converter::Answers(regs) => ConverterRead { regs, age_us: 0 },
+            Converter::StaleSince(at_us) => ConverterRead {
+                regs: good(),
+                age_us: self.now_us.saturating_sub(at_us),
+            },
         })
     }
 }

@@ -15,7 +15,7 @@ use tribo_firmware::runstore::{RunStore, BOARD_RING_BYTES, MAX_RUN_BLOCKS};
 use tribo_firmware::wire::crc32::Crc32;
 use tribo_firmware::wire::frame::MAX_FRAME;
 use tribo_firmware::wire::{
-    Channel, Configure, Decoder, DeviceError, DeviceMsg, Encoder, EndReason, HostMsg,
+    Channel, Configure, Decoder, DeviceError, DeviceMsg, Encoder, EndReason, FaultReport, HostMsg,
     OnboardResult, RigState, RunEnd, RunHeader, SampleBlock, Verdict, CHANNELS, PROTOCOL_VERSION,
 };
 
@@ -67,6 +67,10 @@ pub struct Host {
     /// sent, run frames when stored, so the two interleave).
     pub last_seq: Option<u32>,
     pub seq_backwards: u32,
+    /// `Fault` frames, with the bench's time when read (µs).
+    pub faults: heapless::Vec<(u64, FaultReport), 8>,
+    /// Time the bench read at (set before each read).
+    pub now_us: u64,
 }
 
 impl Host {
@@ -115,6 +119,9 @@ impl Host {
             },
             DeviceMsg::Result(r) => self.result = Some(r),
             DeviceMsg::RunEnded(e) => self.end = Some(e),
+            DeviceMsg::Fault(r) => {
+                let _ = self.faults.push((self.now_us, r));
+            }
             _ => {}
         }
     }
@@ -254,6 +261,7 @@ impl<'a, 'r> Bench<'a, 'r> {
 
     /// The host reads what the link took.
     pub fn read(&mut self) {
+        self.host.now_us = self.now_us;
         let rec = *self.hw.record();
         let (dec, crc, host) = (&mut self.dec, &mut self.crc, &mut self.host);
         self.hw.take_output(|bytes| {
@@ -627,7 +635,7 @@ fn figures(cx: &mut Cx<'_>, name: &str, w: Worst, gap: u64, per_sample: u64) -> 
     r0.and(r1).and(r2).and(r3).and(r4)
 }
 
-fn record<'b>(cx: &Cx<'b>, name: &str) -> Result<Record<'b>, Failure> {
+pub fn record<'b>(cx: &Cx<'b>, name: &str) -> Result<Record<'b>, Failure> {
     let b = cx.bundle()?;
     b.record(name).ok_or_else(|| {
         Failure::new(

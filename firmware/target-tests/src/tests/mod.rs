@@ -1,6 +1,7 @@
 //! The tests, and [`TESTS`], the one list the runner goes through (in this order).
 
 pub mod app;
+pub mod failsafe;
 pub mod parts;
 pub mod pipeline;
 pub mod store;
@@ -23,4 +24,11 @@ pub const TESTS: &[Test] = &[
     test!(pipeline::noisy),
     test!(app::coulomb_viscous_run),
     test!(app::unloaded_run),
+    test!(failsafe::thermocouple_words),
+    test!(failsafe::bad_reads_in_a_row_fault_the_heater),
+    test!(failsafe::runaway_and_watch),
+    test!(failsafe::magnet_hold_limit),
+    test!(failsafe::reset_record),
+    test!(failsafe::safe_state_table),
+    test!(failsafe::app_goes_safe),
 ];
