@@ -28,6 +28,7 @@
 #![allow(clippy::result_large_err)]
 
 pub mod bundle;
+pub mod fatal;
 #[cfg(feature = "generate")]
 pub mod generate;
 pub mod replay;

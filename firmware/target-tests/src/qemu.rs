@@ -7,7 +7,9 @@
 //!   reads 0 in this QEMU.
 //! * Stack: [`Qemu::measure`] paints [`WINDOW`] bytes below the caller's stack pointer, runs the
 //!   call, and finds the lowest word no longer painted (the high-water mark of that call).
-//! * Panics and faults print what happened and exit non-zero (QEMU's default handlers would loop).
+//! * Panics and faults print what happened and exit non-zero (QEMU's default handlers would loop),
+//!   except in a run of a fatal test ([`tribo_target_tests::fatal`]: the filter is exactly its
+//!   name), where they do what the board's handlers do and check it.
 //!
 //! The only `unsafe` of the crate is here: memory-mapped timer registers, stack painting, the
 //! semihosting command line, the fault handler signature.
@@ -15,8 +17,12 @@
 
 use core::fmt::Write;
 use core::ptr::{read_volatile, write_volatile};
+use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio, nr, syscall1};
+use tribo_firmware::reset::{self, MessageBuf};
+use tribo_firmware::wire::ResetCause;
+use tribo_target_tests::fatal::{self, Fatal, FATAL};
 use tribo_target_tests::replay::Clock;
 use tribo_target_tests::{run, tests::TESTS, Bundle, Cost, Cx, Probe};
 
@@ -191,6 +197,9 @@ fn main() -> ! {
     );
     let mut cmdline = [0u8; 128];
     let filter = filter(&mut cmdline);
+    if let Some((name, which)) = fatal::named(filter) {
+        run_fatal(&mut out, probe.platform(), name, which);
+    }
     let bundle = match Bundle::parse(BUNDLE) {
         Ok(b) => Some(b),
         Err(e) => {
@@ -215,8 +224,79 @@ fn main() -> ! {
     loop {}
 }
 
+/// The fatal test of this run (index in [`FATAL`] + 1; 0: none).
+static FATAL_RUN: AtomicU8 = AtomicU8::new(0);
+/// Timer ticks when the fatal test's fault was triggered.
+static TRIGGERED_AT: AtomicU32 = AtomicU32::new(0);
+
+fn fatal_run() -> Option<(&'static str, Fatal)> {
+    let k = FATAL_RUN.load(Ordering::SeqCst) as usize;
+    k.checked_sub(1).and_then(|i| FATAL.get(i)).copied()
+}
+
+/// Runs the fatal test `name`: triggers its fault; the handler finishes the run.
+fn run_fatal(out: &mut Out, platform: &str, name: &'static str, which: Fatal) -> ! {
+    let _ = writeln!(
+        out,
+        "\nrunning 1 test on {platform} (a fatal path: its handler ends the run)"
+    );
+    let _ = write!(out, "test {name} ... ");
+    let k = FATAL.iter().position(|(n, _)| *n == name).unwrap_or(0);
+    FATAL_RUN.store(k as u8 + 1, Ordering::SeqCst);
+    TRIGGERED_AT.store(ticks(), Ordering::SeqCst);
+    match which {
+        Fatal::Panic => {
+            let table = [1u8, 2, 3, 4];
+            let v = fatal::heater_step_that_panics(&table, core::hint::black_box(9));
+            let _ = write!(out, "read {v} ");
+        }
+        // SAFETY: an undefined instruction, to take the HardFault this test is about (UsageFault
+        // is not enabled, so it escalates); the handler ends the run.
+        Fatal::HardFault => unsafe { core::arch::asm!("udf #0") },
+    }
+    let _ = writeln!(
+        out,
+        "\n    failed: the fault did not happen\ntest {name} ... FAILED\n\ntest result: FAILED. 0 \
+         passed; 1 failed; 0 filtered out"
+    );
+    debug::exit(debug::EXIT_FAILURE);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+/// Instructions since the fatal test's trigger.
+fn since_trigger(now: u32) -> u64 {
+    now.wrapping_sub(TRIGGERED_AT.load(Ordering::SeqCst)) as u64 * INSTRUCTIONS_PER_TICK
+}
+
+fn exit(ok: bool) -> ! {
+    debug::exit(if ok {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo<'_>) -> ! {
+    if let Some((name, Fatal::Panic)) = fatal_run() {
+        // The board's order: outputs safe, then the message, then the record.
+        let image = fatal::safe_state();
+        let n = since_trigger(ticks());
+        let mut m = MessageBuf::new();
+        let _ = write!(m, "{info}");
+        let record = reset::encode(ResetCause::Panic, m.as_bytes());
+        exit(fatal::finish(
+            &mut out(),
+            name,
+            Fatal::Panic,
+            &image,
+            &record,
+            Some(n),
+        ));
+    }
     let mut out = out();
     let _ = writeln!(out, "\npanicked: {info}\n\ntest result: FAILED (panic)");
     debug::exit(debug::EXIT_FAILURE);
@@ -226,6 +306,26 @@ fn panic(info: &core::panic::PanicInfo<'_>) -> ! {
 
 #[exception]
 unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
+    if let Some((name, Fatal::HardFault)) = fatal_run() {
+        let image = fatal::safe_state();
+        let n = since_trigger(ticks());
+        // SAFETY: reads of the System Control Block's fault status and address registers, always
+        // mapped on a Cortex-M7.
+        let (cfsr, hfsr, bfar) = unsafe {
+            let scb = &*cortex_m::peripheral::SCB::PTR;
+            (scb.cfsr.read(), scb.hfsr.read(), scb.bfar.read())
+        };
+        let m = reset::cpu_fault_message(ef.pc(), ef.lr(), cfsr, hfsr, bfar);
+        let record = reset::encode(ResetCause::CpuFault, m.as_bytes());
+        exit(fatal::finish(
+            &mut out(),
+            name,
+            Fatal::HardFault,
+            &image,
+            &record,
+            Some(n),
+        ));
+    }
     let mut out = out();
     let _ = writeln!(out, "\nHardFault: {ef:?}\n\ntest result: FAILED (fault)");
     debug::exit(debug::EXIT_FAILURE);

@@ -348,5 +348,21 @@ fn target_test(args: &[String]) -> Result<(), String> {
     ]);
     run(&mut cmd)?;
     let elf = target_dir.join(TARGET).join(PROFILE).join(TARGET_TESTS);
-    qemu::run(&qemu, &elf, filter)
+    // The fatal tests (a panic, a HardFault) end their run in the handler: one QEMU each, after
+    // the others.
+    let fatal: Vec<&str> = tribo_target_tests::fatal::FATAL
+        .iter()
+        .map(|(name, _)| *name)
+        .filter(|name| name.contains(filter))
+        .collect();
+    let ordinary = tribo_target_tests::tests::TESTS
+        .iter()
+        .any(|t| t.name.contains(filter));
+    if ordinary || fatal.is_empty() {
+        qemu::run(&qemu, &elf, filter)?;
+    }
+    for name in fatal {
+        qemu::run(&qemu, &elf, name)?;
+    }
+    Ok(())
 }
