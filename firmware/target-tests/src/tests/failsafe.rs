@@ -865,6 +865,17 @@ pub fn app_goes_safe(cx: &mut Cx) -> Outcome {
             "{name}: Fault frame {} µs after, stated {told_within} µs",
             at - from
         );
+        if alive {
+            // The heater went off at the first bad read; the fault latches exactly
+            // TC_BAD_READS − 1 heater steps (100 ms each) later, not one sooner or later.
+            let steps = (limits::TC_BAD_READS as u64 - 1) * 100_000;
+            let off = w.heater_off_us.unwrap_or(0);
+            check!(
+                at >= off && (at - off).abs_diff(steps) <= POLL_US,
+                "{name}: Fault frame {} µs after the heater went off, expected {steps} µs",
+                at.saturating_sub(off)
+            );
+        }
         check_eq!(b.host.faults.len(), 1, "{name}: one Fault frame");
         cx.note(format_args!(
             "{name}: heater off after {} ms, {:?} told after {} ms",
