@@ -909,3 +909,128 @@ pub fn app_goes_safe(cx: &mut Cx) -> Outcome {
     );
     r0.and(r1).and(r2)
 }
+
+/// The watchdog task's decision on the board's timing (app every 1 ms, thermocouple every 100 ms,
+/// a look every [`FEED_PERIOD_MS`], the IWDG resetting [`limits::WATCHDOG_TIMEOUT_MS`] after the
+/// last feed), across the wrap of the millisecond clock: all alive, never a reset; the thermocouple
+/// task stuck: safe state and no more feeding within its allowed silence plus a look, the reset a
+/// timeout later, the record naming the task; the core hogged (no task runs, the watchdog task
+/// neither): the IWDG resets within its timeout of the last feed.
+pub fn watchdog_liveness(cx: &mut Cx) -> Outcome {
+    use tribo_firmware::watchdog::{task, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
+    /// What happened: (safe state at, reset at, the task named), ms since the stop.
+    struct Run {
+        safe_at: Option<u32>,
+        reset_at: Option<u32>,
+        stuck: Option<&'static str>,
+        worst_look: u64,
+    }
+    // `stop`: (which task stops, when, ms after start); `hog`: the whole core stops.
+    let simulate = |cx: &mut Cx, stop: Option<(usize, u32)>, hog: bool| -> Run {
+        let start = u32::MAX - 5_000; // the clock wraps during the run
+        let live = Liveness::new(BOARD_TASKS, start);
+        let mut last_feed = start;
+        let mut run = Run {
+            safe_at: None,
+            reset_at: None,
+            stuck: None,
+            worst_look: 0,
+        };
+        let mut starved = false;
+        for k in 1..=10_000u32 {
+            let now = start.wrapping_add(k);
+            let stopped = |t: usize| stop.is_some_and(|(s, at)| (s == t || hog) && k >= at);
+            if !stopped(task::APP) {
+                live.check_in(task::APP, now);
+            }
+            if k % 100 == 0 && !stopped(task::THERMOCOUPLE) {
+                live.check_in(task::THERMOCOUPLE, now);
+            }
+            let watchdog_runs = !(hog && stop.is_some_and(|(_, at)| k >= at));
+            if watchdog_runs && k % FEED_PERIOD_MS == 0 && !starved {
+                let mut v = Ok(());
+                let n = cx.count(|| v = live.verdict(now));
+                run.worst_look = run.worst_look.max(n.unwrap_or(0));
+                match v {
+                    Ok(()) => last_feed = now,
+                    Err(s) => {
+                        starved = true;
+                        run.stuck = Some(s.name);
+                        run.safe_at = stop.map(|(_, at)| k - at);
+                    }
+                }
+            }
+            if now.wrapping_sub(last_feed) > limits::WATCHDOG_TIMEOUT_MS {
+                run.reset_at = stop.map(|(_, at)| k - at).or(Some(k));
+                break;
+            }
+        }
+        run
+    };
+    let alive = simulate(cx, None, false);
+    check!(
+        alive.reset_at.is_none() && alive.stuck.is_none(),
+        "all tasks alive, yet reset at {:?} ms ({:?} silent)",
+        alive.reset_at,
+        alive.stuck
+    );
+    // The thermocouple task stops right after a check-in (at 2 s).
+    let tc_silence = BOARD_TASKS[task::THERMOCOUPLE].max_silence_ms;
+    let r = simulate(cx, Some((task::THERMOCOUPLE, 2_001)), false);
+    check_eq!(r.stuck, Some("thermocouple"));
+    cx.note(format_args!(
+        "thermocouple task stopped: safe state after {:?} ms, reset after {:?} ms",
+        r.safe_at, r.reset_at
+    ));
+    check!(
+        r.safe_at
+            .is_some_and(|t| t > tc_silence - 100 && t <= tc_silence + FEED_PERIOD_MS),
+        "safe state {:?} ms after the thermocouple task stopped",
+        r.safe_at
+    );
+    let timeout = limits::WATCHDOG_TIMEOUT_MS;
+    check!(
+        r.reset_at
+            .is_some_and(|t| t <= tc_silence + FEED_PERIOD_MS + timeout + 1),
+        "reset {:?} ms after the thermocouple task stopped",
+        r.reset_at
+    );
+    // The record the board keeps names the task, and round-trips.
+    let l = Liveness::new(BOARD_TASKS, 0);
+    l.check_in(task::APP, tc_silence + 1);
+    let s = l.verdict(tc_silence + 1);
+    check!(s.is_err());
+    if let Err(s) = s {
+        let rec = reset::encode(ResetCause::Watchdog, s.message().as_bytes());
+        let d = reset::decode(&rec);
+        check!(
+            matches!(&d, Some((ResetCause::Watchdog, m)) if m.contains("task thermocouple silent")),
+            "record {d:?}"
+        );
+    }
+    // The app task stuck (its loop stops; the watchdog task still runs).
+    let r = simulate(cx, Some((task::APP, 3_000)), false);
+    check_eq!(r.stuck, Some("app"));
+    let app_silence = BOARD_TASKS[task::APP].max_silence_ms;
+    check!(
+        r.safe_at.is_some_and(|t| t <= app_silence + FEED_PERIOD_MS),
+        "safe state {:?} ms after the app task stopped",
+        r.safe_at
+    );
+    // The core hogged: nothing runs, the IWDG resets within its timeout of the last feed.
+    let r = simulate(cx, Some((task::APP, 3_000)), true);
+    check!(
+        r.reset_at
+            .is_some_and(|t| t <= FEED_PERIOD_MS + timeout + 1),
+        "reset {:?} ms after the core stopped",
+        r.reset_at
+    );
+    let w = alive.worst_look;
+    let counting = cx.counting();
+    cx.figure(
+        "failsafe.watchdog_verdict",
+        counting.then_some(w),
+        "instructions",
+        None,
+    )
+}

@@ -30,5 +30,6 @@ pub const TESTS: &[Test] = &[
     test!(failsafe::magnet_hold_limit),
     test!(failsafe::reset_record),
     test!(failsafe::safe_state_table),
+    test!(failsafe::watchdog_liveness),
     test!(failsafe::app_goes_safe),
 ];
