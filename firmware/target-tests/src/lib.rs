@@ -197,7 +197,7 @@ pub struct Figure {
 }
 
 /// Most figures kept for the closing table.
-pub const MAX_FIGURES: usize = 48;
+pub const MAX_FIGURES: usize = 64;
 
 /// What a test gets: the probe, the output, the embedded bundle, the figures table.
 pub struct Cx<'a> {
