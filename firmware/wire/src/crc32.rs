@@ -1,5 +1,10 @@
 //! CRC-32/ISO-HDLC (the Ethernet, zlib and PNG CRC): reflected polynomial 0xEDB88320, initial value and
 //! final XOR 0xFFFFFFFF. Table-driven; the table is computed at compile time.
+//!
+//! Hand-written rather than the `crc` crate because it is faster where it counts: over a full
+//! sample-block frame (671 bytes) on the M7 this slicing-by-4 takes 3 080 instructions, the crate's
+//! fastest (`Table<16>`, 16 KiB of tables) 4 280 (`cargo xtask target-test wire`, figure
+//! `wire.crc32_of_that_frame`). The crate is the referee in the tests below.
 
 const POLY: u32 = 0xEDB8_8320;
 
@@ -95,6 +100,22 @@ mod tests {
             c.update(&data[..split]);
             c.update(&data[split..]);
             assert_eq!(c.finish(), crc32(&data));
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn equals_the_crc_crate(
+            data in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..1100),
+            split in 0usize..1100,
+        ) {
+            const REFEREE: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+            proptest::prop_assert_eq!(crc32(&data), REFEREE.checksum(&data));
+            let split = split.min(data.len());
+            let mut c = Crc32::new();
+            c.update(&data[..split]);
+            c.update(&data[split..]);
+            proptest::prop_assert_eq!(c.finish(), REFEREE.checksum(&data));
         }
     }
 

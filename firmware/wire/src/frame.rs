@@ -68,6 +68,12 @@ impl std::error::Error for FrameError {}
 /// check or block-length test: on the M7 framing a sample block is mostly this loop). The output
 /// is the classic encoder's byte for byte, including the `0x01` block that follows a trailing
 /// zero or a final full block.
+///
+/// Hand-written rather than the `cobs` crate: over a full sample-block frame on the M7 this takes
+/// 4 800 instructions, `cobs::try_encode` 15 520 (`cargo xtask target-test wire`, figure
+/// `wire.cobs_of_that_frame`), and the crate leaves out the closing `0x01` block after a final full
+/// block, which would change the bytes on the wire (`tests/pinned.rs`). The crate is the referee in
+/// the tests below: it decodes what this encodes, and this decodes what it encodes.
 pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
     let mut rest = src;
     let mut out = 0usize;
@@ -376,5 +382,41 @@ mod tests {
         ) {
             same_as_reference(&data);
         }
+
+        /// Interoperability with the `cobs` crate, both ways: its decoder reads our stuffing, ours
+        /// reads its, and the two stuffings differ only by the empty block the crate leaves out
+        /// after a final full block (or an empty input).
+        #[test]
+        fn the_cobs_crate_agrees(
+            data in proptest::collection::vec(prop_oneof![Just(0u8), any::<u8>(), 1u8..], 1..1200)
+        ) {
+            let room = data.len() + data.len() / 254 + 2;
+            let (mut ours, mut theirs) = (vec![0u8; room], vec![0u8; room]);
+            let n = cobs_encode(&data, &mut ours).unwrap();
+            let m = cobs::try_encode(&data, &mut theirs).unwrap();
+            if n == m + 1 {
+                prop_assert_eq!(ours[m], 0x01);
+            } else {
+                prop_assert_eq!(n, m);
+            }
+            prop_assert_eq!(&ours[..m], &theirs[..m]);
+            let mut back = ours[..n].to_vec();
+            let k = cobs::decode_in_place(&mut back).unwrap();
+            prop_assert_eq!(&back[..k], &data[..]);
+            let mut back = theirs[..m].to_vec();
+            let k = cobs_decode_in_place(&mut back).unwrap();
+            prop_assert_eq!(&back[..k], &data[..]);
+        }
+    }
+
+    #[test]
+    fn the_cobs_crate_leaves_out_the_block_after_a_full_one() {
+        // The reason the hand-written encoder stays: 254 non-zero bytes end in a full block.
+        let data = [7u8; 254];
+        let (mut ours, mut theirs) = ([0u8; 300], [0u8; 300]);
+        let n = cobs_encode(&data, &mut ours).unwrap();
+        let m = cobs::try_encode(&data, &mut theirs).unwrap();
+        assert_eq!((n, m), (256, 255));
+        assert_eq!(ours[255], 0x01);
     }
 }
