@@ -21,13 +21,13 @@
 
 use crate::envelope::{classify_shape, mark_crandall, peaks, Shape};
 use crate::integrate::{simulate, Method};
-use crate::law::{mu_from_averaging, FrictionLaw, LuGre};
+use crate::law::{mu_from_averaging, FrictionLaw};
+pub use crate::law_spec::{LawSpec, LUGRE_FIXED};
 use crate::model::{Model, Rig};
 use crate::record::{Record, RecordErrorKind};
 use crate::uncertainty::{effective_count, hac_covariance, jacobian, noise_sigma, standard_errors};
 use serde::Serialize;
 use std::f64::consts::PI;
-use std::str::FromStr;
 
 /// Fewest half cycles (successive extrema about the rig's natural half period apart, above the
 /// noise) a record needs to be fitted: two cycles, so that the decay has a shape and two constants
@@ -44,130 +44,6 @@ pub const ADEQUATE_RATIO: f64 = 1.5;
 /// the simulation inside the fit (Dormand–Prince at rtol 1e-10, amplitudes compared in f64), so that
 /// a noiseless record is not called inadequate for the integrator's last digits.
 pub const NUMERICAL_FLOOR: f64 = 1e-6;
-
-/// Which law to fit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LawSpec {
-    /// `μ0 sgn(y')`.
-    Coulomb,
-    /// `μ1 y'`.
-    Viscous,
-    /// `μ0 sgn(y') + μ1 y'`.
-    CoulombViscous,
-    /// `(μ0 + μ2 y'²) sgn(y') + μ1 y'`.
-    Quadratic,
-    /// Pseudo-polynomial of order N (N + 1 constants μ0…μN).
-    Poly(usize),
-    /// LuGre: fitted `μ_c`, `μ_s`, `σ2`, with bristle stiffness/damping and Stribeck velocity fixed
-    /// (see [`LUGRE_FIXED`]); `mu` reports `[μ_c, σ2]` (its Coulomb–viscous equivalent).
-    LuGre,
-}
-
-/// Fixed LuGre constants used by [`LawSpec::LuGre`] fits: `(σ0, σ1, v_s, a)`, dimensionless.
-pub const LUGRE_FIXED: (f64, f64, f64, f64) = (200.0, 2.0, 1.0, 2.0);
-
-impl FromStr for LawSpec {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Ok(match s.trim().to_ascii_lowercase().as_str() {
-            "coulomb" | "constant" => LawSpec::Coulomb,
-            "viscous" => LawSpec::Viscous,
-            "coulomb-viscous" | "cv" | "linear" => LawSpec::CoulombViscous,
-            "quadratic" => LawSpec::Quadratic,
-            "lugre" => LawSpec::LuGre,
-            other => {
-                if let Some(n) = other.strip_prefix("poly:") {
-                    let n: usize = n
-                        .parse()
-                        .map_err(|_| format!("bad polynomial order in {other:?}"))?;
-                    if n > 8 {
-                        return Err(format!("polynomial order {n} too high (max 8)"));
-                    }
-                    LawSpec::Poly(n)
-                } else {
-                    return Err(format!(
-                        "unknown law {other:?}: use coulomb, viscous, coulomb-viscous, quadratic, poly:N or lugre"
-                    ));
-                }
-            }
-        })
-    }
-}
-
-impl LawSpec {
-    /// Canonical name (as accepted by `FromStr`).
-    pub fn name(&self) -> String {
-        match self {
-            LawSpec::Coulomb => "coulomb".into(),
-            LawSpec::Viscous => "viscous".into(),
-            LawSpec::CoulombViscous => "coulomb-viscous".into(),
-            LawSpec::Quadratic => "quadratic".into(),
-            LawSpec::Poly(n) => format!("poly:{n}"),
-            LawSpec::LuGre => "lugre".into(),
-        }
-    }
-
-    /// Indices `j` of the fitted `μ_j` (polynomial laws).
-    pub fn powers(&self) -> Vec<usize> {
-        match self {
-            LawSpec::Coulomb => vec![0],
-            LawSpec::Viscous => vec![1],
-            LawSpec::CoulombViscous | LawSpec::LuGre => vec![0, 1],
-            LawSpec::Quadratic => vec![0, 1, 2],
-            LawSpec::Poly(n) => (0..=*n).collect(),
-        }
-    }
-
-    /// Number of fitted parameters.
-    pub fn n_params(&self) -> usize {
-        match self {
-            LawSpec::LuGre => 3,
-            _ => self.powers().len(),
-        }
-    }
-
-    /// The law for parameter vector `p`.
-    pub fn law(&self, p: &[f64]) -> FrictionLaw {
-        match self {
-            LawSpec::LuGre => {
-                let (s0, s1, vs, a) = LUGRE_FIXED;
-                FrictionLaw::LuGre(LuGre {
-                    sigma0: s0,
-                    sigma1: s1,
-                    sigma2: p[2],
-                    mu_c: p[0].abs().max(1e-9),
-                    mu_s: p[1].abs().max(1e-9),
-                    v_s: vs,
-                    a,
-                })
-            }
-            _ => FrictionLaw::Polynomial { mu: self.mu(p) },
-        }
-    }
-
-    /// Standard errors of [`LawSpec::mu`] from those of the parameters (0 for powers not fitted).
-    pub fn mu_se(&self, se: &[f64]) -> Vec<f64> {
-        match self {
-            LawSpec::LuGre => vec![se[0], se[2]],
-            _ => self.mu(se),
-        }
-    }
-
-    /// `μ_j` in order of `j` for parameter vector `p` (zeros for powers not fitted).
-    pub fn mu(&self, p: &[f64]) -> Vec<f64> {
-        match self {
-            LawSpec::LuGre => vec![p[0], p[2]],
-            _ => {
-                let pw = self.powers();
-                let mut mu = vec![0.0; pw.last().map_or(0, |m| m + 1)];
-                for (i, &j) in pw.iter().enumerate() {
-                    mu[j] = p[i];
-                }
-                mu
-            }
-        }
-    }
-}
 
 /// Fit options.
 #[derive(Debug, Clone, PartialEq)]

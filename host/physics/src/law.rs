@@ -154,7 +154,7 @@ impl LuGre {
     /// Converts SI LuGre parameters (thesis ch. 4) into dimensionless ones for a rig.
     #[allow(clippy::too_many_arguments)]
     pub fn from_si(
-        rig: &crate::model::Rig,
+        rig: &crate::rig::Rig,
         sigma0_n_per_m: f64,
         sigma1_n_s_per_m: f64,
         sigma2_n_s_per_m: f64,

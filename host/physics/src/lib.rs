@@ -5,7 +5,9 @@
 //! `y = k x / N`, friction `f = F / N`, constants `μ_j` of seed eq. 10–13.
 //!
 //! - [`law`]: [`law::FrictionLaw`], one value per law (Coulomb … LuGre).
-//! - [`model`]: [`model::Rig`] constants and SI ↔ dimensionless conversion; [`model::Model`].
+//! - [`law_spec`]: [`LawSpec`], a law by name (parsing, display, serde), as options and files give it.
+//! - [`rig`]: [`rig::Rig`] constants and SI ↔ dimensionless conversion.
+//! - [`model`]: [`model::Model`], the oscillator (law, apparatus damping, cubic spring).
 //! - [`integrate`]: RK4 / Dormand–Prince with velocity-reversal events; [`integrate::Simulator`]
 //!   is a stepping API, [`integrate::simulate`] a batch one.
 //! - [`sensor`]: noise, 16-bit quantisation, 300 Hz force channel, lag, temperature, ECR.
@@ -17,13 +19,16 @@ pub mod envelope;
 pub mod identify;
 pub mod integrate;
 pub mod law;
+pub mod law_spec;
 pub mod model;
 pub mod record;
+pub mod rig;
 pub mod sensor;
 pub mod uncertainty;
 
-pub use identify::{FitResult, LawSpec};
+pub use identify::FitResult;
 pub use integrate::{simulate, Method, SimError, Simulator, State, Trajectory};
 pub use law::FrictionLaw;
+pub use law_spec::{LawSpec, UnknownLaw};
 pub use model::{Model, Rig};
 pub use record::Record;

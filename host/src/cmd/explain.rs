@@ -14,7 +14,7 @@ use tribo_explain::{report::write_report, Effect, ExplainOptions, Prepared};
 use tribo_physics::identify::LawSpec;
 
 fn base_law(s: &str) -> Result<LawSpec, String> {
-    match s.parse::<LawSpec>()? {
+    match s.parse::<LawSpec>().map_err(|e| e.to_string())? {
         LawSpec::LuGre => Err(
             "the base law must be polynomial: coulomb, viscous, coulomb-viscous, quadratic, poly:N"
                 .into(),

@@ -15,12 +15,6 @@ use tribo_physics::identify::{
 };
 use tribo_physics::Record;
 
-/// clap value parser of a law name (`coulomb`, `viscous`, `coulomb-viscous`, `quadratic`, `poly:N`,
-/// `lugre`): an unknown name is a usage error.
-pub fn law_spec(s: &str) -> Result<LawSpec, String> {
-    s.parse()
-}
-
 /// The long `--help` of the command.
 pub const LONG_ABOUT: &str = "Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
 
@@ -64,7 +58,7 @@ pub struct Args {
     /// The record (CSV, or a run folder).
     pub record: PathBuf,
     /// Law: coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre.
-    #[arg(long, default_value = "coulomb-viscous", value_parser = law_spec)]
+    #[arg(long, default_value = "coulomb-viscous")]
     pub law: LawSpec,
     /// Print one JSON object.
     #[arg(long)]

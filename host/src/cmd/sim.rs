@@ -22,7 +22,7 @@ use tribo_physics::{Model, Rig};
 pub struct Args {
     /// Friction law: coulomb, viscous, coulomb-viscous, quadratic, poly:N or lugre.
     #[arg(long, default_value = "coulomb-viscous")]
-    pub law: String,
+    pub law: LawSpec,
     /// Dimensionless constants μ0,μ1,… in order of j (for `viscous` give μ1 alone; for `lugre`:
     /// μ_c,μ_s,σ2 with σ0, σ1, v_s fixed as in `tribo fit`).
     #[arg(
@@ -92,16 +92,14 @@ pub struct Args {
 }
 
 /// The law of `--law` with constants `--mu`.
-pub fn law_of(name: &str, mu: &[f64]) -> Result<FrictionLaw> {
-    let spec: LawSpec = name.parse().map_err(anyhow::Error::msg)?;
+pub fn law_of(spec: LawSpec, mu: &[f64]) -> Result<FrictionLaw> {
     let need = match spec {
         LawSpec::Viscous => 1,
         s => s.n_params(),
     };
     if mu.len() != need {
         bail!(
-            "law {} needs {need} constant(s) in --mu, got {}",
-            spec.name(),
+            "law {spec} needs {need} constant(s) in --mu, got {}",
             mu.len()
         );
     }
@@ -114,7 +112,7 @@ pub fn law_of(name: &str, mu: &[f64]) -> Result<FrictionLaw> {
 /// Runs `tribo sim`.
 pub fn run(a: Args) -> Result<()> {
     let rig = Rig::new(a.mass_kg, a.stiffness, a.load_n).map_err(anyhow::Error::msg)?;
-    let law = law_of(&a.law, &a.mu)?;
+    let law = law_of(a.law, &a.mu)?;
     let model = Model::new(law)
         .with_apparatus_damping(a.apparatus_mu1)
         .with_cubic(rig.kappa_of_k3(a.k3));
