@@ -32,7 +32,7 @@
 //! use tribo_explain::{explain, ExplainOptions};
 //! let rec = tribo_physics::Record::load(std::path::Path::new("run.csv")).unwrap();
 //! let e = explain(&rec, &ExplainOptions::default()).unwrap();
-//! println!("{}", e.to_json());
+//! println!("{}", e.to_json().unwrap());
 //! ```
 
 pub mod diag;
@@ -357,8 +357,8 @@ fn pm(v: f64, se: f64) -> String {
 
 impl Explanation {
     /// One JSON object.
-    pub fn to_json(&self) -> String {
-        serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+    pub fn to_json(&self) -> Result<String, serde_json::Error> {
+        serde_json::to_string_pretty(self)
     }
 
     /// The one-sentence answer.

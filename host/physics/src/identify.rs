@@ -445,8 +445,8 @@ impl FitResult {
     }
 
     /// One JSON object with every field of [`FitResult`] (`NaN` as `null`).
-    pub fn to_json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+    pub fn to_json(&self) -> Result<String, serde_json::Error> {
+        serde_json::to_string(self)
     }
 }
 
@@ -978,8 +978,8 @@ pub struct WindowFit {
 impl WindowFit {
     /// One JSON object: `{"a_start", "a_end", "tau_start", "tau_end", "fit": {…}}` (amplitudes and
     /// times dimensionless; `fit` as [`FitResult::to_json`]).
-    pub fn to_json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+    pub fn to_json(&self) -> Result<String, serde_json::Error> {
+        serde_json::to_string(self)
     }
 }
 

@@ -215,9 +215,15 @@ fn fit_windows_on_an_si_record_reports_si_coefficients_and_json() {
             x.fit.mu
         );
         assert_eq!(x.fit.p_si, rig.p_of_mu(&x.fit.mu));
-        let j = x.to_json();
-        assert!(j.starts_with("{\"a_start\":") && j.ends_with("}}"), "{j}");
-        assert!(j.contains("\"fit\":{\"law\":\"coulomb-viscous\""), "{j}");
+        let j: serde_json::Value = serde_json::from_str(&x.to_json().unwrap()).unwrap();
+        // (serde_json reads floats back to within an ulp)
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-15 * b.abs();
+        assert!(close(j["a_start"].as_f64().unwrap(), x.a_start), "{j}");
+        assert!(close(j["a_end"].as_f64().unwrap(), x.a_end), "{j}");
+        assert_eq!(j["fit"]["law"], "coulomb-viscous", "{j}");
+        let mu: Vec<f64> = serde_json::from_value(j["fit"]["mu"].clone()).unwrap();
+        assert_eq!(mu.len(), x.fit.mu.len(), "{j}");
+        assert!(mu.iter().zip(&x.fit.mu).all(|(&a, &b)| close(a, b)), "{j}");
     }
     assert!(w[0].a_start > w[1].a_start && w[1].a_start > w[2].a_start);
     assert!(fit_windows(&rec, LawSpec::CoulombViscous, 0, &FitOptions::default()).is_err());

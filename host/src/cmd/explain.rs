@@ -5,7 +5,7 @@
 use crate::exit::Incomplete;
 use crate::load::load_analysable_for_fit;
 use crate::{out, outln};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
@@ -143,7 +143,10 @@ pub fn run(args: Args) -> Result<()> {
     bar.finish_and_clear();
     let (ex, data) = result.map_err(not_analysable)?;
     if args.json {
-        outln!("{}", ex.to_json())?;
+        outln!(
+            "{}",
+            ex.to_json().context("writing the explanation as JSON")?
+        )?;
     } else {
         out!("{}", ex.to_text())?;
     }
