@@ -218,3 +218,65 @@ fn a_record_with_a_hole_is_refused_unless_the_longest_clean_stretch_is_asked_for
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn fit_plot_draws_both_panels_with_the_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec.csv");
+    let svg = dir.path().join("fit.svg");
+    let (rec_s, svg_s) = (rec.to_str().unwrap(), svg.to_str().unwrap());
+    let out = tribo(&[
+        "sim",
+        "--law",
+        "coulomb-viscous",
+        "--mu",
+        "0.03,0.012",
+        "--duration-s",
+        "1.5",
+        "-o",
+        rec_s,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = tribo(&["fit", rec_s, "--plot", svg_s]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&svg).unwrap();
+    let doc = roxmltree::Document::parse(&text).expect("the figure is well-formed SVG");
+    let texts: Vec<&str> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("text"))
+        .filter_map(|n| n.text().map(str::trim))
+        .collect();
+    for title in [
+        "Mark & Crandall envelope",
+        "fitted law f(y') (coulomb-viscous)",
+    ] {
+        assert!(
+            texts.iter().any(|t| t.starts_with(title)),
+            "no panel titled {title:?} in {texts:?}"
+        );
+    }
+    // The curves are drawn from the data: the envelope and the law each have many points.
+    let mut lengths: Vec<usize> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("polyline"))
+        .map(|n| {
+            n.attribute("points")
+                .unwrap_or("")
+                .split_whitespace()
+                .count()
+        })
+        .collect();
+    lengths.sort_unstable_by(|a, b| b.cmp(a));
+    assert!(
+        lengths.len() >= 3 && lengths[2] >= 100,
+        "expected three data curves of 100+ points, got {lengths:?}"
+    );
+}

@@ -4,14 +4,15 @@ use crate::model::{simulate_spec, Prepared, Simulated};
 use crate::{ExplainError, Explanation};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use tribo_report::plot::{to_svg, LegendPos, Panel, Series as PlotSeries, Style};
+use tribo_report::Figure;
 
-/// An RGB colour.
-type Rgb = (u8, u8, u8);
-const BLACK: Rgb = (0, 0, 0);
-const RED: Rgb = (200, 30, 30);
-const BLUE: Rgb = (30, 70, 200);
+/// Palette indices of the report crate's (colour-blind-safe) palette.
+const MEASURED: usize = 6; // black
+const BASE: usize = 1; // vermillion
+const FINAL: usize = 0; // blue
 
-type Series<'a> = (&'a str, Rgb, Vec<(f64, f64)>);
+type Series<'a> = (&'a str, usize, Vec<(f64, f64)>);
 
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -19,117 +20,34 @@ fn esc(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
-/// Tick positions: about five "nice" values covering `[lo, hi]`.
-fn ticks(lo: f64, hi: f64) -> Vec<f64> {
-    let span = (hi - lo).max(1e-300);
-    let raw = span / 5.0;
-    let mag = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 5.0, 10.0]
-        .iter()
-        .map(|m| m * mag)
-        .find(|s| *s >= raw)
-        .unwrap_or(10.0 * mag);
-    let mut v = Vec::new();
-    let mut t = (lo / step).ceil() * step;
-    while t <= hi + 1e-9 * span && v.len() < 20 {
-        v.push(if t.abs() < 1e-12 * span { 0.0 } else { t });
-        t += step;
-    }
-    v
-}
-
-/// A line chart as a standalone SVG document (no font needed: text is left to the viewer).
+/// A line chart drawn by the report crate (plotters) and written as SVG.
 fn plot(path: &Path, title: &str, xl: &str, yl: &str, series: &[Series]) -> Result<(), String> {
-    let (w, h) = (900.0, 420.0);
-    let (ml, mr, mt, mb) = (80.0, 20.0, 36.0, 50.0);
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y) in series.iter().flat_map(|s| s.2.iter()) {
-        if x.is_finite() && y.is_finite() {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-    }
-    if x0 > x1 {
-        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
-    }
-    if x1 <= x0 {
-        x1 = x0 + 1.0;
-    }
-    let pad = ((y1 - y0) * 0.05).max(1e-12 * y1.abs().max(1.0));
-    let (y0, y1) = (y0 - pad, y1 + pad);
-    let px = |x: f64| ml + (x - x0) / (x1 - x0) * (w - ml - mr);
-    let py = |y: f64| mt + (y1 - y) / (y1 - y0) * (h - mt - mb);
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" \
-         viewBox=\"0 0 {w} {h}\" font-family=\"sans-serif\" font-size=\"12\">\n\
-         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
-         <text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"16\">{}</text>",
-        w / 2.0,
-        esc(title)
-    );
-    let _ = writeln!(
-        s,
-        "<rect x=\"{ml}\" y=\"{mt}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"black\"/>",
-        w - ml - mr,
-        h - mt - mb
-    );
-    for t in ticks(x0, x1) {
-        let x = px(t);
-        let _ = writeln!(
-            s,
-            "<line x1=\"{x:.1}\" y1=\"{mt}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#ddd\"/>\
-             <text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{t:.3}</text>",
-            h - mb,
-            h - mb + 16.0
-        );
-    }
-    for t in ticks(y0, y1) {
-        let y = py(t);
-        let _ = writeln!(
-            s,
-            "<line x1=\"{ml}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#ddd\"/>\
-             <text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{t:.3e}</text>",
-            w - mr,
-            ml - 4.0,
-            y + 4.0
-        );
-    }
-    let _ = writeln!(
-        s,
-        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>\n\
-         <text x=\"14\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 14 {:.1})\">{}</text>",
-        (ml + w - mr) / 2.0,
-        h - 10.0,
-        esc(xl),
-        (mt + h - mb) / 2.0,
-        (mt + h - mb) / 2.0,
-        esc(yl)
-    );
-    for (k, (name, (r, g, b), pts)) in series.iter().enumerate() {
-        let mut d = String::new();
-        for &(x, y) in pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite()) {
-            let _ = write!(d, "{:.2},{:.2} ", px(x), py(y));
-        }
-        let ly = mt + 14.0 + 16.0 * k as f64;
-        let _ = writeln!(
-            s,
-            "<polyline fill=\"none\" stroke=\"rgb({r},{g},{b})\" stroke-width=\"1.2\" points=\"{}\"/>\n\
-             <line x1=\"{:.1}\" y1=\"{ly:.1}\" x2=\"{:.1}\" y2=\"{ly:.1}\" stroke=\"rgb({r},{g},{b})\" stroke-width=\"2\"/>\
-             <text x=\"{:.1}\" y=\"{:.1}\">{}</text>",
-            d.trim_end(),
-            w - mr - 230.0,
-            w - mr - 205.0,
-            w - mr - 200.0,
-            ly + 4.0,
-            esc(name)
-        );
-    }
-    s.push_str("</svg>\n");
-    std::fs::write(path, s).map_err(|e| format!("{}: {e}", path.display()))
+    let mut panel = Panel::new(title, xl, yl);
+    panel.legend_pos = LegendPos::Auto;
+    panel.series = series
+        .iter()
+        .map(|(name, color, data)| {
+            let finite = data
+                .iter()
+                .copied()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect();
+            PlotSeries::line(*name, *color, finite).with_style(Style::Line(1))
+        })
+        .collect();
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let fig = Figure {
+        name: stem,
+        title: title.into(),
+        caption: String::new(),
+        panels: vec![panel],
+        size: (900, 420),
+    };
+    let svg = to_svg(&fig).map_err(|e| e.to_string())?;
+    std::fs::write(path, svg).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 /// Writes `envelope.svg`, `residual.svg`, `force.svg` (if the record has a force channel) and
@@ -173,9 +91,9 @@ pub fn write_report(
         "t (s)",
         "A = √(y² + y'²)",
         &[
-            ("measured", BLACK, meas.clone()),
-            ("base fit", RED, env(&before)),
-            (&final_name, BLUE, env(&after)),
+            ("measured", MEASURED, meas.clone()),
+            ("base fit", BASE, env(&before)),
+            (&final_name, FINAL, env(&after)),
         ],
     )
     .map_err(err)?;
@@ -192,8 +110,8 @@ pub fn write_report(
         "t (s)",
         "(simulated − measured) / A0",
         &[
-            ("base fit", RED, resid(&before)),
-            (&final_name, BLUE, resid(&after)),
+            ("base fit", BASE, resid(&before)),
+            (&final_name, FINAL, resid(&after)),
         ],
     )
     .map_err(err)?;
@@ -213,9 +131,9 @@ pub fn write_report(
             "t (s)",
             "F (N)",
             &[
-                ("measured", BLACK, series(fm)),
-                ("base fit", RED, series(&before.f_meas)),
-                (&final_name, BLUE, series(&after.f_meas)),
+                ("measured", MEASURED, series(fm)),
+                ("base fit", BASE, series(&before.f_meas)),
+                (&final_name, FINAL, series(&after.f_meas)),
             ],
         )
         .map_err(err)?;
@@ -231,9 +149,9 @@ pub fn write_report(
             "v (m/s)",
             "F (N)",
             &[
-                ("measured", BLACK, loops(fm)),
-                ("base fit", RED, loops(&before.f_meas)),
-                (&final_name, BLUE, loops(&after.f_meas)),
+                ("measured", MEASURED, loops(fm)),
+                ("base fit", BASE, loops(&before.f_meas)),
+                (&final_name, FINAL, loops(&after.f_meas)),
             ],
         )
         .map_err(err)?;

@@ -13,7 +13,8 @@
 //! - [`store::write_run_report`]`(run: &tribo_store::Run, out_dir: &Path)
 //!   -> Result<ReportFiles, ReportError>`: a stored run folder ([`store::run_inputs`] gives its
 //!   [`ReportInputs`]); [`store::write_catalog_report`]`(rows: &[CatalogRow], title, out_dir)`:
-//!   catalogued runs (a campaign).
+//!   catalogued runs (a campaign). Behind the default feature `store` (the only part that needs
+//!   the SQLite catalogue); without it the crate draws from plain data.
 //! - [`regime::classify_regime`]: lubrication regime from `log10` ECR.
 //!
 //! Figures of a run (file stems): `motion` (x and v with their Mark & Crandall envelopes),
@@ -34,6 +35,7 @@ mod html;
 pub mod plot;
 pub mod regime;
 pub mod run;
+#[cfg(feature = "store")]
 pub mod store;
 
 pub use campaign::{campaign_report, write_campaign_report, CampaignInputs, CampaignPoint};

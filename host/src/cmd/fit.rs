@@ -14,6 +14,8 @@ use tribo_physics::identify::{
     LawSpec, WindowFit, ADEQUATE_RATIO, NUMERICAL_FLOOR,
 };
 use tribo_physics::Record;
+use tribo_report::plot::{Panel, Series};
+use tribo_report::Figure;
 
 /// The long `--help` of the command.
 pub const LONG_ABOUT: &str = "Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
@@ -305,82 +307,23 @@ fn figure(rec: &Record, r: &FitResult, spec: LawSpec, opts: &FitOptions) -> Resu
             (v, law.steady_force(v))
         })
         .collect();
-    let mut s = String::from(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"1000\" height=\"420\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"1000\" height=\"420\" fill=\"white\"/>\n",
-    );
-    panel(
-        &mut s,
-        60.0,
-        "envelope A(τ): measured (black), fitted (red)",
-        "τ",
-        &[(&measured, "black"), (&fit_pts, "red")],
-    );
-    panel(
-        &mut s,
-        560.0,
-        &format!("fitted law f(y') ({}), gap {:.2e}", r.law, r.gap),
+    let mut env = Panel::new("Mark & Crandall envelope", "τ", "A = √(y² + y'²)");
+    env.series = vec![
+        Series::line("measured", 6, measured),
+        Series::line(format!("fitted {}", r.law), 1, fit_pts),
+    ];
+    let mut law_panel = Panel::new(
+        format!("fitted law f(y') ({}), gap {:.2e}", r.law, r.gap),
         "y'",
-        &[(&law_pts, "blue")],
+        "f = F / N",
     );
-    s.push_str("</svg>\n");
-    Ok(s)
-}
-
-fn panel(s: &mut String, x0: f64, title: &str, xlabel: &str, series: &[(&Vec<(f64, f64)>, &str)]) {
-    let (w, h, y0) = (400.0, 320.0, 50.0);
-    let all = series.iter().flat_map(|(p, _)| p.iter());
-    let (mut xmin, mut xmax, mut ymin, mut ymax) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for &(x, y) in all {
-        xmin = xmin.min(x);
-        xmax = xmax.max(x);
-        ymin = ymin.min(y);
-        ymax = ymax.max(y);
-    }
-    ymin = ymin.min(0.0);
-    if !xmin.is_finite() || !xmax.is_finite() {
-        (xmin, xmax) = (0.0, 1.0);
-    }
-    if !ymin.is_finite() || !ymax.is_finite() {
-        (ymin, ymax) = (0.0, 1.0);
-    }
-    if xmax <= xmin {
-        xmax = xmin + 1.0;
-    }
-    if ymax <= ymin {
-        ymax = ymin + 1.0;
-    }
-    let _ = writeln!(s, "<text x=\"{}\" y=\"30\">{}</text>", x0, title);
-    let _ = writeln!(
-        s,
-        "<rect x=\"{x0}\" y=\"{y0}\" width=\"{w}\" height=\"{h}\" fill=\"none\" stroke=\"#888\"/>"
-    );
-    let _ = writeln!(
-        s,
-        "<text x=\"{}\" y=\"{}\">{xlabel}: {xmin:.3} … {xmax:.3}</text>",
-        x0,
-        y0 + h + 20.0
-    );
-    let _ = writeln!(
-        s,
-        "<text x=\"{}\" y=\"{}\">y: {ymin:.4} … {ymax:.4}</text>",
-        x0,
-        y0 + h + 38.0
-    );
-    for (pts, color) in series {
-        let mut d = String::new();
-        for (i, &(x, y)) in pts.iter().enumerate() {
-            let px = x0 + (x - xmin) / (xmax - xmin) * w;
-            let py = y0 + h - (y - ymin) / (ymax - ymin) * h;
-            let _ = write!(d, "{}{px:.1},{py:.1} ", if i == 0 { "M" } else { "L" });
-        }
-        let _ = writeln!(
-            s,
-            "<path d=\"{d}\" fill=\"none\" stroke=\"{color}\" stroke-width=\"1\"/>"
-        );
-    }
+    law_panel.series = vec![Series::line(r.law.to_string(), 0, law_pts)];
+    let fig = Figure {
+        name: "fit".into(),
+        title: format!("tribo fit: {}", r.law),
+        caption: String::new(),
+        panels: vec![env, law_panel],
+        size: (900, 760),
+    };
+    Ok(tribo_report::plot::to_svg(&fig)?)
 }
