@@ -302,7 +302,7 @@ pub fn apply_rig_flags(
         Rig::REAL.load_n,
         "load_n",
     );
-    rec.rig = Some(Rig::new(m, k, n).map_err(anyhow::Error::msg)?);
+    rec.rig = Some(Rig::new(m, k, n)?);
     Ok(RigUsed {
         mass_kg: m,
         stiffness_n_per_m: k,

@@ -661,7 +661,7 @@ fn starts_for(
 /// Base law powers of a [`LawSpec`] (polynomial laws only).
 pub fn base_powers(base: LawSpec) -> Result<Vec<usize>, ExplainError> {
     match base {
-        LawSpec::LuGre => Err(ExplainError(
+        LawSpec::LuGre => Err(ExplainError::BaseLaw(
             "the base law must be polynomial (coulomb, viscous, coulomb-viscous, quadratic, poly:N)"
                 .into(),
         )),
@@ -744,8 +744,9 @@ pub fn explain_with_progress(
         "assumed"
     };
     let data = data;
-    let base = fit_spec(&data, &spec, &starts, opts.max_iter)
-        .ok_or_else(|| ExplainError("the base law could not be fitted to the record".into()))?;
+    let base = fit_spec(&data, &spec, &starts, opts.max_iter).ok_or_else(|| {
+        ExplainError::BaseLaw("the base law could not be fitted to the record".into())
+    })?;
     let base = with_standard_errors(&data, base);
     progress("diagnostics", 0, 1);
     let diagnostics = diag::diagnose(&data, &base, opts.base);

@@ -11,9 +11,10 @@
 use tribo_physics::integrate::{Method, SimError, Simulator};
 use tribo_physics::law::FrictionLaw;
 use tribo_physics::model::{Model, Rig};
-use tribo_physics::record::{Record, Units};
+use tribo_physics::record::{Record, RecordError, Units};
 use tribo_physics::sensor::{butterworth2, delay};
 use tribo_physics::uncertainty::noise_sigma;
+use tribo_physics::InvalidParameter;
 
 /// A physical effect the base law may be missing (names as in the JSON output).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -348,35 +349,51 @@ pub const FORCE_SETTLE_S: f64 = 0.02;
 /// is not "explained" by fitting integration error.
 pub const NUMERICAL_FLOOR: f64 = 1e-6;
 
-/// Error of the workflow.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ExplainError(pub String);
-
-/// The prefix of an [`ExplainError`] for a record that cannot be analysed (no oscillation, too few
-/// half cycles, a saturated channel, a non-finite sample).
-pub const NOT_ANALYSABLE: &str = "not analysable: ";
+/// Why the workflow stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum ExplainError {
+    /// The record cannot be analysed (no oscillation, too few half cycles, a saturated channel, a
+    /// non-finite sample): nothing to explain, and nothing wrong with the workflow.
+    #[error("not analysable: {0}")]
+    NotAnalysable(String),
+    /// The record is not usable as given (its rig constants, its columns).
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    /// The record is not uniformly sampled.
+    #[error("{0}")]
+    Sampling(String),
+    /// A model's constants are out of range.
+    #[error(transparent)]
+    Invalid(#[from] InvalidParameter),
+    /// A candidate could not be simulated.
+    #[error(transparent)]
+    Simulation(#[from] SimError),
+    /// A candidate's parameters leave their range, or need too many integration steps.
+    #[error("{0}")]
+    Candidate(String),
+    /// The base law cannot be used (not polynomial) or could not be fitted.
+    #[error("{0}")]
+    BaseLaw(String),
+    /// A figure could not be drawn.
+    #[error("figure: {0}")]
+    Figure(#[from] tribo_report::ReportError),
+    /// The report could not be written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
 
 impl ExplainError {
     /// The error for a record that cannot be analysed.
     pub fn not_analysable(why: impl std::fmt::Display) -> ExplainError {
-        ExplainError(format!("{NOT_ANALYSABLE}{why}"))
+        ExplainError::NotAnalysable(why.to_string())
     }
     /// True if the record cannot be analysed (rather than the workflow failing).
     pub fn is_not_analysable(&self) -> bool {
-        self.0.starts_with(NOT_ANALYSABLE)
-    }
-}
-
-impl std::fmt::Display for ExplainError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-impl std::error::Error for ExplainError {}
-
-impl From<SimError> for ExplainError {
-    fn from(e: SimError) -> Self {
-        ExplainError(e.0)
+        matches!(self, ExplainError::NotAnalysable(_))
     }
 }
 
@@ -400,26 +417,28 @@ impl Prepared {
         force_cutoff_hz: Option<f64>,
     ) -> Result<Prepared, ExplainError> {
         rec.validate().map_err(|e| match e.kind() {
-            tribo_physics::record::RecordErrorKind::NonFinite => ExplainError::not_analysable(e.0),
-            _ => ExplainError(e.0),
+            tribo_physics::record::RecordErrorKind::NonFinite => ExplainError::not_analysable(e),
+            _ => ExplainError::Record(e),
         })?;
-        let rig = rec.rig().map_err(|e| ExplainError(e.0))?;
+        let rig = rec.rig()?;
         let dt = rec.dt();
         if !(dt.is_finite() && dt > 0.0) {
-            return Err(ExplainError("cannot tell the sampling interval".into()));
+            return Err(ExplainError::Sampling(
+                "cannot tell the sampling interval".into(),
+            ));
         }
         if let Some(w) = rec
             .t
             .windows(2)
             .find(|w| ((w[1] - w[0]) / dt - 1.0).abs() > 0.01)
         {
-            return Err(ExplainError(format!(
+            return Err(ExplainError::Sampling(format!(
                 "the record is not uniformly sampled (interval {} at t = {}, mean {dt})",
                 w[1] - w[0],
                 w[0]
             )));
         }
-        let (tau, mut y, mut ydot) = rec.dimensionless().map_err(|e| ExplainError(e.0))?;
+        let (tau, mut y, mut ydot) = rec.dimensionless()?;
         let t0 = tau[0];
         let mut tau: Vec<f64> = tau.iter().map(|t| t - t0).collect();
         let mut a_all = tribo_physics::envelope::mark_crandall(&y, &ydot);
@@ -587,7 +606,7 @@ const STEPS_PER_RAD: f64 = 60.0;
 
 fn steps_used_check(_sim: &Simulator, used: usize, budget: usize) -> Result<(), ExplainError> {
     if used > budget {
-        Err(ExplainError(format!(
+        Err(ExplainError::Candidate(format!(
             "simulation needs more than {budget} steps (stiff parameters)"
         )))
     } else {
@@ -598,7 +617,7 @@ fn steps_used_check(_sim: &Simulator, used: usize, budget: usize) -> Result<(), 
 /// Simulates the model `spec`/`p` on the prepared record's grid.
 pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulated, ExplainError> {
     if !spec.in_range(p) {
-        return Err(ExplainError("parameters out of range".into()));
+        return Err(ExplainError::Candidate("parameters out of range".into()));
     }
     let span = data.tau.last().copied().unwrap_or(0.0);
     // Stiffness of memory laws grows with the velocity scale, i.e. with the amplitude.
@@ -626,7 +645,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
             let t0 = tseg[0];
             let dmu = |k: usize| gamma * (tseg[k.min(tseg.len() - 1)] - t0);
             let model = model_at(dmu(0));
-            model.validate().map_err(ExplainError)?;
+            model.validate()?;
             let mut sim = Simulator::new(model, y0, v0, data.method);
             let mut seg = 0usize;
             let mut seg_end = THERMAL_SEGMENT;
@@ -643,7 +662,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                     prior += sim.steps();
                     seg += 1;
                     let m = model_at(dmu(seg));
-                    m.validate().map_err(ExplainError)?;
+                    m.validate()?;
                     sim = Simulator::with_state(m, seg_end, [s.y, s.ydot, s.z], data.method);
                     seg_end += THERMAL_SEGMENT;
                 }
@@ -657,7 +676,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
         }
         _ => {
             let model = model_at(0.0);
-            model.validate().map_err(ExplainError)?;
+            model.validate()?;
             let mut sim = Simulator::new(model, y0, v0, data.method);
             let n = data.tau.len();
             let (mut y, mut yd, mut f) = (
@@ -821,18 +840,29 @@ mod tests {
         let mut rec = spec_rec(&m, 0.2);
         rec.t[100] += 0.5 * rec.dt();
         let e = Prepared::new(&rec, 400, 3000, None).unwrap_err();
-        assert!(e.0.contains("uniformly"), "{e}");
+        assert!(
+            matches!(&e, ExplainError::Sampling(m) if m.contains("uniformly")),
+            "{e:?}"
+        );
         let mut rec = spec_rec(&m, 0.2);
         rec.x[3] = f64::NAN;
-        assert!(Prepared::new(&rec, 400, 3000, None).is_err());
+        let e = Prepared::new(&rec, 400, 3000, None).unwrap_err();
+        assert!(e.is_not_analysable(), "a NaN sample: {e:?}");
         let mut rec = spec_rec(&m, 0.2);
         rec.x.iter_mut().for_each(|x| *x = 0.0);
         rec.v.iter_mut().for_each(|v| *v = 0.0);
         let e = Prepared::new(&rec, 400, 3000, None).unwrap_err();
-        assert!(e.0.contains("rest"), "{e}");
+        assert!(
+            matches!(&e, ExplainError::NotAnalysable(m) if m.contains("rest")),
+            "{e:?}"
+        );
         let mut rec = spec_rec(&m, 0.2);
         rec.rig = None;
-        assert!(Prepared::new(&rec, 400, 3000, None).is_err());
+        let e = Prepared::new(&rec, 400, 3000, None).unwrap_err();
+        assert!(
+            matches!(e, ExplainError::Record(_)),
+            "no rig constants: {e:?}"
+        );
     }
 
     #[test]

@@ -21,7 +21,13 @@ fn esc(s: &str) -> String {
 }
 
 /// A line chart drawn by the report crate (plotters) and written as SVG.
-fn plot(path: &Path, title: &str, xl: &str, yl: &str, series: &[Series]) -> Result<(), String> {
+fn plot(
+    path: &Path,
+    title: &str,
+    xl: &str,
+    yl: &str,
+    series: &[Series],
+) -> Result<(), ExplainError> {
     let mut panel = Panel::new(title, xl, yl);
     panel.legend_pos = LegendPos::Auto;
     panel.series = series
@@ -46,8 +52,11 @@ fn plot(path: &Path, title: &str, xl: &str, yl: &str, series: &[Series]) -> Resu
         panels: vec![panel],
         size: (900, 420),
     };
-    let svg = to_svg(&fig).map_err(|e| e.to_string())?;
-    std::fs::write(path, svg).map_err(|e| format!("{}: {e}", path.display()))
+    let svg = to_svg(&fig)?;
+    std::fs::write(path, svg).map_err(|source| ExplainError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Writes `envelope.svg`, `residual.svg`, `force.svg` (if the record has a force channel) and
@@ -57,7 +66,10 @@ pub fn write_report(
     ex: &Explanation,
     dir: &Path,
 ) -> Result<PathBuf, ExplainError> {
-    let io = |e: std::io::Error| ExplainError(format!("{}: {e}", dir.display()));
+    let io = |source: std::io::Error| ExplainError::Io {
+        path: dir.to_path_buf(),
+        source,
+    };
     std::fs::create_dir_all(dir).map_err(io)?;
     let sim = |m: &crate::FittedModel| -> Result<Simulated, ExplainError> {
         simulate_spec(data, &m.spec, &m.p)
@@ -79,7 +91,6 @@ pub fn write_report(
         .map(|(&i, &a)| (t(i), a))
         .collect();
     let fig = |name: &str| dir.join(name);
-    let err = |e: String| ExplainError(format!("figure: {e}"));
     let final_name = if ex.missing_effects.is_empty() {
         "final (= base)".to_string()
     } else {
@@ -95,8 +106,7 @@ pub fn write_report(
             ("base fit", BASE, env(&before)),
             (&final_name, FINAL, env(&after)),
         ],
-    )
-    .map_err(err)?;
+    )?;
     let resid = |s: &Simulated| -> Vec<(f64, f64)> {
         env(s)
             .iter()
@@ -113,8 +123,7 @@ pub fn write_report(
             ("base fit", BASE, resid(&before)),
             (&final_name, FINAL, resid(&after)),
         ],
-    )
-    .map_err(err)?;
+    )?;
     let mut figs = vec!["envelope.svg", "residual.svg"];
     if let Some(fm) = &data.f_meas {
         // Three cycles from the middle of the motion.
@@ -135,8 +144,7 @@ pub fn write_report(
                 ("base fit", BASE, series(&before.f_meas)),
                 (&final_name, FINAL, series(&after.f_meas)),
             ],
-        )
-        .map_err(err)?;
+        )?;
         let loops = |f: &[f64]| -> Vec<(f64, f64)> {
             range
                 .clone()
@@ -153,8 +161,7 @@ pub fn write_report(
                 ("base fit", BASE, loops(&before.f_meas)),
                 (&final_name, FINAL, loops(&after.f_meas)),
             ],
-        )
-        .map_err(err)?;
+        )?;
         figs.push("force.svg");
         figs.push("force_velocity.svg");
     }

@@ -10,6 +10,7 @@
 //! interpolated state there, so a real-time virtual rig can pull samples one by one. The batch
 //! helper [`simulate`] samples a whole grid.
 
+use crate::invalid::InvalidParameter;
 use crate::model::Model;
 
 /// Integration method.
@@ -53,16 +54,15 @@ impl Method {
     }
 }
 
-/// Simulation failure (non-finite state, step size underflow, bad parameters).
-#[derive(Debug, Clone, PartialEq)]
-pub struct SimError(pub String);
-
-impl std::fmt::Display for SimError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "simulation failed: {}", self.0)
-    }
+/// Simulation failure: bad parameters, or the integration itself (non-finite state, step size
+/// underflow, a request it cannot meet).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    #[error("simulation refused: {0}")]
+    Invalid(#[from] InvalidParameter),
+    #[error("simulation failed: {0}")]
+    Run(String),
 }
-impl std::error::Error for SimError {}
 
 /// Dimensionless state at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -308,7 +308,7 @@ impl Simulator {
     /// start of the last internal step (sampling an increasing grid is always fine).
     pub fn step_to(&mut self, tau: f64) -> Result<State, SimError> {
         if !tau.is_finite() {
-            return Err(SimError(format!("requested time {tau} is not finite")));
+            return Err(SimError::Run(format!("requested time {tau} is not finite")));
         }
         loop {
             if let Some(seg) = &self.seg {
@@ -316,7 +316,7 @@ impl Simulator {
                     Segment::Dense { t0, t1, .. } | Segment::Hermite { t0, t1, .. } => (*t0, *t1),
                 };
                 if tau < t0 - 1e-12 * t0.abs().max(1.0) {
-                    return Err(SimError(format!(
+                    return Err(SimError::Run(format!(
                         "cannot step back to τ = {tau} (last step starts at {t0})"
                     )));
                 }
@@ -394,7 +394,7 @@ impl Simulator {
 
     fn advance_rk4(&mut self, h: f64) -> Result<(), SimError> {
         if !(h > 0.0 && h.is_finite()) {
-            return Err(SimError(format!("RK4 step must be > 0, got {h}")));
+            return Err(SimError::Run(format!("RK4 step must be > 0, got {h}")));
         }
         let s0 = self.s;
         let f0 = self.model.rhs(&s0, self.dir);
@@ -469,7 +469,7 @@ impl Simulator {
 
     fn advance_dopri(&mut self, rtol: f64, atol: f64, h_max: f64) -> Result<(), SimError> {
         if !(rtol > 0.0 && atol > 0.0 && h_max > 0.0) {
-            return Err(SimError(
+            return Err(SimError::Run(
                 "Dormand–Prince tolerances and h_max must be > 0".into(),
             ));
         }
@@ -484,7 +484,7 @@ impl Simulator {
         let mut rejects = 0;
         loop {
             if h < 1e-13 * (1.0 + self.t.abs()) {
-                return Err(SimError(format!(
+                return Err(SimError::Run(format!(
                     "step size underflow at τ = {} (stiff or singular)",
                     self.t
                 )));
@@ -524,7 +524,7 @@ impl Simulator {
                 h *= 0.25;
                 rejects += 1;
                 if rejects > 60 {
-                    return Err(SimError(format!("non-finite state at τ = {}", self.t)));
+                    return Err(SimError::Run(format!("non-finite state at τ = {}", self.t)));
                 }
                 continue;
             }
@@ -617,7 +617,7 @@ fn check_finite(s: &[f64; 3], t: f64) -> Result<(), SimError> {
     if s.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
-        Err(SimError(format!("non-finite state at τ = {t}")))
+        Err(SimError::Run(format!("non-finite state at τ = {t}")))
     }
 }
 
@@ -648,9 +648,9 @@ pub fn simulate(
     taus: &[f64],
     method: Method,
 ) -> Result<Trajectory, SimError> {
-    model.validate().map_err(SimError)?;
+    model.validate()?;
     if !(y0.is_finite() && ydot0.is_finite()) {
-        return Err(SimError("initial state must be finite".into()));
+        return Err(SimError::Run("initial state must be finite".into()));
     }
     let mut sim = Simulator::new(model.clone(), y0, ydot0, method);
     let mut tr = Trajectory {

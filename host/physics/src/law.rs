@@ -9,6 +9,8 @@
 //! *branch* (`dir = ±1`, the sign of the current sliding direction) and locate velocity zero
 //! crossings as events, so the discontinuity is never integrated across.
 
+use crate::invalid::InvalidParameter;
+
 /// A friction law (dimensionless). Construct with the helpers ([`FrictionLaw::coulomb`], …) or the
 /// variants directly.
 #[derive(Debug, Clone, PartialEq)]
@@ -407,8 +409,13 @@ impl FrictionLaw {
     }
 
     /// Checks the parameters are finite and in range; a clear message otherwise.
-    pub fn validate(&self) -> Result<(), String> {
-        let bad = |what: &str| Err(format!("{}: {what}", self.name()));
+    pub fn validate(&self) -> Result<(), InvalidParameter> {
+        let bad = |rule: &'static str| {
+            Err(InvalidParameter::Law {
+                law: self.name(),
+                rule,
+            })
+        };
         let fin = |xs: &[f64]| xs.iter().all(|x| x.is_finite());
         match self {
             FrictionLaw::Polynomial { mu } => {

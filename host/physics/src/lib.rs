@@ -18,6 +18,7 @@
 pub mod envelope;
 pub mod identify;
 pub mod integrate;
+pub mod invalid;
 pub mod law;
 pub mod law_spec;
 pub mod model;
@@ -28,6 +29,7 @@ pub mod uncertainty;
 
 pub use identify::FitResult;
 pub use integrate::{simulate, Method, SimError, Simulator, State, Trajectory};
+pub use invalid::InvalidParameter;
 pub use law::FrictionLaw;
 pub use law_spec::{LawSpec, UnknownLaw};
 pub use model::{Model, Rig};

@@ -5,6 +5,7 @@
 //! `y'' + μ_a y' + y + κ y³ = −f(y', z)` with `μ_a = c / (m Ω)` the apparatus damping and
 //! `κ = k3 N² / k³` the cubic-spring term.
 
+use crate::invalid::InvalidParameter;
 use crate::law::FrictionLaw;
 // The rig constants live in their own module (the law converts SI parameters with them); they
 // stay reachable here, where they always were.
@@ -53,16 +54,14 @@ impl Model {
     }
 
     /// Validates the law and constants.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidParameter> {
         self.law.validate()?;
         if !self.apparatus_mu1.is_finite() || !self.cubic.is_finite() {
-            return Err("apparatus damping and cubic term must be finite".into());
+            return Err(InvalidParameter::ModelTerms);
         }
         if let Some(s) = self.static_mu {
             if !s.is_finite() || s < 0.0 {
-                return Err(format!(
-                    "static friction level must be finite and >= 0, got {s}"
-                ));
+                return Err(InvalidParameter::StaticLevel(s));
             }
         }
         Ok(())

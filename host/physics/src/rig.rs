@@ -4,6 +4,8 @@
 //! A module of its own so that both the friction laws (SI → dimensionless parameters) and the
 //! oscillator model use it without importing each other.
 
+use crate::invalid::InvalidParameter;
+
 /// Physical constants of the rig. `Rig::UNIT` (all ones) makes SI and dimensionless coincide.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Rig {
@@ -37,7 +39,7 @@ impl Rig {
     };
 
     /// Builds a rig, rejecting non-finite or non-positive constants.
-    pub fn new(mass_kg: f64, stiffness_n_per_m: f64, load_n: f64) -> Result<Rig, String> {
+    pub fn new(mass_kg: f64, stiffness_n_per_m: f64, load_n: f64) -> Result<Rig, InvalidParameter> {
         let r = Rig {
             mass_kg,
             stiffness_n_per_m,
@@ -48,16 +50,14 @@ impl Rig {
     }
 
     /// Checks every constant is finite and > 0.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidParameter> {
         for (name, v) in [
             ("mass_kg", self.mass_kg),
             ("stiffness_n_per_m", self.stiffness_n_per_m),
             ("load_n", self.load_n),
         ] {
             if !v.is_finite() || v <= 0.0 {
-                return Err(format!(
-                    "rig constant {name} must be finite and > 0, got {v}"
-                ));
+                return Err(InvalidParameter::RigConstant { name, value: v });
             }
         }
         Ok(())

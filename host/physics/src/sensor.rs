@@ -7,6 +7,7 @@
 //! fluctuating by `fluctuation_decades` otherwise).
 
 use crate::integrate::{simulate, Method, SimError};
+use crate::invalid::InvalidParameter;
 use crate::model::{Model, Rig};
 use crate::record::{Record, Units};
 
@@ -136,7 +137,7 @@ impl SensorModel {
     }
 
     /// Checks ranges and finiteness.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidParameter> {
         let vals = [
             self.disp_noise_m,
             self.vel_noise_m_s,
@@ -147,19 +148,19 @@ impl SensorModel {
             self.force_lag_s,
         ];
         if vals.iter().any(|v| !v.is_finite() || *v < 0.0) {
-            return Err("sensor noises, ranges and lag must be finite and >= 0".into());
+            return Err(InvalidParameter::SensorLevels);
         }
         if let Some(b) = self.bits {
             if !(2..=32).contains(&b) {
-                return Err(format!("ADC bits must be 2..=32, got {b}"));
+                return Err(InvalidParameter::AdcBits(b));
             }
             if self.disp_range_m <= 0.0 || self.vel_range_m_s <= 0.0 || self.force_range_n <= 0.0 {
-                return Err("quantisation needs full-scale ranges > 0".into());
+                return Err(InvalidParameter::FullScale);
             }
         }
         if let Some(fc) = self.force_cutoff_hz {
             if !(fc.is_finite() && fc > 0.0) {
-                return Err(format!("force cut-off must be > 0 Hz, got {fc}"));
+                return Err(InvalidParameter::ForceCutoff(fc));
             }
         }
         Ok(())
@@ -288,19 +289,19 @@ pub fn generate(
     method: Method,
     sensor: Option<&SensorModel>,
 ) -> Result<Record, SimError> {
-    spec.rig.validate().map_err(SimError)?;
+    spec.rig.validate()?;
     if !(spec.duration_s > 0.0 && spec.rate_hz > 0.0 && spec.duration_s.is_finite()) {
-        return Err(SimError("duration and rate must be > 0".into()));
+        return Err(SimError::Run("duration and rate must be > 0".into()));
     }
     if !(spec.x0_m.is_finite() && spec.v0_m_s.is_finite()) {
-        return Err(SimError("initial state must be finite".into()));
+        return Err(SimError::Run("initial state must be finite".into()));
     }
     let n = (spec.duration_s * spec.rate_hz).round() as usize + 1;
     if n > 50_000_000 {
-        return Err(SimError(format!("{n} samples is too many")));
+        return Err(SimError::Run(format!("{n} samples is too many")));
     }
     if let Some(s) = sensor {
-        s.validate().map_err(SimError)?;
+        s.validate()?;
     }
     let rig = spec.rig;
     let dt = 1.0 / spec.rate_hz;

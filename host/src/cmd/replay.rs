@@ -203,8 +203,7 @@ pub fn envelope_vs_simulation(
     let (tau, y, yd) = rec.dimensionless()?;
     let model = Model::new(FrictionLaw::coulomb_viscous(mu0, mu1));
     let taus: Vec<f64> = tau.iter().map(|t| t - tau[0]).collect();
-    let sim = simulate(&model, y[0], yd[0], &taus, FitOptions::default().method)
-        .map_err(|e| anyhow::anyhow!("simulation failed: {}", e.0))?;
+    let sim = simulate(&model, y[0], yd[0], &taus, FitOptions::default().method)?;
     let a_rec = mark_crandall(&y, &yd);
     let a_sim = mark_crandall(&sim.y, &sim.ydot);
     let per_cycle = (2.0 * std::f64::consts::PI / (taus[1] - taus[0]).max(1e-12))

@@ -111,12 +111,12 @@ pub fn law_of(spec: LawSpec, mu: &[f64]) -> Result<FrictionLaw> {
 
 /// Runs `tribo sim`.
 pub fn run(a: Args) -> Result<()> {
-    let rig = Rig::new(a.mass_kg, a.stiffness, a.load_n).map_err(anyhow::Error::msg)?;
+    let rig = Rig::new(a.mass_kg, a.stiffness, a.load_n)?;
     let law = law_of(a.law, &a.mu)?;
     let model = Model::new(law)
         .with_apparatus_damping(a.apparatus_mu1)
         .with_cubic(rig.kappa_of_k3(a.k3));
-    model.validate().map_err(anyhow::Error::msg)?;
+    model.validate()?;
     let spec = RecordSpec {
         rig,
         x0_m: a.x0_m,
