@@ -15,6 +15,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tribo::link::Link;
+use tribo_physics::stats::Rng;
 use tribo_rig::{serve, ServeOptions, VirtualRig};
 use tribo_wire::frame::decode_one;
 use tribo_wire::{DeviceMsg, HostMsg, RigState};
@@ -73,18 +74,6 @@ impl LineStats {
     }
 }
 
-/// xorshift64*: a reproducible stream of numbers.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-}
-
 enum Fate {
     Pass,
     Drop,
@@ -107,7 +96,7 @@ impl Shared {
         if !self.live.load(Ordering::Relaxed) {
             return Fate::Pass;
         }
-        let r = self.rng.lock().unwrap().next() % 100_000;
+        let r = self.rng.lock().unwrap().next_u64() % 100_000;
         let f = &self.faults;
         if r < f.drop_per_100k as u64 {
             Fate::Drop
@@ -124,8 +113,8 @@ impl Shared {
             return;
         }
         let mut rng = self.rng.lock().unwrap();
-        let at = (rng.next() % (frame.len() as u64 - 1)) as usize;
-        let mut x = (rng.next() % 255 + 1) as u8;
+        let at = (rng.next_u64() % (frame.len() as u64 - 1)) as usize;
+        let mut x = (rng.next_u64() % 255 + 1) as u8;
         if frame[at] ^ x == 0 {
             x ^= 0x80;
         }
@@ -309,7 +298,7 @@ impl Bench {
             .unwrap();
         let stats = Arc::new(LineStats::default());
         let shared = Arc::new(Shared {
-            rng: Mutex::new(Rng(faults.seed.max(1))),
+            rng: Mutex::new(Rng::new(faults.seed)),
             live: AtomicBool::new(faults.spare_host_frames == 0),
             dropped_once: Mutex::new(vec![false; faults.drop_once.len()]),
             faults,

@@ -566,23 +566,8 @@ impl Prepared {
     }
 }
 
-/// Ordinary least-squares line: `(slope, intercept)`.
-pub fn linreg(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
-    let n = x.len().min(y.len());
-    if n < 2 {
-        return None;
-    }
-    let (x, y) = (&x[..n], &y[..n]);
-    let mx = x.iter().sum::<f64>() / n as f64;
-    let my = y.iter().sum::<f64>() / n as f64;
-    let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
-    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
-    if sxx.is_nan() || sxx <= 0.0 {
-        return None;
-    }
-    let s = sxy / sxx;
-    Some((s, my - s * mx)).filter(|(a, b)| a.is_finite() && b.is_finite())
-}
+/// Ordinary least-squares line (defined in the physics crate).
+pub use tribo_physics::stats::linreg;
 
 /// Simulated channels of a model on the record's grid.
 #[derive(Debug, Clone)]

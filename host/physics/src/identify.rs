@@ -25,6 +25,7 @@ use crate::law::{mu_from_averaging, FrictionLaw};
 pub use crate::law_spec::{LawSpec, LUGRE_FIXED};
 use crate::model::{Model, Rig};
 use crate::record::{Record, RecordErrorKind};
+use crate::stats::linreg;
 use crate::uncertainty::{effective_count, hac_covariance, jacobian, noise_sigma, standard_errors};
 use serde::Serialize;
 use std::f64::consts::PI;
@@ -705,19 +706,6 @@ pub fn decrement_from_peaks(x: &[f64]) -> Option<(f64, f64)> {
     let l = -d.ln() / std::f64::consts::PI;
     let zeta = l / (1.0 + l * l).sqrt();
     Some((mu0, 2.0 * zeta))
-}
-
-fn linreg(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
-    let n = x.len() as f64;
-    let mx = x.iter().sum::<f64>() / n;
-    let my = y.iter().sum::<f64>() / n;
-    let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
-    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
-    if sxx <= 0.0 {
-        return None;
-    }
-    let s = sxy / sxx;
-    Some((s, my - s * mx))
 }
 
 /// Averaging-law regression: `dA/dτ` (from successive half-cycle peaks) regressed on `A^j`,

@@ -11,6 +11,7 @@
 //! - [`integrate`]: RK4 / Dormand–Prince with velocity-reversal events; [`integrate::Simulator`]
 //!   is a stepping API, [`integrate::simulate`] a batch one.
 //! - [`sensor`]: noise, 16-bit quantisation, 300 Hz force channel, lag, temperature, ECR.
+//! - [`stats`]: least-squares line, mean ± sd, the seeded random generator (defined once).
 //! - [`record`]: [`record::Record`] and its CSV formats.
 //! - [`envelope`]: Mark & Crandall, Hilbert, averaging envelopes, closed forms, shape.
 //! - [`identify`]: Levenberg–Marquardt fits, fast estimators, windowed fits.
@@ -25,6 +26,7 @@ pub mod model;
 pub mod record;
 pub mod rig;
 pub mod sensor;
+pub mod stats;
 pub mod uncertainty;
 
 pub use identify::FitResult;

@@ -11,46 +11,8 @@ use crate::invalid::InvalidParameter;
 use crate::model::{Model, Rig};
 use crate::record::{Record, Units};
 
-/// Small deterministic PRNG (SplitMix64) with Gaussian draws (Box–Muller).
-#[derive(Debug, Clone)]
-pub struct Rng {
-    state: u64,
-    spare: Option<f64>,
-}
-
-impl Rng {
-    /// Seeded generator.
-    pub fn new(seed: u64) -> Rng {
-        Rng {
-            state: seed ^ 0x9E37_79B9_7F4A_7C15,
-            spare: None,
-        }
-    }
-    /// Next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-    /// Standard normal.
-    pub fn normal(&mut self) -> f64 {
-        if let Some(s) = self.spare.take() {
-            return s;
-        }
-        let u1 = self.uniform().max(1e-300);
-        let u2 = self.uniform();
-        let r = (-2.0 * u1.ln()).sqrt();
-        let (s, c) = (2.0 * std::f64::consts::PI * u2).sin_cos();
-        self.spare = Some(r * s);
-        r * c
-    }
-}
+// The generator lives with the other shared maths; it stays reachable here, where it always was.
+pub use crate::stats::Rng;
 
 /// Thermocouple channel: `T(t) = start_c + drift_c_per_s · t + noise`.
 #[derive(Debug, Clone, Copy, PartialEq)]

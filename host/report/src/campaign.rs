@@ -6,6 +6,7 @@ use crate::plot::{Figure, LegendPos, Panel, Series, Style};
 use crate::{write_report, Report, ReportError, ReportFiles};
 use std::collections::BTreeMap;
 use std::path::Path;
+use tribo_physics::stats::mean_sd;
 
 /// One run of a campaign (e.g. a row of the store's catalog).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -88,18 +89,6 @@ impl Clusters {
     fn mean(&self, i: usize) -> f64 {
         self.spans[i].2
     }
-}
-
-/// Mean and sample standard deviation (0 for a single value).
-fn mean_sd(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let sd = if v.len() > 1 {
-        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-    } else {
-        0.0
-    };
-    (m, sd)
 }
 
 /// The runs of one group by x cluster: `(x values, values)`.
