@@ -14,10 +14,12 @@
 
 pub mod devices;
 pub mod hold;
+pub mod plan;
 #[cfg(unix)]
 pub mod pty;
 pub mod serial;
 pub mod session;
+mod stream;
 pub mod transport;
 
 pub use transport::Address;
