@@ -7,9 +7,10 @@
 //!   byte stream each opens; [`serial`]: opening a serial port the way a rig needs;
 //!   [`devices`]: finding attached rigs.
 //! * [`session`]: a whole run (configure, heat, arm, release, stream, resume with `Pull`) and
-//!   `pull` of a run already taken.
+//!   `pull` of a run already taken; [`plan`]: what a run asks of the rig; `stream`: a run's frames
+//!   filed into the store, and pulls of what is missing.
 //! * [`pty`] (Unix): the virtual rig behind a pseudo-terminal.
-//! * [`meaning`]: what the rig's codes mean, in words (errors, faults, reset causes).
+//! * `meaning`: what the rig's codes mean, in words (errors, faults, reset causes).
 //! * [`hold`]: while a session holds the rig, a heartbeat renews its lease, and every exit the host
 //!   controls sends `Safe`.
 
