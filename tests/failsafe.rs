@@ -1,4 +1,4 @@
-//! The fault-injection table of the fail-safe rig (issue 12): one row per fault, each row a test on
+//! The fault-injection table of the fail-safe rig: one row per fault, each row a test on
 //! the simulated rig (the firmware's application with the board's watchdog, panic and HardFault
 //! handling emulated around it, `tribo_rig::VirtualRig`).
 //!

@@ -1,4 +1,4 @@
-//! The fault-injection matrix of issue 14: every row damages a run somewhere between the rig and
+//! The fault-injection matrix of whole runs: every row damages a run somewhere between the rig and
 //! the disk, then asserts that the stored run is bit-identical to the run the rig produced (its own
 //! copy, pulled over a clean line: the same frames, byte for byte, each logged once), or, where
 //! the rig itself no longer holds part of it, that the stored run says exactly what is missing and

@@ -7,14 +7,14 @@
 
 pub use tribo_wire as wire;
 
-// On-board analysis (issue 4): counts → SI → peaks and envelope → two friction fits → result.
+// On-board analysis: counts → SI → peaks and envelope → two friction fits → result.
 pub mod analysis;
 pub mod calib;
 pub mod envelope;
 pub mod fit;
 pub mod peaks;
 
-// The application (issue 5): hardware traits, the rig's concerns, the state machine.
+// The application: hardware traits, the rig's concerns, the state machine.
 pub mod acquisition;
 pub mod app;
 pub mod ecr;
@@ -23,7 +23,7 @@ pub mod heater;
 pub mod release;
 pub mod runstore;
 
-// The fail-safe rig (issue 12): thermocouple trust, host lease, the safe state as data, the
+// The fail-safe rig: thermocouple trust, host lease, the safe state as data, the
 // watchdog's liveness bookkeeping, the reset record.
 pub mod lease;
 pub mod reset;

@@ -3,6 +3,7 @@
 //! The CLI (`src/main.rs`) is thin: each subcommand parses its arguments and calls one function of
 //! this library, found in the module of the same name under [`cmd`].
 
+pub mod archive;
 pub mod cmd;
 pub mod exit;
 pub mod link;

@@ -1,4 +1,4 @@
-//! The host-process rows of the fail-safe table (issue 12): `tribo` as its own process against a
+//! The host-process rows of the fail-safe table: `tribo` as its own process against a
 //! virtual rig that is a process of its own (`tribo rig --virtual`), so the rig outlives the host.
 //! What the rig did is read from its console (standard output: commands, faults, with device time).
 //!

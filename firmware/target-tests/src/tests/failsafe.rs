@@ -1,4 +1,4 @@
-//! The fail-safe logic of issue 12 on the M7: the thermocouple converter's words, the heater's
+//! The fail-safe logic on the M7: the thermocouple converter's words, the heater's
 //! interlocks (bad reads in a row, heating watch, runaway, over-temperature), the magnet's hold
 //! limit and cool-down, the reset record, the safe-state table, and the application going safe by
 //! itself (host lease, thermocouple faults) within its poll budget with the right `Fault` frame.

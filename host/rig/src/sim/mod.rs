@@ -32,6 +32,8 @@ use tribo_firmware::wire::{ChannelCal, Configure, CHANNELS};
 use tribo_physics::sensor::Rng;
 use tribo_physics::{FrictionLaw, Method, Model, Rig, Simulator};
 
+mod hal;
+
 /// 2nd-order Butterworth low-pass (bilinear transform), streaming.
 #[derive(Debug, Clone)]
 struct Biquad {
@@ -515,149 +517,6 @@ impl SimHardware {
         let r = 10f64.powf(self.log10_ecr());
         let gain = GAIN_V_PER_A[(self.ecr_range.min(RANGES - 1)) as usize] as f64;
         (self.ecr_source_v / r * gain).clamp(0.0, FULL_SCALE_V as f64)
-    }
-}
-
-impl Magnet for SimHardware {
-    fn magnet_drive(&mut self, drive: MagnetDrive) {
-        if self.outputs_locked {
-            return;
-        }
-        let was_holding = matches!(self.magnet, MagnetDrive::Hold { .. });
-        match drive {
-            MagnetDrive::Hold { duty } if duty > 0.2 => {
-                // The magnet pulls the head back to x0 and holds it there.
-                self.pin = Pin::Held;
-                self.last = (self.cfg.x0_m, 0.0, 0.0, true);
-                self.remanent_since_us = None;
-            }
-            MagnetDrive::Hold { .. } => {}
-            MagnetDrive::Reverse { .. } => {
-                self.remanent_since_us = None;
-                if was_holding || matches!(self.pin, Pin::Held) {
-                    self.free_pin(self.now_us);
-                }
-            }
-            MagnetDrive::Off => {
-                if was_holding {
-                    self.remanent_since_us = Some(self.now_us);
-                }
-            }
-        }
-        self.magnet = drive;
-    }
-}
-
-impl Thermocouple for SimHardware {
-    fn read_thermocouple(&mut self) -> Option<ConverterRead> {
-        if let Some(msg) = self.panic_next.take() {
-            // A panic inside a task, injected: the virtual rig's "panic handler" catches it.
-            panic!("{msg}");
-        }
-        self.tc_regs.map(|regs| ConverterRead {
-            regs,
-            age_us: self.now_us.saturating_sub(self.tc_read_us),
-        })
-    }
-}
-
-impl HeaterOutput for SimHardware {
-    fn set_heater_duty(&mut self, duty: f32) {
-        if self.outputs_locked {
-            return;
-        }
-        self.heater_duty = if duty.is_finite() {
-            duty.clamp(0.0, 1.0) as f64
-        } else {
-            0.0
-        };
-    }
-}
-
-impl EcrFrontEnd for SimHardware {
-    fn set_ecr_source(&mut self, volts: f32) {
-        if self.outputs_locked {
-            return;
-        }
-        self.ecr_source_v = volts as f64;
-    }
-    fn set_ecr_range(&mut self, range: u8) {
-        self.ecr_range = range.min(RANGES - 1);
-    }
-    fn read_ecr_output(&mut self) -> f32 {
-        (self.ecr_output() + self.cfg.noise.ecr_v * self.rng.normal())
-            .clamp(0.0, FULL_SCALE_V as f64) as f32
-    }
-}
-
-impl SampleSource for SimHardware {
-    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
-        self.adc.clock_for(rate_hz)
-    }
-    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
-        let clock = self.adc.start(rate_hz, self.now_us)?;
-        self.rate_hz = clock.rate_hz();
-        if let Some(t) = &mut self.truth {
-            t.clear();
-        }
-        self.force_lp = Biquad::lowpass(self.cfg.force_cutoff_hz, self.rate_hz);
-        self.force_lp.reset(self.last.2);
-        self.force_delay.clear();
-        Some(clock)
-    }
-    fn adc_stop(&mut self) {
-        self.adc.stop();
-    }
-    fn adc_running(&self) -> bool {
-        self.adc.is_running()
-    }
-    fn adc_next_index(&mut self) -> u64 {
-        self.adc.next_index()
-    }
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
-        self.adc.read(out)
-    }
-}
-
-impl RunFlash for SimHardware {
-    fn flash_geometry(&self) -> FlashGeometry {
-        self.flash.flash_geometry()
-    }
-    fn flash_busy(&mut self) -> bool {
-        self.flash.flash_busy()
-    }
-    fn flash_erase(&mut self, sector: u32) -> bool {
-        self.flash.flash_erase(sector)
-    }
-    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
-        self.flash.flash_program(offset, data)
-    }
-    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
-        self.flash.flash_read(offset, out)
-    }
-    fn flash_take_error(&mut self) -> bool {
-        self.flash.flash_take_error()
-    }
-}
-
-impl Button for SimHardware {
-    fn button_pressed(&mut self) -> bool {
-        self.button
-    }
-}
-
-impl Led for SimHardware {
-    fn set_lamps(&mut self, lamps: Lamps) {
-        self.lamps = lamps;
-    }
-}
-
-impl Link for SimHardware {
-    fn send_frame(&mut self, frame: &[u8]) -> bool {
-        if self.connected {
-            self.out.extend_from_slice(frame);
-        }
-        self.connected
     }
 }
 

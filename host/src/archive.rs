@@ -1,0 +1,82 @@
+//! What the host does with a run once it is in the store: fit it, export it, catalog it, and find
+//! it again by the rig's serial number and run id.
+
+use std::path::{Path, PathBuf};
+use tribo_store::{Catalog, HostFit, Results, Run, RunMeta};
+
+/// The stored run taken on rig `serial` as its run `run_id`, if any (newest first).
+pub fn find_run(store: &Path, serial: &str, run_id: u32) -> anyhow::Result<Option<PathBuf>> {
+    let mut dirs = tribo_store::run::list_run_dirs(store)?;
+    dirs.reverse();
+    for d in dirs {
+        let Ok(text) = std::fs::read_to_string(d.join(tribo_store::run::META_FILE)) else {
+            continue;
+        };
+        let Ok(m) = toml::from_str::<RunMeta>(&text) else {
+            continue;
+        };
+        if m.device_run_id == Some(run_id) && m.device.as_ref().is_some_and(|x| x.serial == serial)
+        {
+            return Ok(Some(d));
+        }
+    }
+    Ok(None)
+}
+
+/// The host's Coulomb–viscous fit of a run (Levenberg–Marquardt on the envelope).
+pub fn host_fit(run: &Run) -> Result<HostFit, String> {
+    use tribo_physics::identify::{fit, FitOptions};
+    if run.gaps().next().is_some() {
+        return Err(format!(
+            "the rig lost {} samples in {} acquisition gap(s): not fitted across them; \
+             `tribo fit {} {}` fits the longest stretch without one",
+            run.lost_samples(),
+            run.gaps().count(),
+            crate::LONGEST_CLEAN_STRETCH_FLAG,
+            run.dir().display()
+        ));
+    }
+    let rec = run.record().map_err(|e| e.msg)?;
+    rec.validate().map_err(|e| e.0)?;
+    let r = fit(
+        &rec,
+        tribo_physics::LawSpec::CoulombViscous,
+        &FitOptions::default(),
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(HostFit {
+        law: r.law.clone(),
+        mu0: r.mu.first().copied().unwrap_or(f64::NAN),
+        mu1: r.mu.get(1).copied().unwrap_or(f64::NAN),
+        gap: r.gap,
+        converged: r.converged,
+        mu0_se: r.mu_se.first().copied().unwrap_or(f64::NAN),
+        mu1_se: r.mu_se.get(1).copied().unwrap_or(f64::NAN),
+        verdict: Some(r.verdict.name().into()),
+    })
+}
+
+/// Fits the run on the host, saves the results and the CSV export, and catalogs it.
+pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
+    let mut results = Results {
+        onboard: run.result().copied(),
+        host: None,
+        host_error: None,
+    };
+    if run.block_count() > 0 {
+        match host_fit(run) {
+            Ok(f) => results.host = Some(f),
+            Err(e) => results.host_error = Some(e),
+        }
+        // A record the physics cannot take (an unloaded run has no rig constants for it) has no
+        // CSV export; the run itself is stored all the same.
+        if let Err(e) = run.export_csv(&run.dir().join(tribo_store::run::CSV_FILE)) {
+            results
+                .host_error
+                .get_or_insert_with(|| format!("no CSV export: {e}"));
+        }
+    }
+    run.save_results(results)?;
+    Catalog::open(store)?.upsert(run)?;
+    Ok(())
+}

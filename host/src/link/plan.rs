@@ -1,0 +1,67 @@
+//! What the host asks of a run before it starts: the rig's configuration, heating, the button.
+
+use tribo_wire::Configure;
+
+/// Heat the plate to a setpoint and wait until it holds it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeaterPlan {
+    pub setpoint_c: f32,
+    pub ramp_c_per_min: f32,
+    /// Settled when within this of the setpoint…
+    pub tolerance_c: f32,
+    /// …for this long.
+    pub settle_s: f64,
+    /// Give up after this long.
+    pub timeout_s: f64,
+}
+
+impl HeaterPlan {
+    /// Heat to `setpoint_c` at `ramp_c_per_min`, settled by the defaults of
+    /// [`tribo_wire::limits`] (within [`tribo_wire::limits::SETTLE_TOL_C`] for
+    /// [`tribo_wire::limits::SETTLE_S`], giving up after [`tribo_wire::limits::SETTLE_TIMEOUT_S`]).
+    pub fn new(setpoint_c: f32, ramp_c_per_min: f32) -> HeaterPlan {
+        HeaterPlan {
+            setpoint_c,
+            ramp_c_per_min,
+            tolerance_c: tribo_wire::limits::SETTLE_TOL_C,
+            settle_s: tribo_wire::limits::SETTLE_S,
+            timeout_s: tribo_wire::limits::SETTLE_TIMEOUT_S,
+        }
+    }
+}
+
+/// Everything `tribo run` needs to take one run.
+#[derive(Debug, Clone)]
+pub struct RunPlan {
+    pub config: Configure,
+    /// `None`: heater off.
+    pub heater: Option<HeaterPlan>,
+    /// Wait for the rig's button instead of releasing from here.
+    pub button: bool,
+    /// Leave the heater on after the run (campaigns).
+    pub keep_heater: bool,
+    pub label: Option<String>,
+    pub sample: Option<String>,
+    pub lubricant: Option<String>,
+    pub campaign: Option<String>,
+    pub repeat: Option<u32>,
+    /// Rig constants a default stood in for (recorded in the run's metadata).
+    pub defaults: Vec<String>,
+}
+
+impl RunPlan {
+    pub fn new(config: Configure) -> RunPlan {
+        RunPlan {
+            config,
+            heater: None,
+            button: false,
+            keep_heater: false,
+            label: None,
+            sample: None,
+            lubricant: None,
+            campaign: None,
+            repeat: None,
+            defaults: Vec::new(),
+        }
+    }
+}
