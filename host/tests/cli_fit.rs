@@ -9,31 +9,36 @@ fn tribo(args: &[&str]) -> std::process::Output {
         .expect("run tribo")
 }
 
+/// `tribo sim` of a Coulomb–viscous contact (μ0 = 0.03, μ1 = 0.012, 1.5 s) into `rec`, plus `extra`
+/// flags; the command must succeed.
+fn sim_coulomb_viscous(rec: &str, extra: &[&str]) {
+    let mut args = vec![
+        "sim",
+        "--law",
+        "coulomb-viscous",
+        "--mu",
+        "0.03,0.012",
+        "--duration-s",
+        "1.5",
+        "-o",
+        rec,
+    ];
+    args.extend_from_slice(extra);
+    let out = tribo(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn sim_then_fit_json_recovers_the_constants() {
     let dir = std::env::temp_dir().join(format!("tribo-cli-fit-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let rec = dir.join("rec.csv");
     let rec_s = rec.to_str().unwrap();
-    let out = tribo(&[
-        "sim",
-        "--law",
-        "coulomb-viscous",
-        "--mu",
-        "0.03,0.012",
-        "--load-n",
-        "0.3",
-        "--duration-s",
-        "1.5",
-        "--noise",
-        "-o",
-        rec_s,
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    sim_coulomb_viscous(rec_s, &["--load-n", "0.3", "--noise"]);
     let text = std::fs::read_to_string(&rec).unwrap();
     assert!(text.contains("# mass_kg=0.04") && text.contains("t_s,x_m,v_m_s"));
 
@@ -225,22 +230,7 @@ fn fit_plot_draws_both_panels_with_the_data() {
     let rec = dir.path().join("rec.csv");
     let svg = dir.path().join("fit.svg");
     let (rec_s, svg_s) = (rec.to_str().unwrap(), svg.to_str().unwrap());
-    let out = tribo(&[
-        "sim",
-        "--law",
-        "coulomb-viscous",
-        "--mu",
-        "0.03,0.012",
-        "--duration-s",
-        "1.5",
-        "-o",
-        rec_s,
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    sim_coulomb_viscous(rec_s, &[]);
     let out = tribo(&["fit", rec_s, "--plot", svg_s]);
     assert!(
         out.status.success(),
