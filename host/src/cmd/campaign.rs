@@ -114,7 +114,11 @@ impl Plan {
         }
         for p in self.points() {
             self.config(p.load_n).validate().map_err(|f| {
-                anyhow::anyhow!("load {} N: {f:?} out of the rig's range", p.load_n)
+                anyhow::anyhow!(
+                    "load {} N: {} is out of the rig's range",
+                    p.load_n,
+                    crate::link::field_name(f)
+                )
             })?;
             if let Some(t) = p.temp_c {
                 tribo_wire::HeaterSetpoint {
@@ -124,7 +128,8 @@ impl Plan {
                 .validate()
                 .map_err(|f| {
                     anyhow::anyhow!(
-                        "temperature {t} °C: {f:?} out of range (15–100 °C, ramp 0.1–30 °C/min)"
+                        "temperature {t} °C: {} is out of the rig's range",
+                        crate::link::field_name(f)
                     )
                 })?;
             }

@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 use tribo_store::Run;
-use tribo_wire::Configure;
+use tribo_wire::{Configure, HeaterSetpoint};
 
 /// How to reach the rig and where to store runs.
 #[derive(clap::Args, Debug, Clone)]
@@ -532,16 +532,26 @@ impl Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let plan = args.plan();
     if let Err(f) = plan.config.validate() {
-        bail!("{} is out of the rig's range: check --load (0–0.7 N), --rate (1–20 kHz), --x0 (≤ 1 mm), --max-duration (0.1–60 s)", format!("{f:?}").to_lowercase());
+        return Err(crate::exit::Usage(format!(
+            "{}: {} is out of the rig's range",
+            flag_of(f),
+            crate::link::field_name(f)
+        ))
+        .into());
     }
     if let Some(t) = args.temp {
-        if !tribo_wire::limits::HEATER_SETPOINT_C.contains(&t)
-            || !tribo_wire::limits::HEATER_RAMP_C_PER_MIN.contains(&args.ramp)
+        if let Err(f) = (HeaterSetpoint {
+            setpoint_c: t,
+            ramp_c_per_min: args.ramp,
+        })
+        .validate()
         {
-            bail!(
-                "--temp {t} °C / --ramp {} °C/min: the heater takes 15–100 °C and 0.1–30 °C/min",
-                args.ramp
-            );
+            return Err(crate::exit::Usage(format!(
+                "--temp {t} °C, --ramp {} °C/min: {} is out of the rig's range",
+                args.ramp,
+                crate::link::field_name(f)
+            ))
+            .into());
         }
     }
     let abort = abort_flag();
@@ -581,4 +591,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The `tribo run` option that sets a configuration field.
+fn flag_of(f: tribo_wire::Field) -> &'static str {
+    use tribo_wire::Field;
+    match f {
+        Field::Mass => "--mass",
+        Field::Stiffness => "--stiffness",
+        Field::Load => "--load",
+        Field::SampleRate => "--rate",
+        Field::InitialAmplitude => "--x0",
+        Field::MaxDuration => "--max-duration",
+        Field::HeaterSetpoint => "--temp",
+        Field::HeaterRamp => "--ramp",
+        Field::Channels | Field::Calibration | Field::RunId => "the configuration",
+    }
 }
