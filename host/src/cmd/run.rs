@@ -382,16 +382,7 @@ pub fn print_outcome(o: &Outcome) -> anyhow::Result<()> {
         }
     );
     if run.lost_samples() > 0 {
-        let spans: Vec<String> = run
-            .gaps()
-            .map(|g| {
-                format!(
-                    "{}..{}",
-                    g.first_sample,
-                    g.first_sample as u64 + g.count as u64
-                )
-            })
-            .collect();
+        let spans = crate::load::gap_spans(run);
         let _ = writeln!(
             s,
             "acquisition gaps: the rig lost {} samples (samples {}); fits refuse to cross a gap: \
