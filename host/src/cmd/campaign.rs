@@ -16,8 +16,7 @@
 //! after 1800 s). While the campaign runs, prompts included, a heartbeat keeps the rig's lease; every
 //! way the campaign ends switches heater and magnet off.
 
-use super::run::{abort_flag, print_outcome, warn_about_reset, LinkArgs, Ui};
-use crate::link::firmware_version;
+use super::run::{abort_flag, print_outcome, LinkArgs, Ui};
 use crate::link::session::{record_run, HeaterPlan, RunPlan};
 use anyhow::{bail, Context};
 use serde::Deserialize;
@@ -292,18 +291,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let abort = abort_flag();
-    let (mut link, info) = args.link.connect()?;
+    let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // Heartbeats while the campaign runs (prompts included); every exit leaves the rig safe.
     let _hold = link.hold();
-    if !args.quiet {
-        eprintln!(
-            "rig on {}: firmware {}, serial {:016x}",
-            link.name(),
-            firmware_version(&info),
-            info.serial
-        );
-    }
-    warn_about_reset(&link);
     let mut last_load: Option<f32> = None;
     for (i, p) in todo.iter().enumerate() {
         if abort.load(Ordering::Relaxed) {

@@ -74,6 +74,25 @@ impl LinkArgs {
         let info = link.hello()?;
         Ok((link, info))
     }
+
+    /// [`LinkArgs::connect`], then says which rig answered (unless `quiet`) and warns when it
+    /// reset by itself since a host last spoke to it.
+    pub fn connect_and_announce(
+        &self,
+        quiet: bool,
+    ) -> anyhow::Result<(Link, tribo_wire::DeviceInfo)> {
+        let (link, info) = self.connect()?;
+        if !quiet {
+            eprintln!(
+                "rig on {}: firmware {}, serial {:016x}",
+                link.name(),
+                firmware_version(&info),
+                info.serial
+            );
+        }
+        warn_about_reset(&link);
+        Ok((link, info))
+    }
 }
 
 /// Set on Ctrl-C, SIGTERM or SIGHUP: the command stops cleanly and the rig is made safe. A second
@@ -546,18 +565,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let abort = abort_flag();
-    let (mut link, info) = args.link.connect()?;
+    let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // From here on every exit leaves the rig safe (see `link::hold`).
     let _hold = link.hold();
-    if !args.quiet {
-        eprintln!(
-            "rig on {}: firmware {}, serial {:016x}",
-            link.name(),
-            firmware_version(&info),
-            info.serial
-        );
-    }
-    warn_about_reset(&link);
     let store = args.link.store();
     for k in 1..=args.repeat.max(1) {
         let mut plan = plan.clone();
