@@ -7,6 +7,7 @@
 //! | row | fault | expected |
 //! |---|---|---|
 //! | `flipped_bytes_at_start_middle_and_end_of_a_log` | one byte of the frame log flipped: file header, run header, a block, a record header, the end | salvage keeps every intact record, the pull fetches only what the flip cost; bit-identical |
+//! | `killed_before_the_header_was_logged` | the recorder killed after the folder and its metadata were written, before the run header reached the log | `tribo pull` finds the folder by the rig's run id and fills it; bit-identical |
 //! | `truncated_log` | the log cut in the middle of a record | shown incomplete (N of at least N blocks); the pull fetches the tail; bit-identical |
 //! | `cable_pulled_mid_stream` | the line cut a third into the run, the run going on | `run` ends incomplete (exit 3); the pull fetches the rest; bit-identical |
 //! | `lossy_link` | 1 % (and 5 %) of the frames each way dropped or corrupted | stored whole by `run` itself; bit-identical |
@@ -202,6 +203,48 @@ fn flipped_bytes_at_start_middle_and_end_of_a_log() {
             "{what}: the damaged log is kept"
         );
     }
+}
+
+/// The recorder writes the rig's run id into the folder's metadata before it logs the run header,
+/// so a recorder killed in between leaves a folder `tribo pull` finds (not a second folder).
+#[test]
+fn killed_before_the_header_was_logged() {
+    let (mut bench, _store, dir, truth) = reference_run(0.02, 33);
+    let store = tempfile::tempdir().unwrap();
+    let d = copy_run(&dir, store.path());
+    let log = std::fs::read(d.join("frames.log")).unwrap();
+    std::fs::write(d.join("frames.log"), &log[..HEADER_LEN as usize]).unwrap();
+    let meta_path = d.join(tribo_store::run::META_FILE);
+    let mut meta: tribo_store::RunMeta =
+        toml::from_str(&std::fs::read_to_string(&meta_path).unwrap()).unwrap();
+    assert_eq!(meta.device_run_id, Some(truth_run_id(&truth)));
+    meta.status = tribo_store::RunStatus::Recording;
+    std::fs::write(&meta_path, toml::to_string(&meta).unwrap()).unwrap();
+    let o = pull(&mut bench, Faults::default(), store.path(), None, false);
+    assert_eq!(
+        o.run.dir(),
+        d,
+        "the pull fills the folder the recorder left"
+    );
+    assert_bit_identical(&o.run, &truth);
+    assert_eq!(
+        std::fs::read_dir(store.path())
+            .unwrap()
+            .filter(|e| e.as_ref().unwrap().path().is_dir())
+            .count(),
+        1
+    );
+}
+
+/// The rig's run id of a run's frames (from its header).
+fn truth_run_id(truth: &[Vec<u8>]) -> u32 {
+    truth
+        .iter()
+        .find_map(|f| match msg(f) {
+            DeviceMsg::RunStarted(h) => Some(h.run_id),
+            _ => None,
+        })
+        .expect("a run header")
 }
 
 #[test]

@@ -4,7 +4,7 @@
 //! |---|---|
 //! | 0 | done, and the data is whole |
 //! | 1 | error: nothing usable was produced (the message says what to do next) |
-//! | 2 | usage: the command line was wrong (clap's own status) |
+//! | 2 | usage: the command line was wrong (clap's own status, or a value the rig would refuse) |
 //! | 3 | finished, but the data is incomplete or not analysable: the output says exactly what is missing |
 //!
 //! A library function that finished with incomplete data returns [`Incomplete`] as its error (after
@@ -40,10 +40,25 @@ impl fmt::Display for Incomplete {
 
 impl std::error::Error for Incomplete {}
 
+/// A command line clap accepted but a value of which the rig would refuse (an out-of-range
+/// setpoint, load or rate), caught before anything is sent: status 2, as for clap's own errors.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Usage(pub String);
+
+impl fmt::Display for Usage {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Usage {}
+
 /// The status an error from a command maps to.
 pub fn status_of(e: &anyhow::Error) -> Status {
     if e.chain().any(|c| c.downcast_ref::<Incomplete>().is_some()) {
         Status::Incomplete
+    } else if e.chain().any(|c| c.downcast_ref::<Usage>().is_some()) {
+        Status::Usage
     } else {
         Status::Error
     }

@@ -326,10 +326,9 @@ fn positions_of(run: &tribo_store::Run) -> Result<Vec<Range<usize>>, RecordError
     Ok(out)
 }
 
-/// "2 acquisition gaps (samples 1200..1500, 9000..9010: 310 lost) and 3 blocks not received".
-fn describe_run_holes(run: &tribo_store::Run) -> String {
-    let gaps: Vec<String> = run
-        .gaps()
+/// The samples each acquisition gap of a run lost, as `first..end` (end exclusive).
+pub fn gap_spans(run: &tribo_store::Run) -> Vec<String> {
+    run.gaps()
         .map(|g| {
             format!(
                 "{}..{}",
@@ -337,7 +336,12 @@ fn describe_run_holes(run: &tribo_store::Run) -> String {
                 g.first_sample as u64 + g.count as u64
             )
         })
-        .collect();
+        .collect()
+}
+
+/// "2 acquisition gaps (samples 1200..1500, 9000..9010: 310 lost) and 3 blocks not received".
+fn describe_run_holes(run: &tribo_store::Run) -> String {
+    let gaps = gap_spans(run);
     let missing = run.missing_blocks().len();
     let mut parts = Vec::new();
     if !gaps.is_empty() {

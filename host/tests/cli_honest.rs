@@ -287,6 +287,41 @@ fn usage_errors_exit_2() {
     }
 }
 
+/// A value clap takes but the rig would refuse is caught before anything is sent: status 2, and
+/// the message names the flag and the range the rig accepts.
+#[test]
+fn out_of_range_run_settings_are_usage_errors_naming_flag_and_range() {
+    for (args, says) in [
+        (vec!["--load", "0.9"], "--load: the load (0–0.7 N)"),
+        (
+            vec!["--load", "0.3", "--rate", "50000"],
+            "--rate: the sample rate (1–20 kHz)",
+        ),
+        (
+            vec!["--load", "0.3", "--max-duration", "90"],
+            "--max-duration: the maximum duration (0.1–60 s)",
+        ),
+        (
+            vec!["--load", "0.3", "--temp", "120"],
+            "the heater setpoint (15–100 °C)",
+        ),
+        (
+            vec!["--load", "0.3", "--temp", "40", "--ramp", "0"],
+            "the heater ramp (0.1–30 °C/min)",
+        ),
+        (vec!["--load", "NaN"], "--load: the load"),
+    ] {
+        // A port nobody listens on: reaching it would be status 1, not 2.
+        let mut all = vec!["run", "--port", "tcp://127.0.0.1:1"];
+        all.extend(&args);
+        let o = tribo(&all);
+        let err = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(err.contains("out of the rig's range"), "{args:?}: {err}");
+    }
+}
+
 /// Runs `tribo args` with its standard output a pipe whose reader is already closed.
 fn into_closed_pipe(args: &[&str]) -> Output {
     let (reader, writer) = std::io::pipe().unwrap();

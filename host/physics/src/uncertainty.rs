@@ -102,49 +102,8 @@ pub fn effective_count(r: &[f64]) -> f64 {
 /// optimum: the HAC sandwich described in the module documentation, with the `n / (n − p)`
 /// small-sample factor. `None` if `JᵀJ` is singular or there are no more residuals than parameters.
 pub fn hac_covariance(jac: &Jacobian, r: &[f64]) -> Option<Vec<Vec<f64>>> {
-    let p = jac.len();
-    let n = r.len();
-    if p == 0 || n <= p || jac.iter().any(|c| c.len() != n) {
-        return None;
-    }
-    let mut jtj = vec![vec![0.0; p]; p];
-    for a in 0..p {
-        for b in 0..p {
-            jtj[a][b] = jac[a].iter().zip(&jac[b]).map(|(x, y)| x * y).sum();
-        }
-    }
-    let bread = invert(&jtj)?;
-    // Scores g_i = J_i r_i.
-    let g: Vec<Vec<f64>> = (0..p)
-        .map(|a| jac[a].iter().zip(r).map(|(j, e)| j * e).collect())
-        .collect();
-    let rho1 = autocorrelation(r, 1).get(1).copied().unwrap_or(0.0);
-    let l = bandwidth(n, rho1);
-    let mut meat = vec![vec![0.0; p]; p];
-    for lag in 0..=l {
-        let w = 1.0 - lag as f64 / (l + 1) as f64;
-        for a in 0..p {
-            for b in 0..p {
-                let s: f64 = (0..n - lag).map(|i| g[a][i] * g[b][i + lag]).sum();
-                if lag == 0 {
-                    meat[a][b] += s;
-                } else {
-                    // Γ_l + Γ_lᵀ
-                    meat[a][b] += w * s;
-                    meat[b][a] += w * s;
-                }
-            }
-        }
-    }
-    let dof = n as f64 / (n - p) as f64;
-    let tmp = matmul(&bread, &meat);
-    let mut cov = matmul(&tmp, &bread);
-    for row in cov.iter_mut() {
-        for v in row.iter_mut() {
-            *v *= dof;
-        }
-    }
-    cov.iter().flatten().all(|v| v.is_finite()).then_some(cov)
+    // One block: the whole series.
+    hac_covariance_blocks(jac, r, std::slice::from_ref(&(0..r.len())))
 }
 
 /// The textbook covariance `s² (JᵀJ)⁻¹`, `s² = Σr² / (n − p)` (independent residuals).

@@ -16,8 +16,7 @@
 //! after 1800 s). While the campaign runs, prompts included, a heartbeat keeps the rig's lease; every
 //! way the campaign ends switches heater and magnet off.
 
-use super::run::{abort_flag, print_outcome, warn_about_reset, LinkArgs, Ui};
-use crate::link::firmware_version;
+use super::run::{abort_flag, print_outcome, LinkArgs, Ui};
 use crate::link::session::{record_run, HeaterPlan, RunPlan};
 use anyhow::{bail, Context};
 use serde::Deserialize;
@@ -114,7 +113,11 @@ impl Plan {
         }
         for p in self.points() {
             self.config(p.load_n).validate().map_err(|f| {
-                anyhow::anyhow!("load {} N: {f:?} out of the rig's range", p.load_n)
+                anyhow::anyhow!(
+                    "load {} N: {} is out of the rig's range",
+                    p.load_n,
+                    crate::link::field_name(f)
+                )
             })?;
             if let Some(t) = p.temp_c {
                 tribo_wire::HeaterSetpoint {
@@ -124,7 +127,8 @@ impl Plan {
                 .validate()
                 .map_err(|f| {
                     anyhow::anyhow!(
-                        "temperature {t} °C: {f:?} out of range (15–100 °C, ramp 0.1–30 °C/min)"
+                        "temperature {t} °C: {} is out of the rig's range",
+                        crate::link::field_name(f)
                     )
                 })?;
             }
@@ -287,18 +291,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let abort = abort_flag();
-    let (mut link, info) = args.link.connect()?;
+    let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // Heartbeats while the campaign runs (prompts included); every exit leaves the rig safe.
     let _hold = link.hold();
-    if !args.quiet {
-        eprintln!(
-            "rig on {}: firmware {}, serial {:016x}",
-            link.name(),
-            firmware_version(&info),
-            info.serial
-        );
-    }
-    warn_about_reset(&link);
     let mut last_load: Option<f32> = None;
     for (i, p) in todo.iter().enumerate() {
         if abort.load(Ordering::Relaxed) {

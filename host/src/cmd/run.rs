@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 use tribo_store::Run;
-use tribo_wire::Configure;
+use tribo_wire::{Configure, HeaterSetpoint};
 
 /// How to reach the rig and where to store runs.
 #[derive(clap::Args, Debug, Clone)]
@@ -72,6 +72,25 @@ impl LinkArgs {
             (Err(e), _) => return Err(e.into()),
         };
         let info = link.hello()?;
+        Ok((link, info))
+    }
+
+    /// [`LinkArgs::connect`], then says which rig answered (unless `quiet`) and warns when it
+    /// reset by itself since a host last spoke to it.
+    pub fn connect_and_announce(
+        &self,
+        quiet: bool,
+    ) -> anyhow::Result<(Link, tribo_wire::DeviceInfo)> {
+        let (link, info) = self.connect()?;
+        if !quiet {
+            eprintln!(
+                "rig on {}: firmware {}, serial {:016x}",
+                link.name(),
+                firmware_version(&info),
+                info.serial
+            );
+        }
+        warn_about_reset(&link);
         Ok((link, info))
     }
 }
@@ -382,16 +401,7 @@ pub fn print_outcome(o: &Outcome) -> anyhow::Result<()> {
         }
     );
     if run.lost_samples() > 0 {
-        let spans: Vec<String> = run
-            .gaps()
-            .map(|g| {
-                format!(
-                    "{}..{}",
-                    g.first_sample,
-                    g.first_sample as u64 + g.count as u64
-                )
-            })
-            .collect();
+        let spans = crate::load::gap_spans(run);
         let _ = writeln!(
             s,
             "acquisition gaps: the rig lost {} samples (samples {}); fits refuse to cross a gap: \
@@ -532,31 +542,32 @@ impl Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let plan = args.plan();
     if let Err(f) = plan.config.validate() {
-        bail!("{} is out of the rig's range: check --load (0–0.7 N), --rate (1–20 kHz), --x0 (≤ 1 mm), --max-duration (0.1–60 s)", format!("{f:?}").to_lowercase());
+        return Err(crate::exit::Usage(format!(
+            "{}: {} is out of the rig's range",
+            flag_of(f),
+            crate::link::field_name(f)
+        ))
+        .into());
     }
     if let Some(t) = args.temp {
-        if !tribo_wire::limits::HEATER_SETPOINT_C.contains(&t)
-            || !tribo_wire::limits::HEATER_RAMP_C_PER_MIN.contains(&args.ramp)
+        if let Err(f) = (HeaterSetpoint {
+            setpoint_c: t,
+            ramp_c_per_min: args.ramp,
+        })
+        .validate()
         {
-            bail!(
-                "--temp {t} °C / --ramp {} °C/min: the heater takes 15–100 °C and 0.1–30 °C/min",
-                args.ramp
-            );
+            return Err(crate::exit::Usage(format!(
+                "--temp {t} °C, --ramp {} °C/min: {} is out of the rig's range",
+                args.ramp,
+                crate::link::field_name(f)
+            ))
+            .into());
         }
     }
     let abort = abort_flag();
-    let (mut link, info) = args.link.connect()?;
+    let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // From here on every exit leaves the rig safe (see `link::hold`).
     let _hold = link.hold();
-    if !args.quiet {
-        eprintln!(
-            "rig on {}: firmware {}, serial {:016x}",
-            link.name(),
-            firmware_version(&info),
-            info.serial
-        );
-    }
-    warn_about_reset(&link);
     let store = args.link.store();
     for k in 1..=args.repeat.max(1) {
         let mut plan = plan.clone();
@@ -581,4 +592,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The `tribo run` option that sets a configuration field.
+fn flag_of(f: tribo_wire::Field) -> &'static str {
+    use tribo_wire::Field;
+    match f {
+        Field::Mass => "--mass",
+        Field::Stiffness => "--stiffness",
+        Field::Load => "--load",
+        Field::SampleRate => "--rate",
+        Field::InitialAmplitude => "--x0",
+        Field::MaxDuration => "--max-duration",
+        Field::HeaterSetpoint => "--temp",
+        Field::HeaterRamp => "--ramp",
+        Field::Channels | Field::Calibration | Field::RunId => "the configuration",
+    }
 }

@@ -7,8 +7,9 @@ use tribo_wire::{
     ResetCause, PROTOCOL_VERSION,
 };
 
-/// The configuration field a refusal names, with the range the rig accepts ([`limits`]).
-fn field_name(f: Field) -> String {
+/// The configuration field a refusal names, with the range the rig accepts ([`limits`]): the one
+/// wording of a range for the rig's own refusals and the host's checks before sending.
+pub fn field_name(f: Field) -> String {
     let r = |r: &core::ops::RangeInclusive<f32>| format!("{}–{}", r.start(), r.end());
     match f {
         Field::Mass => format!("the mass ({} kg)", r(&limits::MASS_KG)),

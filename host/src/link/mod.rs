@@ -27,7 +27,8 @@ pub mod transport;
 
 use meaning::command_name;
 pub use meaning::{
-    explain, explain_fault, firmware_version, heater_fault_text, reset_cause_text, uptime,
+    explain, explain_fault, field_name, firmware_version, heater_fault_text, reset_cause_text,
+    uptime,
 };
 pub use transport::Address;
 

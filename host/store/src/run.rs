@@ -1178,13 +1178,15 @@ impl RunWriter {
                 self.meta.temp_c = Some(clean(h.temp_c));
             }
         }
-        self.log.append(raw)?;
-        self.data.add(f.seq, raw, msg);
         if is_header {
             // The rig's run id is how `tribo pull` finds this folder again, even if this process
-            // is killed before `finish`.
+            // is killed before `finish`: written before the header goes into the log, so that no
+            // moment leaves a logged header in a folder `tribo pull` cannot find (a folder killed
+            // in between holds the run id and no header; the pull asks the rig for the header).
             write_toml_atomic(&self.dir.join(META_FILE), &self.meta)?;
         }
+        self.log.append(raw)?;
+        self.data.add(f.seq, raw, msg);
         if is_header || is_end || self.last_sync.elapsed() >= Duration::from_secs(1) {
             self.log.sync()?;
             self.last_sync = Instant::now();
