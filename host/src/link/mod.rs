@@ -18,6 +18,7 @@ pub mod devices;
 pub mod hold;
 mod meaning;
 pub mod plan;
+mod progress;
 #[cfg(unix)]
 pub mod pty;
 pub mod serial;

@@ -3,6 +3,7 @@
 //! rig already took.
 
 pub use super::plan::{HeaterPlan, RunPlan};
+pub use super::progress::Progress;
 use super::stream::{StreamEnd, Streamer};
 use super::{explain, explain_fault, firmware_version, Link, LinkError, LinkErrorKind};
 use crate::archive::{analyse_and_catalog, find_run};
@@ -11,62 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use tribo_store::{DeviceMeta, Run, RunMeta, RunWriter};
-use tribo_wire::{
-    DeviceInfo, ErrorCode, Gap, HeaterSetpoint, HostMsg, Interlock, RunEnd, RunHeader, SampleBlock,
-    SampleClock,
-};
-
-/// What happens during a run, for a progress display.
-#[derive(Debug)]
-pub enum Progress<'a> {
-    Heating {
-        temp_c: f32,
-        setpoint_c: f32,
-        elapsed_s: f64,
-    },
-    WaitingForButton,
-    Started {
-        header: &'a RunHeader,
-        dir: &'a Path,
-    },
-    /// A block arrived; `envelope_m` is the Mark & Crandall amplitude at its last sample.
-    Block {
-        block: &'a SampleBlock,
-        envelope_m: f64,
-        samples: u64,
-        expected: u64,
-    },
-    Gap {
-        from: u32,
-        to: u32,
-    },
-    Pulling {
-        from_block: u32,
-    },
-    /// A pull round: `blocks` missing blocks asked for (from `first`), and the run's end from
-    /// `tail_from` on.
-    PullRound {
-        round: u32,
-        first: Option<u32>,
-        blocks: u32,
-        missing: usize,
-        tail_from: u32,
-    },
-    /// A pull round brought nothing (or was not answered): waiting before the next one.
-    Backoff {
-        wait: Duration,
-        why: String,
-    },
-    /// The rig lost these samples (an acquisition gap); the run goes on.
-    Lost(&'a Gap),
-    /// The rig's sample clock is not exactly the rate asked for (the timer cannot make it).
-    RateUsed {
-        asked_hz: u32,
-        clock: SampleClock,
-    },
-    Warning(String),
-    Ended(&'a RunEnd),
-}
+use tribo_wire::{DeviceInfo, ErrorCode, HeaterSetpoint, HostMsg, Interlock, RunHeader};
 
 /// How a recording or a pull ended.
 #[derive(Debug)]

@@ -1,7 +1,7 @@
 //! One run's frames from the link into the run store: the live stream, then pulls of what is
 //! missing, in rounds with backoff, until the run is whole or the rig is known not to hold the rest.
 
-use super::session::Progress;
+use super::progress::Progress;
 use super::{explain, explain_fault, Link, LinkError, LinkErrorKind};
 use anyhow::bail;
 use std::sync::atomic::{AtomicBool, Ordering};
