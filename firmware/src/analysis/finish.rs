@@ -1,0 +1,521 @@
+//! The end-of-run fit, spread over polls ([`Pipeline::start_finish`], [`Pipeline::finish_step`]):
+//! the decrement regression over the usable half-cycles, then the averaging iterations, then the
+//! estimates with their standard errors, the envelope's shape and the verdict.
+
+use super::*;
+
+impl Pipeline {
+    /// The half-cycles the result is computed from: all of them, or those before the first gap.
+    pub(super) fn usable(&self) -> &[HalfCycle] {
+        let n = self.st.kept.unwrap_or(self.records.len());
+        self.records.get(..n).unwrap_or(&self.records)
+    }
+
+    /// Analyses what was recorded and returns the result (can be called at any time; normally once
+    /// [`Pipeline::is_finished`]). All at once: see [`Pipeline::finish_step`] to spread the work.
+    pub fn finish(&self, run_id: u32) -> OnboardResult {
+        let mut job = self.start_finish(run_id);
+        loop {
+            if let Some(r) = self.finish_step(&mut job, u32::MAX) {
+                return r;
+            }
+        }
+    }
+
+    /// Starts the end-of-run analysis as a job of bounded steps ([`Pipeline::finish_step`]). The
+    /// pipeline must not take samples or be reset until the job is done.
+    pub fn start_finish(&self, run_id: u32) -> Finish {
+        let recs: &[HalfCycle] = self.usable();
+        let n_rev = recs.len();
+        let cycles = (n_rev / 2).min(u16::MAX as usize) as u16;
+        Finish {
+            out: OnboardResult {
+                run_id,
+                verdict: Verdict::NoOscillation,
+                cycles,
+                frequency_hz: f32::NAN,
+                initial_amplitude_m: f32::NAN,
+                duration_s: recs
+                    .last()
+                    .map_or(self.st.n as f64 / self.st.rate, |r| r.t as f64)
+                    as f32,
+                best: NAN_ESTIMATE,
+                averaging: NAN_ESTIMATE,
+                decrement: NAN_ESTIMATE,
+                shape: EnvelopeShape::Straight,
+                curvature: f32::NAN,
+            },
+            stage: Stage::Frequency(OlsPasses::new()),
+            i: 0,
+            omega_d: 0.0,
+            scale: 0.0,
+            dec: None,
+            avg: Averaging::default(),
+        }
+    }
+
+    /// Advances the end-of-run analysis by at most `rows` rows of its regressions (a row is one
+    /// half-cycle of one pass: a few hundred instructions at most) and returns the result once it
+    /// is complete. Run to the end, the steps compute exactly what [`Pipeline::finish`] does.
+    ///
+    /// What is computed, in order: the frequency from the reversal times (weighted least squares, 3
+    /// passes); the decrement fit on the peaks (3 passes); the averaging fit: the mean displacement
+    /// (1 pass), then 4 iterations of the linear fit (3 passes), the quadratic fit (3 passes) and the
+    /// range of amplitudes (1 pass). Then the verdict.
+    pub fn finish_step(&self, job: &mut Finish, rows: u32) -> Option<OnboardResult> {
+        let recs: &[HalfCycle] = self.usable();
+        let n = recs.len();
+        let mut budget = rows;
+        loop {
+            match &mut job.stage {
+                Stage::Frequency(f) => {
+                    // Reversals are half a damped period apart, Coulomb or not. Weighted by the
+                    // squared amplitude about the reversal (the crossing time's error goes as
+                    // 1/amplitude), so that reversals of tiny final half-cycles do not bias it.
+                    let omega_c = fit::sqrt(self.st.stiffness / self.st.mass);
+                    while job.i < n {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        let i = job.i;
+                        let m = recs[i].moments;
+                        let w = m.var_x as f64 + m.mean_v2 as f64 / (omega_c * omega_c);
+                        f.row([i as f64], recs[i].t as f64, w);
+                        job.i += 1;
+                    }
+                    job.i = 0;
+                    let freq = match f.end_pass() {
+                        Pass::Again => continue,
+                        Pass::Done(None) => return Some(job.done()),
+                        Pass::Done(Some(freq)) => freq,
+                    };
+                    let half_period_s = freq.coef[0];
+                    let omega_cfg = fit::sqrt(self.st.stiffness / self.st.mass);
+                    let omega_d = PI / half_period_s;
+                    let plausible = omega_d > 0.5 * omega_cfg
+                        && omega_d < 2.0 * omega_cfg
+                        && fit::sqrt(freq.sigma2) < 0.05 * half_period_s;
+                    if !plausible {
+                        return Some(job.done());
+                    }
+                    job.out.frequency_hz = (omega_d / (2.0 * PI)) as f32;
+                    if job.out.cycles < MIN_CYCLES {
+                        job.out.verdict = Verdict::TooFewCycles;
+                        return Some(job.done());
+                    }
+                    job.omega_d = omega_d;
+                    job.scale = self.st.stiffness / self.st.load; // metres → y
+                    job.stage = Stage::Decrement(OlsPasses::new());
+                }
+                Stage::Decrement(f) => {
+                    while job.i + 1 < n {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        let i = job.i;
+                        let (a, b) = (&recs[i], &recs[i + 1]);
+                        let (sa, sb) = (self.sign(i), self.sign(i + 1));
+                        f.row([sa * a.peak as f64, sb], sb * b.peak as f64, 1.0);
+                        job.i += 1;
+                    }
+                    job.i = 0;
+                    let fitted = match f.end_pass() {
+                        Pass::Again => continue,
+                        Pass::Done(fitted) => fitted,
+                    };
+                    job.dec = fitted.and_then(|f| decrement(&f, job.scale));
+                    if n < 6 {
+                        return Some(self.conclude(job));
+                    }
+                    // Half-cycle j (1 ≤ j < n) runs from reversal j−1 to reversal j; 0 starts at
+                    // release: skipped.
+                    job.avg = Averaging {
+                        even: if (n - 1) & 1 == 0 { n - 1 } else { n - 2 },
+                        ..Averaging::default()
+                    };
+                    if job.avg.even < 2 {
+                        return Some(self.conclude(job));
+                    }
+                    job.i = 1;
+                    job.stage = Stage::Offset { sum: -0.0 };
+                }
+                Stage::Offset { sum } => {
+                    while job.i <= job.avg.even {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        *sum += recs[job.i].moments.mean_x as f64;
+                        job.i += 1;
+                    }
+                    job.avg.offset = *sum / job.avg.even as f64;
+                    self.next_iteration(job);
+                }
+                Stage::Linear(f) => {
+                    while job.i < n.saturating_sub(1) {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        if let Some((a, d)) = self.averaging_row(&job.avg, job.scale, job.i) {
+                            f.row([a], d, 1.0);
+                        }
+                        job.i += 1;
+                    }
+                    job.i = 2;
+                    let lin = match f.end_pass() {
+                        Pass::Again => continue,
+                        Pass::Done(None) => {
+                            job.avg.result = None;
+                            return Some(self.conclude(job));
+                        }
+                        Pass::Done(Some(lin)) => lin,
+                    };
+                    let (a0, a1) = (lin.intercept, lin.coef[0]);
+                    let a = &mut job.avg;
+                    a.mu0 = -PI * a0 / 2.0;
+                    a.mu1 = -2.0 * a1;
+                    a.r = a.mu0 / job.scale;
+                    if !(a.r.is_finite() && a.mu1.is_finite()) {
+                        a.result = None;
+                        return Some(self.conclude(job));
+                    }
+                    job.stage = Stage::Quadratic {
+                        lin,
+                        quad: OlsPasses::new(),
+                    };
+                }
+                Stage::Quadratic { lin, quad } => {
+                    while job.i < n.saturating_sub(1) {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        if let Some((a, d)) = self.averaging_row(&job.avg, job.scale, job.i) {
+                            quad.row([a, a * a], d, 1.0);
+                        }
+                        job.i += 1;
+                    }
+                    job.i = 2;
+                    let quad = match quad.end_pass() {
+                        Pass::Again => continue,
+                        Pass::Done(q) => q,
+                    };
+                    job.stage = Stage::Range {
+                        lin: *lin,
+                        quad,
+                        lo: f64::INFINITY,
+                        hi: f64::NEG_INFINITY,
+                    };
+                }
+                Stage::Range { lin, quad, lo, hi } => {
+                    while job.i < n.saturating_sub(1) {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        if let Some(a) = self.amplitude(&job.avg, job.scale, job.i) {
+                            (*lo, *hi) = (lo.min(a), hi.max(a));
+                        }
+                        job.i += 1;
+                    }
+                    let (shape, curvature) = match quad {
+                        Some(q) => (shape_of(q, *lo, *hi), q.coef[1]),
+                        None => (EnvelopeShape::Straight, f64::NAN),
+                    };
+                    let a = &mut job.avg;
+                    let Some(estimate) = estimate(
+                        a.mu0,
+                        a.mu1,
+                        lin.cov(0, 0) * PI * PI / 4.0,
+                        lin.cov(1, 1) * 4.0,
+                    ) else {
+                        a.result = None;
+                        return Some(self.conclude(job));
+                    };
+                    a.result = Some(Fitted {
+                        estimate,
+                        offset: a.offset,
+                        shape,
+                        curvature,
+                    });
+                    a.iteration += 1;
+                    if a.iteration == AVERAGING_ITERATIONS {
+                        return Some(self.conclude(job));
+                    }
+                    self.next_iteration(job);
+                }
+                Stage::Done => return Some(job.out),
+            }
+        }
+    }
+
+    /// Starts an iteration of the averaging fit: the envelope about each half-cycle's centre
+    /// `offset − s_j r` and Ω from the previous iteration's μ0 and μ1, with the measured noise
+    /// variance taken out of the mean square.
+    pub(super) fn next_iteration(&self, job: &mut Finish) {
+        let a = &mut job.avg;
+        a.omega = job.omega_d / fit::sqrt((1.0 - 0.25 * a.mu1 * a.mu1).max(0.25));
+        a.r_now = a.r;
+        let (nx, nv) = self.st.noise_var;
+        let gv = self.st.cal[Channel::Velocity as usize].gain as f64;
+        let nv = nv.max(self.st.sv_motion * self.st.sv_motion * gv * gv);
+        a.noise = nx + nv / (a.omega * a.omega);
+        // Half-cycles last exactly π/ω_d (Coulomb or not): nominal spacing, free of the timing
+        // noise of reversals at tiny amplitude.
+        a.dtau = 2.0 * PI * a.omega / job.omega_d;
+        job.i = 2;
+        job.stage = Stage::Linear(OlsPasses::new());
+    }
+
+    /// Envelope of half-cycle `j` in y units (see [`Pipeline::next_iteration`]).
+    pub(super) fn amplitude(&self, a: &Averaging, scale: f64, j: usize) -> Option<f64> {
+        let centre = a.offset - self.sign(j) * a.r_now;
+        let ms = self.usable().get(j)?.moments.mean_square(centre, a.omega) - a.noise;
+        Some(fit::sqrt(ms.max(0.0)) * scale)
+    }
+
+    /// Row `j` of the averaging fit: the amplitude and its central difference over two
+    /// half-cycles.
+    pub(super) fn averaging_row(&self, a: &Averaging, scale: f64, j: usize) -> Option<(f64, f64)> {
+        let amp = |j| self.amplitude(a, scale, j);
+        Some((amp(j)?, (amp(j + 1)? - amp(j.checked_sub(1)?)?) / a.dtau))
+    }
+
+    /// The verdict, from the two estimators.
+    pub(super) fn conclude(&self, job: &mut Finish) -> OnboardResult {
+        let dec = job.dec.take();
+        let avg = job.avg.result.take();
+        let out = &mut job.out;
+        if let Some(d) = &dec {
+            out.decrement = d.estimate;
+        }
+        if let Some(a) = &avg {
+            out.averaging = a.estimate;
+            out.shape = a.shape;
+            out.curvature = a.curvature as f32;
+            let mu1 = a.estimate.mu1 as f64;
+            let omega = job.omega_d / fit::sqrt((1.0 - 0.25 * mu1 * mu1).max(0.25));
+            out.frequency_hz = (omega / (2.0 * PI)) as f32;
+        }
+        let centre = dec
+            .as_ref()
+            .map(|d| d.offset)
+            .or(avg.as_ref().map(|a| a.offset));
+        if let Some(c) = centre {
+            out.initial_amplitude_m = (self.st.x_release as f64 - c).abs() as f32;
+        }
+        let (verdict, best) = match (&dec, &avg) {
+            (None, None) => (Verdict::NoOscillation, NAN_ESTIMATE),
+            (Some(d), None) => (Verdict::EstimatorsDisagree, d.estimate),
+            (None, Some(a)) => (Verdict::EstimatorsDisagree, a.estimate),
+            (Some(d), Some(a)) => combine(&d.estimate, &a.estimate),
+        };
+        out.best = best;
+        out.verdict = if verdict == Verdict::NoOscillation {
+            verdict
+        } else if self.st.saturated > 0 {
+            Verdict::Saturated
+        } else {
+            verdict
+        };
+        let all_finite = [out.best.mu0, out.best.mu1, out.best.mu0_se, out.best.mu1_se]
+            .iter()
+            .all(|v| v.is_finite());
+        if !all_finite && out.verdict == Verdict::Ok {
+            out.verdict = Verdict::NoOscillation;
+        }
+        job.done()
+    }
+
+    /// Peak sign (+1 maximum) of reversal `i`.
+    pub(super) fn sign(&self, i: usize) -> f64 {
+        let s = self.st.first_sign as f64;
+        if i & 1 == 0 {
+            s
+        } else {
+            -s
+        }
+    }
+}
+
+pub(super) const NAN_ESTIMATE: Estimate = Estimate {
+    mu0: f32::NAN,
+    mu1: f32::NAN,
+    mu0_se: f32::NAN,
+    mu1_se: f32::NAN,
+};
+
+/// Iterations of the averaging fit (each refines the centres and Ω with the previous μ0, μ1).
+pub(super) const AVERAGING_ITERATIONS: u8 = 4;
+
+/// The end-of-run analysis in progress (see [`Pipeline::finish_step`]).
+#[derive(Clone, Debug)]
+pub struct Finish {
+    pub(super) out: OnboardResult,
+    pub(super) stage: Stage,
+    /// Next row of the current pass.
+    pub(super) i: usize,
+    pub(super) omega_d: f64,
+    /// Metres → y.
+    pub(super) scale: f64,
+    pub(super) dec: Option<Fitted>,
+    pub(super) avg: Averaging,
+}
+
+impl Finish {
+    /// True once [`Pipeline::finish_step`] has returned the result.
+    pub fn is_done(&self) -> bool {
+        matches!(self.stage, Stage::Done)
+    }
+
+    pub(super) fn done(&mut self) -> OnboardResult {
+        self.stage = Stage::Done;
+        self.out
+    }
+}
+
+#[derive(Clone, Debug)]
+pub(super) enum Stage {
+    Frequency(OlsPasses<1>),
+    Decrement(OlsPasses<2>),
+    Offset {
+        sum: f64,
+    },
+    Linear(OlsPasses<1>),
+    Quadratic {
+        lin: Ols<1>,
+        quad: OlsPasses<2>,
+    },
+    Range {
+        lin: Ols<1>,
+        quad: Option<Ols<2>>,
+        lo: f64,
+        hi: f64,
+    },
+    Done,
+}
+
+/// The averaging fit's state across its iterations.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Averaging {
+    /// Half-cycles used for the mean displacement (an even number).
+    pub(super) even: usize,
+    /// Mean displacement (the centre of oscillation), m.
+    pub(super) offset: f64,
+    /// Coulomb shift (m) and μ0, μ1 of the last iteration.
+    pub(super) r: f64,
+    pub(super) mu0: f64,
+    pub(super) mu1: f64,
+    pub(super) iteration: u8,
+    /// This iteration's constants: Coulomb shift, Ω, noise mean square, half-cycle spacing in τ.
+    pub(super) r_now: f64,
+    pub(super) omega: f64,
+    pub(super) noise: f64,
+    pub(super) dtau: f64,
+    pub(super) result: Option<Fitted>,
+}
+
+/// The decrement estimator from its regression `X_{n+1} = D X_n − r (1 + D)` on signed peaks.
+pub(super) fn decrement(f: &Ols<2>, scale: f64) -> Option<Fitted> {
+    let (beta, d, gamma) = (f.intercept, f.coef[0], f.coef[1]);
+    if !(d > 0.0 && d < 2.0) {
+        return None;
+    }
+    let r = -beta / (1.0 + d);
+    let offset = gamma / (1.0 + d);
+    let l = -fit::ln(d) / PI;
+    let q = 1.0 + l * l;
+    let zeta = l / fit::sqrt(q);
+    let mu1 = 2.0 * zeta;
+    let mu0 = r * scale;
+    let dmu1_dd = 2.0 / (q * fit::sqrt(q)) * (-1.0 / (PI * d));
+    let g0 = [
+        -scale / (1.0 + d),
+        scale * beta / ((1.0 + d) * (1.0 + d)),
+        0.0,
+    ];
+    let g1 = [0.0, dmu1_dd, 0.0];
+    let estimate = estimate(mu0, mu1, f.var_of(&g0), f.var_of(&g1))?;
+    Some(Fitted {
+        estimate,
+        offset,
+        shape: EnvelopeShape::Straight,
+        curvature: 0.0,
+    })
+}
+
+#[derive(Clone, Debug)]
+pub(super) struct Fitted {
+    pub(super) estimate: Estimate,
+    /// Displacement of the centre of oscillation in the calibrated frame (m).
+    pub(super) offset: f64,
+    pub(super) shape: EnvelopeShape,
+    pub(super) curvature: f64,
+}
+
+pub(super) fn estimate(mu0: f64, mu1: f64, var0: f64, var1: f64) -> Option<Estimate> {
+    let e = Estimate {
+        mu0: mu0 as f32,
+        mu1: mu1 as f32,
+        mu0_se: fit::sqrt(var0.max(0.0)) as f32,
+        mu1_se: fit::sqrt(var1.max(0.0)) as f32,
+    };
+    [e.mu0, e.mu1, e.mu0_se, e.mu1_se]
+        .iter()
+        .all(|v| v.is_finite())
+        .then_some(e)
+}
+
+/// Shape of `F(A) = a0 + a1 A + a2 A²` over `[lo, hi]` from the sign of `F'` at both ends (3σ).
+pub(super) fn shape_of(q: &Ols<2>, lo: f64, hi: f64) -> EnvelopeShape {
+    let class = |a: f64| -> i8 {
+        let d = q.coef[0] + 2.0 * q.coef[1] * a;
+        let sd = fit::sqrt(q.var_of(&[0.0, 1.0, 2.0 * a]).max(0.0));
+        if d < -3.0 * sd {
+            -1
+        } else if d > 3.0 * sd {
+            1
+        } else {
+            0
+        }
+    };
+    let (cl, ch) = (class(lo), class(hi));
+    match (cl, ch) {
+        (-1, 1) | (1, -1) => EnvelopeShape::Mixed,
+        (-1, _) | (_, -1) => EnvelopeShape::Convex,
+        (1, _) | (_, 1) => EnvelopeShape::Concave,
+        _ => EnvelopeShape::Straight,
+    }
+}
+
+/// Inverse-variance mean of the two estimators and the cross-check verdict.
+pub(super) fn combine(d: &Estimate, a: &Estimate) -> (Verdict, Estimate) {
+    let one = |x: f32, sx: f32, y: f32, sy: f32, tol: f64| -> (f64, f64, bool) {
+        let (x, sx, y, sy) = (x as f64, sx as f64, y as f64, sy as f64);
+        let diff = x - y;
+        let agree = diff.abs() <= tol + 3.0 * fit::sqrt(sx * sx + sy * sy);
+        let (wx, wy) = (1.0 / (sx * sx).max(1e-30), 1.0 / (sy * sy).max(1e-30));
+        let mean = (wx * x + wy * y) / (wx + wy);
+        let se = fit::sqrt(1.0 / (wx + wy) + 0.25 * diff * diff);
+        (mean, se, agree)
+    };
+    let (m0, s0, ok0) = one(d.mu0, d.mu0_se, a.mu0, a.mu0_se, MU0_PRECISION);
+    let (m1, s1, ok1) = one(d.mu1, d.mu1_se, a.mu1, a.mu1_se, MU1_PRECISION);
+    let best = Estimate {
+        mu0: m0 as f32,
+        mu1: m1 as f32,
+        mu0_se: s0 as f32,
+        mu1_se: s1 as f32,
+    };
+    (
+        if ok0 && ok1 {
+            Verdict::Ok
+        } else {
+            Verdict::EstimatorsDisagree
+        },
+        best,
+    )
+}
