@@ -1,0 +1,224 @@
+//! Whether a record can be analysed at all: oscillation, half-cycles, finite samples, saturation
+//! (the reasons a fit is refused, [`NotAnalysable`]).
+
+use super::*;
+
+/// Why a record cannot be analysed: no constant is fitted for it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NotAnalysable {
+    /// A sample is NaN or infinite (`what` says where).
+    NonFinite {
+        /// The channel and sample (or file, line and column) of the first one.
+        what: String,
+    },
+    /// Nothing oscillates at the rig's natural period above the noise.
+    NoOscillation {
+        /// What was found instead.
+        reason: String,
+    },
+    /// Too short a decay to fit.
+    TooFewHalfCycles {
+        /// Half cycles found.
+        found: usize,
+        /// Half cycles needed ([`MIN_HALF_CYCLES`]).
+        need: usize,
+    },
+    /// A channel stays at its extreme value (the converter's full scale) while the pin moves.
+    Saturated {
+        /// `displacement` or `velocity`.
+        channel: &'static str,
+        /// First sample of the flat run.
+        sample: usize,
+        /// Length of the run (samples).
+        samples: usize,
+    },
+}
+
+impl NotAnalysable {
+    /// Short kebab-case name (`non-finite`, `no-oscillation`, `too-few-half-cycles`, `saturated`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            NotAnalysable::NonFinite { .. } => "non-finite",
+            NotAnalysable::NoOscillation { .. } => "no-oscillation",
+            NotAnalysable::TooFewHalfCycles { .. } => "too-few-half-cycles",
+            NotAnalysable::Saturated { .. } => "saturated",
+        }
+    }
+}
+
+impl std::fmt::Display for NotAnalysable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NotAnalysable::NonFinite { what } => write!(f, "non-finite sample: {what}"),
+            NotAnalysable::NoOscillation { reason } => write!(f, "no oscillation: {reason}"),
+            NotAnalysable::TooFewHalfCycles { found, need } => write!(
+                f,
+                "too few half cycles: {found} above the noise, a fit needs at least {need}"
+            ),
+            NotAnalysable::Saturated {
+                channel,
+                sample,
+                samples,
+            } => write!(
+                f,
+                "the {channel} channel is saturated: it stays at its extreme value for {samples} \
+                 samples from sample {sample} while the pin moves (widen the converter's range)"
+            ),
+        }
+    }
+}
+
+/// The record passed [`screen`]: what was found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Screening {
+    /// Half cycles above the noise at the natural period.
+    pub half_cycles: usize,
+    /// Noise standard deviation of the Mark & Crandall envelope (dimensionless).
+    pub envelope_noise: f64,
+}
+
+/// Runs of consecutive samples equal to the channel's maximum or minimum (start, length), counting
+/// only runs where `moving(i)` holds somewhere, longest first.
+pub(super) fn flat_extreme_runs(c: &[f64], moving: impl Fn(usize) -> bool) -> Vec<(usize, usize)> {
+    let hi = c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let lo = c.iter().copied().fold(f64::INFINITY, f64::min);
+    if hi <= lo || hi.is_nan() || lo.is_nan() {
+        return Vec::new();
+    }
+    let mut runs = Vec::new();
+    for ext in [hi, lo] {
+        let mut i = 0;
+        while i < c.len() {
+            if c[i] == ext {
+                let start = i;
+                while i < c.len() && c[i] == ext {
+                    i += 1;
+                }
+                if (start..i).any(&moving) {
+                    runs.push((start, i - start));
+                }
+            } else {
+                i += 1;
+            }
+        }
+    }
+    runs.sort_by_key(|r| std::cmp::Reverse(r.1));
+    runs
+}
+
+/// A channel is saturated when it stays on its extreme value (the converter's rail) while the pin
+/// moves, for at least one long run (`long` samples) or for two runs of [`SATURATION_RUN`]: a
+/// quantised noisy sinusoid sampled 60+ times a cycle sits on its extreme code for one to four
+/// samples, once (seen on 1 record in 200 at the rig's noise for four).
+pub(super) fn saturated(runs: &[(usize, usize)], long: usize) -> Option<(usize, usize)> {
+    let first = *runs.first()?;
+    let repeated = runs.iter().filter(|r| r.1 >= SATURATION_RUN).count() >= 2;
+    (first.1 >= long || repeated).then_some(first)
+}
+
+/// Shortest flat run at a channel's extreme that counts, when it recurs.
+pub(super) const SATURATION_RUN: usize = 3;
+
+/// Checks that dimensionless samples can be fitted: finite, not saturated, oscillating at the natural
+/// half period π (in τ) above the noise for at least [`MIN_HALF_CYCLES`] half cycles.
+pub fn screen(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<Screening, NotAnalysable> {
+    for (name, c) in [("time", tau), ("displacement", y), ("velocity", ydot)] {
+        if let Some(i) = c.iter().position(|v| !v.is_finite()) {
+            return Err(NotAnalysable::NonFinite {
+                what: format!("{name} is {} at sample {i}", c[i]),
+            });
+        }
+    }
+    let n = tau.len().min(y.len()).min(ydot.len());
+    if n < 8 {
+        return Err(NotAnalysable::NoOscillation {
+            reason: format!("only {n} samples"),
+        });
+    }
+    let (tau, y, ydot) = (&tau[..n], &y[..n], &ydot[..n]);
+    let vmax = ydot.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    // A displacement flat at its extreme while the velocity says the pin moves fast (not the
+    // magnet's hold before the release, when both are still).
+    let moving = |i: usize| ydot[i].abs() > 0.05 * vmax;
+    // A long run: a fortieth of a cycle (9 samples at the rig's 10 kHz), at least 6.
+    let dtau = (tau[n - 1] - tau[0]) / (n - 1) as f64;
+    let long = ((2.0 * PI / dtau / 40.0).ceil() as usize).max(6);
+    if let Some((sample, samples)) = saturated(&flat_extreme_runs(y, moving), long) {
+        return Err(NotAnalysable::Saturated {
+            channel: "displacement",
+            sample,
+            samples,
+        });
+    }
+    if let Some((sample, samples)) = saturated(&flat_extreme_runs(ydot, |i| ydot[i] != 0.0), long) {
+        return Err(NotAnalysable::Saturated {
+            channel: "velocity",
+            sample,
+            samples,
+        });
+    }
+    let a = mark_crandall(y, ydot);
+    let noise = noise_sigma(&a).unwrap_or(0.0);
+    // Extrema: displacement (signed) at each velocity sign change, at least π/8 apart (the noise
+    // dithers the sign of the velocity about each reversal). A half cycle swings from one side to
+    // the other by more than 10 × the noise; after the stop the noise only dithers about the rest
+    // position.
+    let mut ext: Vec<(f64, f64)> = Vec::new();
+    for i in 1..n {
+        let (p, q) = (ydot[i - 1], ydot[i]);
+        if (p > 0.0 && q <= 0.0) || (p < 0.0 && q >= 0.0) {
+            let j = if p.abs() < q.abs() { i - 1 } else { i };
+            if ext.last().is_none_or(|e| tau[j] - e.0 >= PI / 8.0) {
+                ext.push((tau[j], y[j]));
+            }
+        }
+    }
+    // A record that starts at rest (the release) starts at an extremum.
+    if ydot[0].abs() <= 0.05 * vmax && ext.first().is_none_or(|e| e.0 - tau[0] >= PI / 8.0) {
+        ext.insert(0, (tau[0], y[0]));
+    }
+    // The swing is a displacement: compare it with the displacement's own noise (the envelope's
+    // mixes in the velocity's, and a large ripple when the rig constants are wrong).
+    let level = 10.0 * noise_sigma(y).unwrap_or(0.0);
+    let (mut regular, mut significant) = (0usize, Vec::new());
+    for w in ext.windows(2) {
+        let swing = (w[1].1 - w[0].1).abs();
+        if swing > level && swing > 0.0 && w[0].1 * w[1].1 < 0.0 {
+            let dt = w[1].0 - w[0].0;
+            significant.push(dt);
+            if (0.5 * PI..=2.0 * PI).contains(&dt) {
+                regular += 1;
+            }
+        }
+    }
+    if regular == 0 {
+        let reason = if significant.is_empty() {
+            if vmax == 0.0 {
+                "the velocity is zero throughout: the pin never moves".to_string()
+            } else {
+                "no swing of the displacement from one side to the other rises above 10 × the \
+                 noise"
+                    .to_string()
+            }
+        } else {
+            significant.sort_by(f64::total_cmp);
+            let med = significant[significant.len() / 2];
+            format!(
+                "the extrema are {:.2} natural half periods apart, not one: check the rig \
+                 constants (mass_kg, stiffness_n_per_m)",
+                med / PI
+            )
+        };
+        return Err(NotAnalysable::NoOscillation { reason });
+    }
+    if regular < MIN_HALF_CYCLES {
+        return Err(NotAnalysable::TooFewHalfCycles {
+            found: regular,
+            need: MIN_HALF_CYCLES,
+        });
+    }
+    Ok(Screening {
+        half_cycles: regular,
+        envelope_noise: noise,
+    })
+}
