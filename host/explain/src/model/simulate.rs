@@ -1,0 +1,176 @@
+//! Simulating a model over the record's time axis, and the gap between the two.
+
+use super::*;
+
+/// Simulated channels of a model on the record's grid.
+#[derive(Debug, Clone)]
+pub struct Simulated {
+    /// y at every sample.
+    pub y: Vec<f64>,
+    /// y' at every sample.
+    pub ydot: Vec<f64>,
+    /// Force `F/N` as the force channel would read it (low-pass, delay), every sample.
+    pub f_meas: Vec<f64>,
+}
+
+/// Length of the τ segments over which a drifting Coulomb level is held constant (and the
+/// temperature averaged).
+pub const THERMAL_SEGMENT: f64 = 0.5;
+
+/// Integration steps allowed per radian of τ at amplitudes up to 2.5 (proportionally more above;
+/// a well-behaved law needs about ten at rtol 1e-8);
+/// beyond, the candidate is rejected as too stiff.
+pub(super) const STEPS_PER_RAD: f64 = 60.0;
+
+pub(super) fn steps_used_check(
+    _sim: &Simulator,
+    used: usize,
+    budget: usize,
+) -> Result<(), ExplainError> {
+    if used > budget {
+        Err(ExplainError::Candidate(format!(
+            "simulation needs more than {budget} steps (stiff parameters)"
+        )))
+    } else {
+        Ok(())
+    }
+}
+
+/// Simulates the model `spec`/`p` on the prepared record's grid.
+pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulated, ExplainError> {
+    if !spec.in_range(p) {
+        return Err(ExplainError::Candidate("parameters out of range".into()));
+    }
+    let span = data.tau.last().copied().unwrap_or(0.0);
+    // Stiffness of memory laws grows with the velocity scale, i.e. with the amplitude.
+    let budget = (STEPS_PER_RAD * (data.a0 / 2.5).max(1.0) * span) as usize + 2000;
+    let kappa = spec
+        .effect_params(Effect::CubicStiffness, p)
+        .map_or(0.0, |k| k[0]);
+    let mu_a = spec.apparatus_mu1(p);
+    let model_at = |dmu0: f64| {
+        Model::new(spec.law(p, dmu0))
+            .with_cubic(kappa)
+            .with_apparatus_damping(mu_a)
+    };
+    let (y0, v0) = data.initial_state();
+    let (y0, v0) = (
+        y0 * (1.0 + spec.start_scale(p)),
+        v0 * (1.0 + spec.start_scale(p)),
+    );
+    let (y, ydot, f) = match (
+        spec.effect_params(Effect::ThermalDrift, p),
+        data.temp_seg.as_deref(),
+    ) {
+        (Some(g), Some(tseg)) => {
+            let gamma = g[0];
+            let t0 = tseg[0];
+            let dmu = |k: usize| gamma * (tseg[k.min(tseg.len() - 1)] - t0);
+            let model = model_at(dmu(0));
+            model.validate()?;
+            let mut sim = Simulator::new(model, y0, v0, data.method);
+            let mut seg = 0usize;
+            let mut seg_end = THERMAL_SEGMENT;
+            let mut prior = 0usize;
+            let n = data.tau.len();
+            let (mut y, mut yd, mut f) = (
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+            );
+            for &t in &data.tau {
+                while t > seg_end {
+                    let s = sim.step_to(seg_end)?;
+                    prior += sim.steps();
+                    seg += 1;
+                    let m = model_at(dmu(seg));
+                    m.validate()?;
+                    sim = Simulator::with_state(m, seg_end, [s.y, s.ydot, s.z], data.method);
+                    seg_end += THERMAL_SEGMENT;
+                }
+                let s = sim.step_to(t)?;
+                steps_used_check(&sim, prior + sim.steps(), budget)?;
+                y.push(s.y);
+                yd.push(s.ydot);
+                f.push(s.f);
+            }
+            (y, yd, f)
+        }
+        _ => {
+            let model = model_at(0.0);
+            model.validate()?;
+            let mut sim = Simulator::new(model, y0, v0, data.method);
+            let n = data.tau.len();
+            let (mut y, mut yd, mut f) = (
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+            );
+            for &t in &data.tau {
+                let s = sim.step_to(t)?;
+                steps_used_check(&sim, sim.steps(), budget)?;
+                y.push(s.y);
+                yd.push(s.ydot);
+                f.push(s.f);
+            }
+            (y, yd, f)
+        }
+    };
+    let mut fm = match data.force_cutoff_hz {
+        Some(fc) => butterworth2(&f, fc, data.rate_hz),
+        None => f,
+    };
+    if let Some(d) = spec.effect_params(Effect::SensorLag, p) {
+        fm = delay(&fm, d[0] / data.dtau);
+    }
+    Ok(Simulated {
+        y,
+        ydot,
+        f_meas: fm,
+    })
+}
+
+/// Residuals of a simulation against the record: `(envelope, force)`, both divided by the
+/// initial amplitude (forces in units of N, i.e. relative to the initial spring force `k x0`).
+pub fn residuals(data: &Prepared, sim: &Simulated) -> (Vec<f64>, Vec<f64>) {
+    let env: Vec<f64> = data
+        .env_idx
+        .iter()
+        .zip(&data.a_meas)
+        .map(|(&i, &m)| (sim.y[i].hypot(sim.ydot[i]) - m) / data.a0)
+        .collect();
+    let force = match &data.f_meas {
+        Some(fm) => data
+            .f_idx
+            .iter()
+            .map(|&i| (sim.f_meas[i] - fm[i]) / data.a0)
+            .collect(),
+        None => Vec::new(),
+    };
+    (env, force)
+}
+
+/// Root mean square (0 for an empty slice).
+pub fn rms(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        0.0
+    } else {
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+    }
+}
+
+/// The gap: `√(gap_env² + gap_force²)`, each the RMS of its block of [`residuals`].
+pub fn gap_of(env: &[f64], force: &[f64]) -> f64 {
+    rms(env).hypot(rms(force))
+}
+
+/// Weighted residual vector minimised by the fits: each block divided by `√n`, so that
+/// `Σ r² = gap²`.
+pub fn weighted(env: &[f64], force: &[f64]) -> Vec<f64> {
+    let we = 1.0 / (env.len().max(1) as f64).sqrt();
+    let wf = 1.0 / (force.len().max(1) as f64).sqrt();
+    env.iter()
+        .map(|r| r * we)
+        .chain(force.iter().map(|r| r * wf))
+        .collect()
+}

@@ -1,0 +1,278 @@
+//! What a model of the record is: the base law and the effects added to it ([`Effect`], [`Spec`]).
+
+use super::*;
+
+/// A physical effect the base law may be missing (names as in the JSON output).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Effect {
+    /// Next pseudo-polynomial term (`μ2 y'² sgn(y')` on a Coulomb–viscous base).
+    QuadraticVelocity,
+    /// Exponential Stribeck rise at low sliding speed: static level `μ_s`, speed `v_s` (δ = 2).
+    Stribeck,
+    /// Friction with memory: the friction force relaxes towards the steady law with a memory time
+    /// `T` (a first-order lag; [`FrictionLaw::Lagged`]).
+    FrictionalLag,
+    /// Cubic spring `κ y³` (SI `k3 x³`).
+    CubicStiffness,
+    /// Coulomb level following the temperature channel: `μ0 + γ (T(t) − T(0))`.
+    ThermalDrift,
+    /// Force channel delayed by `τ_d` relative to the vibrometer.
+    SensorLag,
+}
+
+impl Effect {
+    /// Every effect of the vocabulary.
+    pub const ALL: [Effect; 6] = [
+        Effect::QuadraticVelocity,
+        Effect::Stribeck,
+        Effect::FrictionalLag,
+        Effect::CubicStiffness,
+        Effect::ThermalDrift,
+        Effect::SensorLag,
+    ];
+
+    /// JSON name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Effect::QuadraticVelocity => "quadratic-velocity",
+            Effect::Stribeck => "stribeck",
+            Effect::FrictionalLag => "frictional-lag",
+            Effect::CubicStiffness => "cubic-stiffness",
+            Effect::ThermalDrift => "thermal-drift",
+            Effect::SensorLag => "sensor-lag",
+        }
+    }
+
+    /// Parses a JSON name.
+    pub fn from_name(s: &str) -> Option<Effect> {
+        Effect::ALL.into_iter().find(|e| e.name() == s)
+    }
+
+    /// Number of parameters the effect adds.
+    pub fn n_params(&self) -> usize {
+        match self {
+            Effect::Stribeck => 2,
+            _ => 1,
+        }
+    }
+
+    /// Dimensionless parameter names (in parameter-vector order).
+    pub fn param_names(&self) -> &'static [&'static str] {
+        match self {
+            Effect::QuadraticVelocity => &["mu_next"],
+            Effect::Stribeck => &["mu_s", "v_s"],
+            Effect::FrictionalLag => &["memory_tau"],
+            Effect::CubicStiffness => &["kappa"],
+            Effect::ThermalDrift => &["dmu0_dT_per_c"],
+            Effect::SensorLag => &["delay_tau"],
+        }
+    }
+}
+
+/// Model structure: base polynomial powers plus effects.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spec {
+    /// Powers `j` of the fitted base constants `μ_j` (e.g. `[0, 1]` for Coulomb–viscous).
+    pub powers: Vec<usize>,
+    /// Added effects, in the order they were added.
+    pub effects: Vec<Effect>,
+    /// Whether the apparatus damping `μ_a` is a parameter (records with a force channel).
+    pub apparatus: bool,
+}
+
+impl Spec {
+    /// A base law without effects.
+    pub fn base(powers: Vec<usize>) -> Spec {
+        Spec {
+            powers,
+            effects: Vec::new(),
+            apparatus: false,
+        }
+    }
+
+    /// Number of parameters.
+    pub fn n_params(&self) -> usize {
+        self.powers.len()
+            + 1
+            + usize::from(self.apparatus)
+            + self.effects.iter().map(|e| e.n_params()).sum::<usize>()
+    }
+
+    /// Highest polynomial power of the law (base plus any quadratic-velocity terms).
+    pub fn order(&self) -> usize {
+        self.powers.iter().copied().max().unwrap_or(0) + self.count(Effect::QuadraticVelocity)
+    }
+
+    pub(super) fn count(&self, e: Effect) -> usize {
+        self.effects.iter().filter(|&&x| x == e).count()
+    }
+
+    /// True if the effect is present.
+    pub fn has(&self, e: Effect) -> bool {
+        self.count(e) > 0
+    }
+
+    /// Whether `e` can be added (each effect once, except further polynomial terms up to order
+    /// 4; Stribeck needs a law of order ≤ 1 with a Coulomb term and a polynomial term cannot be
+    /// added on top of it; sensor lag needs a force channel, thermal drift a temperature).
+    pub fn can_add(&self, e: Effect, has_force: bool, has_temp: bool) -> bool {
+        let coulomb = self.powers.contains(&0);
+        match e {
+            Effect::QuadraticVelocity => self.order() < 4 && !self.has(Effect::Stribeck),
+            Effect::Stribeck => !self.has(e) && self.order() <= 1 && coulomb,
+            Effect::FrictionalLag => !self.has(e),
+            Effect::CubicStiffness => !self.has(e),
+            Effect::ThermalDrift => !self.has(e) && has_temp && coulomb,
+            Effect::SensorLag => !self.has(e) && has_force,
+        }
+    }
+
+    /// The spec with `e` added.
+    pub fn with(&self, e: Effect) -> Spec {
+        let mut s = self.clone();
+        s.effects.push(e);
+        s
+    }
+
+    /// Offset of the first parameter of the `i`-th effect.
+    pub fn offset(&self, i: usize) -> usize {
+        self.powers.len()
+            + 1
+            + usize::from(self.apparatus)
+            + self.effects[..i]
+                .iter()
+                .map(|e| e.n_params())
+                .sum::<usize>()
+    }
+
+    /// Parameters of effect `e` (first occurrence) in `p`.
+    pub fn effect_params<'a>(&self, e: Effect, p: &'a [f64]) -> Option<&'a [f64]> {
+        let i = self.effects.iter().position(|&x| x == e)?;
+        let o = self.offset(i);
+        p.get(o..o + e.n_params())
+    }
+
+    /// `μ_j` of the polynomial part (base plus added terms), in order of `j`.
+    pub fn mu(&self, p: &[f64]) -> Vec<f64> {
+        let mut mu = vec![0.0; self.order() + 1];
+        for (i, &j) in self.powers.iter().enumerate() {
+            mu[j] = p[i];
+        }
+        let mut next = self.powers.iter().copied().max().unwrap_or(0);
+        for (i, e) in self.effects.iter().enumerate() {
+            if *e == Effect::QuadraticVelocity {
+                next += 1;
+                mu[next] = p[self.offset(i)];
+            }
+        }
+        mu
+    }
+
+    /// Whether `p` is in the range the workflow explores (keeps the integrator out of stiff or
+    /// meaningless corners: Stribeck speed ≥ 0.02, memory time in [0.01, 3] rad, |κ| ≤ 0.05,
+    /// delay in [0, 3] rad).
+    pub fn in_range(&self, p: &[f64]) -> bool {
+        if p.len() != self.n_params() || p.iter().any(|v| !v.is_finite()) {
+            return false;
+        }
+        self.effects.iter().all(|&e| {
+            let q = self.effect_params(e, p).unwrap_or(&[]);
+            match e {
+                Effect::Stribeck => q[0] > 0.0 && (0.02..=10.0).contains(&q[1]),
+                Effect::FrictionalLag => (0.01..=3.0).contains(&q[0]),
+                Effect::CubicStiffness => q[0].abs() <= 0.05,
+                Effect::SensorLag => (0.0..=3.0).contains(&q[0]),
+                Effect::QuadraticVelocity | Effect::ThermalDrift => true,
+            }
+        }) && self.mu(p).iter().all(|m| m.abs() < 1.0)
+            && self.start_scale(p).abs() < 0.1
+            && (-0.01..=0.1).contains(&self.apparatus_mu1(p))
+    }
+
+    /// The initial amplitude's relative correction `s` in `p`.
+    pub fn start_scale(&self, p: &[f64]) -> f64 {
+        p.get(self.powers.len()).copied().unwrap_or(0.0)
+    }
+
+    /// The apparatus damping `μ_a` in `p` (0 when not a parameter).
+    pub fn apparatus_mu1(&self, p: &[f64]) -> f64 {
+        if self.apparatus {
+            p.get(self.powers.len() + 1).copied().unwrap_or(0.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// `p` of the law's constants followed by a zero initial correction and apparatus damping (a
+    /// start for a fit).
+    pub fn start(&self, law_params: &[f64]) -> Vec<f64> {
+        let mut p = law_params.to_vec();
+        p.push(0.0);
+        if self.apparatus {
+            p.push(0.0);
+        }
+        p
+    }
+
+    /// Typical magnitude of every parameter (finite-difference steps near 0).
+    pub fn scales(&self) -> Vec<f64> {
+        let mut s = vec![1e-3; self.powers.len() + 1 + usize::from(self.apparatus)];
+        for e in &self.effects {
+            s.extend_from_slice(match e {
+                Effect::QuadraticVelocity => &[1e-3][..],
+                Effect::Stribeck => &[1e-3, 0.03][..],
+                Effect::FrictionalLag => &[0.1][..],
+                Effect::CubicStiffness => &[1e-4][..],
+                Effect::ThermalDrift => &[1e-5][..],
+                Effect::SensorLag => &[0.01][..],
+            });
+        }
+        s
+    }
+
+    /// Names of every parameter (dimensionless), in vector order.
+    pub fn param_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.powers.iter().map(|j| format!("mu{j}")).collect();
+        names.push("start_scale".into());
+        if self.apparatus {
+            names.push("apparatus_mu1".into());
+        }
+        let mut next = self.powers.iter().copied().max().unwrap_or(0);
+        for e in &self.effects {
+            if *e == Effect::QuadraticVelocity {
+                next += 1;
+                names.push(format!("mu{next}"));
+            } else {
+                names.extend(e.param_names().iter().map(|s| s.to_string()));
+            }
+        }
+        names
+    }
+
+    /// The friction law with the Coulomb level shifted by `dmu0` (thermal drift).
+    pub fn law(&self, p: &[f64], dmu0: f64) -> FrictionLaw {
+        let mut mu = self.mu(p);
+        if let Some(m0) = mu.first_mut() {
+            *m0 += dmu0;
+        }
+        let mu0 = mu.first().copied().unwrap_or(0.0);
+        let mu1 = mu.get(1).copied().unwrap_or(0.0);
+        let steady = match self.effect_params(Effect::Stribeck, p) {
+            Some(s) => FrictionLaw::Stribeck {
+                mu_c: mu0,
+                mu_s: s[0] + dmu0,
+                v_s: s[1],
+                delta: 2.0,
+                mu_v: mu1,
+            },
+            None => FrictionLaw::Polynomial { mu },
+        };
+        match self.effect_params(Effect::FrictionalLag, p) {
+            Some(m) => FrictionLaw::Lagged {
+                steady: Box::new(steady),
+                memory: m[0],
+            },
+            None => steady,
+        }
+    }
+}
