@@ -183,29 +183,56 @@ impl SensorModel {
     }
 }
 
-/// Causal 2nd-order Butterworth low-pass (bilinear transform with pre-warping).
-pub fn butterworth2(x: &[f64], cutoff_hz: f64, rate_hz: f64) -> Vec<f64> {
-    let fc = cutoff_hz.min(0.49 * rate_hz);
-    let k = (std::f64::consts::PI * fc / rate_hz).tan();
-    let q = std::f64::consts::FRAC_1_SQRT_2;
-    let norm = 1.0 / (1.0 + k / q + k * k);
-    let b0 = k * k * norm;
-    let b1 = 2.0 * b0;
-    let b2 = b0;
-    let a1 = 2.0 * (k * k - 1.0) * norm;
-    let a2 = (1.0 - k / q + k * k) * norm;
-    let mut y = Vec::with_capacity(x.len());
-    let x0 = x.first().copied().unwrap_or(0.0);
-    let (mut x1, mut x2, mut y1, mut y2) = (x0, x0, x0, x0);
-    for &xi in x {
-        let yi = b0 * xi + b1 * x1 + b2 * x2 - a1 * y1 - a2 * y2;
-        x2 = x1;
-        x1 = xi;
-        y2 = y1;
-        y1 = yi;
-        y.push(yi);
+/// 2nd-order Butterworth low-pass (bilinear transform with pre-warping, cut-off at most 0.49 of
+/// the rate), streaming: one sample in, one out. The charge amplifier's filter, for the records
+/// ([`butterworth2`]) and the virtual rig's force channel alike.
+#[derive(Debug, Clone)]
+pub struct Butterworth2 {
+    b: [f64; 3],
+    a: [f64; 2],
+    x: [f64; 2],
+    y: [f64; 2],
+}
+
+impl Butterworth2 {
+    /// A filter at rest at zero.
+    pub fn new(cutoff_hz: f64, rate_hz: f64) -> Butterworth2 {
+        let fc = cutoff_hz.min(0.49 * rate_hz);
+        let k = (std::f64::consts::PI * fc / rate_hz).tan();
+        let q = std::f64::consts::FRAC_1_SQRT_2;
+        let norm = 1.0 / (1.0 + k / q + k * k);
+        let b0 = k * k * norm;
+        Butterworth2 {
+            b: [b0, 2.0 * b0, b0],
+            a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm],
+            x: [0.0; 2],
+            y: [0.0; 2],
+        }
     }
-    y
+
+    /// Settles the filter at a constant input `v` (its output then stays `v`).
+    pub fn reset(&mut self, v: f64) {
+        self.x = [v; 2];
+        self.y = [v; 2];
+    }
+
+    /// Filters the next sample.
+    pub fn step(&mut self, x: f64) -> f64 {
+        let y = self.b[0] * x + self.b[1] * self.x[0] + self.b[2] * self.x[1]
+            - self.a[0] * self.y[0]
+            - self.a[1] * self.y[1];
+        self.x = [x, self.x[0]];
+        self.y = [y, self.y[0]];
+        y
+    }
+}
+
+/// Causal 2nd-order Butterworth low-pass of a whole signal ([`Butterworth2`], settled at its first
+/// value).
+pub fn butterworth2(x: &[f64], cutoff_hz: f64, rate_hz: f64) -> Vec<f64> {
+    let mut f = Butterworth2::new(cutoff_hz, rate_hz);
+    f.reset(x.first().copied().unwrap_or(0.0));
+    x.iter().map(|&v| f.step(v)).collect()
 }
 
 /// Delays a uniformly sampled signal by `d` samples (linear interpolation, first value held).

@@ -85,7 +85,7 @@ impl SampleSource for SimHardware {
         if let Some(t) = &mut self.truth {
             t.clear();
         }
-        self.force_lp = Biquad::lowpass(self.cfg.force_cutoff_hz, self.rate_hz);
+        self.force_lp = Butterworth2::new(self.cfg.force_cutoff_hz, self.rate_hz);
         self.force_lp.reset(self.last.2);
         self.force_delay.clear();
         Some(clock)

@@ -29,48 +29,10 @@ use tribo_firmware::hal::*;
 use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::thermocouple::{self, sr, Registers};
 use tribo_firmware::wire::{ChannelCal, Configure, CHANNELS};
-use tribo_physics::sensor::Rng;
+use tribo_physics::sensor::{Butterworth2, Rng};
 use tribo_physics::{FrictionLaw, Method, Model, Rig, Simulator};
 
 mod hal;
-
-/// 2nd-order Butterworth low-pass (bilinear transform), streaming.
-#[derive(Debug, Clone)]
-struct Biquad {
-    b: [f64; 3],
-    a: [f64; 2],
-    x: [f64; 2],
-    y: [f64; 2],
-}
-
-impl Biquad {
-    fn lowpass(cutoff_hz: f64, rate_hz: f64) -> Biquad {
-        let k = (std::f64::consts::PI * (cutoff_hz / rate_hz).min(0.49)).tan();
-        let q = std::f64::consts::FRAC_1_SQRT_2;
-        let norm = 1.0 / (1.0 + k / q + k * k);
-        let b0 = k * k * norm;
-        Biquad {
-            b: [b0, 2.0 * b0, b0],
-            a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm],
-            x: [0.0; 2],
-            y: [0.0; 2],
-        }
-    }
-
-    fn reset(&mut self, v: f64) {
-        self.x = [v; 2];
-        self.y = [v; 2];
-    }
-
-    fn step(&mut self, x: f64) -> f64 {
-        let y = self.b[0] * x + self.b[1] * self.x[0] + self.b[2] * self.x[1]
-            - self.a[0] * self.y[0]
-            - self.a[1] * self.y[1];
-        self.x = [x, self.x[0]];
-        self.y = [y, self.y[0]];
-        y
-    }
-}
 
 /// What can go wrong with the thermocouple and its converter (fault injection).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -155,7 +117,7 @@ pub struct SimHardware {
     /// Induced acquisition faults still to come in this run (device times).
     stall_at_us: Option<u64>,
     overrun_at_us: Option<u64>,
-    force_lp: Biquad,
+    force_lp: Butterworth2,
     /// Force samples waiting out the channel's lag.
     force_delay: std::collections::VecDeque<f64>,
     // User interface.
@@ -211,7 +173,7 @@ impl SimHardware {
             truth: None,
             stall_at_us: None,
             overrun_at_us: None,
-            force_lp: Biquad::lowpass(cfg.force_cutoff_hz, 10_000.0),
+            force_lp: Butterworth2::new(cfg.force_cutoff_hz, 10_000.0),
             force_delay: std::collections::VecDeque::new(),
             button: false,
             lamps: Lamps::default(),
@@ -523,29 +485,6 @@ impl SimHardware {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn butterworth_has_unit_dc_gain_and_minus_3_db_at_cutoff() {
-        let rate = 10_000.0;
-        let mut lp = Biquad::lowpass(300.0, rate);
-        let mut y = 0.0;
-        for _ in 0..2000 {
-            y = lp.step(1.0);
-        }
-        assert!((y - 1.0).abs() < 1e-9);
-        let mut lp = Biquad::lowpass(300.0, rate);
-        let mut peak = 0.0f64;
-        for i in 0..20_000 {
-            let y = lp.step((2.0 * std::f64::consts::PI * 300.0 * i as f64 / rate).sin());
-            if i > 10_000 {
-                peak = peak.max(y.abs());
-            }
-        }
-        assert!(
-            (peak - std::f64::consts::FRAC_1_SQRT_2).abs() < 0.01,
-            "{peak}"
-        );
-    }
 
     #[test]
     fn magnet_holds_until_released_and_remanence_delays_a_plain_switch_off() {
