@@ -33,13 +33,13 @@ use embassy_stm32::dac::{DacChannel, Value};
 use embassy_stm32::flash::{Async, Bank2Region, Flash};
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::mode::Blocking;
-use embassy_stm32::peripherals::{ADC1, DMA1_CH0, IWDG1, TIM1, TIM4, USB_OTG_FS};
+use embassy_stm32::peripherals::{ADC1, IWDG1, TIM1, TIM4, USB_OTG_FS};
 use embassy_stm32::spi::{self, Spi};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
+use embassy_stm32::usb;
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, dma, usb};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
@@ -57,16 +57,11 @@ use tribo_firmware::thermocouple::{self as tc, Registers};
 use tribo_firmware::watchdog::{task, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
 use tribo_firmware::wire::{limits, BootReport, ResetCause};
 
+use crate::irqs::Irqs;
 use crate::memory;
 use crate::safety;
 
 use crate::sampling::Sampler;
-
-bind_interrupts!(pub(crate) struct Irqs {
-    OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
-    FLASH => embassy_stm32::flash::InterruptHandler;
-    DMA1_STREAM0 => dma::InterruptHandler<DMA1_CH0>;
-});
 
 type Cs = CriticalSectionRawMutex;
 type UsbDriver = usb::Driver<'static, USB_OTG_FS>;

@@ -6,6 +6,8 @@
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod board;
 #[cfg(all(target_arch = "arm", target_os = "none"))]
+mod irqs;
+#[cfg(all(target_arch = "arm", target_os = "none"))]
 mod memory;
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod safety;

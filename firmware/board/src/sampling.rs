@@ -241,7 +241,7 @@ impl Sampler {
         // peripheral handle cannot create two live drivers of it.
         let ch = unsafe { self.dma.clone_unchecked() };
         let request = RxDma::<ADC1>::request(&*ch);
-        let channel = embassy_stm32::dma::Channel::new(ch, crate::board::Irqs);
+        let channel = embassy_stm32::dma::Channel::new(ch, crate::irqs::Irqs);
         // SAFETY: `DMA_RING` is zeroed, 'static, and given to this one ring buffer (the previous
         // one was dropped); the only other access to it is `DmaView`'s volatile reads, which never
         // form a reference. The peripheral address is ADC1's data register, read 16 bits at a time.
