@@ -1,0 +1,214 @@
+//! Fitting a model (base law plus effects) to a record: start points, parameters by name, standard
+//! errors.
+
+use super::*;
+
+/// Fits `spec` from each starting point, keeping the best.
+pub fn fit_spec(
+    data: &Prepared,
+    spec: &Spec,
+    starts: &[Vec<f64>],
+    max_iter: usize,
+) -> Option<FittedModel> {
+    let mut best: Option<FittedModel> = None;
+    for p0 in starts {
+        let scales = spec.scales();
+        // A difference step of 1e-3 of each parameter's scale: the default 1e-7 is below the
+        // resolution of the adaptive integrator and of the stick events on long records with
+        // Coulomb friction (a 1e-9 change of μ0 may move the final stop by a half cycle).
+        let lm = levenberg_marquardt_with(
+            |p| {
+                let s = simulate_spec(data, spec, p).ok()?;
+                let (e, f) = residuals(data, &s);
+                Some(weighted(&e, &f))
+            },
+            p0,
+            &LmOptions {
+                max_iter,
+                tol: 1e-5,
+                rel_step: 1e-3,
+                scales,
+            },
+        );
+        let Some(lm) = lm else { continue };
+        let Some(m) = evaluate(data, spec, &lm.p) else {
+            continue;
+        };
+        if best.as_ref().is_none_or(|b| m.gap < b.gap) {
+            best = Some(m);
+        }
+    }
+    best
+}
+
+/// Simulates and scores a model with given parameters.
+pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> {
+    let s = simulate_spec(data, spec, p).ok()?;
+    let (e, f) = residuals(data, &s);
+    let gap = gap_of(&e, &f);
+    if !gap.is_finite() {
+        return None;
+    }
+    Some(FittedModel {
+        effects: spec.effects.iter().map(|e| e.name().to_string()).collect(),
+        params: named_params(data, spec, p),
+        params_se: BTreeMap::new(),
+        gap,
+        gap_envelope: rms(&e),
+        gap_force: data.has_force().then(|| rms(&f)),
+        spec: spec.clone(),
+        p: p.to_vec(),
+        env_resid: e,
+        force_resid: f,
+    })
+}
+
+/// Standard errors of a fitted model's parameter vector: the Jacobian of the weighted residuals at
+/// the optimum and the HAC sandwich with the envelope and force channels as independent blocks
+/// (each channel's own correlation accounted for). `NaN` where they cannot be determined.
+pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
+    let r = weighted(&m.env_resid, &m.force_resid);
+    let ne = m.env_resid.len();
+    let blocks = [0..ne, ne..r.len()];
+    let scales = m.spec.scales();
+    jacobian(
+        |p| {
+            let s = simulate_spec(data, &m.spec, p).ok()?;
+            let (e, f) = residuals(data, &s);
+            Some(weighted(&e, &f))
+        },
+        &m.p,
+        &r,
+        1e-3,
+        &scales,
+    )
+    .and_then(|j| hac_covariance_blocks(&j, &r, &blocks))
+    .map(|c| standard_errors(&c))
+    .unwrap_or_else(|| vec![f64::NAN; m.p.len()])
+}
+
+/// Fills `params_se` of a fitted model.
+pub fn with_standard_errors(data: &Prepared, mut m: FittedModel) -> FittedModel {
+    let se = standard_errors_of(data, &m);
+    m.params_se = named_params(data, &m.spec, &se);
+    m
+}
+
+/// Parameters by name, with SI equivalents. (Every conversion is linear, so the same map of a
+/// vector of standard errors gives the standard errors of the named parameters.)
+pub fn named_params(data: &Prepared, spec: &Spec, p: &[f64]) -> BTreeMap<String, f64> {
+    let rig = data.rig;
+    let mut m = BTreeMap::new();
+    let mu = spec.mu(p);
+    let p_si = rig.p_of_mu(&mu);
+    for (j, (&a, &b)) in mu.iter().zip(&p_si).enumerate() {
+        m.insert(format!("mu{j}"), a);
+        m.insert(format!("p{j}_si"), b);
+    }
+    if spec.apparatus {
+        m.insert("apparatus_mu1".into(), spec.apparatus_mu1(p));
+    }
+    for e in &spec.effects {
+        m.extend(effect_params(data, spec, p, *e));
+    }
+    m
+}
+
+/// The named parameters of one effect of a fitted model (dimensionless and SI; linear in `p`).
+pub fn effect_params(data: &Prepared, spec: &Spec, p: &[f64], e: Effect) -> BTreeMap<String, f64> {
+    let rig = data.rig;
+    let mut m = BTreeMap::new();
+    let mu = spec.mu(p);
+    let Some(q) = spec.effect_params(e, p) else {
+        return m;
+    };
+    match e {
+        Effect::QuadraticVelocity => {
+            let j = spec.order();
+            let p_si = rig.p_of_mu(&mu);
+            m.insert(format!("mu{j}"), mu[j]);
+            m.insert(format!("p{j}_si"), p_si[j]);
+        }
+        Effect::Stribeck => {
+            m.insert("mu_s".into(), q[0]);
+            m.insert("v_s".into(), q[1]);
+            m.insert("v_s_m_s".into(), rig.v_of_ydot(q[1]));
+        }
+        Effect::FrictionalLag => {
+            m.insert("memory_tau".into(), q[0]);
+            m.insert("memory_s".into(), rig.t_of_tau(q[0]));
+        }
+        Effect::CubicStiffness => {
+            m.insert("kappa".into(), q[0]);
+            m.insert(
+                "k3_n_per_m3".into(),
+                q[0] * rig.stiffness_n_per_m.powi(3) / rig.load_n.powi(2),
+            );
+        }
+        Effect::ThermalDrift => {
+            m.insert("dmu0_dT_per_c".into(), q[0]);
+        }
+        Effect::SensorLag => {
+            m.insert("delay_tau".into(), q[0]);
+            m.insert("delay_s".into(), rig.t_of_tau(q[0]));
+        }
+    }
+    m
+}
+
+/// Starting points for `spec + e` from the current fit and the diagnostics.
+pub(super) fn starts_for(
+    data: &Prepared,
+    cur: &FittedModel,
+    e: Effect,
+    d: &diag::Diagnostics,
+) -> Vec<Vec<f64>> {
+    let mu = cur.spec.mu(&cur.p);
+    let mu0 = mu.first().copied().unwrap_or(0.01).abs().max(1e-4);
+    let with = |extra: &[f64]| {
+        let mut p = cur.p.clone();
+        p.extend_from_slice(extra);
+        p
+    };
+    match e {
+        Effect::QuadraticVelocity => {
+            let next = cur.spec.order() + 1;
+            let mut pw = cur.spec.powers.clone();
+            pw.extend(cur.spec.powers.iter().max().map_or(1, |m| m + 1)..=next);
+            let est = estimate_averaging(&data.tau, &data.y, &data.ydot, &pw)
+                .and_then(|v| v.last().copied())
+                .filter(|v| v.is_finite())
+                .unwrap_or(0.0);
+            vec![with(&[est]), with(&[0.0])]
+        }
+        Effect::Stribeck => vec![with(&[1.05 * mu0, 0.3]), with(&[1.5 * mu0, 0.15])],
+        Effect::FrictionalLag => {
+            let from_lag = d
+                .force_lag_s
+                .filter(|&l| l > 0.0)
+                .map(|l| data.rig.tau_of_t(l).clamp(0.02, 2.0))
+                .unwrap_or(0.3);
+            vec![with(&[from_lag]), with(&[0.1])]
+        }
+        Effect::CubicStiffness => {
+            let k = d.kappa_estimate.filter(|k| k.is_finite()).unwrap_or(0.0);
+            vec![with(&[k])]
+        }
+        Effect::ThermalDrift => vec![with(&[0.0])],
+        Effect::SensorLag => {
+            let l = d.force_lag_s.unwrap_or(0.0).max(0.0);
+            vec![with(&[data.rig.tau_of_t(l).max(0.2 * data.dtau)])]
+        }
+    }
+}
+
+/// Base law powers of a [`LawSpec`] (polynomial laws only).
+pub fn base_powers(base: LawSpec) -> Result<Vec<usize>, ExplainError> {
+    match base {
+        LawSpec::LuGre => Err(ExplainError::BaseLaw(
+            "the base law must be polynomial (coulomb, viscous, coulomb-viscous, quadratic, poly:N)"
+                .into(),
+        )),
+        b => Ok(b.powers()),
+    }
+}
