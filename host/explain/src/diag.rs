@@ -1,4 +1,4 @@
-//! Disagreement measures of a fitted base model (issue 7 step 1): envelope residual against
+//! Disagreement measures of a fitted base model: envelope residual against
 //! amplitude and time, windowed fits (thesis Tables 6–7), instantaneous frequency against
 //! amplitude, force-channel lag and dissipated energy, temperature drift.
 

@@ -1,4 +1,4 @@
-//! The discrepancy workflow of the oscillating tribometer (issue 7; thesis ch. 3.7 and 4).
+//! The discrepancy workflow of the oscillating tribometer (thesis ch. 3.7 and 4).
 //!
 //! A base friction law (Coulomb–viscous by default) is fitted to a record, simulated and compared
 //! with it on every channel the record has: the Mark & Crandall envelope (displacement and velocity)
