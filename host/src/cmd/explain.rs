@@ -1,5 +1,5 @@
 //! `tribo explain RECORD [--base LAW] [--json] [--report DIR]`: find where a friction law fails to
-//! explain a record, name the missing physics, add it and show the gap shrink The logic
+//! explain a record, name the missing physics, add it and show the gap shrink. The logic
 //! lives in the `tribo-explain` crate.
 
 use crate::exit::Incomplete;
