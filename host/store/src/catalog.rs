@@ -199,11 +199,12 @@ impl Cell {
         if n == 0 {
             return None;
         }
-        let mean = values.iter().sum::<f64>() / n as f64;
-        let sd = (n > 1).then(|| {
-            (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
-        });
-        Some(Cell { mean, sd, n })
+        let (mean, sd) = tribo_physics::stats::mean_sd(values);
+        Some(Cell {
+            mean,
+            sd: (n > 1).then_some(sd),
+            n,
+        })
     }
 }
 
