@@ -40,17 +40,7 @@ fn cause_code(c: ResetCause) -> u8 {
 }
 
 fn cause_of(code: u8) -> Option<ResetCause> {
-    Some(match code {
-        0 => ResetCause::PowerOn,
-        1 => ResetCause::Pin,
-        2 => ResetCause::Software,
-        3 => ResetCause::Watchdog,
-        4 => ResetCause::Panic,
-        5 => ResetCause::CpuFault,
-        6 => ResetCause::Brownout,
-        7 => ResetCause::Unknown,
-        _ => return None,
-    })
+    ResetCause::ALL.get(code as usize).copied()
 }
 
 fn crc_of(words: &[u32]) -> u32 {
@@ -217,16 +207,7 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    const ALL: [ResetCause; 8] = [
-        ResetCause::PowerOn,
-        ResetCause::Pin,
-        ResetCause::Software,
-        ResetCause::Watchdog,
-        ResetCause::Panic,
-        ResetCause::CpuFault,
-        ResetCause::Brownout,
-        ResetCause::Unknown,
-    ];
+    const ALL: [ResetCause; 8] = ResetCause::ALL;
 
     #[test]
     fn records_round_trip_and_damage_is_refused() {

@@ -100,16 +100,7 @@ fn fault_report() -> impl Strategy<Value = FaultReport> {
 }
 
 fn reset_cause() -> impl Strategy<Value = ResetCause> {
-    prop::sample::select(vec![
-        ResetCause::PowerOn,
-        ResetCause::Pin,
-        ResetCause::Software,
-        ResetCause::Watchdog,
-        ResetCause::Panic,
-        ResetCause::CpuFault,
-        ResetCause::Brownout,
-        ResetCause::Unknown,
-    ])
+    prop::sample::select(ResetCause::ALL.to_vec())
 }
 
 fn error_code() -> impl Strategy<Value = ErrorCode> {

@@ -410,16 +410,7 @@ pub fn magnet_hold_limit(cx: &mut Cx) -> Outcome {
 /// single-bit flip, erased RAM, a fill pattern, pseudo-random words; the boot report reads the
 /// record only when RAM was kept.
 pub fn reset_record(cx: &mut Cx) -> Outcome {
-    const ALL: [ResetCause; 8] = [
-        ResetCause::PowerOn,
-        ResetCause::Pin,
-        ResetCause::Software,
-        ResetCause::Watchdog,
-        ResetCause::Panic,
-        ResetCause::CpuFault,
-        ResetCause::Brownout,
-        ResetCause::Unknown,
-    ];
+    const ALL: [ResetCause; 8] = ResetCause::ALL;
     let msg =
         "panicked at src/heater.rs:212:9: index out of bounds: the len is 4 but the index is 9";
     for c in ALL {

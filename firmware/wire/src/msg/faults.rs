@@ -51,6 +51,20 @@ wire_type! {
     }
 }
 
+impl ResetCause {
+    /// Every cause, in the order of their codes in the reset record.
+    pub const ALL: [ResetCause; 8] = [
+        ResetCause::PowerOn,
+        ResetCause::Pin,
+        ResetCause::Software,
+        ResetCause::Watchdog,
+        ResetCause::Panic,
+        ResetCause::CpuFault,
+        ResetCause::Brownout,
+        ResetCause::Unknown,
+    ];
+}
+
 /// Longest message a [`BootReport`] carries.
 pub const BOOT_MESSAGE_LEN: usize = 120;
 
