@@ -1,7 +1,9 @@
 //! Project automation, run as `cargo xtask <task>`.
 //!
-//! * `cargo xtask firmware [--run]`: builds the release firmware ELF for `thumbv7em-none-eabihf` and
-//!   prints its flash and RAM use. Uses the rustup target when it is installed; otherwise Debian's
+//! * `cargo xtask firmware [--run | --clippy]`: builds the release firmware ELF for
+//!   `thumbv7em-none-eabihf` and prints its flash and RAM use (`--clippy`: lints the board binary and
+//!   the crates under it for the target instead, `-D warnings`; on the host the board is an empty
+//!   stub, so the workspace clippy does not see its code). Uses the rustup target when it is installed; otherwise Debian's
 //!   `rustc-web`/`cargo-web`/`rust-web-src`/`lld-22` with `RUSTC_BOOTSTRAP=1 -Z build-std=core`,
 //!   installing those packages first when they are missing and we may (root, apt-get present).
 //! * `cargo xtask target-test [FILTER]`: the on-target tests (`firmware/target-tests`): generates
@@ -25,7 +27,13 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 const BOARD: &str = "tribo-board";
 const TARGET_TESTS: &str = "tribo-target-tests";
 const PROFILE: &str = "firmware";
-const DEBIAN_PACKAGES: [&str; 4] = ["rustc-web", "cargo-web", "rust-web-src", "lld-22"];
+const DEBIAN_PACKAGES: [&str; 5] = [
+    "rustc-web",
+    "cargo-web",
+    "rust-web-src",
+    "lld-22",
+    "rust-web-clippy",
+];
 /// Least stack the AXI SRAM must leave after the static data (the stack grows down from its end).
 const MIN_STACK: u64 = 32 * 1024;
 
@@ -40,8 +48,10 @@ fn main() -> ExitCode {
             eprintln!(
                 "usage: cargo xtask <task>\n\n\
                  tasks:\n  \
-                 firmware [--run]   build the STM32H743 firmware ELF and print its size\n                     \
-                 (--run: flash it with probe-rs and show the defmt log)\n  \
+                 firmware [--run | --clippy]\n                     \
+                 build the STM32H743 firmware ELF and print its size\n                     \
+                 (--run: flash it with probe-rs and show the defmt log;\n                     \
+                 --clippy: lint the board and the crates under it for the target)\n  \
                  target-test [FILTER]\n                     \
                  run the on-target tests on an emulated Cortex-M7 (QEMU; Debian package\n                     \
                  qemu-system-arm); FILTER runs only the tests whose name contains it\n  \
@@ -114,6 +124,7 @@ fn ci() -> Result<(), String> {
     ]))?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     firmware(&[])?;
+    firmware(&["--clippy".to_string()])?;
     target_test(&[])?;
     windows::windows(&[])?;
     Ok(())
@@ -146,6 +157,7 @@ fn rustup_has_target(target: &str) -> bool {
 fn debian_ready() -> bool {
     Path::new("/usr/bin/cargo").exists()
         && Path::new("/usr/bin/rustc").exists()
+        && Path::new("/usr/bin/cargo-clippy").exists()
         && Path::new("/usr/lib/rustlib/src/rust/library/core").is_dir()
         && (Path::new("/usr/bin/rust-lld").exists() || Path::new("/usr/bin/ld.lld-22").exists())
 }
@@ -208,8 +220,13 @@ fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
                 .env("RUSTC_BOOTSTRAP", "1")
                 .env_remove("RUSTDOC")
                 .env_remove("RUSTC_WRAPPER")
-                .env_remove("CARGO");
-            c.args(["-Z", "build-std=core"]);
+                .env_remove("CARGO")
+                // `cargo clippy` finds `cargo-clippy` on the PATH: Debian's, beside this cargo,
+                // not rustup's proxy (which would lint with a toolchain that has no ARM `core`).
+                .env("PATH", debian_first_path());
+            // `-Z build-std=core` as configuration, so that it reaches the cargo that
+            // `cargo clippy` runs too (a `-Z` before the subcommand would stay with the outer one).
+            c.env("CARGO_UNSTABLE_BUILD_STD", "core");
             (c, dir)
         }
     };
@@ -217,10 +234,35 @@ fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
     (cmd, target_dir)
 }
 
+/// `PATH` with `/usr/bin` first.
+fn debian_first_path() -> std::ffi::OsString {
+    let rest = std::env::var_os("PATH").unwrap_or_default();
+    let mut dirs = vec![PathBuf::from("/usr/bin")];
+    dirs.extend(std::env::split_paths(&rest));
+    std::env::join_paths(dirs).unwrap_or(rest)
+}
+
 fn firmware(args: &[String]) -> Result<PathBuf, String> {
     let flash = args.iter().any(|a| a == "--run");
     let toolchain = pick_toolchain()?;
     let (mut cmd, target_dir) = cross_cargo(&toolchain);
+    if args.iter().any(|a| a == "--clippy") {
+        cmd.args([
+            "clippy",
+            "-p",
+            BOARD,
+            "--target",
+            TARGET,
+            "--profile",
+            PROFILE,
+        ]);
+        cmd.args(["--", "-D", "warnings"]);
+        run(&mut cmd).map_err(|e| {
+            format!("{e}\n  → the firmware has clippy findings for {TARGET} (listed above)")
+        })?;
+        println!("clippy: {BOARD} and the crates under it are clean for {TARGET}");
+        return Ok(target_dir);
+    }
     cmd.args([
         if flash { "run" } else { "build" },
         "-p",
