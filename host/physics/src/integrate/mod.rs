@@ -13,6 +13,13 @@
 use crate::invalid::InvalidParameter;
 use crate::model::Model;
 
+mod dopri;
+mod segment;
+mod trajectory;
+use dopri::*;
+use segment::*;
+pub use trajectory::*;
+
 /// Integration method.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Method {
@@ -79,101 +86,6 @@ pub struct State {
     pub f: f64,
     /// True once the pin has stuck for good (eq. 14).
     pub stuck: bool,
-}
-
-#[derive(Debug, Clone)]
-enum Segment {
-    /// Dense output of a Dormand–Prince step started at t0 with step h, valid to t1 ≤ t0 + h.
-    Dense {
-        t0: f64,
-        h: f64,
-        t1: f64,
-        rc: [[f64; 3]; 5],
-        dir: f64,
-    },
-    /// Cubic Hermite between two RK4 points.
-    Hermite {
-        t0: f64,
-        t1: f64,
-        s0: [f64; 3],
-        s1: [f64; 3],
-        f0: [f64; 3],
-        f1: [f64; 3],
-        dir: f64,
-    },
-}
-
-// Dormand–Prince 5(4) tableau.
-const A21: f64 = 1.0 / 5.0;
-const A31: f64 = 3.0 / 40.0;
-const A32: f64 = 9.0 / 40.0;
-const A41: f64 = 44.0 / 45.0;
-const A42: f64 = -56.0 / 15.0;
-const A43: f64 = 32.0 / 9.0;
-const A51: f64 = 19372.0 / 6561.0;
-const A52: f64 = -25360.0 / 2187.0;
-const A53: f64 = 64448.0 / 6561.0;
-const A54: f64 = -212.0 / 729.0;
-const A61: f64 = 9017.0 / 3168.0;
-const A62: f64 = -355.0 / 33.0;
-const A63: f64 = 46732.0 / 5247.0;
-const A64: f64 = 49.0 / 176.0;
-const A65: f64 = -5103.0 / 18656.0;
-const A71: f64 = 35.0 / 384.0;
-const A73: f64 = 500.0 / 1113.0;
-const A74: f64 = 125.0 / 192.0;
-const A75: f64 = -2187.0 / 6784.0;
-const A76: f64 = 11.0 / 84.0;
-const E1: f64 = 71.0 / 57600.0;
-const E3: f64 = -71.0 / 16695.0;
-const E4: f64 = 71.0 / 1920.0;
-const E5: f64 = -17253.0 / 339200.0;
-const E6: f64 = 22.0 / 525.0;
-const E7: f64 = -1.0 / 40.0;
-const D1: f64 = -12715105075.0 / 11282082432.0;
-const D3: f64 = 87487479700.0 / 32700410799.0;
-const D4: f64 = -10690763975.0 / 1880347072.0;
-const D5: f64 = 701980252875.0 / 199316789632.0;
-const D6: f64 = -1453857185.0 / 822651844.0;
-const D7: f64 = 69997945.0 / 29380423.0;
-
-#[inline]
-fn comb(s: &[f64; 3], terms: &[(f64, &[f64; 3])], h: f64) -> [f64; 3] {
-    let mut out = *s;
-    for (c, k) in terms {
-        for i in 0..3 {
-            out[i] += h * c * k[i];
-        }
-    }
-    out
-}
-
-fn dense_eval(rc: &[[f64; 3]; 5], th: f64) -> [f64; 3] {
-    let th1 = 1.0 - th;
-    let mut o = [0.0; 3];
-    for (i, oi) in o.iter_mut().enumerate() {
-        *oi = rc[0][i] + th * (rc[1][i] + th1 * (rc[2][i] + th * (rc[3][i] + th1 * rc[4][i])));
-    }
-    o
-}
-
-fn hermite(
-    s0: &[f64; 3],
-    s1: &[f64; 3],
-    f0: &[f64; 3],
-    f1: &[f64; 3],
-    h: f64,
-    th: f64,
-) -> [f64; 3] {
-    let h00 = (1.0 + 2.0 * th) * (1.0 - th) * (1.0 - th);
-    let h10 = th * (1.0 - th) * (1.0 - th);
-    let h01 = th * th * (3.0 - 2.0 * th);
-    let h11 = th * th * (th - 1.0);
-    let mut o = [0.0; 3];
-    for i in 0..3 {
-        o[i] = h00 * s0[i] + h10 * h * f0[i] + h01 * s1[i] + h11 * h * f1[i];
-    }
-    o
 }
 
 /// Stepping simulator of one model from one initial state.
@@ -312,37 +224,14 @@ impl Simulator {
         }
         loop {
             if let Some(seg) = &self.seg {
-                let (t0, t1) = match seg {
-                    Segment::Dense { t0, t1, .. } | Segment::Hermite { t0, t1, .. } => (*t0, *t1),
-                };
+                let (t0, t1) = seg.span();
                 if tau < t0 - 1e-12 * t0.abs().max(1.0) {
                     return Err(SimError::Run(format!(
                         "cannot step back to τ = {tau} (last step starts at {t0})"
                     )));
                 }
                 if tau <= t1 {
-                    let (s, dir) = match seg {
-                        Segment::Dense { t0, h, rc, dir, .. } => {
-                            (dense_eval(rc, ((tau - t0) / h).max(0.0)), *dir)
-                        }
-                        Segment::Hermite {
-                            t0,
-                            t1,
-                            s0,
-                            s1,
-                            f0,
-                            f1,
-                            dir,
-                        } => {
-                            let h = t1 - t0;
-                            let th = if h > 0.0 {
-                                ((tau - t0) / h).max(0.0)
-                            } else {
-                                1.0
-                            };
-                            (hermite(s0, s1, f0, f1, h, th), *dir)
-                        }
-                    };
+                    let (s, dir) = seg.at(tau);
                     return Ok(self.state_of(tau, s, dir));
                 }
             } else if tau <= self.t {
@@ -584,105 +473,10 @@ impl Simulator {
     }
 }
 
-/// The first θ in (0, 1] where `dir · v(θ)` turns negative on a dense-output polynomial.
-fn find_reversal(rc: &[[f64; 3]; 5], dir: f64) -> f64 {
-    let v = |th: f64| dir * dense_eval(rc, th)[1];
-    // Bracket: first of 16 sub-intervals where the sign turns.
-    let n = 16;
-    let mut lo = 0.0;
-    let mut hi = 1.0;
-    for i in 1..=n {
-        let th = i as f64 / n as f64;
-        if v(th) < 0.0 {
-            hi = th;
-            lo = (i - 1) as f64 / n as f64;
-            break;
-        }
-    }
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if v(mid) >= 0.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-        if hi - lo < 1e-16 {
-            break;
-        }
-    }
-    0.5 * (lo + hi)
-}
-
 fn check_finite(s: &[f64; 3], t: f64) -> Result<(), SimError> {
     if s.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
         Err(SimError::Run(format!("non-finite state at τ = {t}")))
     }
-}
-
-/// A sampled dimensionless trajectory.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Trajectory {
-    /// τ.
-    pub tau: Vec<f64>,
-    /// y.
-    pub y: Vec<f64>,
-    /// y'.
-    pub ydot: Vec<f64>,
-    /// Internal state z.
-    pub z: Vec<f64>,
-    /// Contact friction force f.
-    pub f: Vec<f64>,
-    /// τ at which the pin stuck for good, if it did within the record.
-    pub stop_tau: Option<f64>,
-    /// Velocity reversals `(τ, y)` within the record (discontinuous laws).
-    pub reversals: Vec<(f64, f64)>,
-}
-
-/// Simulates `model` from `(y0, ydot0)` and samples it at the increasing times `taus`.
-pub fn simulate(
-    model: &Model,
-    y0: f64,
-    ydot0: f64,
-    taus: &[f64],
-    method: Method,
-) -> Result<Trajectory, SimError> {
-    model.validate()?;
-    if !(y0.is_finite() && ydot0.is_finite()) {
-        return Err(SimError::Run("initial state must be finite".into()));
-    }
-    let mut sim = Simulator::new(model.clone(), y0, ydot0, method);
-    let mut tr = Trajectory {
-        tau: Vec::with_capacity(taus.len()),
-        y: Vec::with_capacity(taus.len()),
-        ydot: Vec::with_capacity(taus.len()),
-        z: Vec::with_capacity(taus.len()),
-        f: Vec::with_capacity(taus.len()),
-        ..Default::default()
-    };
-    for &t in taus {
-        let s = sim.step_to(t)?;
-        tr.tau.push(t);
-        tr.y.push(s.y);
-        tr.ydot.push(s.ydot);
-        tr.z.push(s.z);
-        tr.f.push(s.f);
-        if s.stuck && tr.stop_tau.is_none() {
-            tr.stop_tau = Some(sim.tau());
-        }
-    }
-    let end = taus.last().copied().unwrap_or(0.0);
-    tr.reversals = sim
-        .reversals()
-        .iter()
-        .copied()
-        .filter(|r| r.0 <= end)
-        .collect();
-    Ok(tr)
-}
-
-/// Uniform grid `0, dtau, 2 dtau, …` with `n` points.
-pub fn grid(n: usize, dtau: f64) -> Vec<f64> {
-    (0..n).map(|i| i as f64 * dtau).collect()
 }
