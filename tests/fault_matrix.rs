@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use tribo::link::session::{pull_run, record_run, Outcome};
 use tribo::link::Link;
-use tribo_rig::{AcquisitionFaults, LawConfig, VirtualRig, VirtualRigConfig};
+use tribo_rig::{AcquisitionFaults, VirtualRig, VirtualRigConfig};
 use tribo_store::log::{LogReader, HEADER_LEN};
 use tribo_store::Run;
 use tribo_wire::frame::decode_one;
@@ -38,7 +38,7 @@ use tribo_wire::{Configure, DeviceMsg, HostMsg};
 
 fn rig(mu0: f64, seed: u64) -> VirtualRig {
     VirtualRig::new(VirtualRigConfig {
-        law: LawConfig::CoulombViscous { mu0, mu1: 0.004 },
+        law: tribo_physics::FrictionLaw::coulomb_viscous(mu0, 0.004),
         seed,
         ..Default::default()
     })
@@ -377,10 +377,7 @@ fn lossy_link() {
 fn lost_header_events_result_and_end() {
     // A run with an acquisition gap (the reader stalls 300 ms), and ECR range changes.
     let cfg = VirtualRigConfig {
-        law: LawConfig::CoulombViscous {
-            mu0: 0.01,
-            mu1: 0.004,
-        },
+        law: tribo_physics::FrictionLaw::coulomb_viscous(0.01, 0.004),
         seed: 21,
         acquisition: AcquisitionFaults {
             stall_reader_after_ms: Some(600),
@@ -573,10 +570,7 @@ fn events_an_older_host_did_not_store_are_fetched_into_the_same_run() {
     // blocks, result and end (as tribo did before it stored run events): the pull recognises the
     // run as the rig's (same header) and adds the events, instead of taking it for another run.
     let cfg = VirtualRigConfig {
-        law: LawConfig::CoulombViscous {
-            mu0: 0.01,
-            mu1: 0.004,
-        },
+        law: tribo_physics::FrictionLaw::coulomb_viscous(0.01, 0.004),
         seed: 22,
         acquisition: AcquisitionFaults {
             stall_reader_after_ms: Some(500),

@@ -9,7 +9,7 @@ use host_common::*;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 use tribo::link::session::record_run;
-use tribo_rig::{AcquisitionFaults, LawConfig, ServeOptions, VirtualRig, VirtualRigConfig};
+use tribo_rig::{AcquisitionFaults, ServeOptions, VirtualRig, VirtualRigConfig};
 
 fn fit_args(record: &std::path::Path, longest: bool) -> tribo::cmd::fit::Args {
     tribo::cmd::fit::Args {
@@ -29,10 +29,7 @@ fn fit_args(record: &std::path::Path, longest: bool) -> tribo::cmd::fit::Args {
 #[test]
 fn a_stalled_reader_gives_a_stored_run_whose_gap_the_host_reports_and_will_not_fit_across() {
     let cfg = VirtualRigConfig {
-        law: LawConfig::CoulombViscous {
-            mu0: 0.01,
-            mu1: 0.004,
-        },
+        law: tribo_physics::FrictionLaw::coulomb_viscous(0.01, 0.004),
         seed: 21,
         acquisition: AcquisitionFaults {
             stall_reader_after_ms: Some(1200),

@@ -7,7 +7,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 use tribo::link::session::{record_run, Outcome, RunPlan};
 use tribo::link::{Address, Link};
-use tribo_rig::{LawConfig, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
+use tribo_rig::{ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
 use tribo_wire::{Configure, DeviceInfo};
 
 /// A virtual rig served on a local TCP port; it stops when this is dropped. Derefs to its address.
@@ -48,7 +48,7 @@ impl std::ops::Deref for RigOnTcp {
 /// fit should find.
 pub fn virtual_rig(mu0: f64, mu1: f64, seed: u64, speed: f64) -> (RigOnTcp, (f64, f64)) {
     let cfg = VirtualRigConfig {
-        law: LawConfig::CoulombViscous { mu0, mu1 },
+        law: tribo_physics::FrictionLaw::coulomb_viscous(mu0, mu1),
         seed,
         ..Default::default()
     };

@@ -528,10 +528,7 @@ fn with_button_the_run_starts_when_the_rig_button_is_pressed() {
 fn a_run_through_a_pseudo_terminal_goes_through_the_serial_port_code() {
     // `tribo rig --virtual --pty`: the host opens the terminal with the code that opens a USB rig.
     let cfg = tribo_rig::VirtualRigConfig {
-        law: tribo_rig::LawConfig::CoulombViscous {
-            mu0: 0.02,
-            mu1: 0.004,
-        },
+        law: tribo_physics::FrictionLaw::coulomb_viscous(0.02, 0.004),
         seed: 12,
         ..Default::default()
     };

@@ -81,8 +81,8 @@ fn truncated_log_keeps_every_whole_frame_and_says_what_was_cut() {
     std::fs::write(&log, &full[..5]).unwrap();
     let run = Run::open(&dir).unwrap();
     assert_eq!(run.block_count(), 0);
-    let e = tribo::load_record(&dir).unwrap_err();
-    assert!(e.0.contains("too short"), "{e}");
+    let e = tribo::exit::chain_text(&tribo::load_record(&dir).unwrap_err());
+    assert!(e.contains("too short"), "{e}");
 }
 
 #[test]
@@ -107,7 +107,10 @@ fn corrupt_log_is_an_error_naming_the_place_and_the_remedy_and_pull_salvage_repa
     );
     // `tribo fit RUN` shows the same sentence.
     let fe = tribo::load_record(&dir).unwrap_err();
-    assert!(fe.0.contains("corrupt at byte"), "{fe}");
+    // The run named, the store's own sentence as its source.
+    assert!(matches!(fe, tribo::load::LoadError::Run { .. }), "{fe:?}");
+    let fe = tribo::exit::chain_text(&fe);
+    assert!(fe.contains("corrupt at byte"), "{fe}");
     // Salvaging keeps every intact record: all but the damaged one, before and after it.
     let run = Run::open_salvage(&dir).unwrap();
     let hit_is_block = blocks_in_first(&bytes, &starts, 26) > blocks_in_first(&bytes, &starts, 25);

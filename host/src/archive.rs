@@ -23,27 +23,50 @@ pub fn find_run(store: &Path, serial: &str, run_id: u32) -> anyhow::Result<Optio
     Ok(None)
 }
 
+/// Why the host did not fit a stored run.
+#[derive(Debug, thiserror::Error)]
+pub enum HostFitError {
+    /// The rig lost samples: a fit across the gaps would be wrong.
+    #[error(
+        "the rig lost {lost} samples in {gaps} acquisition gap(s): not fitted across them; \
+         `tribo fit {flag} {}` fits the longest stretch without one",
+        dir.display(),
+        flag = crate::LONGEST_CLEAN_STRETCH_FLAG
+    )]
+    Gaps {
+        lost: u64,
+        gaps: usize,
+        dir: PathBuf,
+    },
+    /// The run's samples could not be read as a record.
+    #[error("the run's samples")]
+    Samples(#[source] tribo_store::StoreError),
+    /// The samples are not a record the fit can take.
+    #[error("the run's record")]
+    Record(#[source] tribo_physics::record::RecordError),
+    /// The fit failed.
+    #[error("the Coulomb–viscous fit")]
+    Fit(#[source] tribo_physics::identify::FitError),
+}
+
 /// The host's Coulomb–viscous fit of a run (Levenberg–Marquardt on the envelope).
-pub fn host_fit(run: &Run) -> Result<HostFit, String> {
+pub fn host_fit(run: &Run) -> Result<HostFit, HostFitError> {
     use tribo_physics::identify::{fit, FitOptions};
     if run.gaps().next().is_some() {
-        return Err(format!(
-            "the rig lost {} samples in {} acquisition gap(s): not fitted across them; \
-             `tribo fit {} {}` fits the longest stretch without one",
-            run.lost_samples(),
-            run.gaps().count(),
-            crate::LONGEST_CLEAN_STRETCH_FLAG,
-            run.dir().display()
-        ));
+        return Err(HostFitError::Gaps {
+            lost: run.lost_samples(),
+            gaps: run.gaps().count(),
+            dir: run.dir().to_path_buf(),
+        });
     }
-    let rec = run.record().map_err(|e| e.msg)?;
-    rec.validate().map_err(|e| e.0)?;
+    let rec = run.record().map_err(HostFitError::Samples)?;
+    rec.validate().map_err(HostFitError::Record)?;
     let r = fit(
         &rec,
         tribo_physics::LawSpec::CoulombViscous,
         &FitOptions::default(),
     )
-    .map_err(|e| e.to_string())?;
+    .map_err(HostFitError::Fit)?;
     Ok(HostFit {
         law: r.law.clone(),
         mu0: r.mu.first().copied().unwrap_or(f64::NAN),
@@ -66,7 +89,8 @@ pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
     if run.block_count() > 0 {
         match host_fit(run) {
             Ok(f) => results.host = Some(f),
-            Err(e) => results.host_error = Some(e),
+            // Kept in the run's results as a sentence, with its causes.
+            Err(e) => results.host_error = Some(crate::exit::chain_text(&e)),
         }
         // A record the physics cannot take (an unloaded run has no rig constants for it) has no
         // CSV export; the run itself is stored all the same.

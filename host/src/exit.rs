@@ -63,3 +63,15 @@ pub fn status_of(e: &anyhow::Error) -> Status {
         Status::Error
     }
 }
+
+/// An error and its causes on one line, `: `-joined (for a message stored or wrapped as text).
+pub fn chain_text(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        text.push_str(": ");
+        text.push_str(&c.to_string());
+        cause = c.source();
+    }
+    text
+}

@@ -9,9 +9,43 @@
 
 use serde::Serialize;
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use tribo_physics::record::{RecordError, RecordErrorKind, Units};
 use tribo_physics::{Record, Rig};
+use tribo_store::StoreError;
+
+/// Why a record could not be loaded from a path.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// A CSV file, or a run's samples, that is not a usable record.
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    /// A run folder the store cannot read.
+    #[error("cannot read the run {}", path.display())]
+    Run {
+        path: PathBuf,
+        #[source]
+        source: StoreError,
+    },
+    /// A record with holes, refused for a fit ([`Holes::Refuse`]); the message says where the
+    /// holes are and what to do.
+    #[error("{}: {message}", path.display())]
+    Holes { path: PathBuf, message: String },
+}
+
+impl LoadError {
+    /// A readable record with a NaN or infinite sample: it cannot be analysed.
+    pub fn is_non_finite(&self) -> bool {
+        matches!(self, LoadError::Record(e) if e.kind() == RecordErrorKind::NonFinite)
+    }
+}
+
+fn run_error(path: &Path) -> impl FnOnce(StoreError) -> LoadError + '_ {
+    move |source| LoadError::Run {
+        path: path.to_path_buf(),
+        source,
+    }
+}
 
 /// The flag that makes `tribo fit` / `tribo explain` fit the longest stretch without holes.
 pub const LONGEST_CLEAN_STRETCH_FLAG: &str = "--longest-clean-stretch";
@@ -19,17 +53,14 @@ pub const LONGEST_CLEAN_STRETCH_FLAG: &str = "--longest-clean-stretch";
 /// Loads a record: a directory is a run recorded by `tribo` (its samples in SI with its rig
 /// constants), anything else is a CSV file in the physics formats. Samples keep their times, so a
 /// run with holes gives a time axis with jumps (see [`load_for_fit`]).
-pub fn load_record(path: &Path) -> Result<Record, RecordError> {
+pub fn load_record(path: &Path) -> Result<Record, LoadError> {
     if path.is_dir() {
         let run = open_run(path)?;
-        let rec = run
-            .record()
-            .map_err(|e| RecordError(e.msg, RecordErrorKind::Invalid))?;
-        rec.validate()
-            .map_err(|e| RecordError(format!("{}: {}", path.display(), e.0), e.1))?;
+        let rec = run.record().map_err(run_error(path))?;
+        rec.validate().map_err(|e| e.in_file(path))?;
         return Ok(rec);
     }
-    Record::load(path)
+    Ok(Record::load(path)?)
 }
 
 /// What to do with a record that has holes.
@@ -44,12 +75,10 @@ pub enum Holes {
 }
 
 /// A record ready to fit: no holes, or the longest stretch without one.
-pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, RecordError> {
+pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
     let (rec, stretches, described) = if path.is_dir() {
         let run = open_run(path)?;
-        let rec = run
-            .record()
-            .map_err(|e| RecordError(e.msg, RecordErrorKind::Invalid))?;
+        let rec = run.record().map_err(run_error(path))?;
         let stretches = positions_of(&run)?;
         let described = describe_run_holes(&run);
         (rec, stretches, described)
@@ -60,8 +89,7 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, RecordError> {
         (rec, stretches, described)
     };
     if stretches.len() <= 1 {
-        rec.validate()
-            .map_err(|e| RecordError(format!("{}: {}", path.display(), e.0), e.1))?;
+        rec.validate().map_err(|e| e.in_file(path))?;
         return Ok(rec);
     }
     let longest = stretches
@@ -76,21 +104,23 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, RecordError> {
         }
     };
     match holes {
-        Holes::Refuse => Err(RecordError::invalid(format!(
-            "{}: {described}. A fit across a hole would treat the samples after it as if they \
+        Holes::Refuse => Err(LoadError::Holes {
+            path: path.to_path_buf(),
+            message: format!(
+                "{described}. A fit across a hole would treat the samples after it as if they \
              followed on at once. Pass {LONGEST_CLEAN_STRETCH_FLAG} to fit the longest stretch \
              without one ({}){}",
-            path.display(),
-            span(&longest),
-            if path.is_dir() {
-                format!(
-                    ", or, if blocks are missing, fetch them with `tribo pull {}`",
-                    path.display()
-                )
-            } else {
-                String::new()
-            }
-        ))),
+                span(&longest),
+                if path.is_dir() {
+                    format!(
+                        ", or, if blocks are missing, fetch them with `tribo pull {}`",
+                        path.display()
+                    )
+                } else {
+                    String::new()
+                }
+            ),
+        }),
         Holes::LongestCleanStretch => {
             eprintln!(
                 "note: {}: {described}; fitting the longest clean stretch ({}) of the {} stretches",
@@ -99,15 +129,14 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, RecordError> {
                 stretches.len()
             );
             let part = slice(&rec, longest);
-            part.validate()
-                .map_err(|e| RecordError(format!("{}: {}", path.display(), e.0), e.1))?;
+            part.validate().map_err(|e| e.in_file(path))?;
             Ok(part)
         }
     }
 }
 
-fn open_run(path: &Path) -> Result<tribo_store::Run, RecordError> {
-    let run = tribo_store::Run::open(path).map_err(|e| RecordError(e.msg, RecordErrorKind::Io))?;
+fn open_run(path: &Path) -> Result<tribo_store::Run, LoadError> {
+    let run = tribo_store::Run::open(path).map_err(run_error(path))?;
     if let Some(r) = &run.recovery {
         eprintln!("warning: {}: {r}", path.display());
     }
@@ -127,12 +156,14 @@ fn open_run(path: &Path) -> Result<tribo_store::Run, RecordError> {
 
 /// A record with a non-finite sample is read but cannot be analysed: that is
 /// [`crate::exit::Incomplete`] (status 3), not an error (status 1).
-fn analysable(r: Result<Record, RecordError>) -> anyhow::Result<Record> {
-    r.map_err(|e| match e.kind() {
-        RecordErrorKind::NonFinite => {
-            anyhow::Error::new(crate::exit::Incomplete(format!("not analysable: {}", e.0)))
+fn analysable(r: Result<Record, LoadError>) -> anyhow::Result<Record> {
+    r.map_err(|e| {
+        if e.is_non_finite() {
+            let said = crate::exit::chain_text(&e);
+            anyhow::Error::new(crate::exit::Incomplete(format!("not analysable: {said}")))
+        } else {
+            anyhow::Error::new(e)
         }
-        _ => anyhow::Error::new(e),
     })
 }
 
@@ -315,7 +346,7 @@ pub fn apply_rig_flags(
 
 /// The run's clean stretches as positions in its record (whose samples are the run's, in index
 /// order).
-fn positions_of(run: &tribo_store::Run) -> Result<Vec<Range<usize>>, RecordError> {
+fn positions_of(run: &tribo_store::Run) -> Result<Vec<Range<usize>>, LoadError> {
     let mut out = Vec::new();
     let mut pos = 0usize;
     for r in run.clean_stretches() {

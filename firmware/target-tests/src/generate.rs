@@ -103,7 +103,7 @@ pub fn configure(s: &Spec) -> Configure {
 
 /// The counts of a spec: the hold, then the simulated motion; five channels per sample.
 pub fn counts(s: &Spec, cfg: &Configure) -> Result<Vec<u8>, String> {
-    let rig = Rig::new(0.04, 1150.0, s.load_n)?;
+    let rig = Rig::new(0.04, 1150.0, s.load_n).map_err(|e| e.to_string())?;
     let model = Model::new(FrictionLaw::coulomb_viscous(s.mu0, s.mu1));
     let spec = RecordSpec {
         rig,

@@ -21,10 +21,3 @@ pub enum InvalidParameter {
     #[error("force cut-off must be > 0 Hz, got {0}")]
     ForceCutoff(f64),
 }
-
-/// For callers whose own errors are still messages (the virtual rig's start-up).
-impl From<InvalidParameter> for String {
-    fn from(e: InvalidParameter) -> String {
-        e.to_string()
-    }
-}

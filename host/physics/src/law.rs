@@ -10,10 +10,18 @@
 //! crossings as events, so the discontinuity is never integrated across.
 
 use crate::invalid::InvalidParameter;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+mod form;
 
 /// A friction law (dimensionless). Construct with the helpers ([`FrictionLaw::coulomb`], …) or the
-/// variants directly.
-#[derive(Debug, Clone, PartialEq)]
+/// variants directly; read from and written to configuration files with serde (a table with a
+/// `kind` and the constants: `{ kind = "coulomb_viscous", mu0 = 0.02, mu1 = 0.004 }`), validated as
+/// it is read; shown to people by
+/// [`Display`](fmt::Display) (`coulomb-viscous (mu0 = 0.02, mu1 = 0.004)`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "form::Form", into = "form::Form")]
 pub enum FrictionLaw {
     /// Pseudo-polynomial law of any order (eq. 12–13):
     /// `f = Σ_even μ_j |y'|^j sgn(y') + Σ_odd μ_j y'^j`, `mu[j] = μ_j`.
@@ -108,7 +116,8 @@ pub enum FrictionLaw {
 /// From SI (`σ0` N/m, `σ1`, `σ2` N s/m, forces `F_c`, `F_s` N, `v_s` m/s), use
 /// [`LuGre::from_si`]. (The thesis writes `dz/dt = v − |v| z / g` with `σ0 = 1 N/m`; this is the
 /// standard form, identical when `σ0 = 1`.)
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LuGre {
     /// Bristle stiffness `σ0_SI / k`.
     pub sigma0: f64,
@@ -130,7 +139,8 @@ pub struct LuGre {
 /// `f = σ0 s z + σ1 dz/dτ + μ_c sgn(y') (1 − s) + σ2 y'`, `dz/dτ = s (y' − σ0 |y'| z / g(y'))`,
 /// `g(v) = α0 + α1 exp(−(v/v_s)^2)`, where `s(|v|)` goes from 1 (|v| ≤ l1) to 0 (|v| ≥ l2) by a
 /// smooth cubic step.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ModifiedLuGre {
     /// Bristle stiffness.
     pub sigma0: f64,
@@ -197,6 +207,100 @@ impl ModifiedLuGre {
     }
     fn g(&self, v: f64) -> f64 {
         self.alpha0 + self.alpha1 * (-(v / self.v_s).powi(2)).exp()
+    }
+}
+
+/// The law's name (as `--law` and [`FrictionLaw::name`] write it) and its constants, as a
+/// configuration file names them:
+/// `coulomb-viscous (mu0 = 0.02, mu1 = 0.004)`, `lagged (memory = 0.5) of coulomb (mu0 = 0.02)`.
+impl fmt::Display for FrictionLaw {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let named = |f: &mut fmt::Formatter<'_>, kv: &[(&str, f64)]| {
+            write!(f, "{} (", self.name())?;
+            for (i, (k, v)) in kv.iter().enumerate() {
+                write!(f, "{}{k} = {v}", if i > 0 { ", " } else { "" })?;
+            }
+            f.write_str(")")
+        };
+        match self {
+            FrictionLaw::Polynomial { mu } => match mu[..] {
+                [mu0] => named(f, &[("mu0", mu0)]),
+                [0.0, mu1] => named(f, &[("mu1", mu1)]),
+                [mu0, mu1] => named(f, &[("mu0", mu0), ("mu1", mu1)]),
+                [mu0, mu1, mu2] => named(f, &[("mu0", mu0), ("mu1", mu1), ("mu2", mu2)]),
+                _ => write!(f, "{} (mu = {mu:?})", self.name()),
+            },
+            FrictionLaw::Stribeck {
+                mu_c,
+                mu_s,
+                v_s,
+                delta,
+                mu_v,
+            } => named(
+                f,
+                &[
+                    ("mu_c", *mu_c),
+                    ("mu_s", *mu_s),
+                    ("v_s", *v_s),
+                    ("delta", *delta),
+                    ("mu_v", *mu_v),
+                ],
+            ),
+            FrictionLaw::StribeckPower {
+                k_ehl,
+                n_ehl,
+                h_bl,
+                p_bl,
+                b,
+                m,
+            } => named(
+                f,
+                &[
+                    ("k_ehl", *k_ehl),
+                    ("n_ehl", *n_ehl),
+                    ("h_bl", *h_bl),
+                    ("p_bl", *p_bl),
+                    ("b", *b),
+                    ("m", *m),
+                ],
+            ),
+            FrictionLaw::HessSoom { mu_b, c1, c2 } => {
+                named(f, &[("mu_b", *mu_b), ("c1", *c1), ("c2", *c2)])
+            }
+            FrictionLaw::Dahl { sigma, mu_c, alpha } => {
+                named(f, &[("sigma", *sigma), ("mu_c", *mu_c), ("alpha", *alpha)])
+            }
+            FrictionLaw::LuGre(p) => named(
+                f,
+                &[
+                    ("sigma0", p.sigma0),
+                    ("sigma1", p.sigma1),
+                    ("sigma2", p.sigma2),
+                    ("mu_c", p.mu_c),
+                    ("mu_s", p.mu_s),
+                    ("v_s", p.v_s),
+                    ("a", p.a),
+                ],
+            ),
+            FrictionLaw::ModifiedLuGre(p) => named(
+                f,
+                &[
+                    ("sigma0", p.sigma0),
+                    ("sigma1", p.sigma1),
+                    ("sigma2", p.sigma2),
+                    ("mu_c", p.mu_c),
+                    ("alpha0", p.alpha0),
+                    ("alpha1", p.alpha1),
+                    ("v_s", p.v_s),
+                    ("l1", p.l1),
+                    ("l2", p.l2),
+                ],
+            ),
+            FrictionLaw::Lagged { steady, memory } => {
+                named(f, &[("memory", *memory)])?;
+                write!(f, " of {steady}")
+            }
+        }
     }
 }
 
@@ -404,6 +508,17 @@ impl FrictionLaw {
     pub fn mu(&self) -> Option<&[f64]> {
         match self {
             FrictionLaw::Polynomial { mu } => Some(mu),
+            _ => None,
+        }
+    }
+
+    /// `(μ0, μ1)` if the law is Coulomb–viscous or one of its halves (a pseudo-polynomial of
+    /// order ≤ 1), the law an envelope fit of the rig finds exactly.
+    pub fn as_coulomb_viscous(&self) -> Option<(f64, f64)> {
+        match self.mu()? {
+            [] => Some((0.0, 0.0)),
+            [mu0] => Some((*mu0, 0.0)),
+            [mu0, mu1] => Some((*mu0, *mu1)),
             _ => None,
         }
     }

@@ -9,9 +9,10 @@
 //! - Runs recorded by `tribo` are folders, read by the `tribo` crate; [`Record::load`] refuses them
 //!   with a clear error.
 
+use crate::invalid::InvalidParameter;
 use crate::model::Rig;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Three sample columns `(τ, y, y')`.
 pub type Columns = (Vec<f64>, Vec<f64>, Vec<f64>);
@@ -62,32 +63,67 @@ pub enum RecordErrorKind {
     Invalid,
 }
 
-/// Error reading or validating a record: the message (which names the file, line and column for
-/// parse errors) and its kind.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RecordError(pub String, pub RecordErrorKind);
+/// Why a record cannot be read, written or analysed. The message says what and where (line and
+/// column for parse errors); [`RecordError::In`] adds the file, with the error as its source.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// The file could not be read or written.
+    #[error("cannot {verb} {}", path.display())]
+    Io {
+        /// `read` or `write`.
+        verb: &'static str,
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The text is not a record (encoding, header, a field that is not a number, a repeated key…).
+    #[error("line {line}, column {col}: {what}")]
+    Syntax {
+        line: usize,
+        col: usize,
+        what: String,
+    },
+    /// A sample is NaN or infinite: the record is readable but cannot be analysed.
+    #[error("{what}")]
+    NonFinite { what: String },
+    /// The values are inconsistent (lengths, time not increasing, a setting out of range).
+    #[error("{0}")]
+    Invalid(String),
+    /// The rig constants the record gives are out of range.
+    #[error(transparent)]
+    Rig(InvalidParameter),
+    /// An error in the record `path`.
+    #[error("cannot use the record {}", path.display())]
+    In {
+        path: PathBuf,
+        #[source]
+        source: Box<RecordError>,
+    },
+}
 
 impl RecordError {
-    /// An error of kind `kind`.
-    pub fn new(kind: RecordErrorKind, msg: impl Into<String>) -> RecordError {
-        RecordError(msg.into(), kind)
-    }
-    /// An [`RecordErrorKind::Invalid`] error.
+    /// An [`RecordError::Invalid`] error.
     pub fn invalid(msg: impl Into<String>) -> RecordError {
-        RecordError(msg.into(), RecordErrorKind::Invalid)
+        RecordError::Invalid(msg.into())
     }
-    /// The kind.
+    /// The error, said to be in the record `path`.
+    pub fn in_file(self, path: &Path) -> RecordError {
+        RecordError::In {
+            path: path.to_path_buf(),
+            source: Box::new(self),
+        }
+    }
+    /// The kind (of the innermost error, for one in a file).
     pub fn kind(&self) -> RecordErrorKind {
-        self.1
+        match self {
+            RecordError::Io { .. } => RecordErrorKind::Io,
+            RecordError::Syntax { .. } => RecordErrorKind::Syntax,
+            RecordError::NonFinite { .. } => RecordErrorKind::NonFinite,
+            RecordError::Invalid(_) | RecordError::Rig(_) => RecordErrorKind::Invalid,
+            RecordError::In { source, .. } => source.kind(),
+        }
     }
 }
-
-impl std::fmt::Display for RecordError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-impl std::error::Error for RecordError {}
 
 fn err<T>(msg: impl Into<String>) -> Result<T, RecordError> {
     Err(RecordError::invalid(msg))
@@ -95,10 +131,11 @@ fn err<T>(msg: impl Into<String>) -> Result<T, RecordError> {
 
 /// A parse error at a line and column (both from 1; the column counts characters).
 fn at<T>(line: usize, col: usize, msg: impl std::fmt::Display) -> Result<T, RecordError> {
-    Err(RecordError::new(
-        RecordErrorKind::Syntax,
-        format!("line {line}, column {col}: {msg}"),
-    ))
+    Err(RecordError::Syntax {
+        line,
+        col,
+        what: msg.to_string(),
+    })
 }
 
 /// The header keys a record may give (`# key=value` comment lines).
@@ -189,10 +226,9 @@ impl Record {
         }
         for (name, c) in self.channels() {
             if let Some(i) = c.iter().position(|v| !v.is_finite()) {
-                return Err(RecordError::new(
-                    RecordErrorKind::NonFinite,
-                    format!("column {name}: non-finite value {} at sample {i}", c[i]),
-                ));
+                return Err(RecordError::NonFinite {
+                    what: format!("column {name}: non-finite value {} at sample {i}", c[i]),
+                });
             }
         }
         if let Some(i) = self.t.windows(2).position(|w| w[1] <= w[0]) {
@@ -202,7 +238,7 @@ impl Record {
             ));
         }
         if let Some(r) = &self.rig {
-            r.validate().map_err(RecordError::invalid)?;
+            r.validate().map_err(RecordError::Rig)?;
         }
         if let Some(fc) = self.force_cutoff_hz {
             if !(fc.is_finite() && fc > 0.0) {
@@ -223,11 +259,12 @@ impl Record {
                 path.display()
             ));
         }
-        let bytes = std::fs::read(path).map_err(|e| {
-            RecordError::new(RecordErrorKind::Io, format!("{}: {e}", path.display()))
+        let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
+            verb: "read",
+            path: path.to_path_buf(),
+            source,
         })?;
-        Record::from_csv_bytes(&bytes)
-            .map_err(|e| RecordError(format!("{}: {}", path.display(), e.0), e.1))
+        Record::from_csv_bytes(&bytes).map_err(|e| e.in_file(path))
     }
 
     /// Parses CSV bytes: UTF-8 (a leading byte-order mark is skipped); a byte that is not UTF-8
@@ -359,14 +396,13 @@ impl Record {
                             )
                         })?;
                         if !v.is_finite() {
-                            return Err(RecordError::new(
-                                RecordErrorKind::NonFinite,
-                                format!(
+                            return Err(RecordError::NonFinite {
+                                what: format!(
                                     "line {line_no}, column {fcol}: column {}: non-finite value {:?}",
                                     h[i],
                                     f.trim()
                                 ),
-                            ));
+                            });
                         }
                         cols[i].push(v);
                         col += f.chars().count() + 1;
@@ -387,9 +423,7 @@ impl Record {
         let rec = if let (Some(it), Some(ix), Some(iv)) = (find("t_s"), find("x_m"), find("v_m_s"))
         {
             let rig = match rig_vals {
-                [Some(m), Some(k), Some(n)] => {
-                    Some(Rig::new(m, k, n).map_err(RecordError::invalid)?)
-                }
+                [Some(m), Some(k), Some(n)] => Some(Rig::new(m, k, n).map_err(RecordError::Rig)?),
                 [None, None, None] => None,
                 _ => {
                     let missing: Vec<&str> = ["mass_kg", "stiffness_n_per_m", "load_n"]
@@ -485,8 +519,11 @@ impl Record {
 
     /// Writes the record as CSV to `path`.
     pub fn save(&self, path: &Path) -> Result<(), RecordError> {
-        std::fs::write(path, self.to_csv_string())
-            .map_err(|e| RecordError::new(RecordErrorKind::Io, format!("{}: {e}", path.display())))
+        std::fs::write(path, self.to_csv_string()).map_err(|source| RecordError::Io {
+            verb: "write",
+            path: path.to_path_buf(),
+            source,
+        })
     }
 
     /// Dimensionless view `(τ, y, y')` using the record's rig.

@@ -340,9 +340,36 @@ fn record_csv_round_trip_and_clear_errors() {
         ("# mass_kg=0.04\nt_s,x_m,v_m_s\n0,1,0\n", "incomplete rig"),
         ("t_s,x_m,v_m_s\n0,1,0\n", "too short"),
     ] {
-        let e = Record::from_csv_str(bad).unwrap_err();
-        assert!(e.0.contains(needle), "{bad:?}: {}", e.0);
+        let e = Record::from_csv_str(bad).unwrap_err().to_string();
+        assert!(e.contains(needle), "{bad:?}: {e}");
     }
+}
+
+#[test]
+fn an_unreadable_or_damaged_file_is_named_with_its_cause_as_the_source() {
+    use std::error::Error;
+    use tribo_physics::record::{RecordError, RecordErrorKind};
+    let dir = std::env::temp_dir().join(format!("tribo-record-errors-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // Missing: the io::Error is the source, the message names the file.
+    let missing = dir.join("missing.csv");
+    let e = Record::load(&missing).unwrap_err();
+    assert_eq!(e.kind(), RecordErrorKind::Io);
+    assert!(e.to_string().contains("missing.csv"), "{e}");
+    let io = e.source().and_then(|s| s.downcast_ref::<std::io::Error>());
+    assert_eq!(io.map(|e| e.kind()), Some(std::io::ErrorKind::NotFound));
+    // Damaged: the file, then the line and column, as the chain of sources.
+    let bad = dir.join("bad.csv");
+    std::fs::write(&bad, "t_s,x_m,v_m_s\n0,1,0\n1,x,0\n").unwrap();
+    let e = Record::load(&bad).unwrap_err();
+    assert_eq!(e.kind(), RecordErrorKind::Syntax);
+    assert!(
+        matches!(&e, RecordError::In { path, .. } if path == &bad),
+        "{e:?}"
+    );
+    let inner = e.source().map(|s| s.to_string()).unwrap_or_default();
+    assert!(inner.starts_with("line 3, column 3:"), "{inner}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

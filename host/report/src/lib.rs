@@ -45,27 +45,48 @@ pub use run::{record_report, write_record_report, ReportInputs, ReportOptions};
 
 use std::path::{Path, PathBuf};
 
-/// Why a report could not be made.
-#[derive(Debug, Clone, PartialEq)]
+/// Why a report could not be made: what, and, as the source, the error underneath.
+#[derive(Debug, thiserror::Error)]
 pub enum ReportError {
-    /// The data given cannot be reported (empty, NaN, no rig constants…).
+    /// The data given cannot be reported (empty, too few amplitude windows…).
+    #[error("cannot report: {0}")]
     Input(String),
+    /// The record given cannot be reported (no rig constants, inconsistent columns…).
+    #[error("cannot report the record")]
+    Record(#[source] tribo_physics::record::RecordError),
+    /// An analysis a figure needs failed (the envelope, the windowed fits).
+    #[error("cannot report: {what}")]
+    Analysis {
+        what: &'static str,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// A stored run could not be read.
+    #[cfg(feature = "store")]
+    #[error("cannot read the run {run}")]
+    Run {
+        run: String,
+        #[source]
+        source: tribo_store::StoreError,
+    },
     /// Writing a file failed.
-    Io(String),
+    #[error("cannot write {}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     /// A figure could not be drawn.
-    Plot(String),
+    #[error("cannot draw the figure {figure}")]
+    Plot {
+        figure: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// A figure with nothing to draw (no panel, no finite data).
+    #[error("nothing to draw in the figure {figure}: {why}")]
+    Empty { figure: String, why: String },
 }
-
-impl std::fmt::Display for ReportError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            ReportError::Input(m) => write!(f, "cannot report: {m}"),
-            ReportError::Io(m) => write!(f, "writing the report: {m}"),
-            ReportError::Plot(m) => write!(f, "drawing the report: {m}"),
-        }
-    }
-}
-impl std::error::Error for ReportError {}
 
 /// A report in memory: figures, the HTML tables and notes.
 #[derive(Debug, Clone, PartialEq)]
@@ -105,8 +126,11 @@ pub struct ReportFiles {
     pub not_analysable: Option<String>,
 }
 
-fn io_err(path: &Path, e: std::io::Error) -> ReportError {
-    ReportError::Io(format!("{}: {e}", path.display()))
+fn io_err(path: &Path, source: std::io::Error) -> ReportError {
+    ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 /// Writes every figure (SVG, and PNG if asked) and `report.html` into `out_dir`.

@@ -164,8 +164,11 @@ pub fn color(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
-fn plot_err(fig: &str, e: impl std::fmt::Display) -> ReportError {
-    ReportError::Plot(format!("figure {fig}: {e}"))
+fn plot_err(fig: &str, e: impl std::error::Error + Send + Sync + 'static) -> ReportError {
+    ReportError::Plot {
+        figure: fig.to_string(),
+        source: Box::new(e),
+    }
 }
 
 /// Renders a figure as an SVG document.
@@ -225,17 +228,17 @@ fn range_of(vals: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     Some((lo - pad, hi + pad))
 }
 
-fn draw<DB: DrawingBackend>(
+fn draw<DB: DrawingBackend<ErrorType: 'static>>(
     root: &DrawingArea<DB, Shift>,
     fig: &Figure,
 ) -> Result<(), ReportError> {
     let e = |err: DrawingAreaErrorKind<DB::ErrorType>| plot_err(&fig.name, err);
     root.fill(&WHITE).map_err(e)?;
     if fig.panels.is_empty() {
-        return Err(ReportError::Plot(format!(
-            "figure {} has no panel",
-            fig.name
-        )));
+        return Err(ReportError::Empty {
+            figure: fig.name.clone(),
+            why: "no panel".into(),
+        });
     }
     let areas = root.split_evenly((fig.panels.len(), 1));
     for (panel, area) in fig.panels.iter().zip(areas.iter()) {
@@ -244,7 +247,7 @@ fn draw<DB: DrawingBackend>(
     Ok(())
 }
 
-fn draw_panel<DB: DrawingBackend>(
+fn draw_panel<DB: DrawingBackend<ErrorType: 'static>>(
     area: &DrawingArea<DB, Shift>,
     p: &Panel,
     fig: &str,
@@ -264,21 +267,15 @@ fn draw_panel<DB: DrawingBackend>(
             .map(|d| d.1)
             .chain(s.errors.iter().flat_map(|d| [d.1, d.2]))
     });
-    let (x0, x1) = p.x_range.or_else(|| range_of(xs)).ok_or_else(|| {
-        ReportError::Plot(format!(
-            "figure {fig}: panel {:?} has no finite data",
-            p.title
-        ))
-    })?;
+    let no_data = || ReportError::Empty {
+        figure: fig.to_string(),
+        why: format!("panel {:?} has no finite data", p.title),
+    };
+    let (x0, x1) = p.x_range.or_else(|| range_of(xs)).ok_or_else(no_data)?;
     let (y0, y1) = p
         .y_range
         .or_else(|| range_of(ys.chain(p.hlines.iter().map(|h| h.0))))
-        .ok_or_else(|| {
-            ReportError::Plot(format!(
-                "figure {fig}: panel {:?} has no finite data",
-                p.title
-            ))
-        })?;
+        .ok_or_else(no_data)?;
     let sec = p.secondary.clone().unwrap_or(Secondary {
         x_label: None,
         x_scale: 1.0,

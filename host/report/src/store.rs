@@ -85,9 +85,10 @@ pub fn run_inputs(run: &Run) -> ReportInputs {
 /// Writes the report of a stored run into `out_dir` (the samples as recorded, on-board result from
 /// `result.toml`).
 pub fn write_run_report(run: &Run, out_dir: &Path) -> Result<ReportFiles, ReportError> {
-    let rec = run
-        .record()
-        .map_err(|e| ReportError::Input(format!("run {}: {e}", run.id())))?;
+    let rec = run.record().map_err(|source| ReportError::Run {
+        run: run.id().to_string(),
+        source,
+    })?;
     write_record_report(&rec, &run_inputs(run), out_dir)
 }
 

@@ -225,34 +225,45 @@ fn missing_channels_skip_their_figures_with_a_note() {
 fn bad_records_are_clear_errors() {
     let good = simulated(7.0, 0.03);
     let dir = tempfile::tempdir().unwrap();
-    let run = |rec: &Record| write_record_report(rec, &ReportInputs::default(), dir.path());
+    // What a person reads: the error and its causes.
+    let run = |rec: &Record| {
+        write_record_report(rec, &ReportInputs::default(), dir.path()).map_err(|e| {
+            let mut text = e.to_string();
+            let mut cause = std::error::Error::source(&e);
+            while let Some(c) = cause {
+                text += &format!(": {c}");
+                cause = c.source();
+            }
+            (e, text)
+        })
+    };
 
     let empty = Record::new(vec![], vec![], vec![], Some(Rig::REAL), Units::Si);
-    let e = run(&empty).unwrap_err();
+    let (e, said) = run(&empty).unwrap_err();
     assert!(
-        matches!(e, ReportError::Input(_)) && e.to_string().contains("no samples"),
-        "{e}"
+        matches!(e, ReportError::Input(_)) && said.contains("no samples"),
+        "{said}"
     );
 
     let mut nan = good.clone();
     nan.x[10] = f64::NAN;
-    let e = run(&nan).unwrap_err();
-    assert!(e.to_string().contains("non-finite"), "{e}");
+    let (e, said) = run(&nan).unwrap_err();
+    assert!(
+        matches!(e, ReportError::Record(_)) && said.contains("non-finite"),
+        "{said}"
+    );
 
     let mut nan_force = good.clone();
     nan_force.ft.as_mut().unwrap()[3] = f64::INFINITY;
-    assert!(run(&nan_force).unwrap_err().to_string().contains("ft"));
+    assert!(run(&nan_force).unwrap_err().1.contains("ft"));
 
     let mut bad_ecr = good.clone();
     bad_ecr.ecr.as_mut().unwrap()[0] = 0.0;
-    assert!(run(&bad_ecr).unwrap_err().to_string().contains("ECR"));
+    assert!(run(&bad_ecr).unwrap_err().1.contains("ECR"));
 
     let mut no_rig = good.clone();
     no_rig.rig = None;
-    assert!(run(&no_rig)
-        .unwrap_err()
-        .to_string()
-        .contains("rig constants"));
+    assert!(run(&no_rig).unwrap_err().1.contains("rig constants"));
 
     let n = good.len();
     let at_rest = Record::new(
@@ -262,12 +273,20 @@ fn bad_records_are_clear_errors() {
         Some(Rig::REAL),
         Units::Si,
     );
-    assert!(run(&at_rest)
-        .unwrap_err()
-        .to_string()
-        .contains("no oscillation"));
+    assert!(run(&at_rest).unwrap_err().1.contains("no oscillation"));
     // Nothing half-written by the failures.
     assert!(!dir.path().join("report.html").exists());
+
+    // A folder that cannot be made: the path named, the io::Error as the source.
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let e = write_record_report(&good, &ReportInputs::default(), &file.join("report")).unwrap_err();
+    assert!(
+        matches!(&e, ReportError::Io { path, .. } if path.starts_with(&file)),
+        "{e:?}"
+    );
+    let io = std::error::Error::source(&e).and_then(|s| s.downcast_ref::<std::io::Error>());
+    assert!(io.is_some(), "{e:?}");
 }
 
 fn campaign() -> Vec<CampaignPoint> {

@@ -19,7 +19,7 @@ use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::runstore::{RunStore, BOARD_RING_BYTES, MAX_RUN_BLOCKS};
 use tribo_physics::sensor::{generate, RecordSpec, SensorModel};
 use tribo_physics::{FrictionLaw, Method, Model, Rig};
-use tribo_rig::{serve, LawConfig, ServeOptions, VirtualRig, VirtualRigConfig};
+use tribo_rig::{serve, ServeOptions, VirtualRig, VirtualRigConfig};
 use tribo_wire::codec::encode;
 use tribo_wire::frame::{decode_one, encode_vec, Decoder, Encoder, MAX_FRAME};
 use tribo_wire::*;
@@ -219,10 +219,7 @@ fn ratio() {
     }
     s.print("tribo-physics record, unloaded (apparatus damping only), 40 s (x, v, F)");
     let loaded = VirtualRigConfig {
-        law: LawConfig::CoulombViscous {
-            mu0: 0.02,
-            mu1: 0.004,
-        },
+        law: tribo_physics::FrictionLaw::coulomb_viscous(0.02, 0.004),
         ..Default::default()
     };
     let mut s = Sizes::default();

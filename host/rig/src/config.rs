@@ -10,7 +10,8 @@
 //! seed = 7
 //!
 //! [law]
-//! kind = "coulomb_viscous"   # or "coulomb", "viscous", "quadratic", "polynomial", "stribeck"
+//! kind = "coulomb_viscous"   # any `tribo_physics::FrictionLaw`: "coulomb", "viscous", "quadratic",
+//!                            # "polynomial" (mu = […]), "stribeck", "lugre", "lagged", …
 //! mu0 = 0.02
 //! mu1 = 0.004
 //!
@@ -25,74 +26,9 @@
 //! log10_rest = 9.0
 //! ```
 
+use crate::RigError;
 use serde::Deserialize;
 use tribo_physics::FrictionLaw;
-
-/// The contact's friction law, dimensionless as in the thesis (μ_j of eq. 10–13).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum LawConfig {
-    Coulomb {
-        mu0: f64,
-    },
-    Viscous {
-        mu1: f64,
-    },
-    CoulombViscous {
-        mu0: f64,
-        mu1: f64,
-    },
-    Quadratic {
-        mu0: f64,
-        mu1: f64,
-        mu2: f64,
-    },
-    Polynomial {
-        mu: Vec<f64>,
-    },
-    Stribeck {
-        mu_c: f64,
-        mu_s: f64,
-        v_s: f64,
-        delta: f64,
-        mu_v: f64,
-    },
-}
-
-impl LawConfig {
-    pub fn to_law(&self) -> FrictionLaw {
-        match self {
-            LawConfig::Coulomb { mu0 } => FrictionLaw::coulomb(*mu0),
-            LawConfig::Viscous { mu1 } => FrictionLaw::viscous(*mu1),
-            LawConfig::CoulombViscous { mu0, mu1 } => FrictionLaw::coulomb_viscous(*mu0, *mu1),
-            LawConfig::Quadratic { mu0, mu1, mu2 } => FrictionLaw::quadratic(*mu0, *mu1, *mu2),
-            LawConfig::Polynomial { mu } => FrictionLaw::polynomial(mu.clone()),
-            LawConfig::Stribeck {
-                mu_c,
-                mu_s,
-                v_s,
-                delta,
-                mu_v,
-            } => FrictionLaw::Stribeck {
-                mu_c: *mu_c,
-                mu_s: *mu_s,
-                v_s: *v_s,
-                delta: *delta,
-                mu_v: *mu_v,
-            },
-        }
-    }
-
-    /// (μ0, μ1) of the contact when the law is Coulomb–viscous (or one of its halves).
-    pub fn coulomb_viscous(&self) -> Option<(f64, f64)> {
-        match self {
-            LawConfig::Coulomb { mu0 } => Some((*mu0, 0.0)),
-            LawConfig::Viscous { mu1 } => Some((0.0, *mu1)),
-            LawConfig::CoulombViscous { mu0, mu1 } => Some((*mu0, *mu1)),
-            _ => None,
-        }
-    }
-}
 
 /// Sensor noise, standard deviations (SI).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -202,7 +138,9 @@ pub struct VirtualRigConfig {
     pub x0_m: f64,
     /// Apparatus viscous damping, dimensionless (= 2ζ; the real rig: 0.0011).
     pub apparatus_mu1: f64,
-    pub law: LawConfig,
+    /// The contact's friction law, dimensionless as in the thesis (μ_j of eq. 10–13); in TOML a
+    /// `[law]` table with its `kind` and constants, checked as it is read.
+    pub law: FrictionLaw,
     /// A magnet switched off without the reverse pulse lets go this much later (remanence), s.
     pub remanence_s: f64,
     /// Charge-amplifier low-pass of the force channel, Hz.
@@ -228,10 +166,7 @@ impl Default for VirtualRigConfig {
             load_n: 0.3,
             x0_m: 667e-6,
             apparatus_mu1: 0.0011,
-            law: LawConfig::CoulombViscous {
-                mu0: 0.02,
-                mu1: 0.004,
-            },
+            law: FrictionLaw::coulomb_viscous(0.02, 0.004),
             remanence_s: 0.005,
             force_cutoff_hz: 300.0,
             force_lag_s: 0.003,
@@ -247,9 +182,8 @@ impl Default for VirtualRigConfig {
 
 impl VirtualRigConfig {
     /// Parses a TOML description (missing fields take their defaults).
-    pub fn from_toml(text: &str) -> Result<VirtualRigConfig, String> {
-        let c: VirtualRigConfig =
-            toml::from_str(text).map_err(|e| format!("virtual rig configuration: {e}"))?;
+    pub fn from_toml(text: &str) -> Result<VirtualRigConfig, RigError> {
+        let c: VirtualRigConfig = toml::from_str(text).map_err(RigError::Toml)?;
         c.validate()?;
         Ok(c)
     }
@@ -257,9 +191,8 @@ impl VirtualRigConfig {
     /// The rig constants a TOML description leaves to their defaults (of `mass_kg`,
     /// `stiffness_n_per_m`, `load_n`, `x0_m`, `apparatus_mu1`, `law`): what `tribo rig` says stood
     /// in for them.
-    pub fn defaulted(text: &str) -> Result<Vec<&'static str>, String> {
-        let t: toml::Table =
-            toml::from_str(text).map_err(|e| format!("virtual rig configuration: {e}"))?;
+    pub fn defaulted(text: &str) -> Result<Vec<&'static str>, RigError> {
+        let t: toml::Table = toml::from_str(text).map_err(RigError::Toml)?;
         Ok(RIG_CONSTANTS
             .into_iter()
             .filter(|k| !t.contains_key(*k))
@@ -267,35 +200,41 @@ impl VirtualRigConfig {
     }
 
     /// Checks the ranges the simulator needs.
-    pub fn validate(&self) -> Result<(), String> {
-        let pos = |name: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
+    pub fn validate(&self) -> Result<(), RigError> {
+        let check = |name: &'static str, rule: &'static str, v: f64, ok: bool| {
+            if ok && v.is_finite() {
                 Ok(())
             } else {
-                Err(format!("{name} must be a positive number, got {v}"))
+                Err(RigError::Setting {
+                    name,
+                    rule,
+                    value: v,
+                })
             }
         };
-        pos("mass_kg", self.mass_kg)?;
-        pos("stiffness_n_per_m", self.stiffness_n_per_m)?;
-        pos("x0_m", self.x0_m)?;
-        pos("force_cutoff_hz", self.force_cutoff_hz)?;
-        if self.force_lag_s > 1.0 {
-            return Err(format!(
-                "force_lag_s must be at most 1 s, got {}",
-                self.force_lag_s
-            ));
-        }
-        pos("thermal.heater_power_w", self.thermal.heater_power_w)?;
-        pos(
-            "thermal.resistance_k_per_w",
-            self.thermal.resistance_k_per_w,
-        )?;
-        pos("thermal.capacity_j_per_k", self.thermal.capacity_j_per_k)?;
-        pos("ecr.correlation_s", self.ecr.correlation_s)?;
-        if !(self.load_n.is_finite() && self.load_n >= 0.0) {
-            return Err(format!("load_n must be >= 0, got {}", self.load_n));
-        }
         for (name, v) in [
+            ("mass_kg", self.mass_kg),
+            ("stiffness_n_per_m", self.stiffness_n_per_m),
+            ("x0_m", self.x0_m),
+            ("force_cutoff_hz", self.force_cutoff_hz),
+            ("thermal.heater_power_w", self.thermal.heater_power_w),
+            (
+                "thermal.resistance_k_per_w",
+                self.thermal.resistance_k_per_w,
+            ),
+            ("thermal.capacity_j_per_k", self.thermal.capacity_j_per_k),
+            ("ecr.correlation_s", self.ecr.correlation_s),
+        ] {
+            check(name, "a positive number", v, v > 0.0)?;
+        }
+        check(
+            "force_lag_s",
+            "at most 1 s",
+            self.force_lag_s,
+            self.force_lag_s <= 1.0,
+        )?;
+        for (name, v) in [
+            ("load_n", self.load_n),
             ("apparatus_mu1", self.apparatus_mu1),
             ("remanence_s", self.remanence_s),
             ("force_lag_s", self.force_lag_s),
@@ -306,20 +245,17 @@ impl VirtualRigConfig {
             ("noise.ecr_v", self.noise.ecr_v),
             ("ecr.fluctuation_decades", self.ecr.fluctuation_decades),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("{name} must be >= 0, got {v}"));
-            }
+            check(name, ">= 0", v, v >= 0.0)?;
         }
-        if !(self.thermal.ambient_c.is_finite()
-            && self.ecr.log10_film.is_finite()
-            && self.ecr.log10_rest.is_finite())
-        {
-            return Err("ambient temperature and ECR levels must be finite".into());
+        for (name, v) in [
+            ("thermal.ambient_c", self.thermal.ambient_c),
+            ("ecr.log10_film", self.ecr.log10_film),
+            ("ecr.log10_rest", self.ecr.log10_rest),
+        ] {
+            check(name, "a finite number", v, true)?;
         }
-        self.law
-            .to_law()
-            .validate()
-            .map_err(|e| format!("law: {e}"))
+        self.law.validate()?;
+        Ok(())
     }
 }
 

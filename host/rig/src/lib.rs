@@ -10,10 +10,12 @@
 //!   ([`serve()`]), to successive TCP connections ([`TcpRig`]), or in-process ([`in_process`]).
 
 pub mod config;
+mod error;
 pub mod serve;
 pub mod sim;
 
-pub use config::{AcquisitionFaults, EcrModel, LawConfig, Noise, ThermalModel, VirtualRigConfig};
+pub use config::{AcquisitionFaults, EcrModel, Noise, ThermalModel, VirtualRigConfig};
+pub use error::RigError;
 pub use serve::{in_process, serve, HostEvent, ServeOptions, TcpRig};
 pub use sim::{ConverterFault, HeaterStage, SimHardware};
 
@@ -105,7 +107,7 @@ fn new_app(serial: u64) -> App<'static> {
 impl VirtualRig {
     /// A rig at time 0, just powered on: pin held nowhere (magnet off), heater off. Refuses an
     /// invalid configuration.
-    pub fn new(cfg: VirtualRigConfig) -> Result<VirtualRig, String> {
+    pub fn new(cfg: VirtualRigConfig) -> Result<VirtualRig, RigError> {
         let hw = SimHardware::new(&cfg)?;
         let app_cfg = AppConfig::new(cfg.serial);
         let mut app = App::new(app_cfg, board_store());
@@ -162,7 +164,7 @@ impl VirtualRig {
     /// This rig power-cycled with its load knob turned to `load_n` (the plate keeps its
     /// temperature, the host lease its setting; the stored run and the clock start afresh). Refuses
     /// a load the rig cannot take.
-    pub fn with_load(&self, load_n: f64) -> Result<VirtualRig, String> {
+    pub fn with_load(&self, load_n: f64) -> Result<VirtualRig, RigError> {
         let mut cfg = self.cfg.clone();
         cfg.load_n = load_n;
         let mut rig = VirtualRig::new(cfg)?;

@@ -7,7 +7,7 @@
 //! pulled: its clock runs, a run in progress goes on and waits in its memory, and the next host to
 //! connect can `Pull` it. It serves one host at a time.
 
-use crate::VirtualRig;
+use crate::{RigError, VirtualRig};
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -50,18 +50,21 @@ impl Default for ServeOptions {
 
 impl ServeOptions {
     /// Refuses options under which the rig would never advance or the button never be pressed.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), RigError> {
         if self.speed.is_nan() || self.speed <= 0.0 {
-            return Err(format!(
-                "speed must be > 0 (1 = real time, inf = as fast as possible), got {}",
-                self.speed
-            ));
+            return Err(RigError::Setting {
+                name: "speed",
+                rule: "> 0 (1 = real time, inf = as fast as possible)",
+                value: self.speed,
+            });
         }
         if let Some(b) = self.button_after_s {
             if !(b.is_finite() && b >= 0.0) {
-                return Err(format!(
-                    "the button must be pressed a finite time ≥ 0 s after arming, got {b}"
-                ));
+                return Err(RigError::Setting {
+                    name: "the button's delay after arming, s,",
+                    rule: "finite and ≥ 0",
+                    value: b,
+                });
             }
         }
         Ok(())

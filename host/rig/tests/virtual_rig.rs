@@ -1,7 +1,7 @@
 //! The firmware application against the simulated rig, end to end, through wire frames (how the
 //! rig is served to a host: `serve.rs`).
 
-use tribo_rig::{LawConfig, VirtualRig, VirtualRigConfig};
+use tribo_rig::{VirtualRig, VirtualRigConfig};
 use tribo_wire::frame::{decode_one, encode_vec};
 use tribo_wire::*;
 
@@ -115,7 +115,7 @@ impl Host {
 fn onboard_mu0_mu1_match_the_simulated_contact() {
     for (mu0, mu1, seed) in [(0.02, 0.004, 1u64), (0.005, 0.01, 2)] {
         let cfg = VirtualRigConfig {
-            law: LawConfig::CoulombViscous { mu0, mu1 },
+            law: tribo_physics::FrictionLaw::coulomb_viscous(mu0, mu1),
             seed,
             ..Default::default()
         };
@@ -382,11 +382,7 @@ fn toml_configuration_reads_and_refuses_nonsense() {
     assert_eq!((c.load_n, c.seed), (0.5, 9));
     assert_eq!(
         c.law,
-        LawConfig::Quadratic {
-            mu0: 0.01,
-            mu1: 0.002,
-            mu2: 0.001
-        }
+        tribo_physics::FrictionLaw::quadratic(0.01, 0.002, 0.001)
     );
     assert_eq!(c.ecr.fluctuation_decades, 1.0);
     assert_eq!(c.mass_kg, VirtualRigConfig::default().mass_kg);
@@ -404,4 +400,37 @@ fn toml_configuration_reads_and_refuses_nonsense() {
     ] {
         assert!(VirtualRigConfig::from_toml(bad).is_err(), "{bad} accepted");
     }
+}
+
+#[test]
+fn a_refused_configuration_says_which_setting_and_keeps_the_parser_s_detail_as_its_source() {
+    use std::error::Error;
+    use tribo_rig::RigError;
+    // A law out of range is refused as the file is read; the TOML error (line, rule) is the source.
+    let e = VirtualRigConfig::from_toml(
+        "[law]\nkind = \"stribeck\"\nmu_c = 0.02\nmu_s = 0.03\nv_s = -1.0\ndelta = 2.0\nmu_v = 0.0\n",
+    )
+    .unwrap_err();
+    assert!(matches!(e, RigError::Toml(_)), "{e:?}");
+    let detail = e.source().map(|s| s.to_string()).unwrap_or_default();
+    assert!(
+        detail.contains("v_s > 0") && detail.contains("line 1"),
+        "{detail}"
+    );
+    // A setting out of range names itself, its rule and its value.
+    let e = VirtualRigConfig::from_toml("mass_kg = -1.0").unwrap_err();
+    match &e {
+        RigError::Setting { name, value, .. } => assert_eq!((*name, *value), ("mass_kg", -1.0)),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(e.to_string(), "mass_kg must be a positive number, got -1");
+    // Rig constants the model refuses (a NaN load cannot come through TOML, but through code).
+    let cfg = VirtualRigConfig {
+        load_n: f64::NAN,
+        ..Default::default()
+    };
+    assert!(matches!(
+        VirtualRig::new(cfg),
+        Err(RigError::Setting { name: "load_n", .. })
+    ));
 }

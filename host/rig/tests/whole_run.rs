@@ -1,7 +1,7 @@
 //! The whole run kept by the virtual rig: runs the host never saw live, pulled afterwards from RAM
 //! and flash; power lost after and during a run; a 60 s five-channel run at 10 kS/s kept whole.
 
-use tribo_rig::{LawConfig, VirtualRig, VirtualRigConfig};
+use tribo_rig::{VirtualRig, VirtualRigConfig};
 use tribo_wire::frame::{decode_one, encode_vec};
 use tribo_wire::*;
 
@@ -123,10 +123,7 @@ fn end_of(frames: &Frames) -> RunEnd {
 
 fn loaded() -> VirtualRigConfig {
     VirtualRigConfig {
-        law: LawConfig::CoulombViscous {
-            mu0: 0.02,
-            mu1: 0.004,
-        },
+        law: tribo_physics::FrictionLaw::coulomb_viscous(0.02, 0.004),
         seed: 3,
         ..Default::default()
     }

@@ -51,7 +51,7 @@ pub fn demo(args: &Args) -> anyhow::Result<crate::link::session::Outcome> {
         }
     };
     say(format!(
-        "virtual rig in this process (contact {:?}, load {} N); running through the link's frames",
+        "virtual rig in this process (contact {}, load {} N); running through the link's frames",
         cfg.law, cfg.load_n
     ));
     let info = link.hello()?;
@@ -94,7 +94,7 @@ pub fn demo(args: &Args) -> anyhow::Result<crate::link::session::Outcome> {
         args.rig.speed,
         st.bad_frames
     );
-    if let Some((m0, m1)) = cfg.law.coulomb_viscous() {
+    if let Some((m0, m1)) = cfg.law.as_coulomb_viscous() {
         println!(
             "{:<10}μ0 = {m0}, μ1 = {} (contact + apparatus {})",
             "simulated",

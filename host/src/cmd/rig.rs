@@ -9,7 +9,8 @@ use anyhow::{bail, Context};
 use std::net::TcpListener;
 use std::path::PathBuf;
 use std::time::Duration;
-use tribo_rig::{HostEvent, LawConfig, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
+use tribo_physics::FrictionLaw;
+use tribo_rig::{HostEvent, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
 
 /// The simulated rig, from a TOML file and/or flags (flags win).
 #[derive(clap::Args, Debug, Clone)]
@@ -81,8 +82,7 @@ impl VirtualArgs {
             Some(p) => {
                 let text = std::fs::read_to_string(p)
                     .with_context(|| format!("cannot read {}", p.display()))?;
-                VirtualRigConfig::from_toml(&text)
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?
+                VirtualRigConfig::from_toml(&text).with_context(|| p.display().to_string())?
             }
             None => VirtualRigConfig::default(),
         };
@@ -90,14 +90,18 @@ impl VirtualArgs {
             c.load_n = l;
         }
         if self.mu0.is_some() || self.mu1.is_some() || self.mu2.is_some() {
-            let (m0, m1) = match &c.law {
-                LawConfig::Quadratic { mu0, mu1, .. } => (*mu0, *mu1),
-                l => l.coulomb_viscous().unwrap_or((0.02, 0.004)),
-            };
-            let (mu0, mu1) = (self.mu0.unwrap_or(m0), self.mu1.unwrap_or(m1));
+            // The flags replace the contact's first constants; those they leave keep the
+            // file's values when its law is pseudo-polynomial of order ≤ 2.
+            let mu = c
+                .law
+                .mu()
+                .filter(|m| m.len() <= 3)
+                .unwrap_or(&[0.02, 0.004]);
+            let at = |j: usize| mu.get(j).copied().unwrap_or(0.0);
+            let (mu0, mu1) = (self.mu0.unwrap_or(at(0)), self.mu1.unwrap_or(at(1)));
             c.law = match self.mu2 {
-                Some(mu2) => LawConfig::Quadratic { mu0, mu1, mu2 },
-                None => LawConfig::CoulombViscous { mu0, mu1 },
+                Some(mu2) => FrictionLaw::quadratic(mu0, mu1, mu2),
+                None => FrictionLaw::coulomb_viscous(mu0, mu1),
             };
         }
         if let Some(t) = self.ambient {
@@ -117,8 +121,7 @@ impl VirtualArgs {
         if let Some(s) = self.seed {
             c.seed = s;
         }
-        c.validate()
-            .map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        c.validate().context("virtual rig")?;
         if self.speed.is_nan() || self.speed <= 0.0 {
             bail!("--speed must be a positive number (1 = real time, inf = as fast as possible)");
         }
@@ -141,8 +144,7 @@ impl VirtualArgs {
         {
             bail!("--button-after must be a number of seconds ≥ 0");
         }
-        opts.validate()
-            .map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        opts.validate().context("virtual rig")?;
         Ok(opts)
     }
 
@@ -150,7 +152,7 @@ impl VirtualArgs {
     pub fn build(&self) -> anyhow::Result<(VirtualRig, ServeOptions)> {
         let cfg = self.rig_config()?;
         let opts = self.serve_options()?;
-        let rig = VirtualRig::new(cfg).map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        let rig = VirtualRig::new(cfg).context("virtual rig")?;
         Ok((rig, opts))
     }
 
@@ -170,8 +172,7 @@ impl VirtualArgs {
             ),
             _ => anyhow::anyhow!("cannot listen on {listen}: {e}"),
         })?;
-        let tcp = TcpRig::spawn(rig, listener, opts, events)
-            .map_err(|e| anyhow::anyhow!("virtual rig: {e}"))?;
+        let tcp = TcpRig::spawn(rig, listener, opts, events).context("virtual rig")?;
         Ok((tcp, cfg))
     }
 
@@ -214,7 +215,7 @@ pub struct Args {
 /// The rig's settings, one line.
 fn describe(cfg: &VirtualRigConfig, a: &VirtualArgs) -> String {
     format!(
-        "m = {} kg, k = {} N/m, load {} N{}, contact {:?}, apparatus μ1 {}, seed {}, speed ×{}",
+        "m = {} kg, k = {} N/m, load {} N{}, contact {}, apparatus μ1 {}, seed {}, speed ×{}",
         cfg.mass_kg,
         cfg.stiffness_n_per_m,
         cfg.load_n,
@@ -233,9 +234,10 @@ fn describe(cfg: &VirtualRigConfig, a: &VirtualArgs) -> String {
 /// Says which rig constants the configuration file leaves to the thesis's rig.
 fn print_defaults(a: &VirtualArgs) {
     if let Some(p) = &a.config {
+        // The file was read and checked before; were it gone since, there is nothing to say.
         let d = std::fs::read_to_string(p)
-            .map_err(|e| e.to_string())
-            .and_then(|t| VirtualRigConfig::defaulted(&t))
+            .ok()
+            .and_then(|t| VirtualRigConfig::defaulted(&t).ok())
             .unwrap_or_default();
         if !d.is_empty() {
             println!(

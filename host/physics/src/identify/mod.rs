@@ -127,8 +127,11 @@ impl From<NotAnalysable> for FitError {
 impl From<crate::record::RecordError> for FitError {
     fn from(e: crate::record::RecordError) -> Self {
         match e.kind() {
-            RecordErrorKind::NonFinite => NotAnalysable::NonFinite { what: e.0 }.into(),
-            _ => FitError::Failed(e.0),
+            RecordErrorKind::NonFinite => NotAnalysable::NonFinite {
+                what: e.to_string(),
+            }
+            .into(),
+            _ => FitError::Failed(e.to_string()),
         }
     }
 }

@@ -97,8 +97,12 @@ pub(super) fn envelope_figure(
     let measured = pts(v.tau.iter().map(|t| t - tau0), v.a.iter().copied());
     p.series
         .push(Series::line("measured", 7, decimate(&measured, bins)).with_style(Style::Line(3)));
-    let data = EnvelopeData::new(&v.tau, &v.y, &v.ydot, bins.max(50))
-        .map_err(|e| ReportError::Input(e.to_string()))?;
+    let data = EnvelopeData::new(&v.tau, &v.y, &v.ydot, bins.max(50)).map_err(|e| {
+        ReportError::Analysis {
+            what: "the envelope",
+            source: Box::new(e),
+        }
+    })?;
     for (i, f) in fits.iter().enumerate() {
         match identify::simulated_envelope(&data, f.friction_law(), fit_opts) {
             Ok(env) => p.series.push(
@@ -207,7 +211,10 @@ pub(super) fn windows_figure(v: &View, opts: &ReportOptions) -> Result<Figure, R
         opts.windows,
         &opts.fit,
     )
-    .map_err(|e| ReportError::Input(e.to_string()))?;
+    .map_err(|e| ReportError::Analysis {
+        what: "the amplitude windows",
+        source: Box::new(e),
+    })?;
     if w.len() < 2 {
         return Err(ReportError::Input(format!(
             "only {} amplitude window(s) long enough to fit",

@@ -129,9 +129,9 @@ pub fn record_report(rec: &Record, inputs: &ReportInputs) -> Result<Report, Repo
     if rec.is_empty() {
         return Err(ReportError::Input("the record has no samples".into()));
     }
-    rec.validate().map_err(|e| ReportError::Input(e.0))?;
-    let rig = rec.rig().map_err(|e| ReportError::Input(e.0))?;
-    let (tau, y, ydot) = rec.dimensionless().map_err(|e| ReportError::Input(e.0))?;
+    rec.validate().map_err(ReportError::Record)?;
+    let rig = rec.rig().map_err(ReportError::Record)?;
+    let (tau, y, ydot) = rec.dimensionless().map_err(ReportError::Record)?;
     let a = mark_crandall(&y, &ydot);
     let a0 = a[0];
     if a0 <= 0.0 {

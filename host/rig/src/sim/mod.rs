@@ -22,6 +22,7 @@
 //!   (heater, magnet and ECR source off, the pins taken from their timers until the next reset).
 
 use crate::config::VirtualRigConfig;
+use crate::RigError;
 use tribo_firmware::acquisition::clock::BOARD_TIMER_HZ;
 use tribo_firmware::acquisition::{Batch, ConverterModel};
 use tribo_firmware::ecr::{FULL_SCALE_V, GAIN_V_PER_A, RANGES};
@@ -130,12 +131,12 @@ pub struct SimHardware {
 }
 
 impl SimHardware {
-    pub fn new(cfg: &VirtualRigConfig) -> Result<SimHardware, String> {
+    pub fn new(cfg: &VirtualRigConfig) -> Result<SimHardware, RigError> {
         cfg.validate()?;
         // Unloaded: the contact transmits no force whatever its law; only the apparatus damps. The
         // dimensionless model needs N > 0, so it runs at a token load with no contact law.
         let (load, law) = if cfg.load_n > 0.0 {
-            (cfg.load_n, cfg.law.to_law())
+            (cfg.load_n, cfg.law.clone())
         } else {
             (1e-3, FrictionLaw::polynomial(vec![0.0, 0.0]))
         };
@@ -203,7 +204,7 @@ impl SimHardware {
         }
         self.cfg
             .law
-            .coulomb_viscous()
+            .as_coulomb_viscous()
             .map(|(m0, m1)| (m0, m1 + self.cfg.apparatus_mu1))
     }
 
