@@ -28,7 +28,7 @@ struct Row {
     addr: Address,
     port: Option<Port>,
     note: &'static str,
-    answer: Option<Result<(String, String), String>>,
+    answer: Option<Result<(String, String), crate::link::LinkError>>,
 }
 
 /// Runs the subcommand.

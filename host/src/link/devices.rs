@@ -2,7 +2,7 @@
 //! (`serialport::available_ports`), the rig's among them by USB id (1209:0001), and the firmware
 //! version each one announces in its hello.
 
-use super::{Address, Link};
+use super::{Address, Link, LinkError};
 use serialport::{SerialPortInfo, SerialPortType};
 use std::time::Duration;
 
@@ -104,11 +104,11 @@ pub fn rigs() -> Result<Vec<Port>, String> {
 }
 
 /// What a rig at `addr` answers to hello: `Ok((firmware version, rig serial in hex))` or why not.
-pub fn probe(addr: &Address) -> Result<(String, String), String> {
-    let mut link = Link::open(addr).map_err(|e| e.msg)?;
+pub fn probe(addr: &Address) -> Result<(String, String), LinkError> {
+    let mut link = Link::open(addr)?;
     link.timeouts.reply = Duration::from_millis(400);
     link.timeouts.attempts = 2;
-    let info = link.hello().map_err(|e| e.msg)?;
+    let info = link.hello()?;
     Ok((
         super::firmware_version(&info),
         format!("{:016x}", info.serial),

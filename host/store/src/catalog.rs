@@ -293,9 +293,10 @@ pub struct Catalog {
 }
 
 fn db_err(ctx: &str, e: rusqlite::Error) -> StoreError {
-    StoreError::new(
+    StoreError::caused(
         ErrorKind::Catalog,
-        format!("catalog: {ctx}: {e}; the catalog is only an index: delete catalog.sqlite and run `tribo runs --reindex`"),
+        format!("catalog: {ctx} (the catalog is only an index: delete catalog.sqlite and run `tribo runs --reindex`)"),
+        e,
     )
 }
 

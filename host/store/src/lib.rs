@@ -39,11 +39,17 @@ pub use time::utc_now_rfc3339;
 
 use std::fmt;
 
-/// Any store failure. The message says what went wrong, where, and what to do next.
-#[derive(Debug)]
+/// Any store failure: its kind (for callers that react differently), what went wrong and where
+/// and what to do next (the message), and the error underneath, if any, as its source (the
+/// `io::Error`, the SQLite or TOML error): `Display` says the message only, the CLI prints the
+/// chain.
+#[derive(Debug, thiserror::Error)]
+#[error("{msg}")]
 pub struct StoreError {
     pub kind: ErrorKind,
     pub msg: String,
+    #[source]
+    source: Option<Box<dyn std::error::Error + Send + Sync>>,
 }
 
 /// Broad class of a [`StoreError`], for callers that react differently.
@@ -60,24 +66,30 @@ pub enum ErrorKind {
 }
 
 impl StoreError {
+    /// An error of kind `kind` with nothing underneath.
     pub fn new(kind: ErrorKind, msg: impl Into<String>) -> Self {
         StoreError {
             kind,
             msg: msg.into(),
+            source: None,
+        }
+    }
+    /// An error of kind `kind` caused by `source`.
+    pub fn caused(
+        kind: ErrorKind,
+        msg: impl Into<String>,
+        source: impl std::error::Error + Send + Sync + 'static,
+    ) -> Self {
+        StoreError {
+            kind,
+            msg: msg.into(),
+            source: Some(Box::new(source)),
         }
     }
     pub(crate) fn io(ctx: impl fmt::Display, e: std::io::Error) -> Self {
-        StoreError::new(ErrorKind::Io, format!("{ctx}: {e}"))
+        StoreError::caused(ErrorKind::Io, ctx.to_string(), e)
     }
 }
-
-impl fmt::Display for StoreError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.msg)
-    }
-}
-
-impl std::error::Error for StoreError {}
 
 pub type Result<T, E = StoreError> = std::result::Result<T, E>;
 

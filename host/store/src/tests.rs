@@ -353,6 +353,20 @@ fn open_reports_what_is_wrong() {
     let e = Run::open(d.path()).unwrap_err();
     assert_eq!(e.kind, ErrorKind::Corrupt);
     assert!(e.msg.contains("meta.toml is damaged"), "{e}");
+    // The parser's own account (line, column, what it expected) is the source, not lost.
+    let toml_err = std::error::Error::source(&e).and_then(|s| s.downcast_ref::<toml::de::Error>());
+    assert!(toml_err.is_some(), "{e:?}");
+    // A store that cannot be made (a file stands where its folder should): the path, and the
+    // io::Error underneath.
+    let file = d.path().join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let Err(e) = Catalog::open(&file.join("store")) else {
+        panic!("a store made under a file");
+    };
+    assert_eq!(e.kind, ErrorKind::Io);
+    assert!(e.msg.contains("a-file"), "{e}");
+    let io = std::error::Error::source(&e).and_then(|s| s.downcast_ref::<std::io::Error>());
+    assert!(io.is_some(), "{e:?}");
 }
 
 #[test]

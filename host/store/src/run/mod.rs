@@ -83,9 +83,10 @@ fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
         }
     })?;
     toml::from_str(&text).map_err(|e| {
-        StoreError::new(
+        StoreError::caused(
             ErrorKind::Corrupt,
-            format!("{} is damaged: {e}; fix or delete the file", path.display()),
+            format!("{} is damaged: fix or delete the file", path.display()),
+            e,
         )
     })
 }
@@ -93,9 +94,10 @@ fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
 /// Writes `value` to `path` atomically (temporary file, fsync, rename).
 fn write_toml_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     let text = toml::to_string(value).map_err(|e| {
-        StoreError::new(
+        StoreError::caused(
             ErrorKind::Invalid,
-            format!("cannot encode {}: {e}", path.display()),
+            format!("cannot encode {}", path.display()),
+            e,
         )
     })?;
     write_atomic(path, text.as_bytes())
@@ -432,9 +434,10 @@ impl Run {
             clean(cfg.rig.load_n),
         )
         .map_err(|e| {
-            StoreError::new(
+            StoreError::caused(
                 ErrorKind::Corrupt,
-                format!("{}: rig constants: {e}", self.dir.display()),
+                format!("{}: the run's rig constants", self.dir.display()),
+                e,
             )
         })?;
         let mut r = Record::new(s.t, s.x, s.v, Some(rig), Units::Si);

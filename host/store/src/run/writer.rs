@@ -124,12 +124,8 @@ impl RunWriter {
     }
 
     pub(super) fn decode(&self, raw: &[u8]) -> Result<tribo_wire::Frame<DeviceMsg>> {
-        tribo_wire::v1::decode_as(self.log.header().protocol, raw).map_err(|e| {
-            StoreError::new(
-                ErrorKind::Invalid,
-                format!("refusing to log a bad frame: {e}"),
-            )
-        })
+        tribo_wire::v1::decode_as(self.log.header().protocol, raw)
+            .map_err(|e| StoreError::caused(ErrorKind::Invalid, "refusing to log a bad frame", e))
     }
 
     pub(super) fn log_frame(&mut self, raw: &[u8], f: tribo_wire::Frame<DeviceMsg>) -> Result<()> {
