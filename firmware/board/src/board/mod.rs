@@ -22,6 +22,10 @@
 //!   connected.
 //!
 //! Panics and HardFaults go to `crate::safety` (safe state, reset record, reset).
+//!
+//! Here: the shared state, the app, thermocouple and watchdog tasks, and `main`, which takes the
+//! peripherals and hands them out. Beside it: `hw` ([`BoardHw`], the hardware traits on this
+//! board), `flash` (bank 2 and its task), `host_link` (the USB tasks), `clocks` (the clock tree).
 use core::cell::Cell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -63,6 +67,15 @@ use crate::safety;
 
 use crate::sampling::Sampler;
 
+mod hw;
+mod flash;
+mod host_link;
+mod clocks;
+use hw::*;
+use flash::*;
+use host_link::*;
+use clocks::*;
+
 type Cs = CriticalSectionRawMutex;
 type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
 
@@ -97,222 +110,6 @@ static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static CONTROL_BUF: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
 static CDC_STATE: StaticCell<State> = StaticCell::new();
-
-/// An operation on bank 2, asked by the application, run by the flash task.
-// The program variant carries its bytes: the op lives in one static signal slot, and there is no
-// heap to box into, so the slot is the size of the largest variant either way.
-#[allow(clippy::large_enum_variant)]
-#[derive(Clone)]
-enum FlashOp {
-    Erase {
-        sector: u32,
-    },
-    Program {
-        offset: u32,
-        len: usize,
-        data: [u8; FLASH_MAX_PROGRAM],
-    },
-}
-
-/// Bank 2 between the application (which asks and reads) and the flash task (which erases and
-/// programs, awaiting the flash interrupt).
-struct FlashLink {
-    region: embassy_sync::mutex::Mutex<Cs, Bank2Region<'static, Async>>,
-    op: Signal<Cs, FlashOp>,
-    /// An operation was asked and is not finished.
-    busy: AtomicBool,
-    failed: AtomicBool,
-}
-
-/// The hardware the application task drives directly.
-struct BoardHw {
-    shared: &'static Shared,
-    flash: &'static FlashLink,
-    magnet_hold: SimplePwmChannel<'static, TIM1>,
-    magnet_reverse: SimplePwmChannel<'static, TIM1>,
-    heater: SimplePwmChannel<'static, TIM4>,
-    ecr_dac: DacChannel<'static, Blocking>,
-    ecr_range: [Output<'static>; 3],
-    button: Input<'static>,
-    lamps: [Output<'static>; 3],
-    sampler: Sampler,
-}
-
-fn fraction(duty: f32) -> u32 {
-    if duty.is_finite() {
-        (duty.clamp(0.0, 1.0) * 1000.0) as u32
-    } else {
-        0
-    }
-}
-
-impl Magnet for BoardHw {
-    fn magnet_drive(&mut self, drive: MagnetDrive) {
-        let (hold, reverse) = match drive {
-            MagnetDrive::Off => (0.0, 0.0),
-            MagnetDrive::Hold { duty } => (duty, 0.0),
-            MagnetDrive::Reverse { duty } => (0.0, duty),
-        };
-        // Both bridge legs low before the other one is driven.
-        self.magnet_hold
-            .set_duty_cycle_fraction(fraction(hold), 1000);
-        self.magnet_reverse
-            .set_duty_cycle_fraction(fraction(reverse), 1000);
-    }
-}
-
-impl Thermocouple for BoardHw {
-    fn read_thermocouple(&mut self) -> Option<ConverterRead> {
-        let (regs, at_us) = self.shared.thermocouple.lock(|c| c.get());
-        regs.map(|regs| ConverterRead {
-            regs,
-            age_us: now_us().saturating_sub(at_us),
-        })
-    }
-}
-
-impl HeaterOutput for BoardHw {
-    fn set_heater_duty(&mut self, duty: f32) {
-        self.heater.set_duty_cycle_fraction(fraction(duty), 1000);
-    }
-}
-
-impl EcrFrontEnd for BoardHw {
-    fn set_ecr_source(&mut self, volts: f32) {
-        let dac_v = (volts * ECR_DIVIDER).clamp(0.0, FULL_SCALE_V);
-        self.ecr_dac
-            .set(Value::Bit12Right((dac_v / FULL_SCALE_V * 4095.0) as u16));
-    }
-    fn set_ecr_range(&mut self, range: u8) {
-        for (bit, pin) in self.ecr_range.iter_mut().enumerate() {
-            pin.set_level(if range & (1 << bit) != 0 {
-                Level::High
-            } else {
-                Level::Low
-            });
-        }
-    }
-    fn read_ecr_output(&mut self) -> f32 {
-        // The sampler always runs (at its idle rate between runs): the latest scan's ECR channel.
-        self.sampler
-            .latest_ecr()
-            .map_or(f32::NAN, |c| count_to_volts(c as f32))
-    }
-}
-
-impl SampleSource for BoardHw {
-    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
-        self.sampler.clock_for(rate_hz)
-    }
-    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
-        self.sampler.start(rate_hz)
-    }
-    fn adc_stop(&mut self) {
-        self.sampler.stop();
-    }
-    fn adc_running(&self) -> bool {
-        self.sampler.is_acquiring()
-    }
-    fn adc_next_index(&mut self) -> u64 {
-        self.sampler.next_index()
-    }
-    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
-        self.sampler.read(out)
-    }
-}
-
-impl Button for BoardHw {
-    fn button_pressed(&mut self) -> bool {
-        self.button.is_high()
-    }
-}
-
-impl Led for BoardHw {
-    fn set_lamps(&mut self, lamps: Lamps) {
-        for (pin, on) in self
-            .lamps
-            .iter_mut()
-            .zip([lamps.green, lamps.amber, lamps.red])
-        {
-            pin.set_level(if on { Level::High } else { Level::Low });
-        }
-    }
-}
-
-impl Link for BoardHw {
-    fn send_frame(&mut self, frame: &[u8]) -> bool {
-        // No host: refused, so that run frames wait in the store rather than in a pipe that is
-        // emptied when the next host connects.
-        if !self.shared.connected.load(Ordering::Acquire)
-            || self.shared.tx.free_capacity() < frame.len()
-        {
-            return false;
-        }
-        // Only this task writes the pipe, so the free space cannot shrink meanwhile.
-        let mut rest = frame;
-        while !rest.is_empty() {
-            match self.shared.tx.try_write(rest) {
-                Ok(n) => rest = &rest[n..],
-                Err(_) => return false,
-            }
-        }
-        true
-    }
-}
-
-impl RunFlash for BoardHw {
-    fn flash_geometry(&self) -> FlashGeometry {
-        FlashGeometry::H743_BANK2
-    }
-    fn flash_busy(&mut self) -> bool {
-        self.flash.busy.load(Ordering::Acquire)
-    }
-    fn flash_erase(&mut self, sector: u32) -> bool {
-        if self.flash_busy() || sector >= FlashGeometry::H743_BANK2.sectors {
-            return false;
-        }
-        self.flash.busy.store(true, Ordering::Release);
-        self.flash.op.signal(FlashOp::Erase { sector });
-        true
-    }
-    fn flash_program(&mut self, offset: u32, data: &[u8]) -> bool {
-        let g = FlashGeometry::H743_BANK2;
-        let w = FLASH_WORD as u32;
-        let len = data.len() as u32;
-        if self.flash_busy()
-            || !offset.is_multiple_of(w)
-            || len == 0
-            || !len.is_multiple_of(w)
-            || data.len() > FLASH_MAX_PROGRAM
-            || offset + len > g.bytes()
-            || offset / g.sector_bytes != (offset + len - 1) / g.sector_bytes
-        {
-            return false;
-        }
-        let mut buf = [0xFF; FLASH_MAX_PROGRAM];
-        buf[..data.len()].copy_from_slice(data);
-        self.flash.busy.store(true, Ordering::Release);
-        self.flash.op.signal(FlashOp::Program {
-            offset,
-            len: data.len(),
-            data: buf,
-        });
-        true
-    }
-    fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool {
-        // Never while bank 2 is erased or programmed: the read would stall the CPU until it ends.
-        if self.flash_busy() {
-            return false;
-        }
-        match self.flash.region.try_lock() {
-            Ok(mut region) => region.blocking_read(offset, out).is_ok(),
-            Err(_) => false,
-        }
-    }
-    fn flash_take_error(&mut self) -> bool {
-        self.flash.failed.swap(false, Ordering::AcqRel)
-    }
-}
 
 fn now_us() -> u64 {
     Instant::now().as_micros()
@@ -420,125 +217,6 @@ async fn thermocouple_task(
         }
         ticker.next().await;
     }
-}
-
-/// Runs the application's flash operations on bank 2, one at a time.
-#[embassy_executor::task]
-async fn flash_task(link: &'static FlashLink) {
-    const SECTOR: u32 = FlashGeometry::H743_BANK2.sector_bytes;
-    loop {
-        let op = link.op.wait().await;
-        let ok = {
-            let mut region = link.region.lock().await;
-            match op {
-                FlashOp::Erase { sector } => region
-                    .erase(sector * SECTOR, (sector + 1) * SECTOR)
-                    .await
-                    .is_ok(),
-                FlashOp::Program { offset, len, data } => {
-                    region.write(offset, &data[..len]).await.is_ok()
-                }
-            }
-        };
-        if !ok {
-            defmt::warn!("bank 2 operation failed");
-            link.failed.store(true, Ordering::Release);
-        }
-        link.busy.store(false, Ordering::Release);
-    }
-}
-
-#[embassy_executor::task]
-async fn usb_task(mut dev: embassy_usb::UsbDevice<'static, UsbDriver>) -> ! {
-    dev.run().await
-}
-
-#[embassy_executor::task]
-async fn usb_tx_task(shared: &'static Shared, mut tx: Sender<'static, UsbDriver>) {
-    let mut buf = [0u8; 64];
-    loop {
-        tx.wait_connection().await;
-        // A clean start: bytes queued for a host that went away (a frame cut by the cable pull)
-        // are dropped; what the application must resend, it resends from its run store.
-        shared.tx.clear();
-        shared.connected.store(true, Ordering::Release);
-        defmt::info!("usb: host connected");
-        loop {
-            let n = shared.tx.read(&mut buf).await;
-            if tx.write_packet(&buf[..n]).await.is_err() {
-                break;
-            }
-        }
-        shared.connected.store(false, Ordering::Release);
-        defmt::info!("usb: host gone");
-    }
-}
-
-#[embassy_executor::task]
-async fn usb_rx_task(shared: &'static Shared, mut rx: Receiver<'static, UsbDriver>) {
-    let mut buf = [0u8; 64];
-    loop {
-        rx.wait_connection().await;
-        // Packets of a previous connection not yet taken by the application are stale; the empty
-        // packet tells the application a new connection starts here.
-        shared.rx.clear();
-        shared.rx.send(heapless::Vec::new()).await;
-        while let Ok(n) = rx.read_packet(&mut buf).await {
-            if n == 0 {
-                continue;
-            }
-            let bytes = heapless::Vec::from_slice(&buf[..n]).unwrap_or_default();
-            shared.rx.send(bytes).await;
-        }
-    }
-}
-
-/// The clock tree (written down in `firmware/README.md`): HSE in bypass from the ST-LINK's 8 MHz
-/// MCO (crystal-accurate) → PLL1 400 MHz core, PLL2P 25 MHz ADC kernel clock; AHB 200 MHz, APB
-/// 100 MHz, so the APB1 timers (TIM6: the sample clock) run at 200 MHz; HSI48 synchronised on the
-/// USB SOF by the CRS for USB.
-fn clocks() -> embassy_stm32::Config {
-    use embassy_stm32::rcc::*;
-    let mut config = embassy_stm32::Config::default();
-    config.rcc.hse = Some(Hse {
-        freq: Hertz(8_000_000),
-        mode: HseMode::Bypass,
-    });
-    config.rcc.hsi = Some(HSIPrescaler::DIV1);
-    config.rcc.csi = true;
-    config.rcc.hsi48 = Some(Hsi48Config {
-        sync_from_usb: true,
-    });
-    // 8 MHz / 4 × 400 = 800 MHz VCO: 400 MHz core (P / 2), 100 MHz for SPI1 (Q / 8).
-    config.rcc.pll1 = Some(Pll {
-        source: PllSource::HSE,
-        prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL400,
-        fracn: None,
-        divp: Some(PllDiv::DIV2),
-        divq: Some(PllDiv::DIV8),
-        divr: None,
-    });
-    // 8 MHz / 4 × 200 = 400 MHz VCO / 16: 25 MHz ADC kernel clock.
-    config.rcc.pll2 = Some(Pll {
-        source: PllSource::HSE,
-        prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL200,
-        fracn: None,
-        divp: Some(PllDiv::DIV16),
-        divq: None,
-        divr: None,
-    });
-    config.rcc.sys = Sysclk::PLL1_P;
-    config.rcc.ahb_pre = AHBPrescaler::DIV2;
-    config.rcc.apb1_pre = APBPrescaler::DIV2;
-    config.rcc.apb2_pre = APBPrescaler::DIV2;
-    config.rcc.apb3_pre = APBPrescaler::DIV2;
-    config.rcc.apb4_pre = APBPrescaler::DIV2;
-    config.rcc.voltage_scale = VoltageScale::Scale1;
-    config.rcc.mux.usbsel = mux::Usbsel::HSI48;
-    config.rcc.mux.adcsel = mux::Adcsel::PLL2_P;
-    config
 }
 
 macro_rules! spawn {

@@ -1,0 +1,141 @@
+//! The hardware the application task drives directly ([`BoardHw`]): magnet and heater PWM, the
+//! thermocouple reading the thermocouple task leaves, the ECR DAC and range switches, the sampler,
+//! the button, the lamps and the USB pipe, each behind its `tribo_firmware::hal` trait.
+
+use super::*;
+
+/// The hardware the application task drives directly.
+pub(super) struct BoardHw {
+    pub(super) shared: &'static Shared,
+    pub(super) flash: &'static FlashLink,
+    pub(super) magnet_hold: SimplePwmChannel<'static, TIM1>,
+    pub(super) magnet_reverse: SimplePwmChannel<'static, TIM1>,
+    pub(super) heater: SimplePwmChannel<'static, TIM4>,
+    pub(super) ecr_dac: DacChannel<'static, Blocking>,
+    pub(super) ecr_range: [Output<'static>; 3],
+    pub(super) button: Input<'static>,
+    pub(super) lamps: [Output<'static>; 3],
+    pub(super) sampler: Sampler,
+}
+
+pub(super) fn fraction(duty: f32) -> u32 {
+    if duty.is_finite() {
+        (duty.clamp(0.0, 1.0) * 1000.0) as u32
+    } else {
+        0
+    }
+}
+
+impl Magnet for BoardHw {
+    fn magnet_drive(&mut self, drive: MagnetDrive) {
+        let (hold, reverse) = match drive {
+            MagnetDrive::Off => (0.0, 0.0),
+            MagnetDrive::Hold { duty } => (duty, 0.0),
+            MagnetDrive::Reverse { duty } => (0.0, duty),
+        };
+        // Both bridge legs low before the other one is driven.
+        self.magnet_hold
+            .set_duty_cycle_fraction(fraction(hold), 1000);
+        self.magnet_reverse
+            .set_duty_cycle_fraction(fraction(reverse), 1000);
+    }
+}
+
+impl Thermocouple for BoardHw {
+    fn read_thermocouple(&mut self) -> Option<ConverterRead> {
+        let (regs, at_us) = self.shared.thermocouple.lock(|c| c.get());
+        regs.map(|regs| ConverterRead {
+            regs,
+            age_us: now_us().saturating_sub(at_us),
+        })
+    }
+}
+
+impl HeaterOutput for BoardHw {
+    fn set_heater_duty(&mut self, duty: f32) {
+        self.heater.set_duty_cycle_fraction(fraction(duty), 1000);
+    }
+}
+
+impl EcrFrontEnd for BoardHw {
+    fn set_ecr_source(&mut self, volts: f32) {
+        let dac_v = (volts * ECR_DIVIDER).clamp(0.0, FULL_SCALE_V);
+        self.ecr_dac
+            .set(Value::Bit12Right((dac_v / FULL_SCALE_V * 4095.0) as u16));
+    }
+    fn set_ecr_range(&mut self, range: u8) {
+        for (bit, pin) in self.ecr_range.iter_mut().enumerate() {
+            pin.set_level(if range & (1 << bit) != 0 {
+                Level::High
+            } else {
+                Level::Low
+            });
+        }
+    }
+    fn read_ecr_output(&mut self) -> f32 {
+        // The sampler always runs (at its idle rate between runs): the latest scan's ECR channel.
+        self.sampler
+            .latest_ecr()
+            .map_or(f32::NAN, |c| count_to_volts(c as f32))
+    }
+}
+
+impl SampleSource for BoardHw {
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
+        self.sampler.clock_for(rate_hz)
+    }
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
+        self.sampler.start(rate_hz)
+    }
+    fn adc_stop(&mut self) {
+        self.sampler.stop();
+    }
+    fn adc_running(&self) -> bool {
+        self.sampler.is_acquiring()
+    }
+    fn adc_next_index(&mut self) -> u64 {
+        self.sampler.next_index()
+    }
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
+        self.sampler.read(out)
+    }
+}
+
+impl Button for BoardHw {
+    fn button_pressed(&mut self) -> bool {
+        self.button.is_high()
+    }
+}
+
+impl Led for BoardHw {
+    fn set_lamps(&mut self, lamps: Lamps) {
+        for (pin, on) in self
+            .lamps
+            .iter_mut()
+            .zip([lamps.green, lamps.amber, lamps.red])
+        {
+            pin.set_level(if on { Level::High } else { Level::Low });
+        }
+    }
+}
+
+impl Link for BoardHw {
+    fn send_frame(&mut self, frame: &[u8]) -> bool {
+        // No host: refused, so that run frames wait in the store rather than in a pipe that is
+        // emptied when the next host connects.
+        if !self.shared.connected.load(Ordering::Acquire)
+            || self.shared.tx.free_capacity() < frame.len()
+        {
+            return false;
+        }
+        // Only this task writes the pipe, so the free space cannot shrink meanwhile.
+        let mut rest = frame;
+        while !rest.is_empty() {
+            match self.shared.tx.try_write(rest) {
+                Ok(n) => rest = &rest[n..],
+                Err(_) => return false,
+            }
+        }
+        true
+    }
+}
