@@ -512,7 +512,7 @@ fn a_run_longer_than_the_rig_keeps() {
         }
     });
     bench.run_on(61.0);
-    {
+    let durable = {
         let st = bench.rig().app().store();
         eprintln!(
             "store: {} blocks, {} durable, RAM from {}, flash {:?}",
@@ -521,7 +521,11 @@ fn a_run_longer_than_the_rig_keeps() {
             st.first_block_in_ram(),
             st.flash_state()
         );
-    }
+        // The flash is full long before the end and RAM drops the records around its cut: the
+        // flash copy still ends cleanly, the run's beginning then its result and end.
+        assert_eq!(st.flash_state(), tribo_firmware::runstore::FlashState::Done);
+        st.durable_blocks()
+    };
     let truth = bench.rig_frames(1);
     let held: BTreeSet<u32> = truth.iter().filter_map(|f| block_of(f)).collect();
     let end = truth
@@ -562,6 +566,12 @@ fn a_run_longer_than_the_rig_keeps() {
         "{n}"
     );
     eprintln!("{inc}");
+    // Power lost, then back: the run comes back from flash finished, its beginning whole.
+    bench.rig().power_cycle();
+    bench.run_on(0.1);
+    let st = bench.rig().app().store();
+    assert!(st.is_finished(), "the result and end survive the power cut");
+    assert_eq!(st.blocks(), durable);
 }
 
 #[test]

@@ -17,7 +17,10 @@
 //!   the wear is spread over the bank. When a run outgrows the flash, the flash keeps its beginning
 //!   (a cut) and always its result and end (room is reserved for them); the RAM ring keeps its most
 //!   recent part, and only records the ring had to drop before the flash took them are lost (each
-//!   pull says which blocks it could not send).
+//!   pull says which blocks it could not send). The cut's last partial flash word is kept aside,
+//!   so the run may go on long after it (60 s at 20 kS/s fills the bank in ~18 s) and its flash
+//!   copy still ends cleanly. A flash slower than the run (its unwritten bytes filling ¾ of the
+//!   ring) is cut early the same way, at the first record it has not begun, rather than fail.
 //! * **After a power loss** [`RunStore::recover`] finds the newest run in flash (the highest run id
 //!   among the sectors that open with a valid header) and reads it back record by record, each frame
 //!   checked (CRC, decoding, run id, block order); a torn or foreign record ends it there. The run is
@@ -190,6 +193,27 @@ impl<'a> RunStore<'a> {
         self.writer.cut.unwrap_or(self.ring.hi)
     }
 
+    /// The first record boundary at or after stream position `q` (the stream end if none): the
+    /// start of the first block recorded there (events between blocks are not indexed; a block is
+    /// never far).
+    fn record_at_or_after(&self, q: u32) -> u32 {
+        let n = self.blocks.min(self.index.len() as u32);
+        let (mut lo, mut hi) = (0u32, n);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if self.index[mid as usize] >= q {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        if lo < n {
+            self.index[lo as usize]
+        } else {
+            self.ring.hi
+        }
+    }
+
     /// Blocks whose record is in flash now (they survive a power loss).
     pub fn durable_blocks(&self) -> u32 {
         let limit = self.writer.written.min(self.base());
@@ -262,6 +286,7 @@ impl<'a> RunStore<'a> {
             erased: 0,
             written: 0,
             cut: None,
+            cut_word: [0xFF; FLASH_WORD],
             state: if usable {
                 FlashState::Writing
             } else {
@@ -348,7 +373,23 @@ impl<'a> RunStore<'a> {
         let need = LEN_BYTES + frame.len() as u32;
         let pos = self.ring.hi;
         if self.writer.cut.is_none() && pos + need + FLASH_RESERVE > self.writer.capacity() {
-            self.writer.cut = Some(pos);
+            self.set_cut(pos);
+        }
+        // A flash slower than the run: once the bytes it has not written fill ¾ of the ring, the
+        // copy stops at the first record it has not begun, so that it ends cleanly (its beginning,
+        // result and end) before the ring would drop what it still needs. The last quarter of the
+        // ring is the room for that record and a sector erase (1.1 s of the stream at 57 kB/s is
+        // 63 kB; the board's ring's quarter is 172 KiB).
+        if self.writer.cut.is_none()
+            && self.writer.state == FlashState::Writing
+            && pos + need - self.writer.written > self.ring.cap / 4 * 3
+        {
+            let begun = self.writer.written
+                + match self.writer.inflight {
+                    Some(Op::Program { len }) => len,
+                    _ => 0,
+                };
+            self.set_cut(self.record_at_or_after(begun));
         }
         self.make_room(need);
         self.ring.append(&len);
@@ -364,7 +405,9 @@ impl<'a> RunStore<'a> {
                 return;
             };
             let end = self.ring.lo + LEN_BYTES + len;
-            let unwritten = end > self.writer.written && self.ring.lo < self.base();
+            // Bytes the flash still needs from RAM: `written..ram_image_end()`.
+            let needed = self.writer.written..self.ram_image_end();
+            let unwritten = !needed.is_empty() && end > needed.start && self.ring.lo < needed.end;
             if unwritten && self.writer.state == FlashState::Writing {
                 // The flash fell behind by a whole ring: it will never catch up with this run.
                 self.writer.state = FlashState::Failed;

@@ -26,6 +26,10 @@ pub(super) struct Writer {
     /// Bytes of the image programmed so far (whole words, except after recovery).
     pub(super) written: u32,
     pub(super) cut: Option<u32>,
+    /// The cut's last, partial flash word (the image bytes from the word boundary below the cut
+    /// to the cut), kept here when the cut is taken: RAM may drop the records around the cut
+    /// long before the run ends and the word can be programmed.
+    pub(super) cut_word: [u8; FLASH_WORD],
     pub(super) state: FlashState,
     pub(super) inflight: Option<Op>,
 }
@@ -40,6 +44,7 @@ impl Writer {
         erased: 0,
         written: 0,
         cut: None,
+        cut_word: [0xFF; FLASH_WORD],
         state: FlashState::Off,
         inflight: None,
     };
@@ -93,14 +98,47 @@ impl RunStore<'_> {
         self.base() + tail
     }
 
+    /// Ends the flash image's stream at `pos`, a record boundary at or after every byte the flash
+    /// has programmed or is programming, whose records are in RAM: the flash keeps the records
+    /// before it, then the result and end. The cut's partial last word is kept aside
+    /// ([`Writer::cut_word`]).
+    pub(super) fn set_cut(&mut self, pos: u32) {
+        let floor = pos / FLASH_WORD as u32 * FLASH_WORD as u32;
+        let mut word = [0xFF; FLASH_WORD];
+        let n = pos - floor;
+        if n > 0 && self.ring.holds(floor, n) {
+            self.ring.read(floor, &mut word[..n as usize]);
+        }
+        self.writer.cut = Some(pos);
+        self.writer.cut_word = word;
+    }
+
+    /// End of the image bytes that only RAM holds until the flash has them: the stream end, or
+    /// the word boundary below the cut (the rest of that word is in [`Writer::cut_word`]).
+    pub(super) fn ram_image_end(&self) -> u32 {
+        match self.writer.cut {
+            Some(c) => c / FLASH_WORD as u32 * FLASH_WORD as u32,
+            None => self.ring.hi,
+        }
+    }
+
     /// Copies image bytes `q..q + out.len()` (0xFF past its end). False if some are not in RAM.
     pub(super) fn image_bytes(&self, q: u32, out: &mut [u8]) -> bool {
         let base = self.base();
+        let word_at = self.ram_image_end();
         let mut done = 0usize;
         while done < out.len() {
             let at = q + done as u32;
-            if at < base {
-                let n = ((base - at) as usize).min(out.len() - done);
+            if at < base && at >= word_at {
+                // The cut's last word, kept aside.
+                let (o, n) = (
+                    (at - word_at) as usize,
+                    ((base - at) as usize).min(out.len() - done),
+                );
+                out[done..done + n].copy_from_slice(&self.writer.cut_word[o..o + n]);
+                done += n;
+            } else if at < base {
+                let n = ((word_at - at) as usize).min(out.len() - done);
                 if !self.ring.holds(at, n as u32) {
                     return false;
                 }

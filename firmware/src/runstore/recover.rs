@@ -32,6 +32,7 @@ impl RunStore<'_> {
             erased: g.sectors,
             written: g.bytes(),
             cut: None,
+            cut_word: [0xFF; FLASH_WORD],
             state: FlashState::Done,
             inflight: None,
         };

@@ -636,3 +636,76 @@ fn header_result_and_end_frames_fit_their_slots_at_worst() {
         assert!(f.len() <= SLOT, "{what}: {} bytes", f.len());
     }
 }
+
+/// The run goes on long after the flash is full (a fast run: 20 kS/s fills bank 2 in ~18 s): RAM
+/// drops the records around the cut long before the run ends, the last, partial flash word of the
+/// cut among them. The flash copy still ends cleanly: its beginning, then the result and end.
+#[test]
+fn a_run_that_outlasts_the_flash_and_the_ring_still_ends_its_flash_copy_cleanly() {
+    let g = FlashGeometry {
+        sector_bytes: 8 * 1024,
+        sectors: 4,
+    };
+    let mut f = flash(g);
+    let mut s = store(8 * 1024);
+    let run = test_run(13, 600, 50);
+    record(&mut s, &mut f, &run, true);
+    let mut now = 0;
+    settle(&mut s, &mut f, &mut now);
+    assert_eq!(s.flash_state(), FlashState::Done);
+    let durable = s.durable_blocks();
+    assert!(durable > 100 && durable < 600, "{durable}");
+    // RAM holds the last part only; the live stream said what it lost.
+    assert!(
+        s.first_block_in_ram() > durable + 100,
+        "{}",
+        s.first_block_in_ram()
+    );
+    f.power_cut();
+    let mut s2 = store(8 * 1024);
+    let r = s2.recover(&mut f).unwrap();
+    assert_eq!((r.run_id, r.blocks, r.finished), (13, durable, true));
+    let back = stream(&s2, &mut f);
+    assert_eq!(back[..], all(&run)[..back.len()]);
+    assert_eq!(s2.result(), Some(&run.result[..]));
+    assert_eq!(s2.end(), Some(&run.end[..]));
+    assert_eq!(f.violations(), 0);
+}
+
+/// A flash slower than the run (a worn bank, long erases): the unwritten backlog would outgrow
+/// the ring. The copy is cut at the first record the flash has not begun, so it ends cleanly
+/// rather than failing, and the run lives on whole in RAM as long as RAM holds it.
+#[test]
+fn a_flash_slower_than_the_run_is_cut_before_the_ring_overtakes_it() {
+    let mut f = flash(SMALL).with_timing(20_000, 400);
+    let mut s = store(32 * 1024);
+    let run = test_run(14, 300, 40);
+    let mut now = 0;
+    assert!(s.begin(&f, run.run_id, &run.header));
+    for r in &run.records {
+        match r {
+            Rec::Block(k, b) => assert!(s.push_block(*k, b)),
+            Rec::Event(b) => assert!(s.push_event(b)),
+        }
+        // A record every millisecond, the flash serviced every 100 µs.
+        for _ in 0..10 {
+            now += 100;
+            f.advance(now);
+            s.service(&mut f);
+        }
+    }
+    assert_eq!(s.flash_state(), FlashState::Writing);
+    assert!(s.set_result(&run.result) && s.set_end(&run.end));
+    settle(&mut s, &mut f, &mut now);
+    assert_eq!(s.flash_state(), FlashState::Done);
+    let durable = s.durable_blocks();
+    assert!(durable > 10 && durable < 300, "{durable}");
+    f.power_cut();
+    let mut s2 = store(32 * 1024);
+    let r = s2.recover(&mut f).unwrap();
+    assert_eq!((r.run_id, r.blocks, r.finished), (14, durable, true));
+    let back = stream(&s2, &mut f);
+    assert_eq!(back[..], all(&run)[..back.len()]);
+    assert_eq!(s2.end(), Some(&run.end[..]));
+    assert_eq!(f.violations(), 0);
+}

@@ -67,14 +67,14 @@ use crate::safety;
 
 use crate::sampling::Sampler;
 
-mod hw;
+mod clocks;
 mod flash;
 mod host_link;
-mod clocks;
-use hw::*;
+mod hw;
+use clocks::*;
 use flash::*;
 use host_link::*;
-use clocks::*;
+use hw::*;
 
 type Cs = CriticalSectionRawMutex;
 type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
