@@ -198,11 +198,7 @@ fn table(record: &str, rig: &RigUsed, r: &FitResult) -> String {
         1 => " s/m".to_string(),
         j => format!(" (s/m)^{j}"),
     };
-    let fitted = |j: usize| {
-        r.law
-            .parse::<LawSpec>()
-            .map_or(true, |l| l == LawSpec::LuGre || l.powers().contains(&j))
-    };
+    let fitted = |j: usize| r.law == LawSpec::LuGre || r.law.powers().contains(&j);
     for (j, (m, p)) in r.mu.iter().zip(&r.p_si).enumerate() {
         if !fitted(j) {
             continue;
@@ -215,7 +211,7 @@ fn table(record: &str, rig: &RigUsed, r: &FitResult) -> String {
             unit(j)
         );
     }
-    if r.law == "lugre" {
+    if r.law == LawSpec::LuGre {
         let _ = writeln!(
             s,
             "mu_s       {}   (LuGre static level; σ0, σ1, v_s fixed)",

@@ -177,8 +177,8 @@ impl FitVerdict {
 /// singular (a constant the record cannot determine).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FitResult {
-    /// Law name (`coulomb`, …, `poly:N`, `lugre`).
-    pub law: String,
+    /// The law fitted (serialised as its name: `coulomb`, …, `poly:N`, `lugre`).
+    pub law: LawSpec,
     /// How far the fit can be trusted.
     pub verdict: FitVerdict,
     /// Dimensionless constants μ_j in order of j (seed eq. 10–13).
@@ -219,12 +219,7 @@ pub struct FitResult {
 impl FitResult {
     /// The fitted law.
     pub fn friction_law(&self) -> FrictionLaw {
-        match self.law.parse::<LawSpec>() {
-            Ok(spec) => spec.law(&self.params),
-            Err(_) => FrictionLaw::Polynomial {
-                mu: self.mu.clone(),
-            },
-        }
+        self.law.law(&self.params)
     }
 
     /// Gap relative to the noise floor (1 = residuals at the noise).
@@ -438,7 +433,7 @@ pub fn fit_envelope(
         FitVerdict::Adequate
     };
     Ok(FitResult {
-        law: spec.name(),
+        law: spec,
         verdict,
         shape: classify_shape(&mu, a_lo, a0),
         p_si: mu.clone(),

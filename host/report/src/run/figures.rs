@@ -165,7 +165,7 @@ pub(super) fn law_figure(v: &View, fits: &[FitResult], onboard: Option<&OnboardR
     for (i, f) in fits.iter().enumerate() {
         let law = f.friction_law();
         p.series.push(Series::line(
-            f.law.clone(),
+            f.law.to_string(),
             i,
             grid.iter().map(|&x| (x, law.steady_force(x))).collect(),
         ));

@@ -176,7 +176,7 @@ pub fn record_report(rec: &Record, inputs: &ReportInputs) -> Result<Report, Repo
         inputs.fits.clone()
     };
     for spec in opts.laws.iter().filter(|_| not_analysable.is_none()) {
-        if fits.iter().any(|f| f.law == spec.name()) {
+        if fits.iter().any(|f| f.law == *spec) {
             continue;
         }
         match identify::fit(rec, *spec, &opts.fit) {

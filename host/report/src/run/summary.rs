@@ -134,11 +134,7 @@ pub(super) fn summary(
     let mut res: Vec<Vec<String>> = fits
         .iter()
         .map(|f| {
-            let fitted: Vec<usize> = f
-                .law
-                .parse::<LawSpec>()
-                .map(|s| s.powers())
-                .unwrap_or_else(|_| (0..f.mu.len()).collect());
+            let fitted: Vec<usize> = f.law.powers();
             let mu = |j: usize| match f.mu.get(j) {
                 Some(&m) if fitted.contains(&j) => {
                     pm(m, f.mu_se.get(j).copied().unwrap_or(f64::NAN))
@@ -183,7 +179,7 @@ pub(super) fn summary(
     ));
     if let (Some(o), Some(cv)) = (
         &inputs.onboard,
-        fits.iter().find(|f| f.law == "coulomb-viscous"),
+        fits.iter().find(|f| f.law == LawSpec::CoulombViscous),
     ) {
         let d0 = o.best.mu0 as f64 - cv.mu.first().copied().unwrap_or(f64::NAN);
         let d1 = o.best.mu1 as f64 - cv.mu.get(1).copied().unwrap_or(f64::NAN);
