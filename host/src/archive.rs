@@ -68,7 +68,7 @@ pub fn host_fit(run: &Run) -> Result<HostFit, HostFitError> {
     )
     .map_err(HostFitError::Fit)?;
     Ok(HostFit {
-        law: r.law.to_string(),
+        law: r.law,
         mu0: r.mu.first().copied().unwrap_or(f64::NAN),
         mu1: r.mu.get(1).copied().unwrap_or(f64::NAN),
         gap: r.gap,

@@ -108,8 +108,8 @@ impl Conclusion {
 pub struct Explanation {
     /// What the workflow concluded.
     pub conclusion: Conclusion,
-    /// Base law name.
-    pub base: String,
+    /// The base law (serialised as its name).
+    pub base: tribo_physics::LawSpec,
     /// Effects found missing, in the order they were added.
     pub missing_effects: Vec<String>,
     /// One entry per added effect.

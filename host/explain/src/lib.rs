@@ -301,7 +301,7 @@ pub fn explain_with_progress(
     progress("done", 1, 1);
     let ex = Explanation {
         conclusion,
-        base: opts.base.name(),
+        base: opts.base,
         missing_effects: steps.iter().map(|s| s.effect.clone()).collect(),
         gap_initial: base.gap,
         gap_final: cur.gap,

@@ -384,7 +384,7 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
                 m.label = Some(format!("r{rep}"));
             });
             let host = HostFit {
-                law: "coulomb-viscous".into(),
+                law: tribo_physics::LawSpec::CoulombViscous,
                 mu0: mu0 as f64 * 1.01,
                 mu1: 0.01,
                 gap: 0.001,

@@ -178,7 +178,8 @@ impl RunMeta {
 /// Host-side fit of the run's samples (Coulomb–viscous, tribo-physics' Levenberg–Marquardt).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HostFit {
-    pub law: String,
+    /// The law fitted (stored as its name).
+    pub law: tribo_physics::LawSpec,
     pub mu0: f64,
     pub mu1: f64,
     /// RMS envelope misfit relative to the initial amplitude.
