@@ -244,18 +244,16 @@ fn debian_first_path() -> std::ffi::OsString {
 
 fn firmware(args: &[String]) -> Result<PathBuf, String> {
     let flash = args.iter().any(|a| a == "--run");
+    let lint = args.iter().any(|a| a == "--clippy");
     let toolchain = pick_toolchain()?;
     let (mut cmd, target_dir) = cross_cargo(&toolchain);
-    if args.iter().any(|a| a == "--clippy") {
-        cmd.args([
-            "clippy",
-            "-p",
-            BOARD,
-            "--target",
-            TARGET,
-            "--profile",
-            PROFILE,
-        ]);
+    let task = match (lint, flash) {
+        (true, _) => "clippy",
+        (false, true) => "run",
+        (false, false) => "build",
+    };
+    cmd.args([task, "-p", BOARD, "--target", TARGET, "--profile", PROFILE]);
+    if lint {
         cmd.args(["--", "-D", "warnings"]);
         run(&mut cmd).map_err(|e| {
             format!("{e}\n  → the firmware has clippy findings for {TARGET} (listed above)")
@@ -263,15 +261,6 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         println!("clippy: {BOARD} and the crates under it are clean for {TARGET}");
         return Ok(target_dir);
     }
-    cmd.args([
-        if flash { "run" } else { "build" },
-        "-p",
-        BOARD,
-        "--target",
-        TARGET,
-        "--profile",
-        PROFILE,
-    ]);
     run(&mut cmd)?;
     let elf_path = target_dir.join(TARGET).join(PROFILE).join(BOARD);
     let bytes = std::fs::read(&elf_path).map_err(|e| format!("{}: {e}", elf_path.display()))?;
