@@ -434,3 +434,42 @@ fn a_refused_configuration_says_which_setting_and_keeps_the_parser_s_detail_as_i
         Err(RigError::Setting { name: "load_n", .. })
     ));
 }
+
+/// Every kind `tribo rig --help` names reads from TOML as that law (the help stays true).
+#[test]
+fn every_law_kind_the_help_names_reads_from_toml() {
+    let laws = [
+        ("kind = \"coulomb\"\nmu0 = 0.02", "coulomb"),
+        ("kind = \"viscous\"\nmu1 = 0.004", "viscous"),
+        ("kind = \"coulomb_viscous\"\nmu0 = 0.02\nmu1 = 0.004", "coulomb-viscous"),
+        ("kind = \"quadratic\"\nmu0 = 0.02\nmu1 = 0.004\nmu2 = 1e-4", "quadratic"),
+        ("kind = \"polynomial\"\nmu = [0.02, 0.004, 1e-4, 1e-6]", "poly:3"),
+        (
+            "kind = \"stribeck\"\nmu_c = 0.02\nmu_s = 0.03\nv_s = 0.5\ndelta = 2.0\nmu_v = 0.004",
+            "stribeck",
+        ),
+        (
+            "kind = \"stribeck_power\"\nk_ehl = 0.01\nn_ehl = 0.5\nh_bl = 0.1\np_bl = 0.0\nb = 0.3\nm = 2.0",
+            "stribeck-power",
+        ),
+        ("kind = \"hess_soom\"\nmu_b = 0.05\nc1 = 2.0\nc2 = 0.004", "hess-soom"),
+        ("kind = \"dahl\"\nsigma = 100.0\nmu_c = 0.02\nalpha = 1.0", "dahl"),
+        (
+            "kind = \"lugre\"\nsigma0 = 200.0\nsigma1 = 2.0\nsigma2 = 0.004\nmu_c = 0.02\nmu_s = 0.03\nv_s = 1.0\na = 2.0",
+            "lugre",
+        ),
+        (
+            "kind = \"modified_lugre\"\nsigma0 = 200.0\nsigma1 = 2.0\nsigma2 = 0.004\nmu_c = 0.02\nalpha0 = 0.02\nalpha1 = 0.01\nv_s = 1.0\nl1 = 0.01\nl2 = 0.1",
+            "modified-lugre",
+        ),
+        (
+            "kind = \"lagged\"\nmemory = 0.5\n[law.steady]\nkind = \"coulomb\"\nmu0 = 0.02",
+            "lagged",
+        ),
+    ];
+    for (law, name) in laws {
+        let text = format!("[law]\n{law}\n");
+        let c = VirtualRigConfig::from_toml(&text).unwrap_or_else(|e| panic!("{text}: {e:?}"));
+        assert_eq!(c.law.name(), name, "{text}");
+    }
+}
