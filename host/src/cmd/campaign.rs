@@ -98,8 +98,8 @@ impl Plan {
     pub fn load(path: &Path) -> anyhow::Result<Plan> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read the plan {}", path.display()))?;
-        let p: Plan =
-            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let p: Plan = toml::from_str(&text)
+            .with_context(|| format!("the campaign plan {}", path.display()))?;
         p.check().with_context(|| format!("{}", path.display()))?;
         Ok(p)
     }
