@@ -123,6 +123,8 @@ impl core::fmt::Display for ConfigError {
     }
 }
 
+impl core::error::Error for ConfigError {}
+
 /// Why the pipeline stopped taking samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StopReason {

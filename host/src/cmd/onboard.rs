@@ -126,7 +126,7 @@ pub fn analyse(record: &Record) -> anyhow::Result<OnboardResult> {
         max_duration_s: (duration + 2.0 * dt) as f32,
         calibration,
     };
-    let mut pipeline = Pipeline::new(&cfg).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut pipeline = Pipeline::new(&cfg)?;
     pipeline.release();
     let start = release_index(record, rate, rig.stiffness_n_per_m / rig.mass_kg);
     let count = |ch: Channel, v: f64| calib::to_count(calibration[ch as usize], v).unwrap_or(0);

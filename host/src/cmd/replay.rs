@@ -12,7 +12,7 @@
 //!   envelope leaves the simulated one, the law stops describing the contact.
 
 use crate::firmware::analysis::{Phase, Pipeline};
-use anyhow::bail;
+use anyhow::{bail, Context};
 use std::path::PathBuf;
 use tribo_physics::envelope::mark_crandall;
 use tribo_physics::identify::FitOptions;
@@ -91,7 +91,7 @@ pub struct Difference {
 /// Runs the firmware pipeline over the run's logged samples.
 pub fn replay_pipeline(run: &Run) -> anyhow::Result<OnboardResult> {
     let cfg = run.config();
-    let mut p = Pipeline::new(&cfg).map_err(|e| anyhow::anyhow!("the run's configuration: {e}"))?;
+    let mut p = Pipeline::new(&cfg).context("the run's configuration")?;
     // The hold capture is not logged: emulate it (see `hold_capture`), or failing that with the
     // first samples of the run, before the velocity leaves zero.
     let hold = hold_capture(run);
