@@ -106,8 +106,14 @@ impl RunStore<'_> {
         let floor = pos / FLASH_WORD as u32 * FLASH_WORD as u32;
         let mut word = [0xFF; FLASH_WORD];
         let n = pos - floor;
-        if n > 0 && self.ring.holds(floor, n) {
+        if n == 0 {
+            // The cut is on a word boundary: nothing to keep aside.
+        } else if self.ring.holds(floor, n) {
             self.ring.read(floor, &mut word[..n as usize]);
+        } else if self.writer.state == FlashState::Writing {
+            // Cannot happen while the copy is on (RAM drops no byte the flash still needs without
+            // stopping it); were it so, the image would have a hole: stop rather than write one.
+            self.writer.state = FlashState::Failed;
         }
         self.writer.cut = Some(pos);
         self.writer.cut_word = word;
