@@ -283,16 +283,13 @@ impl<'a> RunStore<'a> {
         self.writer = Writer {
             geometry: g,
             start,
-            erased: 0,
-            written: 0,
-            cut: None,
-            cut_word: [0xFF; FLASH_WORD],
             state: if usable {
                 FlashState::Writing
             } else {
                 FlashState::Off
             },
             inflight,
+            ..Writer::OFF
         };
         // The header is the stream's first record.
         let mut rec = [0u8; LEN_BYTES as usize + SLOT];

@@ -84,9 +84,6 @@ pub(super) fn read_image<F: RunFlash>(flash: &mut F, w: &Writer, q: u32, out: &m
     true
 }
 
-// ------------------------------------------------------------------------------------------------
-// The store
-
 impl RunStore<'_> {
     /// Bytes of the flash image: the stream up to the cut, then the result and end records.
     pub(super) fn image_len(&self) -> u32 {
@@ -103,7 +100,8 @@ impl RunStore<'_> {
     /// before it, then the result and end. The cut's partial last word is kept aside
     /// ([`Writer::cut_word`]).
     pub(super) fn set_cut(&mut self, pos: u32) {
-        let floor = pos / FLASH_WORD as u32 * FLASH_WORD as u32;
+        self.writer.cut = Some(pos);
+        let floor = self.ram_image_end();
         let mut word = [0xFF; FLASH_WORD];
         let n = pos - floor;
         if n == 0 {
@@ -115,7 +113,6 @@ impl RunStore<'_> {
             // stopping it); were it so, the image would have a hole: stop rather than write one.
             self.writer.state = FlashState::Failed;
         }
-        self.writer.cut = Some(pos);
         self.writer.cut_word = word;
     }
 

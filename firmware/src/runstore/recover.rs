@@ -31,10 +31,8 @@ impl RunStore<'_> {
             start,
             erased: g.sectors,
             written: g.bytes(),
-            cut: None,
-            cut_word: [0xFF; FLASH_WORD],
             state: FlashState::Done,
-            inflight: None,
+            ..Writer::OFF
         };
         let (hlen, _) = read_record(flash, &w, 0, &mut buf)?;
         let header = Slot::from_slice(&buf[..hlen]).ok()?;
