@@ -5,6 +5,7 @@
 
 pub mod archive;
 pub mod cmd;
+pub mod crosscheck;
 pub mod exit;
 pub mod link;
 pub mod load;

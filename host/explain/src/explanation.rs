@@ -110,6 +110,9 @@ pub struct Explanation {
     pub conclusion: Conclusion,
     /// The base law (serialised as its name).
     pub base: tribo_physics::LawSpec,
+    /// The base law's constants: `tribo fit`'s result on the same record (the one estimator of a
+    /// law from a record), with its standard errors, noise floor, verdict and compared span.
+    pub base_fit: tribo_physics::FitResult,
     /// Effects found missing, in the order they were added.
     pub missing_effects: Vec<String>,
     /// One entry per added effect.
@@ -202,16 +205,30 @@ impl Explanation {
             self.gap_initial / self.noise_floor,
             self.noise_floor
         );
-        for (k, v) in &self.base_model.params {
-            if k.starts_with("mu") || k == "apparatus_mu1" {
-                let se = self
-                    .base_model
-                    .params_se
-                    .get(k)
-                    .copied()
-                    .unwrap_or(f64::NAN);
-                let _ = writeln!(s, "    {k} = {}", pm(*v, se));
+        let f = &self.base_fit;
+        for (j, m) in f.mu.iter().enumerate() {
+            if f.law.powers().contains(&j) {
+                let _ = writeln!(s, "    mu{j} = {}", pm(*m, f.mu_se[j]));
             }
+        }
+        let _ = writeln!(
+            s,
+            "    (`tribo fit`'s result: {}, gap {:.2} × its noise floor)",
+            f.verdict.name(),
+            f.gap_ratio()
+        );
+        if let Some(a) = self.base_model.params.get("apparatus_mu1") {
+            let se = self
+                .base_model
+                .params_se
+                .get("apparatus_mu1")
+                .copied()
+                .unwrap_or(f64::NAN);
+            let _ = writeln!(
+                s,
+                "    apparatus_mu1 = {} (damping of the blades, which the force channel does not see)",
+                pm(*a, se)
+            );
         }
         for st in &self.steps {
             let _ = writeln!(

@@ -50,7 +50,6 @@ use tribo_physics::identify::{
     estimate_averaging, fit_dimensionless, levenberg_marquardt_with, FitError, FitOptions, LawSpec,
     LmOptions, ADEQUATE_RATIO,
 };
-use tribo_physics::integrate::Method;
 use tribo_physics::uncertainty::{
     chi2_upper_quantile, effective_count, hac_covariance_blocks, jacobian, standard_errors,
 };
@@ -150,21 +149,18 @@ pub fn explain_with_progress(
     spec.apparatus = data.has_force();
     let spec = spec;
     progress("fitting the base law", 0, 1);
-    // Envelope-only fit of tribo-physics first (robust from its own estimators, and it screens
-    // the record), then the joint envelope + force fit from there.
-    let fopts = FitOptions {
-        method: Method::dopri(1e-9),
-        max_points: opts.max_env_points,
-        max_iter: opts.max_iter,
-        fit_initial_amplitude: false,
-        ..FitOptions::default()
-    };
-    let mut starts = Vec::new();
-    match fit_dimensionless(&data.tau, &data.y, &data.ydot, opts.base, &fopts) {
-        Ok(r) => starts.push(spec.start(&r.params)),
-        Err(FitError::NotAnalysable(n)) => return Err(ExplainError::not_analysable(n)),
-        Err(_) => {}
-    }
+    // The base law is `tribo fit`'s answer: the one estimator of a law from a record, on the
+    // whole record. The joint envelope + force model the effects are added to starts from it.
+    let (tau_all, y_all, ydot_all) = &data.record;
+    let mut base_fit =
+        match fit_dimensionless(tau_all, y_all, ydot_all, opts.base, &FitOptions::default()) {
+            Ok(r) => r,
+            Err(FitError::NotAnalysable(n)) => return Err(ExplainError::not_analysable(n)),
+            Err(e) => return Err(ExplainError::BaseLaw(e.to_string())),
+        };
+    base_fit.p_si = data.rig.p_of_mu(&base_fit.mu);
+    base_fit.p_si_se = data.rig.p_of_mu(&base_fit.mu_se);
+    let mut starts = vec![spec.start(&base_fit.params)];
     starts.push(spec.start(&tribo_physics::identify::start_point(
         &data.tau, &data.y, &data.ydot, opts.base,
     )));
@@ -314,6 +310,7 @@ pub fn explain_with_progress(
         force_cutoff_hz: data.force_cutoff_hz,
         force_cutoff_source: source.into(),
         rounds,
+        base_fit,
         base_model: base,
         final_model: cur,
         diagnostics,

@@ -7,7 +7,7 @@
 
 use std::f64::consts::PI;
 use tribo_physics::identify::{
-    fit_dimensionless, windowed_fits, FitOptions, LawSpec, WindowFit, LUGRE_FIXED,
+    fit_dimensionless, fit_windows, windowed_fits, FitOptions, LawSpec, WindowFit, LUGRE_FIXED,
 };
 use tribo_physics::integrate::{grid, simulate, Method};
 use tribo_physics::law::LuGre;
@@ -227,4 +227,57 @@ fn fit_windows_on_an_si_record_reports_si_coefficients_and_json() {
     }
     assert!(w[0].a_start > w[1].a_start && w[1].a_start > w[2].a_start);
     assert!(fit_windows(&rec, LawSpec::CoulombViscous, 0, &FitOptions::default()).is_err());
+}
+
+/// On noisy records of an exact Coulomb–viscous law (the real acquisition chain, seeds 2–6),
+/// every window's constants hold the truth within their ±: at most one constant in ten outside
+/// 2σ and none outside 4σ. (Windows that started from their first sample as measured gave μ1 ten
+/// times more precise than it was: 0.00458 ± 4e-5 for a truth of 0.0051.)
+#[test]
+fn window_constants_of_an_exact_law_hold_the_truth_within_their_standard_errors() {
+    use tribo_physics::integrate::Method;
+    use tribo_physics::sensor::{generate, RecordSpec, SensorModel};
+    use tribo_physics::{Model, Rig};
+    let truth = [0.02, 0.0051];
+    let (mut inside, mut count) = (0, 0);
+    for seed in 2..=6 {
+        let spec = RecordSpec {
+            rig: Rig::new(0.04, 1150.0, 0.3).unwrap(),
+            x0_m: 667e-6,
+            v0_m_s: 0.0,
+            duration_s: 2.0,
+            rate_hz: 10_000.0,
+        };
+        let sensor = SensorModel {
+            seed,
+            ..SensorModel::default()
+        };
+        let rec = generate(
+            &spec,
+            &Model::new(FrictionLaw::coulomb_viscous(truth[0], truth[1])),
+            Method::dopri(1e-10),
+            Some(&sensor),
+        )
+        .unwrap();
+        let w = fit_windows(&rec, LawSpec::CoulombViscous, 4, &FitOptions::default()).unwrap();
+        assert_eq!(w.len(), 4);
+        for x in &w {
+            for (j, t) in truth.iter().enumerate() {
+                let z = (x.fit.mu[j] - t) / x.fit.mu_se[j];
+                assert!(
+                    z.abs() < 4.0,
+                    "seed {seed}: window at A = {}: mu{j} z = {z}: {:?} ± {:?}",
+                    x.a_start,
+                    x.fit.mu,
+                    x.fit.mu_se
+                );
+                inside += usize::from(z.abs() <= 2.0);
+                count += 1;
+            }
+        }
+    }
+    assert!(
+        inside as f64 >= 0.9 * count as f64,
+        "{inside}/{count} within 2σ"
+    );
 }

@@ -48,7 +48,10 @@ never a guess.
 `--json` prints one object: `conclusion` (base-adequate, explained, partly-explained,
 unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_before`,
 `gap_after`, `evidence`, `params` and `params_se`), `gap_initial`, `gap_final`, `noise_floor`,
-`unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source`, the base and final models,
+`unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source`, `base_fit` (the base law's
+constants: `tribo fit`'s result on the same record, the one estimator of a law), `base_model` (the
+model of every channel the effects are added to) and `final_model`, `cross_check` (the on-board
+result beside the host's, `null` for other base laws than coulomb-viscous),
 every round's candidates and the diagnostics. The gap is RMS(measured − fitted envelope) /
 initial amplitude, extended to the force channel as √(gap_envelope² + gap_force²).
 
@@ -142,13 +145,16 @@ pub fn run(args: Args) -> Result<()> {
     });
     bar.finish_and_clear();
     let (ex, data) = result.map_err(not_analysable)?;
+    let check = crate::cmd::fit::cross_check(&args.record, &record, &ex.base_fit);
     if args.json {
-        outln!(
-            "{}",
-            ex.to_json().context("writing the explanation as JSON")?
-        )?;
+        let mut j = serde_json::to_value(&ex).context("writing the explanation as JSON")?;
+        j["cross_check"] = serde_json::to_value(&check)?;
+        outln!("{j}")?;
     } else {
         out!("{}", ex.to_text())?;
+        if let Some(c) = &check {
+            outln!("{}", c.text())?;
+        }
     }
     if let Some(dir) = &args.report {
         let page = write_report(&data, &ex, dir)?;

@@ -1,6 +1,7 @@
 //! `tribo fit`: identify a friction law from a record (thesis ch. 3.5), with the standard error of
 //! every constant, the record's noise floor and a verdict.
 
+use crate::crosscheck::{CrossCheck, OnboardSource};
 use crate::exit::Incomplete;
 use crate::load::{apply_rig_flags, load_analysable_for_fit, recorded_defaults, RigFlags, RigUsed};
 use crate::{out, outln};
@@ -133,6 +134,7 @@ pub fn run(a: Args) -> Result<()> {
         }
         Err(e) => return Err(e).with_context(|| format!("{}", a.record.display())),
     };
+    let check = cross_check(&a.record, &rec, &r);
     let windows = if a.windows > 0 {
         fit_windows(&rec, spec, a.windows, &opts)?
     } else {
@@ -143,12 +145,16 @@ pub fn run(a: Args) -> Result<()> {
         j["record"] = a.record.display().to_string().into();
         j["rig"] = serde_json::to_value(rig)?;
         j["defaults"] = serde_json::to_value(rig.defaults())?;
+        j["cross_check"] = serde_json::to_value(&check)?;
         if a.windows > 0 {
             j["windows"] = serde_json::to_value(&windows)?;
         }
         outln!("{j}")?;
     } else {
-        out!("{}", table(&a.record.display().to_string(), &rig, &r))?;
+        out!("{}", table(&a.record.display().to_string(), &rig, &r, &rec))?;
+        if let Some(c) = &check {
+            outln!("{}", c.text())?;
+        }
         if a.windows > 0 {
             out!("{}", window_table(&windows))?;
         }
@@ -188,7 +194,74 @@ pub fn pm(v: f64, se: f64) -> String {
     format!("{v:.digits$} ± {se:.digits$}")
 }
 
-fn table(record: &str, rig: &RigUsed, r: &FitResult) -> String {
+/// The on-board cross-check of a Coulomb–viscous host fit: the rig's stored result for a run
+/// folder, else the firmware's pipeline over the record's samples. `None` for other laws, or when
+/// the on-board pipeline cannot take the record.
+pub fn cross_check(path: &std::path::Path, rec: &Record, r: &FitResult) -> Option<CrossCheck> {
+    if r.law != LawSpec::CoulombViscous {
+        return None;
+    }
+    let stored = path
+        .is_dir()
+        .then(|| tribo_store::Run::open(path).ok())
+        .flatten()
+        .and_then(|run| run.result().copied());
+    match stored {
+        Some(ob) => CrossCheck::of(r, &ob, OnboardSource::Rig),
+        None => crate::cmd::onboard::analyse(rec)
+            .ok()
+            .and_then(|ob| CrossCheck::of(r, &ob, OnboardSource::Record)),
+    }
+}
+
+/// What part of the record was compared, in the record's time.
+pub fn span_text(rec: &Record, r: &FitResult) -> String {
+    let sp = &r.span;
+    let t = |i: usize| {
+        rec.t
+            .get(i.min(rec.len().saturating_sub(1)))
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let rig = rec.rig().ok();
+    let si = |y: f64, v: bool| match (rig, rec.units) {
+        (Some(rig), tribo_physics::record::Units::Si) => {
+            if v {
+                format!("{:.1e} m/s", rig.v_of_ydot(y))
+            } else {
+                format!("{:.1e} m", rig.x_of_y(y))
+            }
+        }
+        _ => format!("{y:.1e}"),
+    };
+    let mut s = format!(
+        "t = {:.4} s (the release{}) to {:.4} s",
+        t(sp.start),
+        if sp.held() > 0 {
+            format!(", after {} samples held", sp.held())
+        } else {
+            String::new()
+        },
+        t(sp.end.saturating_sub(1))
+    );
+    if sp.at_rest() > 0 {
+        let _ = write!(
+            s,
+            " (then |v| < {}: {} samples at rest or in the noise, not compared)",
+            si(sp.rest_level, true),
+            sp.at_rest()
+        );
+    }
+    let _ = write!(
+        s,
+        "; noise read from the record: x {}, v {}",
+        si(sp.noise_y, false),
+        si(sp.noise_ydot, true)
+    );
+    s
+}
+
+fn table(record: &str, rig: &RigUsed, r: &FitResult, rec: &Record) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "record     {record}");
     let _ = writeln!(s, "rig        {}", rig.describe());
@@ -231,6 +304,7 @@ fn table(record: &str, rig: &RigUsed, r: &FitResult) -> String {
         }
     );
     let _ = writeln!(s, "shape      {}", r.shape.name());
+    let _ = writeln!(s, "compared   {}", span_text(rec, r));
     let _ = writeln!(
         s,
         "fit        {} iterations, {} envelope points ({:.0} effectively independent), {} half cycles",
@@ -283,7 +357,7 @@ fn window_table(w: &[WindowFit]) -> String {
 /// SVG: measured and fitted envelopes vs τ (left) and the fitted law f(y') (right).
 fn figure(rec: &Record, r: &FitResult, spec: LawSpec, opts: &FitOptions) -> Result<String> {
     let (tau, y, ydot) = rec.dimensionless()?;
-    let data = EnvelopeData::new(&tau, &y, &ydot, 1500).map_err(anyhow::Error::msg)?;
+    let data = EnvelopeData::over(&tau, &y, &ydot, &r.span, 1500).map_err(anyhow::Error::msg)?;
     let fitted = scaled_envelope(&data, spec.law(&r.params), r.initial_scale(&data), opts)
         .map_err(anyhow::Error::msg)?;
     let measured = {
@@ -291,7 +365,7 @@ fn figure(rec: &Record, r: &FitResult, spec: LawSpec, opts: &FitOptions) -> Resu
         let stride = a.len().div_ceil(1500);
         (0..a.len())
             .step_by(stride)
-            .map(|i| (tau[i] - tau[0], a[i]))
+            .map(|i| (tau[i] - tau[r.span.start.min(tau.len() - 1)], a[i]))
             .collect::<Vec<_>>()
     };
     let fit_pts: Vec<(f64, f64)> = data.tau.iter().copied().zip(fitted).collect();

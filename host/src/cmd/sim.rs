@@ -3,6 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use std::path::PathBuf;
+use tribo_physics::bench::{Bench, BenchRecord};
 use tribo_physics::identify::LawSpec;
 use tribo_physics::integrate::Method;
 use tribo_physics::law::FrictionLaw;
@@ -80,6 +81,19 @@ pub struct Args {
     /// Noise seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// A bench's hold: the record starts this long before the release (s), the carriage held at
+    /// x0 by the magnet; `--duration-s` counts from the release.
+    #[arg(long, default_value_t = 0.0)]
+    pub held_s: f64,
+    /// A bench's speckle dropouts: single-sample spikes in the velocity channel, per second.
+    #[arg(long, default_value_t = 0.0)]
+    pub dropouts_per_s: f64,
+    /// A bench's floor motion seen by the vibrometer: amplitude (m) of a slow sine.
+    #[arg(long, default_value_t = 0.0)]
+    pub floor_m: f64,
+    /// Frequency of the floor motion (Hz).
+    #[arg(long, default_value_t = 7.0)]
+    pub floor_hz: f64,
     /// Write the dimensionless form `tau,y,ydot` instead of SI.
     #[arg(long)]
     pub dimensionless: bool,
@@ -153,7 +167,42 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         None
     };
-    let mut rec = generate(&spec, &model, Method::default(), sensor.as_ref())?;
+    for (name, v) in [
+        ("--held-s", a.held_s),
+        ("--dropouts-per-s", a.dropouts_per_s),
+        ("--floor-m", a.floor_m),
+        ("--floor-hz", a.floor_hz),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(
+                crate::exit::Usage(format!("{name} must be finite and ≥ 0 (got {v})")).into(),
+            );
+        }
+    }
+    let bench = Bench {
+        held_s: a.held_s,
+        dropouts_per_s: a.dropouts_per_s,
+        floor_m: a.floor_m,
+        floor_hz: a.floor_hz,
+        ..Bench::default()
+    };
+    let mut rec = if bench == Bench::default() {
+        generate(&spec, &model, Method::default(), sensor.as_ref())?
+    } else {
+        BenchRecord {
+            rig,
+            model: model.clone(),
+            x0_m: a.x0_m,
+            after_release_s: a.duration_s,
+            rate_hz: a.rate_hz,
+            sensor: sensor.clone().unwrap_or_else(|| SensorModel {
+                seed: a.seed,
+                ..SensorModel::ideal()
+            }),
+            bench,
+        }
+        .make()?
+    };
     if a.dimensionless {
         let (t, y, v) = rec.dimensionless()?;
         rec = Record::new(t, y, v, Some(Rig::UNIT), Units::Dimensionless);

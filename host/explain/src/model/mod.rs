@@ -63,6 +63,9 @@ pub struct Prepared {
     pub force_noise: f64,
     /// Integrator.
     pub method: Method,
+    /// The whole record, dimensionless (τ, y, y'), as `tribo fit` takes it: the base law is
+    /// fitted on it by the one estimator of a law from a record.
+    pub record: (Vec<f64>, Vec<f64>, Vec<f64>),
 }
 
 /// The rig's charge-amplifier low-pass (Hz): what a force channel that does not state its own has
@@ -168,9 +171,15 @@ impl Prepared {
                 w[0]
             )));
         }
-        let (tau, mut y, mut ydot) = rec.dimensionless()?;
-        let t0 = tau[0];
-        let mut tau: Vec<f64> = tau.iter().map(|t| t - t0).collect();
+        let (tau_all, y_all, ydot_all) = rec.dimensionless()?;
+        // From the release on (the rule of `tribo fit`: a bench record may start while the magnet
+        // holds).
+        let span = tribo_physics::identify::motion_span(&tau_all, &y_all, &ydot_all);
+        let s0 = span.start;
+        let t0 = tau_all[s0];
+        let mut tau: Vec<f64> = tau_all[s0..].iter().map(|t| t - t0).collect();
+        let mut y = y_all[s0..].to_vec();
+        let mut ydot = ydot_all[s0..].to_vec();
         let mut a_all = tribo_physics::envelope::mark_crandall(&y, &ydot);
         let a0 = a_all[0];
         if a0.is_nan() || a0 <= 0.0 {
@@ -196,7 +205,12 @@ impl Prepared {
         let env_idx: Vec<usize> = (0..n).step_by(stride(n, max_env)).collect();
         let a_meas = env_idx.iter().map(|&i| a_all[i]).collect();
         let f_meas = match (&rec.ft, rec.units) {
-            (Some(f), _) => Some(f[..n].iter().map(|v| v / rig.load_n).collect::<Vec<f64>>()),
+            (Some(f), _) => Some(
+                f[s0..s0 + n]
+                    .iter()
+                    .map(|v| v / rig.load_n)
+                    .collect::<Vec<f64>>(),
+            ),
             _ => None,
         };
         // The force channel's first moments carry what happened before the record (the magnet's
@@ -209,20 +223,20 @@ impl Prepared {
             Vec::new()
         };
         let temp = rec.temp.as_ref().and_then(|tc| {
-            let (s, c) = linreg(&tau, &tc[..n])?;
+            let (s, c) = linreg(&tau, &tc[s0..s0 + n])?;
             Some((c, s))
         });
         let temp_seg = rec.temp.as_ref().map(|tc| {
             let segs = (tau[n - 1] / THERMAL_SEGMENT) as usize + 1;
             let (mut sum, mut cnt) = (vec![0.0; segs], vec![0usize; segs]);
-            for (t, v) in tau.iter().zip(&tc[..n]) {
+            for (t, v) in tau.iter().zip(&tc[s0..s0 + n]) {
                 let k = ((t / THERMAL_SEGMENT) as usize).min(segs - 1);
                 sum[k] += v;
                 cnt[k] += 1;
             }
             // Empty segments (sampling coarser than a segment) repeat the previous mean.
             let mut out = Vec::with_capacity(segs);
-            let mut last = tc[0];
+            let mut last = tc[s0];
             for (s, c) in sum.iter().zip(&cnt) {
                 if *c > 0 {
                     last = s / *c as f64;
@@ -256,6 +270,7 @@ impl Prepared {
             env_noise,
             force_noise,
             method: Method::dopri(1e-8),
+            record: (tau_all, y_all, ydot_all),
         })
     }
 

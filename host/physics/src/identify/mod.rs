@@ -49,10 +49,12 @@ pub const NUMERICAL_FLOOR: f64 = 1e-6;
 mod classical;
 mod screen;
 mod solver;
+mod span;
 mod windows;
 pub use classical::*;
 pub use screen::*;
 pub use solver::*;
+pub use span::*;
 pub use windows::*;
 
 /// Fit options.
@@ -70,8 +72,8 @@ pub struct FitOptions {
     pub apparatus_mu1: f64,
     /// Starting point (parameters of the law); `None` = fast estimators.
     pub start: Option<Vec<f64>>,
-    /// Also fit the initial amplitude (the first sample is as noisy as any other). Windowed fits
-    /// start each window from its first sample as measured (thesis Tables 6–7) and do not.
+    /// Also fit the initial amplitude (the first sample is as noisy as any other; windowed fits
+    /// do so too).
     pub fit_initial_amplitude: bool,
 }
 
@@ -214,6 +216,9 @@ pub struct FitResult {
     pub n_eff: f64,
     /// Half cycles found by the screening (0 for fits on a window of a record).
     pub half_cycles: usize,
+    /// The part of the record compared: from the release to where the motion sinks into the
+    /// noise, with the noise levels read from the record that placed it.
+    pub span: MotionSpan,
 }
 
 impl FitResult {
@@ -258,15 +263,43 @@ pub struct EnvelopeData {
     /// Noise standard deviation of the envelope over the compared part of the record (every
     /// sample, before decimation).
     pub noise: f64,
+    /// What the measurement noise adds to the envelope's square on average
+    /// ([`MotionSpan::envelope_bias_var`]): the simulated envelope is compared as `√(A² + this)`.
+    pub bias_var: f64,
 }
 
 impl EnvelopeData {
-    /// From dimensionless samples (τ shifted to start at 0), keeping at most `max_points`.
+    /// From dimensionless samples, over the part of them that is free motion ([`motion_span`]
+    /// with the release taken at the first sample: windows of a record), keeping at most
+    /// `max_points`.
     pub fn new(tau: &[f64], y: &[f64], ydot: &[f64], max_points: usize) -> Result<Self, FitError> {
         let n = tau.len();
         if n < 8 || y.len() != n || ydot.len() != n {
             return Err(FitError::failed(format!(
                 "need ≥ 8 samples of τ, y, y' (got {n})"
+            )));
+        }
+        let mut span = motion_span(tau, y, ydot);
+        if span.start > 0 {
+            span = motion_span_from(tau, y, ydot, 0);
+        }
+        Self::over(tau, y, ydot, &span, max_points)
+    }
+
+    /// From dimensionless samples over `span` (τ shifted to start at 0 at its first sample),
+    /// keeping at most `max_points`.
+    pub fn over(
+        tau: &[f64],
+        y: &[f64],
+        ydot: &[f64],
+        span: &MotionSpan,
+        max_points: usize,
+    ) -> Result<Self, FitError> {
+        let n = tau.len();
+        if n < 8 || y.len() != n || ydot.len() != n || span.end > n || span.end < span.start + 8 {
+            return Err(FitError::failed(format!(
+                "need ≥ 8 samples of τ, y, y' in the compared span (got {} of {n})",
+                span.end.saturating_sub(span.start)
             )));
         }
         if tau.iter().chain(y).chain(ydot).any(|v| !v.is_finite()) {
@@ -275,22 +308,17 @@ impl EnvelopeData {
             }
             .into());
         }
-        // Compare only while the pin moves: after the stop the rest position is a saw-tooth
-        // function of the constants and would make the cost landscape rugged.
-        let vmax = ydot.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let a_start = y[0].hypot(ydot[0]);
-        let thr = (2e-3 * a_start).max(1e-3 * vmax);
-        let last = ydot.iter().rposition(|v| v.abs() > thr).unwrap_or(n - 1);
-        let n_used = (last + 2).clamp(8.min(n), n);
-        let stride = n_used.div_ceil(max_points.max(8));
-        let a_all = mark_crandall(y, ydot);
-        let idx: Vec<usize> = (0..n_used).step_by(stride).collect();
+        let (s, e) = (span.start, span.end);
+        let stride = (e - s).div_ceil(max_points.max(8));
+        let a_all = mark_crandall(&y[s..e], &ydot[s..e]);
+        let idx: Vec<usize> = (0..e - s).step_by(stride).collect();
         Ok(EnvelopeData {
-            tau: idx.iter().map(|&i| tau[i] - tau[0]).collect(),
+            tau: idx.iter().map(|&i| tau[s + i] - tau[s]).collect(),
             a: idx.iter().map(|&i| a_all[i]).collect(),
-            y0: y[0],
-            ydot0: ydot[0],
-            noise: noise_sigma(&a_all[..n_used]).unwrap_or(0.0),
+            y0: y[s],
+            ydot0: ydot[s],
+            noise: noise_sigma(&a_all).unwrap_or(0.0),
+            bias_var: span.envelope_bias_var(),
         })
     }
     /// Initial amplitude.
@@ -325,7 +353,13 @@ pub fn scaled_envelope(
         opts.method,
     )
     .map_err(|e| FitError::failed(e.to_string()))?;
-    Ok(mark_crandall(&tr.y, &tr.ydot))
+    let b = data.bias_var;
+    Ok(tr
+        .y
+        .iter()
+        .zip(&tr.ydot)
+        .map(|(y, v)| (y * y + v * v + b).sqrt())
+        .collect())
 }
 
 /// Fits `spec` to an SI or dimensionless record (its rig constants must be known), after
@@ -348,10 +382,39 @@ pub fn fit_dimensionless(
     spec: LawSpec,
     opts: &FitOptions,
 ) -> Result<FitResult, FitError> {
-    let sc = screen(tau, y, ydot)?;
-    let mut r = fit_unscreened(tau, y, ydot, spec, opts)?;
-    r.half_cycles = sc.half_cycles;
-    Ok(r)
+    let n = tau.len().min(y.len()).min(ydot.len());
+    let (tau, y, ydot) = (&tau[..n], &y[..n], &ydot[..n]);
+    check_finite(tau, y, ydot)?;
+    let span = motion_span(tau, y, ydot);
+    let r = span.range();
+    // The motion is screened, not the hold before it or the rest after it.
+    let sc = screen(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()])?;
+    let data = EnvelopeData::over(tau, y, ydot, &span, opts.max_points)?;
+    let p0 = start_of(opts, spec, || {
+        start_point(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()], spec)
+    })?;
+    let mut res = fit_envelope(&data, spec, p0, opts)?;
+    res.half_cycles = sc.half_cycles;
+    res.span = span;
+    Ok(res)
+}
+
+/// The starting point: the caller's, checked, or the fast estimators'.
+fn start_of(
+    opts: &FitOptions,
+    spec: LawSpec,
+    estimate: impl FnOnce() -> Vec<f64>,
+) -> Result<Vec<f64>, FitError> {
+    match &opts.start {
+        Some(p) if p.len() == spec.n_params() => Ok(p.clone()),
+        Some(p) => Err(FitError::failed(format!(
+            "start has {} parameters, {} needs {}",
+            p.len(),
+            spec.name(),
+            spec.n_params()
+        ))),
+        None => Ok(estimate()),
+    }
 }
 
 /// Fits without screening (windows of an already screened record).
@@ -363,19 +426,10 @@ fn fit_unscreened(
     opts: &FitOptions,
 ) -> Result<FitResult, FitError> {
     let data = EnvelopeData::new(tau, y, ydot, opts.max_points)?;
-    let p0 = match &opts.start {
-        Some(p) if p.len() == spec.n_params() => p.clone(),
-        Some(p) => {
-            return Err(FitError::failed(format!(
-                "start has {} parameters, {} needs {}",
-                p.len(),
-                spec.name(),
-                spec.n_params()
-            )))
-        }
-        None => start_point(tau, y, ydot, spec),
-    };
-    fit_envelope(&data, spec, p0, opts)
+    let p0 = start_of(opts, spec, || start_point(tau, y, ydot, spec))?;
+    let mut r = fit_envelope(&data, spec, p0, opts)?;
+    r.span = MotionSpan::whole(tau.len());
+    Ok(r)
 }
 
 /// Levenberg–Marquardt fit of `spec` (and of the initial amplitude) to prepared envelope data from
@@ -415,7 +469,11 @@ pub fn fit_envelope(
         .as_ref()
         .and_then(|r0| {
             let jac = jacobian(resid, &lm.p, r0, 1e-5, &scales)?;
-            hac_covariance(&jac, r0)
+            let mut cov = hac_covariance(&jac, r0)?;
+            if !free_start {
+                add_initial_state_noise(data, spec, &lm.p, &jac, r0, opts, &mut cov)?;
+            }
+            Some(cov)
         })
         .map(|c| standard_errors(&c))
         .unwrap_or_else(|| vec![f64::NAN; q0.len()]);
@@ -451,7 +509,54 @@ pub fn fit_envelope(
         points: n,
         n_eff,
         half_cycles: 0,
+        span: MotionSpan::whole(data.a.len()),
     })
+}
+
+/// When the simulation starts from the first sample as measured, that sample's noise moves every
+/// fitted constant together: `Δp = −(JᵀJ)⁻¹ Jᵀ ∂r/∂s · Δs`, with `s` the initial state's relative
+/// scale and `Var(Δs)` the envelope's per-sample noise over the initial amplitude, squared. Added
+/// to the covariance (the residuals' own spread cannot show an error common to all of them).
+fn add_initial_state_noise(
+    data: &EnvelopeData,
+    spec: LawSpec,
+    p: &[f64],
+    jac: &crate::uncertainty::Jacobian,
+    r0: &[f64],
+    opts: &FitOptions,
+    cov: &mut [Vec<f64>],
+) -> Option<()> {
+    let h = 1e-5;
+    let law = spec.law(&p[..spec.n_params()]);
+    let a = scaled_envelope(data, law, 1.0 + h, opts).ok()?;
+    let js: Vec<f64> = a
+        .iter()
+        .zip(&data.a)
+        .zip(r0)
+        .map(|((s, m), r)| ((s - m) - r) / h)
+        .collect();
+    let np = jac.len();
+    let jtj: Vec<Vec<f64>> = (0..np)
+        .map(|i| {
+            (0..np)
+                .map(|j| jac[i].iter().zip(&jac[j]).map(|(x, y)| x * y).sum())
+                .collect()
+        })
+        .collect();
+    let inv = crate::uncertainty::invert(&jtj)?;
+    let g: Vec<f64> = (0..np)
+        .map(|i| jac[i].iter().zip(&js).map(|(x, y)| x * y).sum())
+        .collect();
+    let dp: Vec<f64> = (0..np)
+        .map(|i| -(0..np).map(|j| inv[i][j] * g[j]).sum::<f64>())
+        .collect();
+    let var_s = (data.noise / data.a0().max(1e-300)).powi(2);
+    for i in 0..np {
+        for j in 0..np {
+            cov[i][j] += dp[i] * dp[j] * var_s;
+        }
+    }
+    Some(())
 }
 
 /// Convenience: SI rig of a record or the unit rig.

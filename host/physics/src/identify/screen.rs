@@ -119,9 +119,8 @@ pub(super) fn saturated(runs: &[(usize, usize)], long: usize) -> Option<(usize, 
 /// Shortest flat run at a channel's extreme that counts, when it recurs.
 pub(super) const SATURATION_RUN: usize = 3;
 
-/// Checks that dimensionless samples can be fitted: finite, not saturated, oscillating at the natural
-/// half period π (in τ) above the noise for at least [`MIN_HALF_CYCLES`] half cycles.
-pub fn screen(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<Screening, NotAnalysable> {
+/// The first non-finite sample of τ, y or y', if any.
+pub fn check_finite(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<(), NotAnalysable> {
     for (name, c) in [("time", tau), ("displacement", y), ("velocity", ydot)] {
         if let Some(i) = c.iter().position(|v| !v.is_finite()) {
             return Err(NotAnalysable::NonFinite {
@@ -129,6 +128,13 @@ pub fn screen(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<Screening, NotAnal
             });
         }
     }
+    Ok(())
+}
+
+/// Checks that dimensionless samples can be fitted: finite, not saturated, oscillating at the natural
+/// half period π (in τ) above the noise for at least [`MIN_HALF_CYCLES`] half cycles.
+pub fn screen(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<Screening, NotAnalysable> {
+    check_finite(tau, y, ydot)?;
     let n = tau.len().min(y.len()).min(ydot.len());
     if n < 8 {
         return Err(NotAnalysable::NoOscillation {
@@ -176,6 +182,10 @@ pub fn screen(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<Screening, NotAnal
     // A record that starts at rest (the release) starts at an extremum.
     if ydot[0].abs() <= 0.05 * vmax && ext.first().is_none_or(|e| e.0 - tau[0] >= PI / 8.0) {
         ext.insert(0, (tau[0], y[0]));
+    }
+    // A motion that ends at rest (the stop) ends at an extremum.
+    if ydot[n - 1].abs() <= 0.05 * vmax && ext.last().is_none_or(|e| tau[n - 1] - e.0 >= PI / 8.0) {
+        ext.push((tau[n - 1], y[n - 1]));
     }
     // The swing is a displacement: compare it with the displacement's own noise (the envelope's
     // mixes in the velocity's, and a large ripple when the rig constants are wrong).

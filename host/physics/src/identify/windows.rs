@@ -43,10 +43,13 @@ pub fn fit_windows(
     Ok(w)
 }
 
-/// Splits the motion (until the envelope falls below 2 % of its start) into `windows` parts of
-/// equal amplitude drop and fits `spec` on each, starting each simulation from the window's
-/// first sample. Constants that drift from window to window mean the law misses something. The
-/// whole record is [`screen`]ed first; the windows are not (each may hold only a few half cycles).
+/// Splits the motion (from the release, [`motion_span`], until the envelope falls below 2 % of its
+/// start) into `windows` parts of equal amplitude drop and fits `spec` on each. Each window's
+/// simulation starts from the window's first sample with its amplitude fitted as a constant (that
+/// sample is as noisy as any other: held to it, the window's constants would carry its error
+/// without their ± knowing). Constants that drift from window to window beyond their ± mean the
+/// law misses something. The motion is [`screen`]ed first; the windows are not (each may hold only
+/// a few half cycles).
 pub fn windowed_fits(
     tau: &[f64],
     y: &[f64],
@@ -58,6 +61,11 @@ pub fn windowed_fits(
     if windows == 0 {
         return Err(FitError::failed("need at least one window"));
     }
+    let n = tau.len().min(y.len()).min(ydot.len());
+    check_finite(&tau[..n], &y[..n], &ydot[..n])?;
+    let span = motion_span(&tau[..n], &y[..n], &ydot[..n]);
+    let r = span.range();
+    let (tau, y, ydot) = (&tau[r.clone()], &y[r.clone()], &ydot[r]);
     screen(tau, y, ydot)?;
     let a = mark_crandall(y, ydot);
     let a0 = *a.first().ok_or_else(|| FitError::failed("empty record"))?;
