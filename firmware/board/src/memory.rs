@@ -84,8 +84,9 @@ pub fn take() -> Option<RunStoreMemory> {
 // does not cover it. This `__pre_init` (called by cortex-m-rt's reset handler before it initialises
 // RAM, and before any Rust code runs) copies its initial value from its load address, word by word,
 // as the reset handler does for `.data`: in assembly, because no Rust code may run before RAM is
-// initialised. The DTCM is enabled out of reset. `memory.x` aligns `.rtt` and its load address to
-// 4 bytes and pads its size to a multiple of 4.
+// initialised. It also zeroes the buffer (`.rtt_buffer`), so that its ECC is written before
+// defmt-rtt's byte writes. The DTCM is enabled out of reset. `memory.x` aligns both sections and
+// `.rtt`'s load address to 4 bytes and pads their sizes to multiples of 4.
 core::arch::global_asm!(
     ".section .text.__pre_init, \"ax\"",
     ".global __pre_init",
@@ -100,6 +101,13 @@ core::arch::global_asm!(
     "    ldm r2!, {{r3}}",
     "    stm r0!, {{r3}}",
     "    b 0b",
-    "1:  bx lr",
+    "1:  ldr r0, =__srttbuf",
+    "    ldr r1, =__erttbuf",
+    "    movs r2, #0",
+    "2:  cmp r1, r0",
+    "    beq 3f",
+    "    stm r0!, {{r2}}",
+    "    b 2b",
+    "3:  bx lr",
     ".size __pre_init, . - __pre_init",
 );
