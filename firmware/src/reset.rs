@@ -256,6 +256,15 @@ pub fn boot_recovery(
     BootRecovery::EraseFirst { sector }
 }
 
+/// The offset in flash bank 2 (at `base`, `bytes` long) of the data access a CPU fault reports, if
+/// the fault is a bus fault with a valid address inside the bank (CFSR.BFARVALID, bit 15): what a
+/// double ECC error does on the H7. The HardFault handler sets the marker from it, so that the next
+/// boot erases that sector even when the read was not the boot recovery's (a pull, say).
+pub fn bank2_fault_offset(cfsr: u32, bfar: u32, base: u32, bytes: u32) -> Option<u32> {
+    let offset = bfar.checked_sub(base)?;
+    (cfsr & 1 << 15 != 0 && offset < bytes).then_some(offset)
+}
+
 /// Says in the boot report that the recovery faulted on `sector`, which was erased with the run it
 /// held (the cause stays: the fault or panic that reset the chip).
 pub fn note_torn_sector(report: &mut BootReport, sector: u32) {
@@ -375,6 +384,21 @@ mod tests {
         assert!(r.message.starts_with(
             "recovery faulted reading bank 2 sector 5: sector erased, its run lost; HardFault"
         ));
+    }
+
+    #[test]
+    fn a_bus_fault_in_bank_2_names_its_offset() {
+        const BASE: u32 = 0x0810_0000;
+        const BYTES: u32 = 1 << 20;
+        let valid = 1 << 15 | 1 << 9; // BFARVALID, PRECISERR
+        assert_eq!(
+            bank2_fault_offset(valid, BASE + 0x4_0020, BASE, BYTES),
+            Some(0x4_0020)
+        );
+        assert_eq!(bank2_fault_offset(1 << 9, BASE + 0x20, BASE, BYTES), None);
+        assert_eq!(bank2_fault_offset(valid, BASE - 4, BASE, BYTES), None);
+        assert_eq!(bank2_fault_offset(valid, BASE + BYTES, BASE, BYTES), None);
+        assert_eq!(bank2_fault_offset(valid, 0x2400_0000, BASE, BYTES), None);
     }
 
     /// The board's loop: a torn word faults every recovery that reads it; with the marker each

@@ -229,5 +229,11 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
     };
     let m = reset::cpu_fault_message(ef.pc(), ef.lr(), cfsr, hfsr, bfar);
     record(ResetCause::CpuFault, m.as_bytes());
+    // A bus fault reading flash bank 2 (a torn word's double ECC error), whoever read it: the
+    // next boot erases that sector before its recovery (`reset::boot_recovery`).
+    let g = FlashGeometry::H743_BANK2;
+    if let Some(offset) = reset::bank2_fault_offset(cfsr, bfar, crate::mpu::BANK2_BASE, g.bytes()) {
+        recovering(Some(offset));
+    }
     cortex_m::peripheral::SCB::sys_reset()
 }
