@@ -26,6 +26,7 @@ pub mod runstore;
 // The fail-safe rig: thermocouple trust, host lease, the safe state as data, the
 // watchdog's liveness bookkeeping, the reset record.
 pub mod lease;
+pub mod link_tx;
 pub mod reset;
 pub mod safety;
 pub mod thermocouple;

@@ -202,6 +202,84 @@ pub fn cpu_fault_message(pc: u32, lr: u32, cfsr: u32, hfsr: u32, bfar: u32) -> M
     m
 }
 
+/// The "recovering" marker: kept in the no-init RAM beside the record while the boot recovery reads
+/// flash bank 2 (the board sets it, with the offset of every read, before the read; and clears it
+/// when the recovery is over). A word of bank 2 whose programming or erase a power cut tore has an
+/// inconsistent ECC, and reading it is a bus error: HardFault, reset, and the same read again at
+/// the next boot. With the marker the next boot knows which sector the recovery was reading when
+/// the chip faulted, erases it unread, and reports the run it held as lost ([`boot_recovery`]):
+/// at most one lost sector per fault, never a loop.
+pub type Marker = [u32; MARKER_WORDS];
+/// Words of a [`Marker`]: magic, the offset in bank 2, its complement.
+pub const MARKER_WORDS: usize = 3;
+/// No recovery under way.
+pub const MARKER_CLEAR: Marker = [0; MARKER_WORDS];
+const MARKER_MAGIC: u32 = 0x5245_4356; // "RECV"
+
+/// The marker of a recovery about to read bank 2 at `offset`.
+pub fn marker(offset: u32) -> Marker {
+    [MARKER_MAGIC, offset, !offset]
+}
+
+/// What the boot does before recovering the last run from flash.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BootRecovery {
+    /// Recover as usual.
+    Recover,
+    /// The last boot's recovery faulted reading `sector`: erase it first (unread), then recover
+    /// what the others hold; the run that sector held is lost.
+    EraseFirst { sector: u32 },
+}
+
+/// Decides from the reset flags, the boot report's cause and (only when RAM was kept)
+/// the marker whether the last recovery faulted. Only a panic or a CPU fault counts: a reset by
+/// the pin or the debugger during a recovery says nothing about the flash. A marker that does not
+/// check out (garbage, or a sector outside the bank) is no marker.
+pub fn boot_recovery(
+    flags: ResetFlags,
+    cause: ResetCause,
+    read_marker: impl FnOnce() -> Marker,
+    sector_bytes: u32,
+    sectors: u32,
+) -> BootRecovery {
+    if !flags.ram_kept() || !matches!(cause, ResetCause::Panic | ResetCause::CpuFault) {
+        return BootRecovery::Recover;
+    }
+    let [magic, offset, check] = read_marker();
+    if magic != MARKER_MAGIC || check != !offset || sector_bytes == 0 {
+        return BootRecovery::Recover;
+    }
+    let sector = offset / sector_bytes;
+    if sector >= sectors {
+        return BootRecovery::Recover;
+    }
+    BootRecovery::EraseFirst { sector }
+}
+
+/// The offset in flash bank 2 (at `base`, `bytes` long) of the data access a CPU fault reports, if
+/// the fault is a bus fault with a valid address inside the bank (CFSR.BFARVALID, bit 15): what a
+/// double ECC error does on the H7. The HardFault handler sets the marker from it, so that the next
+/// boot erases that sector even when the read was not the boot recovery's (a pull, say).
+pub fn bank2_fault_offset(cfsr: u32, bfar: u32, base: u32, bytes: u32) -> Option<u32> {
+    let offset = bfar.checked_sub(base)?;
+    (cfsr & 1 << 15 != 0 && offset < bytes).then_some(offset)
+}
+
+/// Says in the boot report that the recovery faulted on `sector`, which was erased with the run it
+/// held (the cause stays: the fault or panic that reset the chip).
+pub fn note_torn_sector(report: &mut BootReport, sector: u32) {
+    let mut m = MessageBuf::new();
+    let _ = write!(
+        m,
+        "recovery faulted reading bank 2 sector {sector}: sector erased, its run lost; "
+    );
+    let _ = m.write_str(&report.message);
+    report.message.clear();
+    if let Ok(s) = core::str::from_utf8(m.as_bytes()) {
+        let _ = report.message.push_str(s);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -249,6 +327,117 @@ mod tests {
             core::str::from_utf8(f.as_bytes()).unwrap(),
             "HardFault at pc=0x08001234 lr=0xfffffff9 cfsr=0x00008200 hfsr=0x40000000 bfar=0x20040000"
         );
+    }
+
+    #[test]
+    fn a_recovery_that_faulted_erases_its_sector_once() {
+        const SECTOR: u32 = 128 * 1024;
+        let kept = ResetFlags::from_h7_rsr(1 << 24 | 1 << 22);
+        let por = ResetFlags::from_h7_rsr(1 << 23 | 1 << 22 | 1 << 21);
+        let at = |off: u32| move || marker(off);
+        // A HardFault while reading sector 5: erase it first.
+        assert_eq!(
+            boot_recovery(kept, ResetCause::CpuFault, at(5 * SECTOR + 96), SECTOR, 8),
+            BootRecovery::EraseFirst { sector: 5 }
+        );
+        assert_eq!(
+            boot_recovery(kept, ResetCause::Panic, at(0), SECTOR, 8),
+            BootRecovery::EraseFirst { sector: 0 }
+        );
+        // The marker cleared after a recovery that ended: recover.
+        let clear = || MARKER_CLEAR;
+        assert_eq!(
+            boot_recovery(kept, ResetCause::CpuFault, clear, SECTOR, 8),
+            BootRecovery::Recover
+        );
+        // After a power-on the RAM is garbage: not even read.
+        let never = || -> Marker { panic!("marker read after a power-on") };
+        assert_eq!(
+            boot_recovery(por, ResetCause::PowerOn, never, SECTOR, 8),
+            BootRecovery::Recover
+        );
+        // A reset by the pin or the watchdog during a recovery: the flash is not to blame.
+        for cause in [ResetCause::Pin, ResetCause::Software, ResetCause::Watchdog] {
+            assert_eq!(
+                boot_recovery(kept, cause, at(SECTOR), SECTOR, 8),
+                BootRecovery::Recover
+            );
+        }
+        // Garbage or an offset outside the bank: no marker.
+        let mut bad = marker(SECTOR);
+        bad[2] ^= 1;
+        assert_eq!(
+            boot_recovery(kept, ResetCause::CpuFault, || bad, SECTOR, 8),
+            BootRecovery::Recover
+        );
+        assert_eq!(
+            boot_recovery(kept, ResetCause::CpuFault, at(8 * SECTOR), SECTOR, 8),
+            BootRecovery::Recover
+        );
+        // The report says which sector went, and keeps what it can of the fault.
+        let mut r = BootReport {
+            cause: ResetCause::CpuFault,
+            message: heapless::String::try_from("HardFault at pc=0x08001234").unwrap(),
+        };
+        note_torn_sector(&mut r, 5);
+        assert_eq!(r.cause, ResetCause::CpuFault);
+        assert!(r.message.starts_with(
+            "recovery faulted reading bank 2 sector 5: sector erased, its run lost; HardFault"
+        ));
+    }
+
+    #[test]
+    fn a_bus_fault_in_bank_2_names_its_offset() {
+        const BASE: u32 = 0x0810_0000;
+        const BYTES: u32 = 1 << 20;
+        let valid = 1 << 15 | 1 << 9; // BFARVALID, PRECISERR
+        assert_eq!(
+            bank2_fault_offset(valid, BASE + 0x4_0020, BASE, BYTES),
+            Some(0x4_0020)
+        );
+        assert_eq!(bank2_fault_offset(1 << 9, BASE + 0x20, BASE, BYTES), None);
+        assert_eq!(bank2_fault_offset(valid, BASE - 4, BASE, BYTES), None);
+        assert_eq!(bank2_fault_offset(valid, BASE + BYTES, BASE, BYTES), None);
+        assert_eq!(bank2_fault_offset(valid, 0x2400_0000, BASE, BYTES), None);
+    }
+
+    /// The board's loop: a torn word faults every recovery that reads it; with the marker each
+    /// boot after a fault erases the sector instead, so the rig comes back after one more boot.
+    #[test]
+    fn a_torn_word_is_not_a_boot_loop() {
+        const SECTOR: u32 = 4096;
+        let kept = ResetFlags::from_h7_rsr(1 << 24 | 1 << 22);
+        let mut torn = Some(3 * SECTOR + 64); // the offset whose read faults
+        let mut ram = MARKER_CLEAR;
+        let mut cause = ResetCause::PowerOn;
+        let mut flags = ResetFlags::from_h7_rsr(1 << 23);
+        let mut boots = 0;
+        loop {
+            boots += 1;
+            assert!(boots < 4, "boot loop");
+            if let BootRecovery::EraseFirst { sector } =
+                boot_recovery(flags, cause, || ram, SECTOR, 8)
+            {
+                if torn.is_some_and(|o| o / SECTOR == sector) {
+                    torn = None;
+                }
+            }
+            // The recovery reads every sector's first word, then the run.
+            let mut faulted = false;
+            for off in (0..8 * SECTOR).step_by(32) {
+                ram = marker(off);
+                if torn == Some(off) {
+                    faulted = true;
+                    break;
+                }
+            }
+            if !faulted {
+                // (the board clears the marker here)
+                break;
+            }
+            (flags, cause) = (kept, ResetCause::CpuFault);
+        }
+        assert_eq!(boots, 2);
     }
 
     #[test]

@@ -10,6 +10,8 @@ mod irqs;
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod memory;
 #[cfg(all(target_arch = "arm", target_os = "none"))]
+mod mpu;
+#[cfg(all(target_arch = "arm", target_os = "none"))]
 mod safety;
 #[cfg(all(target_arch = "arm", target_os = "none"))]
 mod sampling;

@@ -7,8 +7,9 @@
 //!
 //! SRAM1, SRAM2 and the DTCM buffers are not in the runtime's `.bss`: their sections (see `memory.x`) are
 //! `NOLOAD`, so this module zeroes them before handing them out, once. SRAM3 (DMA buffers) and
-//! SRAM4 are left to the other concerns.
-// `#[link_section]` and the raw pointers need `unsafe`; this module is the only place.
+//! SRAM4 are left to the other concerns. Also here: the copy of defmt-rtt's control block into the
+//! DTCM at reset (`__pre_init`, at the end).
+// `#[link_section]`, the raw pointers and the start-up assembly need `unsafe`.
 #![allow(unsafe_code)]
 
 use core::mem::MaybeUninit;
@@ -77,3 +78,36 @@ pub fn take() -> Option<RunStoreMemory> {
         index,
     })
 }
+
+// defmt-rtt's control block lives in the DTCM (`.rtt` in `memory.x`: never in the D-cache, so the
+// probe and the core see each other's writes), outside cortex-m-rt's `.data`, whose copy from flash
+// does not cover it. This `__pre_init` (called by cortex-m-rt's reset handler before it initialises
+// RAM, and before any Rust code runs) copies its initial value from its load address, word by word,
+// as the reset handler does for `.data`: in assembly, because no Rust code may run before RAM is
+// initialised. It also zeroes the buffer (`.rtt_buffer`), so that its ECC is written before
+// defmt-rtt's byte writes. The DTCM is enabled out of reset. `memory.x` aligns both sections and
+// `.rtt`'s load address to 4 bytes and pads their sizes to multiples of 4.
+core::arch::global_asm!(
+    ".section .text.__pre_init, \"ax\"",
+    ".global __pre_init",
+    ".type __pre_init, %function",
+    ".thumb_func",
+    "__pre_init:",
+    "    ldr r0, =__srtt",
+    "    ldr r1, =__ertt",
+    "    ldr r2, =__sirtt",
+    "0:  cmp r1, r0",
+    "    beq 1f",
+    "    ldm r2!, {{r3}}",
+    "    stm r0!, {{r3}}",
+    "    b 0b",
+    "1:  ldr r0, =__srttbuf",
+    "    ldr r1, =__erttbuf",
+    "    movs r2, #0",
+    "2:  cmp r1, r0",
+    "    beq 3f",
+    "    stm r0!, {{r2}}",
+    "    b 2b",
+    "3:  bx lr",
+    ".size __pre_init, . - __pre_init",
+);

@@ -14,7 +14,7 @@
 #![allow(unsafe_code)]
 
 use core::mem::MaybeUninit;
-use core::ptr::addr_of_mut;
+use core::ptr::{addr_of, addr_of_mut};
 use core::sync::atomic::{compiler_fence, fence, Ordering};
 
 use embassy_stm32::adc::{Adc, AnyAdcChannel, RxDma};
@@ -43,48 +43,38 @@ const STREAM: usize = 0;
 pub const SCAN_CHANNELS: usize = 4;
 
 /// The converter's ring: 16 KiB, alone in the `.dma_ring` section (region `DMA_RING` of
-/// `memory.x`, SRAM3 in the D2 domain, reachable by DMA1), which [`configure_mpu_and_caches`] makes
-/// non-cacheable. Written only by the DMA after [`Sampler::new`] zeroed it.
+/// `memory.x`, SRAM3 in the D2 domain, reachable by DMA1), which MPU region 7 ([`ring_region`])
+/// makes non-cacheable. Written only by the DMA after [`Sampler::new`] zeroed it.
 #[link_section = ".dma_ring"]
 static mut DMA_RING: MaybeUninit<[u16; RING_WORDS]> = MaybeUninit::uninit();
 
-/// Base address and size of the `.dma_ring` region (must match `memory.x`).
-const DMA_RING_BASE: u32 = 0x3004_4000;
+/// Size of the `.dma_ring` section's region (`DMA_RING` in `memory.x`).
 const DMA_RING_BYTES: u32 = 16 * 1024;
 const _: () = assert!(RING_WORDS * 2 == DMA_RING_BYTES as usize);
 
-/// Makes the DMA ring's region non-cacheable (MPU region 7, the highest priority, so that no other
-/// region can cover it with a cacheable attribute), then turns the I- and D-caches on.
+/// MPU region 7 (the highest priority, so that no other region can cover the ring with a cacheable
+/// attribute): the ring's 16 KiB, normal, non-cacheable, shareable, execute-never; `None` unless
+/// the ring's actual address (where the linker put the static) is the base of a region of its size
+/// (`memory.x` asserts the same at link time).
 ///
 /// Why non-cacheable rather than clean/invalidate: the reader looks at the ring at any moment, by
 /// position, down to a single scan; invalidating 32-byte lines the DMA may be writing into at that
 /// instant would be racy, and per-read invalidation costs more than uncached reads of 8 bytes.
-pub fn configure_mpu_and_caches(
-    mpu: &mut cortex_m::peripheral::MPU,
-    scb: &mut cortex_m::peripheral::SCB,
-    cpuid: &mut cortex_m::peripheral::CPUID,
-) {
-    const REGION: u32 = 7;
-    // RASR: XN, full access (AP = 0b011), TEX = 0b001 C = 0 B = 0 (normal memory, non-cacheable),
-    // shareable, size 2^(13 + 1) = 16 KiB, enabled.
-    let size_field = DMA_RING_BYTES.trailing_zeros() - 1;
-    let rasr = 1 << 28 | 0b011 << 24 | 0b001 << 19 | 1 << 18 | size_field << 1 | 1;
-    cortex_m::asm::dmb();
-    // SAFETY: the MPU is programmed once, before any task runs and before the DMA is started; the
-    // region covers only the `.dma_ring` section (base aligned to its size, checked below), and
-    // the background region stays enabled (PRIVDEFENA), so every other access keeps the default map.
-    unsafe {
-        mpu.ctrl.write(0);
-        mpu.rnr.write(REGION);
-        mpu.rbar.write(DMA_RING_BASE);
-        mpu.rasr.write(rasr);
-        mpu.ctrl.write(1 << 2 | 1);
-    }
-    cortex_m::asm::dsb();
-    cortex_m::asm::isb();
-    debug_assert_eq!(DMA_RING_BASE % DMA_RING_BYTES, 0);
-    scb.enable_icache();
-    scb.enable_dcache(cpuid);
+pub fn ring_region() -> Option<crate::mpu::Region> {
+    let base = addr_of!(DMA_RING) as u32;
+    let region = crate::mpu::Region {
+        number: 7,
+        base,
+        bytes: DMA_RING_BYTES,
+        attrs: crate::mpu::NORMAL_UNCACHED_SHARED,
+    };
+    (base.is_multiple_of(DMA_RING_BYTES)
+        && crate::mpu::holds(
+            &region,
+            base,
+            core::mem::size_of::<[u16; RING_WORDS]>() as u32,
+        ))
+    .then_some(region)
 }
 
 /// The ring as the reader sees it: volatile reads of memory the DMA writes.
@@ -99,8 +89,10 @@ impl RingView for DmaView {
             return 0;
         }
         // SAFETY: `i` is inside the static ring; the memory is plain u16s (any bit pattern is
-        // valid), non-cacheable, and only the DMA writes it: a volatile read sees what the DMA
-        // last wrote (a torn scan is detected by the reader from the DMA position).
+        // valid), never in the D-cache (MPU region 7, or the D-cache left off when that region
+        // could not be placed: `mpu::configure_and_enable_caches`), and only the DMA writes it: a
+        // volatile read sees what the DMA last wrote (a torn scan is detected by the reader from
+        // the DMA position).
         unsafe { self.0.add(i).read_volatile() }
     }
 }

@@ -282,7 +282,7 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         size.data,
         size.vectors,
     );
-    let memory_x = root().join("firmware/board/memory.x");
+    let memory_x = root().join("memory.x");
     let text =
         std::fs::read_to_string(&memory_x).map_err(|e| format!("{}: {e}", memory_x.display()))?;
     let regions = memory::regions(&text)?;

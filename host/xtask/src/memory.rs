@@ -99,7 +99,7 @@ mod tests {
 
     #[test]
     fn reads_the_workspace_memory_x() {
-        let text = include_str!("../../../firmware/board/memory.x");
+        let text = include_str!("../../../memory.x");
         let r = regions(text).unwrap();
         let flash = r.iter().find(|r| r.name == "FLASH").unwrap();
         assert_eq!(

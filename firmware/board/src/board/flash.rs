@@ -73,31 +73,131 @@ impl RunFlash for BoardHw {
         if self.flash_busy() {
             return false;
         }
-        match self.flash.region.try_lock() {
-            Ok(mut region) => region.blocking_read(offset, out).is_ok(),
-            Err(_) => false,
+        let Ok(mut region) = self.flash.region.try_lock() else {
+            return false;
+        };
+        if !self.recovering {
+            return region.blocking_read(offset, out).is_ok();
         }
+        // The boot recovery: each piece read within one sector, the marker naming it first, so that
+        // if a torn word's ECC faults the read, the next boot knows which sector to erase
+        // (`tribo_firmware::reset::boot_recovery`).
+        let sector = FlashGeometry::H743_BANK2.sector_bytes;
+        let mut at = offset;
+        let mut rest = &mut out[..];
+        while !rest.is_empty() {
+            let n = ((sector - at % sector) as usize).min(rest.len());
+            let (piece, tail) = rest.split_at_mut(n);
+            safety::recovering(Some(at));
+            if region.blocking_read(at, piece).is_err() {
+                return false;
+            }
+            at += n as u32;
+            rest = tail;
+        }
+        true
     }
     fn flash_take_error(&mut self) -> bool {
         self.flash.failed.swap(false, Ordering::AcqRel)
     }
 }
 
+/// embassy-stm32 0.6's H7 flash driver around each of its calls, for bank 2 (RM0433 §4.9):
+///
+/// * its `clear_all_err` rewrites FLASH_SR2, which is read-only on the H7: the error flags clear
+///   only through FLASH_CCR2. A flag left set (e.g. a corrected ECC event during a pull's read)
+///   would fail every later erase and program (the driver checks SR2's flags after each), so every
+///   flag is cleared here before each operation, and after it (what it raised is returned, to log);
+/// * its `write` ends with `CR2 = PG off`, a whole-register write that zeroes PSIZE, and its erase
+///   keeps whatever PSIZE holds: erases after a program would run at ×8 parallelism, several times
+///   slower than the erase times `firmware/README.md` plans with. PSIZE is set to ×64 (0b11, the
+///   NUCLEO's 3.3 V supply) before each operation. CR2 is writable only unlocked: the bank is
+///   unlocked here first (the driver unlocks only a locked bank, and locks it again when done).
+///
+/// No `unsafe`: the PAC's register accessors are safe; the flash task is the only one that runs
+/// flash operations (the application only reads, never while one runs), so nothing else writes
+/// these registers meanwhile.
+mod bank2 {
+    use embassy_stm32::pac;
+
+    /// Every "clear" bit of FLASH_CCR2 set: all of SR2's status and error flags cleared. Returns
+    /// SR2 as it was.
+    pub(super) fn clear_flags() -> u32 {
+        let bank = pac::FLASH.bank(1);
+        let sr = bank.sr().read().0;
+        bank.ccr().write(|w| {
+            w.set_clr_eop(true);
+            w.set_clr_wrperr(true);
+            w.set_clr_pgserr(true);
+            w.set_clr_strberr(true);
+            w.set_clr_incerr(true);
+            w.set_clr_operr(true);
+            w.set_clr_rdperr(true);
+            w.set_clr_rdserr(true);
+            w.set_clr_sneccerr(true);
+            w.set_clr_dbeccerr(true);
+            w.set_clr_crcend(true);
+            w.set_clr_crcrderr(true);
+        });
+        sr
+    }
+
+    /// Unlocks bank 2 (if locked) and sets PSIZE to ×64, then clears its flags.
+    pub(super) fn prepare() {
+        let bank = pac::FLASH.bank(1);
+        if bank.cr().read().lock() {
+            bank.keyr().write_value(0x4567_0123);
+            bank.keyr().write_value(0xCDEF_89AB);
+        }
+        bank.cr().modify(|w| w.set_psize(0b11));
+        clear_flags();
+    }
+}
+
+const SECTOR: u32 = FlashGeometry::H743_BANK2.sector_bytes;
+
+/// Erases one sector of bank 2 with the driver, flags cleared and PSIZE ×64 around it.
+pub(super) async fn erase_sector(region: &mut Bank2Region<'static, Async>, sector: u32) -> bool {
+    bank2::prepare();
+    let ok = region
+        .erase(sector * SECTOR, (sector + 1) * SECTOR)
+        .await
+        .is_ok();
+    note_flags(bank2::clear_flags(), "erase");
+    ok
+}
+
+/// Programs `data` at `offset` of bank 2 with the driver, flags cleared around it.
+async fn program(region: &mut Bank2Region<'static, Async>, offset: u32, data: &[u8]) -> bool {
+    bank2::prepare();
+    let ok = region.write(offset, data).await.is_ok();
+    note_flags(bank2::clear_flags(), "program");
+    ok
+}
+
+/// Logs the error flags (FLASH_SR2 bits 17..=28) an operation left.
+fn note_flags(sr: u32, what: &str) {
+    let errors = sr & 0x1FFE_0000;
+    if errors != 0 {
+        defmt::warn!(
+            "bank 2 {}: FLASH_SR2 error flags {=u32:#010x}, cleared",
+            what,
+            errors
+        );
+    }
+}
+
 /// Runs the application's flash operations on bank 2, one at a time.
 #[embassy_executor::task]
 pub(super) async fn flash_task(link: &'static FlashLink) {
-    pub(super) const SECTOR: u32 = FlashGeometry::H743_BANK2.sector_bytes;
     loop {
         let op = link.op.wait().await;
         let ok = {
             let mut region = link.region.lock().await;
             match op {
-                FlashOp::Erase { sector } => region
-                    .erase(sector * SECTOR, (sector + 1) * SECTOR)
-                    .await
-                    .is_ok(),
+                FlashOp::Erase { sector } => erase_sector(&mut region, sector).await,
                 FlashOp::Program { offset, len, data } => {
-                    region.write(offset, &data[..len]).await.is_ok()
+                    program(&mut region, offset, &data[..len]).await
                 }
             }
         };

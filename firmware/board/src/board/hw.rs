@@ -16,6 +16,12 @@ pub(super) struct BoardHw {
     pub(super) button: Input<'static>,
     pub(super) lamps: [Output<'static>; 3],
     pub(super) sampler: Sampler,
+    /// The safe-state table matched the PAC at boot (`safety::check_table`). When it did not,
+    /// heater, magnet and ECR source stay off whatever the application asks: the fatal paths could
+    /// not drive them safe.
+    pub(super) outputs_allowed: bool,
+    /// The boot recovery is reading bank 2: each read is marked first (`flash_read`).
+    pub(super) recovering: bool,
 }
 
 pub(super) fn fraction(duty: f32) -> u32 {
@@ -28,6 +34,11 @@ pub(super) fn fraction(duty: f32) -> u32 {
 
 impl Magnet for BoardHw {
     fn magnet_drive(&mut self, drive: MagnetDrive) {
+        let drive = if self.outputs_allowed {
+            drive
+        } else {
+            MagnetDrive::Off
+        };
         let (hold, reverse) = match drive {
             MagnetDrive::Off => (0.0, 0.0),
             MagnetDrive::Hold { duty } => (duty, 0.0),
@@ -53,12 +64,14 @@ impl Thermocouple for BoardHw {
 
 impl HeaterOutput for BoardHw {
     fn set_heater_duty(&mut self, duty: f32) {
+        let duty = if self.outputs_allowed { duty } else { 0.0 };
         self.heater.set_duty_cycle_fraction(fraction(duty), 1000);
     }
 }
 
 impl EcrFrontEnd for BoardHw {
     fn set_ecr_source(&mut self, volts: f32) {
+        let volts = if self.outputs_allowed { volts } else { 0.0 };
         let dac_v = (volts * ECR_DIVIDER).clamp(0.0, FULL_SCALE_V);
         self.ecr_dac
             .set(Value::Bit12Right((dac_v / FULL_SCALE_V * 4095.0) as u16));

@@ -12,14 +12,15 @@
 //!   checks it, `tribo_firmware::thermocouple`).
 //! * `flash`: erases and programs bank 2 for the run store, one operation at a time as the
 //!   application asks ([`FlashLink`]), interrupt-driven, so the application keeps running meanwhile.
-//! * `watchdog`: feeds the IWDG while the periodic tasks (app, thermocouple) check in; otherwise
+//! * `watchdog`: started once the app's first poll (the flash recovery) is over, feeds the IWDG
+//!   while the periodic tasks (app, thermocouple) check in; otherwise
 //!   drives the outputs safe, notes which task and lets the IWDG reset the chip
 //!   (`tribo_firmware::watchdog`). The flash and USB tasks wait on their peripherals and do not
 //!   check in; the sampler is hardware (its reader is the app task).
-//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. Each (re)connection of the
-//!   host starts clean: bytes queued before it are dropped, the application forgets any
-//!   half-received frame, and frames are refused (they wait in the run store) while no host is
-//!   connected.
+//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. A suspend (what a cable pull
+//!   looks like without VBUS sensing) or a bus reset is "link down": frames are refused (they wait
+//!   in the run store) until a host is back; then the sender resends the frame it was sending, whole,
+//!   and the application forgets any half-received frame (`host_link`).
 //!
 //! Panics and HardFaults go to `crate::safety` (safe state, reset record, reset).
 //!
@@ -55,6 +56,7 @@ use static_cell::{ConstStaticCell, StaticCell};
 use tribo_firmware::app::{App, AppConfig};
 use tribo_firmware::ecr::{count_to_volts, FULL_SCALE_V};
 use tribo_firmware::hal::*;
+use tribo_firmware::reset::{self, BootRecovery};
 use tribo_firmware::runstore::RunStore;
 
 use tribo_firmware::thermocouple::{self as tc, Registers};
@@ -93,8 +95,16 @@ struct Shared {
     thermocouple: &'static Mutex<Cs, Cell<TcReading>>,
     /// The periodic tasks' check-ins, for the watchdog.
     liveness: Liveness<{ BOARD_TASKS.len() }>,
-    /// A host is connected (the CDC class is configured): frames may be queued for it.
+    /// A host is connected (the CDC class is configured and the bus not suspended): frames may be
+    /// queued for it.
     connected: AtomicBool,
+    /// The bus is suspended (with VBUS sensing off, a pulled cable looks like this).
+    usb_suspended: AtomicBool,
+    /// A suspend, resume or bus reset happened (`host_link::UsbEvents`), for the sender.
+    usb_event: Signal<Cs, ()>,
+    /// The application's first poll (the recovery of the last run from flash) is over: the
+    /// watchdog may start.
+    app_started: Signal<Cs, ()>,
     tx: Pipe<Cs, TX_PIPE>,
     rx: Channel<Cs, heapless::Vec<u8, 64>, 8>,
 }
@@ -110,21 +120,51 @@ static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static CONTROL_BUF: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
 static CDC_STATE: StaticCell<State> = StaticCell::new();
+static USB_EVENTS: StaticCell<UsbEvents> = StaticCell::new();
 
 fn now_us() -> u64 {
     Instant::now().as_micros()
 }
 
 #[embassy_executor::task]
-async fn app_task(shared: &'static Shared, mut hw: BoardHw, serial: u64, boot: BootReport) {
+async fn app_task(
+    shared: &'static Shared,
+    mut hw: BoardHw,
+    serial: u64,
+    mut boot: BootReport,
+    recovery: BootRecovery,
+) {
     let Some(mem) = memory::take() else {
         defmt::error!("run store memory already taken");
         return;
     };
+    // The last boot's recovery faulted reading a sector (a torn flash word: its ECC is a bus
+    // error): that sector is erased unread, and the boot report says its run is lost.
+    if let BootRecovery::EraseFirst { sector } = recovery {
+        defmt::error!(
+            "last recovery faulted in bank 2 sector {}: erasing it",
+            sector
+        );
+        let mut region = hw.flash.region.lock().await;
+        if !erase_sector(&mut region, sector).await {
+            defmt::error!("erase of bank 2 sector {} failed", sector);
+        }
+        reset::note_torn_sector(&mut boot, sector);
+    }
     let store = RunStore::new(mem.ring, mem.index);
     let cfg = AppConfig::new(serial);
     let mut app = App::new(cfg, store);
     app.set_boot_report(boot);
+    // The first poll recovers the last run from flash (up to 1 MiB, read without yielding), each
+    // read marked in the no-init RAM; the watchdog starts only after it, so a long recovery cannot
+    // trip it, and the marker is cleared only after it, so a fault inside it is known at the next
+    // boot.
+    hw.recovering = true;
+    app.poll(&mut hw, now_us());
+    hw.recovering = false;
+    safety::recovering(None);
+    shared.liveness.check_in(task::APP, now_ms());
+    shared.app_started.signal(());
     // The application's period (500 µs: a poll's share of the work stays within its budget, see
     // `AppConfig::poll_period_us`).
     let mut ticker = Ticker::every(Duration::from_micros(cfg.poll_period_us as u64));
@@ -150,6 +190,12 @@ fn now_ms() -> u32 {
 /// timeout. (A core stuck in one task never runs this: the IWDG resets it all the same.)
 #[embassy_executor::task]
 async fn watchdog_task(shared: &'static Shared, mut wdg: IndependentWatchdog<'static, IWDG1>) {
+    // Not before the application's first poll (the flash recovery) is over; every task's allowance
+    // counts from here.
+    shared.app_started.wait().await;
+    for i in 0..BOARD_TASKS.len() {
+        shared.liveness.check_in(i, now_ms());
+    }
     wdg.unleash();
     let mut ticker = Ticker::every(Duration::from_millis(FEED_PERIOD_MS as u64));
     loop {
@@ -230,16 +276,44 @@ macro_rules! spawn {
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    // Why the last reset (read before anything else touches RCC_RSR or the record).
-    let boot = safety::boot_report();
-    // The DMA ring non-cacheable, then the caches on (before anything uses DMA).
-    if let Some(mut cp) = cortex_m::Peripherals::take() {
-        crate::sampling::configure_mpu_and_caches(&mut cp.MPU, &mut cp.SCB, &mut cp.CPUID);
-    } else {
-        defmt::error!("core peripherals already taken: caches left off");
+    // Why the last reset, and whether the last recovery faulted (read before anything else
+    // touches RCC_RSR, the record or the marker; the caches are still off).
+    let safety::Boot {
+        report: mut boot,
+        recovery,
+    } = safety::boot_report();
+    // The MPU (bank 2, the no-init RAM and the DMA ring non-cacheable; the stack's guard), then the
+    // caches on (before anything uses DMA or the flash).
+    match cortex_m::Peripherals::take() {
+        Some(mut cp) => {
+            let regions = [
+                Some(crate::mpu::bank2()),
+                crate::mpu::stack_guard(),
+                safety::noinit_region(),
+                crate::sampling::ring_region(),
+            ];
+            if let Err(e) = crate::mpu::configure_and_enable_caches(
+                &mut cp.MPU,
+                &mut cp.SCB,
+                &mut cp.CPUID,
+                &regions,
+            ) {
+                defmt::error!("{}: D-cache left off", e);
+            }
+        }
+        None => defmt::error!("core peripherals already taken: caches left off"),
     }
     let p = embassy_stm32::init(clocks());
-    safety::check_table();
+    // The safe-state table against the PAC: if it does not match, the fatal paths cannot drive
+    // the outputs safe, so the application never drives them on (`BoardHw::outputs_allowed`) and
+    // the host is told in the boot report.
+    let outputs_allowed = safety::check_table();
+    if !outputs_allowed {
+        boot.message.clear();
+        let _ = boot.message.push_str(
+            "safe-state table does not match the PAC: heater, magnet, ECR source kept off",
+        );
+    }
     safety::freeze_watchdog_when_halted();
     defmt::info!("last reset: {}", boot.cause);
     // SRAM3 (the DMA ring) allocated to the CPU's domain, so D2 stays on while the CPU runs.
@@ -254,6 +328,9 @@ async fn main(spawner: Spawner) {
         thermocouple: THERMOCOUPLE.take(),
         liveness: Liveness::new(BOARD_TASKS, now_ms()),
         connected: AtomicBool::new(false),
+        usb_suspended: AtomicBool::new(false),
+        usb_event: Signal::new(),
+        app_started: Signal::new(),
         tx: Pipe::new(),
         rx: Channel::new(),
     });
@@ -337,6 +414,8 @@ async fn main(spawner: Spawner) {
             Output::new(p.PE1, Level::Low, Speed::Low),
             Output::new(p.PB14, Level::Low, Speed::Low),
         ],
+        outputs_allowed,
+        recovering: false,
     };
 
     // MAX31856 on SPI1 (mode 1, 1 MHz), chip select PD14.
@@ -365,6 +444,7 @@ async fn main(spawner: Spawner) {
         &mut [],
         CONTROL_BUF.take(),
     );
+    builder.handler(USB_EVENTS.init(UsbEvents { shared }));
     let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
     let (tx, rx) = class.split();
     let usb = builder.build();
@@ -374,8 +454,9 @@ async fn main(spawner: Spawner) {
     spawn!(spawner, usb_rx_task(shared, rx));
     spawn!(spawner, thermocouple_task(shared, spi, cs));
     spawn!(spawner, flash_task(flash));
-    spawn!(spawner, app_task(shared, hw, serial, boot));
-    // Last: every task is running when the watchdog starts counting.
+    spawn!(spawner, app_task(shared, hw, serial, boot, recovery));
+    // Last: every task is running when the watchdog starts counting, which is after the
+    // application's first poll (see `watchdog_task`).
     let wdg = IndependentWatchdog::new(p.IWDG1, limits::WATCHDOG_TIMEOUT_MS * 1000);
     spawn!(spawner, watchdog_task(shared, wdg));
 }
