@@ -5,7 +5,6 @@
 
 pub mod archive;
 pub mod cmd;
-pub mod crosscheck;
 pub mod exit;
 pub mod link;
 pub mod load;
@@ -15,4 +14,5 @@ pub use load::{load_for_fit, load_record, Holes, LONGEST_CLEAN_STRETCH_FLAG};
 
 pub use tribo_firmware as firmware;
 pub use tribo_physics as physics;
+pub use tribo_report::crosscheck;
 pub use tribo_wire as wire;

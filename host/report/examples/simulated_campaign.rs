@@ -19,6 +19,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     temp_c: Some(t + 0.3 * r as f64),
                     mu0: Some(0.010 + 0.003 * ti as f64 + 0.0004 * r as f64 + 0.001 * li as f64),
                     mu1: Some(0.004 - 0.0015 * ti as f64 + 0.0001 * r as f64),
+                    mu0_se: None,
+                    mu1_se: None,
                     cycles: Some(60.0 - 15.0 * li as f64 - 8.0 * ti as f64 + r as f64),
                 });
             }

@@ -17,9 +17,13 @@ pub struct CampaignPoint {
     pub load_n: f64,
     /// Nominal plane temperature (°C): the setpoint, else the measured one.
     pub temp_c: Option<f64>,
-    /// Dimensionless Coulomb and viscous constants (host fit preferred, else on-board).
+    /// Dimensionless Coulomb and viscous constants of the host fit.
     pub mu0: Option<f64>,
     pub mu1: Option<f64>,
+    /// Their standard errors (`None` when not known): drawn as each run's bar, and the y axis
+    /// never spans less than a few of them (a difference far below the ± is not drawn as a slope).
+    pub mu0_se: Option<f64>,
+    pub mu1_se: Option<f64>,
     /// Oscillation cycles until the stop.
     pub cycles: Option<f64>,
 }
@@ -110,11 +114,18 @@ fn grouped_figure(
     g_tol: f64,
     g_label: impl Fn(f64) -> String,
     value: impl Fn(&CampaignPoint) -> Option<f64>,
+    value_se: impl Fn(&CampaignPoint) -> Option<f64>,
 ) -> Option<Figure> {
     let rows: Vec<(f64, Option<f64>, f64)> = points
         .iter()
         .filter_map(|p| Some((x(p)?, group(p).filter(|g| g.is_finite()), value(p)?)))
         .filter(|(xv, _, val)| xv.is_finite() && val.is_finite())
+        .collect();
+    // Each run's own ± (x, value, se), for its bar and the axis floor.
+    let run_se: Vec<(f64, f64, f64)> = points
+        .iter()
+        .filter_map(|p| Some((x(p)?, value(p)?, value_se(p)?)))
+        .filter(|(a, b, c)| a.is_finite() && b.is_finite() && c.is_finite() && *c > 0.0)
         .collect();
     if rows.is_empty() {
         return None;
@@ -158,6 +169,16 @@ fn grouped_figure(
         p.series
             .push(Series::line("", i, singles).with_style(Style::Points(2)));
     }
+    if !run_se.is_empty() {
+        p.series.push(
+            Series::line("each run ± its standard error", groups.len(), Vec::new())
+                .with_style(Style::Points(1)),
+        );
+        if let Some(s) = p.series.last_mut() {
+            s.errors = run_se.iter().map(|&(x, v, e)| (x, v - e, v + e)).collect();
+        }
+        p.y_range = y_range_with_floor(&rows, &run_se);
+    }
     Some(Figure {
         name: name.into(),
         title: title.into(),
@@ -165,6 +186,31 @@ fn grouped_figure(
         panels: vec![p],
         size: (900, 600),
     })
+}
+
+/// The value axis: the data (and the runs' bars) with a margin, but never narrower than 6 × the
+/// runs' median standard error, so that a difference far below the ± is not stretched into a
+/// slope.
+fn y_range_with_floor(
+    rows: &[(f64, Option<f64>, f64)],
+    run_se: &[(f64, f64, f64)],
+) -> Option<(f64, f64)> {
+    let mut ses: Vec<f64> = run_se.iter().map(|r| r.2).collect();
+    ses.sort_by(f64::total_cmp);
+    let se = *ses.get(ses.len() / 2)?;
+    let vals = rows
+        .iter()
+        .map(|r| r.2)
+        .chain(run_se.iter().flat_map(|r| [r.1 - r.2, r.1 + r.2]));
+    let (lo, hi) = vals.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    if lo > hi {
+        return None;
+    }
+    let mid = 0.5 * (lo + hi);
+    let half = (0.52 * (hi - lo)).max(3.0 * se);
+    Some((mid - half, mid + half))
 }
 
 fn fmt_opt(v: Option<f64>, prec: usize) -> String {
@@ -216,6 +262,7 @@ pub fn campaign_report(
         TEMP_TOL_C,
         temp_label,
         |p| p.mu0,
+        |p| p.mu0_se,
     );
     match f {
         Some(f) => figures.push(f),
@@ -236,6 +283,7 @@ pub fn campaign_report(
         TEMP_TOL_C,
         temp_label,
         |p| p.mu1,
+        |p| p.mu1_se,
     );
     match f {
         Some(f) => figures.push(f),
@@ -256,6 +304,7 @@ pub fn campaign_report(
         LOAD_TOL_N,
         load_label,
         |p| p.cycles,
+        |_| None,
     );
     match f {
         Some(f) => figures.push(f),

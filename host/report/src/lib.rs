@@ -31,6 +31,7 @@
 //! (`assets/`, Bitstream Vera licence).
 
 pub mod campaign;
+pub mod crosscheck;
 mod html;
 pub mod plot;
 pub mod regime;

@@ -74,6 +74,11 @@ pub fn run_inputs(run: &Run) -> ReportInputs {
             ),
         ));
     }
+    if let (Some(h), Some(ob)) = (run.host_fit(), run.result()) {
+        if let Some(c) = crate::crosscheck::CrossCheck::of_stored(h, ob) {
+            meta.push(("host vs on-board".into(), c.summary()));
+        }
+    }
     ReportInputs {
         title: format!("Run {}", m.id),
         meta,
@@ -92,15 +97,17 @@ pub fn write_run_report(run: &Run, out_dir: &Path) -> Result<ReportFiles, Report
     write_record_report(&rec, &run_inputs(run), out_dir)
 }
 
-/// A campaign point from a catalog row: host fit preferred, else the on-board estimate; cycles
-/// from the on-board analysis.
+/// A campaign point from a catalog row: the host fit (the one estimator of a law; a run without
+/// one has no point, never the on-board estimate in its place); cycles from the on-board analysis.
 pub fn campaign_point(row: &CatalogRow) -> CampaignPoint {
     CampaignPoint {
         run: row.id.clone(),
         load_n: row.load_n,
         temp_c: row.temp_c,
-        mu0: row.host_mu0.or(row.onboard_mu0),
-        mu1: row.host_mu1.or(row.onboard_mu1),
+        mu0: row.host_mu0,
+        mu1: row.host_mu1,
+        mu0_se: row.host_mu0_se,
+        mu1_se: row.host_mu1_se,
         cycles: row.cycles.map(f64::from),
     }
 }

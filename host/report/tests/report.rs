@@ -300,6 +300,8 @@ fn campaign() -> Vec<CampaignPoint> {
                     temp_c: Some(t + 0.6 * r as f64),
                     mu0: Some(0.01 + 0.001 * ti as f64 + 0.0005 * r as f64),
                     mu1: Some(0.002),
+                    mu0_se: None,
+                    mu1_se: None,
                     cycles: Some(40.0 - 10.0 * li as f64 + r as f64),
                 });
             }
@@ -440,4 +442,38 @@ fn a_dimensionless_record_is_reported_in_dimensionless_units() {
         "{row}"
     );
     assert!(row.contains("adequate"), "{row}");
+}
+
+/// A constant μ0 measured with ± 1e-5 whose runs differ by 1e-7 across the loads is drawn flat:
+/// the value axis spans at least 6 standard errors, and every run carries its ± as a bar. (An axis
+/// fitted to the data alone spanned 1e-6 and drew the constant as a steep fall.)
+#[test]
+fn a_campaign_axis_never_stretches_a_difference_far_below_the_standard_error() {
+    let mut pts = Vec::new();
+    for (i, n) in [0.1, 0.3, 0.5, 0.7].into_iter().enumerate() {
+        pts.push(CampaignPoint {
+            run: format!("run-{i}"),
+            load_n: n,
+            temp_c: Some(25.0),
+            mu0: Some(0.02 - 1e-7 * i as f64),
+            mu1: Some(0.004),
+            mu0_se: Some(1e-5),
+            mu1_se: Some(2e-5),
+            cycles: Some(30.0),
+        });
+    }
+    let report = campaign_report(&pts, &CampaignInputs::default()).unwrap();
+    let mu0 = &report.figures[0].panels[0];
+    let (lo, hi) = mu0
+        .y_range
+        .expect("a value axis set from the standard errors");
+    assert!(hi - lo >= 6.0 * 1e-5 * 0.999, "axis spans {}", hi - lo);
+    assert!(lo < 0.02 - 3e-7 && hi > 0.02, "{lo} .. {hi}");
+    let bars = mu0
+        .series
+        .iter()
+        .find(|s| s.name.contains("standard error"))
+        .expect("the runs' ± drawn");
+    assert_eq!(bars.errors.len(), 4);
+    assert!(bars.errors.iter().all(|e| (e.2 - e.1 - 2e-5).abs() < 1e-12));
 }

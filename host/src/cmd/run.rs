@@ -374,6 +374,11 @@ pub fn result_table(run: &Run) -> String {
     } else if let Some(e) = &run.results.host_error {
         s.push_str(&format!("{:<10}no fit: {e}\n", "host"));
     }
+    if let (Some(h), Some(r)) = (host, ob) {
+        if let Some(c) = crate::crosscheck::CrossCheck::of_stored(h, r) {
+            s.push_str(&format!("{:<10}{}\n", "check", c.summary()));
+        }
+    }
     s
 }
 

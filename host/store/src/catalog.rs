@@ -39,7 +39,9 @@ CREATE TABLE IF NOT EXISTS runs (
     blocks INTEGER NOT NULL DEFAULT 0,
     blocks_expected INTEGER,
     completeness TEXT NOT NULL DEFAULT '',
-    log_stamp TEXT NOT NULL DEFAULT ''
+    log_stamp TEXT NOT NULL DEFAULT '',
+    host_mu0_se REAL,
+    host_mu1_se REAL
 );
 CREATE INDEX IF NOT EXISTS runs_campaign ON runs(campaign);
 ";
@@ -70,6 +72,9 @@ pub struct CatalogRow {
     pub host_mu0: Option<f64>,
     pub host_mu1: Option<f64>,
     pub host_gap: Option<f64>,
+    /// Standard errors of the host fit's μ0 and μ1.
+    pub host_mu0_se: Option<f64>,
+    pub host_mu1_se: Option<f64>,
     /// Samples the rig lost (acquisition gaps reported by the run's gap frames).
     pub lost_samples: u64,
     /// Sample blocks held.
@@ -320,6 +325,8 @@ impl Catalog {
             ("blocks_expected", "INTEGER"),
             ("completeness", "TEXT NOT NULL DEFAULT ''"),
             ("log_stamp", "TEXT NOT NULL DEFAULT ''"),
+            ("host_mu0_se", "REAL"),
+            ("host_mu1_se", "REAL"),
         ] {
             let has: bool = conn
                 .query_row(
@@ -355,8 +362,8 @@ impl Catalog {
             .execute(
                 "INSERT OR REPLACE INTO runs (id,path,created,status,label,sample,lubricant,campaign,repeat,\
                  load_n,temp_c,firmware,serial,samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,\
-                 host_mu0,host_mu1,host_gap,lost_samples,blocks,blocks_expected,completeness,log_stamp) \
-                 VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23,?24,?25,?26,?27)",
+                 host_mu0,host_mu1,host_gap,lost_samples,blocks,blocks_expected,completeness,log_stamp,host_mu0_se,host_mu1_se) \
+                 VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23,?24,?25,?26,?27,?28,?29)",
                 params![
                     m.id,
                     run.dir().to_string_lossy(),
@@ -385,6 +392,8 @@ impl Catalog {
                     c.blocks_expected.map(|b| b as i64),
                     c.summary(),
                     log_stamp(run.dir()),
+                    host.map(|h| h.mu0_se).filter(|v| v.is_finite()),
+                    host.map(|h| h.mu1_se).filter(|v| v.is_finite()),
                 ],
             )
             .map_err(|e| db_err("insert", e))?;
@@ -448,7 +457,7 @@ impl Catalog {
             .prepare(
                 "SELECT id,path,created,status,label,sample,lubricant,campaign,repeat,load_n,temp_c,firmware,serial,\
                  samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,host_mu0,host_mu1,host_gap,lost_samples,\
-                 blocks,blocks_expected,completeness FROM runs \
+                 blocks,blocks_expected,completeness,host_mu0_se,host_mu1_se FROM runs \
                  WHERE (?1 IS NULL OR campaign = ?1) AND (?2 IS NULL OR instr(label, ?2) > 0) \
                  AND (?3 IS NULL OR status = ?3) AND (?4 IS NULL OR load_n >= ?4 - 1e-9) \
                  AND (?5 IS NULL OR load_n <= ?5 + 1e-9) AND (?6 IS NULL OR temp_c >= ?6 - 1e-9) \
@@ -488,6 +497,8 @@ impl Catalog {
                         blocks: r.get::<_, i64>(23)? as u64,
                         blocks_expected: r.get::<_, Option<i64>>(24)?.map(|b| b as u64),
                         completeness: r.get(25)?,
+                        host_mu0_se: r.get(26)?,
+                        host_mu1_se: r.get(27)?,
                     })
                 },
             )

@@ -123,6 +123,52 @@ impl CrossCheck {
         })
     }
 
+    /// [`CrossCheck::of_values`] from a stored run's host fit and the rig's own result.
+    #[cfg(feature = "store")]
+    pub fn of_stored(host: &tribo_store::HostFit, onboard: &OnboardResult) -> Option<Self> {
+        if host.law != LawSpec::CoulombViscous {
+            return None;
+        }
+        let verdict = match host.verdict.as_deref() {
+            Some("adequate") => Some(FitVerdict::Adequate),
+            Some("inadequate") => Some(FitVerdict::Inadequate),
+            Some("not-converged") => Some(FitVerdict::NotConverged),
+            _ => None,
+        };
+        Self::of_values(
+            [host.mu0, host.mu1],
+            [host.mu0_se, host.mu1_se],
+            verdict,
+            onboard,
+            OnboardSource::Rig,
+        )
+    }
+
+    /// One sentence: the distances in σ and whether they agree (and what to suspect if not).
+    pub fn summary(&self) -> String {
+        let z = |v: f64| {
+            if v.is_finite() {
+                format!("{v:+.1}σ")
+            } else {
+                "?σ".into()
+            }
+        };
+        let mut s = format!(
+            "host − on-board: μ0 {}, μ1 {}: {}",
+            z(self.z[0]),
+            z(self.z[1]),
+            if self.agree {
+                "they agree"
+            } else {
+                "they disagree (more than 3 combined σ)"
+            }
+        );
+        if let Some(w) = &self.suspect {
+            s.push_str(&format!("; suspect {w}"));
+        }
+        s
+    }
+
     /// One line for the terminal (and a second with what to suspect when they disagree).
     pub fn text(&self) -> String {
         let z = |v: f64| {
