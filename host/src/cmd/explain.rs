@@ -148,12 +148,12 @@ pub fn run(args: Args) -> Result<()> {
     let check = crate::cmd::fit::cross_check(&args.record, &record, &ex.base_fit);
     if args.json {
         let mut j = serde_json::to_value(&ex).context("writing the explanation as JSON")?;
-        j["cross_check"] = serde_json::to_value(&check)?;
+        j["cross_check"] = crate::cmd::fit::cross_check_json(&check)?;
         outln!("{j}")?;
     } else {
         out!("{}", ex.to_text())?;
-        if let Some(c) = &check {
-            outln!("{}", c.text())?;
+        if let Some(line) = crate::cmd::fit::cross_check_text(&check) {
+            outln!("{line}")?;
         }
     }
     if let Some(dir) = &args.report {

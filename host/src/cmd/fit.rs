@@ -145,15 +145,15 @@ pub fn run(a: Args) -> Result<()> {
         j["record"] = a.record.display().to_string().into();
         j["rig"] = serde_json::to_value(rig)?;
         j["defaults"] = serde_json::to_value(rig.defaults())?;
-        j["cross_check"] = serde_json::to_value(&check)?;
+        j["cross_check"] = cross_check_json(&check)?;
         if a.windows > 0 {
             j["windows"] = serde_json::to_value(&windows)?;
         }
         outln!("{j}")?;
     } else {
         out!("{}", table(&a.record.display().to_string(), &rig, &r, &rec))?;
-        if let Some(c) = &check {
-            outln!("{}", c.text())?;
+        if let Some(line) = cross_check_text(&check) {
+            outln!("{line}")?;
         }
         if a.windows > 0 {
             out!("{}", window_table(&windows))?;
@@ -195,22 +195,54 @@ pub fn pm(v: f64, se: f64) -> String {
 }
 
 /// The on-board cross-check of a Coulomb–viscous host fit: the rig's stored result for a run
-/// folder, else the firmware's pipeline over the record's samples. `None` for other laws, or when
-/// the on-board pipeline cannot take the record.
-pub fn cross_check(path: &std::path::Path, rec: &Record, r: &FitResult) -> Option<CrossCheck> {
+/// folder, else the firmware's pipeline over the record's samples. `Ok(None)` for other laws (the
+/// rig fits only Coulomb–viscous); `Err(why)` when there is no on-board result to compare with.
+pub fn cross_check(
+    path: &std::path::Path,
+    rec: &Record,
+    r: &FitResult,
+) -> std::result::Result<Option<CrossCheck>, String> {
     if r.law != LawSpec::CoulombViscous {
-        return None;
+        return Ok(None);
     }
     let stored = path
         .is_dir()
         .then(|| tribo_store::Run::open(path).ok())
         .flatten()
         .and_then(|run| run.result().copied());
-    match stored {
-        Some(ob) => CrossCheck::of(r, &ob, OnboardSource::Rig),
-        None => crate::cmd::onboard::analyse(rec)
-            .ok()
-            .and_then(|ob| CrossCheck::of(r, &ob, OnboardSource::Record)),
+    let (ob, source) = match stored {
+        Some(ob) => (ob, OnboardSource::Rig),
+        None => (
+            crate::cmd::onboard::analyse(rec)
+                .map_err(|e| format!("the on-board pipeline cannot take the record: {e:#}"))?,
+            OnboardSource::Record,
+        ),
+    };
+    CrossCheck::of(r, &ob, source).map(Some).ok_or_else(|| {
+        format!(
+            "the on-board analysis gave no estimate ({})",
+            ob.verdict.name()
+        )
+    })
+}
+
+/// The cross-check's line for the terminal, or why there is none.
+pub fn cross_check_text(c: &std::result::Result<Option<CrossCheck>, String>) -> Option<String> {
+    match c {
+        Ok(Some(c)) => Some(c.text()),
+        Ok(None) => None,
+        Err(why) => Some(format!("on-board   no cross-check: {why}")),
+    }
+}
+
+/// The cross-check as JSON: the object, `null` for a law the rig does not fit, or
+/// `{"unavailable": why}`.
+pub fn cross_check_json(
+    c: &std::result::Result<Option<CrossCheck>, String>,
+) -> serde_json::Result<serde_json::Value> {
+    match c {
+        Ok(c) => serde_json::to_value(c),
+        Err(why) => Ok(serde_json::json!({ "unavailable": why })),
     }
 }
 
@@ -250,6 +282,13 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
             " (then |v| < {}: {} samples at rest or in the noise, not compared)",
             si(sp.rest_level, true),
             sp.at_rest()
+        );
+    }
+    if sp.spikes > 0 {
+        let _ = write!(
+            s,
+            "; {} spike samples (speckle dropouts, glitches) left out",
+            sp.spikes
         );
     }
     let _ = write!(

@@ -128,7 +128,7 @@ pub fn analyse(record: &Record) -> anyhow::Result<OnboardResult> {
     };
     let mut pipeline = Pipeline::new(&cfg)?;
     pipeline.release();
-    let start = release_index(record, rate, rig.stiffness_n_per_m / rig.mass_kg);
+    let start = release_index(record);
     let count = |ch: Channel, v: f64| calib::to_count(calibration[ch as usize], v).unwrap_or(0);
     let mut sample = [0u16; 3];
     for i in start..record.len() {
@@ -148,19 +148,17 @@ pub fn analyse(record: &Record) -> anyhow::Result<OnboardResult> {
     Ok(pipeline.finish(0))
 }
 
-/// Index at which to start feeding: a record may begin with the pin still held (v ≈ 0); the
-/// pipeline would wait for motion only so long, so the hold is skipped up to an eighth of a period
-/// before the velocity first exceeds 1 % of its peak.
-fn release_index(record: &Record, rate: f64, omega_sq: f64) -> usize {
-    let vmax = record.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let first = record
-        .v
-        .iter()
-        .position(|v| v.abs() > 0.01 * vmax)
-        .unwrap_or(0);
-    let period = 2.0 * std::f64::consts::PI / omega_sq.sqrt();
-    let margin = (period / 8.0 * rate) as usize;
-    first.saturating_sub(margin)
+/// Index at which to start feeding: a record may begin with the pin still held (v ≈ 0), and the
+/// pipeline takes the first sample fed as the release (it waits for motion only so long, and a
+/// noisy hold fed to it reads as no oscillation). The release is found as `tribo fit` finds it
+/// ([`tribo_physics::identify::motion_span`]: the velocity leaving its own noise for good, traced
+/// back along the sine), within a sample or two; feeding starts two samples before it.
+fn release_index(record: &Record) -> usize {
+    record
+        .dimensionless()
+        .map(|(tau, y, ydot)| tribo_physics::identify::motion_span(&tau, &y, &ydot).start)
+        .unwrap_or(0)
+        .saturating_sub(2)
 }
 
 fn num(v: f32) -> String {

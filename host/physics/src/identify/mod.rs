@@ -266,7 +266,33 @@ pub struct EnvelopeData {
     /// What the measurement noise adds to the envelope's square on average
     /// ([`MotionSpan::envelope_bias_var`]): the simulated envelope is compared as `√(A² + this)`.
     pub bias_var: f64,
+    /// Samples of the compared span left out as spikes ([`spikes`]: a speckle dropout of the
+    /// vibrometer, a glitch).
+    pub spikes: usize,
 }
+
+/// Samples of an envelope that stand out from the median of their 9 neighbours by more than
+/// [`SPIKE_SIGMAS`] × the noise (plus 10⁻⁴ of the largest value: the resolution of a noiseless
+/// record): a vibrometer's speckle dropouts and glitches, one to a few samples long, which a least-
+/// squares fit would follow. The envelope itself varies far less over 9 samples.
+pub fn spikes(a: &[f64], noise: f64) -> Vec<bool> {
+    let n = a.len();
+    let amax = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let thr = SPIKE_SIGMAS * noise + 1e-4 * amax;
+    let mut out = vec![false; n];
+    let mut w: Vec<f64> = Vec::with_capacity(9);
+    for i in 0..n {
+        let (lo, hi) = (i.saturating_sub(4), (i + 5).min(n));
+        w.clear();
+        w.extend_from_slice(&a[lo..hi]);
+        let med = crate::uncertainty::median(&mut w);
+        out[i] = (a[i] - med).abs() > thr;
+    }
+    out
+}
+
+/// How many noise standard deviations make a spike ([`spikes`]).
+pub const SPIKE_SIGMAS: f64 = 8.0;
 
 impl EnvelopeData {
     /// From dimensionless samples, over the part of them that is free motion ([`motion_span`]
@@ -311,14 +337,21 @@ impl EnvelopeData {
         let (s, e) = (span.start, span.end);
         let stride = (e - s).div_ceil(max_points.max(8));
         let a_all = mark_crandall(&y[s..e], &ydot[s..e]);
-        let idx: Vec<usize> = (0..e - s).step_by(stride).collect();
+        let noise = noise_sigma(&a_all).unwrap_or(0.0);
+        let spike = spikes(&a_all, noise);
+        // The first sample starts the simulation: never dropped.
+        let idx: Vec<usize> = (0..e - s)
+            .step_by(stride)
+            .filter(|&i| i == 0 || !spike[i])
+            .collect();
         Ok(EnvelopeData {
             tau: idx.iter().map(|&i| tau[s + i] - tau[s]).collect(),
             a: idx.iter().map(|&i| a_all[i]).collect(),
             y0: y[s],
             ydot0: ydot[s],
-            noise: noise_sigma(&a_all).unwrap_or(0.0),
+            noise,
             bias_var: span.envelope_bias_var(),
+            spikes: spike.iter().filter(|&&b| b).count(),
         })
     }
     /// Initial amplitude.
@@ -395,7 +428,10 @@ pub fn fit_dimensionless(
     })?;
     let mut res = fit_envelope(&data, spec, p0, opts)?;
     res.half_cycles = sc.half_cycles;
-    res.span = span;
+    res.span = MotionSpan {
+        spikes: data.spikes,
+        ..span
+    };
     Ok(res)
 }
 

@@ -39,6 +39,9 @@ pub struct MotionSpan {
     pub noise_ydot: f64,
     /// The `|y'|` below which the pin is taken to be at rest (dimensionless).
     pub rest_level: f64,
+    /// Samples of the span left out of the comparison as spikes (set by the fit:
+    /// [`super::spikes`]).
+    pub spikes: usize,
 }
 
 impl MotionSpan {
@@ -51,6 +54,7 @@ impl MotionSpan {
             noise_y: 0.0,
             noise_ydot: 0.0,
             rest_level: 0.0,
+            spikes: 0,
         }
     }
 
@@ -164,6 +168,7 @@ pub fn motion_span_from(tau: &[f64], y: &[f64], ydot: &[f64], start: usize) -> M
         noise_y,
         noise_ydot,
         rest_level,
+        spikes: 0,
     }
 }
 
