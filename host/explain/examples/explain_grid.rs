@@ -41,7 +41,7 @@ fn cases() -> Vec<Case> {
     let mut v = Vec::new();
     let y0 = 1150.0 * 667e-6 / LOAD;
     let x0: f64 = 667e-6;
-    for (i, f) in [0.025, 0.05, 0.1, 0.2].into_iter().enumerate() {
+    for (i, f) in [0.05, 0.1, 0.2, 0.4].into_iter().enumerate() {
         v.push(Case {
             present: "quadratic-velocity",
             strength: format!("μ2·Y0² = {:.0} % of μ0", 100.0 * f),
@@ -175,8 +175,16 @@ fn main() {
     // (present, noise, rank) -> (named right, of)
     let mut limits: BTreeMap<(&str, usize, usize), (usize, usize, String)> = BTreeMap::new();
     let mut done = 0;
+    let only = std::env::var("GRID_ONLY").ok();
+    let only_level = std::env::var("GRID_LEVEL").ok();
     for (li, level) in NOISE_LEVELS.iter().enumerate() {
+        if only_level.as_deref().is_some_and(|l| l != level.name) {
+            continue;
+        }
         for c in &cs {
+            if only.as_deref().is_some_and(|o| o != c.present) {
+                continue;
+            }
             for seed in 0..seeds {
                 let chain = SensorModel {
                     disp_noise_m: level.disp_m,
@@ -186,7 +194,25 @@ fn main() {
                     ..SensorModel::default()
                 };
                 let rec = record(&c.contact, LOAD, 1.3, Some(&chain));
-                let named = match explain(&rec, &ExplainOptions::default()) {
+                let ex = explain(&rec, &ExplainOptions::default());
+                if only.is_some() {
+                    if let Ok(e) = &ex {
+                        eprintln!("{}", e.to_text());
+                        for (i, r) in e.rounds.iter().enumerate() {
+                            for c in r {
+                                eprintln!(
+                                    "  round {} {:<20} evidence {:>10.1} excess removed {:>6.2} {}",
+                                    i + 1,
+                                    c.effect,
+                                    c.evidence.unwrap_or(f64::NAN),
+                                    c.excess_removed.unwrap_or(f64::NAN),
+                                    if c.significant { "significant" } else { "" }
+                                );
+                            }
+                        }
+                    }
+                }
+                let named = match ex {
                     Ok(e) if e.missing_effects.is_empty() => e.conclusion.name().to_string(),
                     Ok(e) => e.missing_effects.join("+"),
                     Err(e) => format!("error: {e}"),

@@ -30,7 +30,8 @@ pub struct Evidence {
     pub threshold: f64,
     /// Parameters the effect adds.
     pub k: usize,
-    /// Fraction of the excess misfit (gap² − floor²) the effect removes (1 if there was none).
+    /// Fraction of the excess misfit the effect removes (1 if there was none): `Σ_c (gap_c² −
+    /// floor_c²)` over the channels, each in units of its own noise floor².
     pub excess_removed: f64,
     /// Per channel.
     pub channels: Vec<ChannelEvidence>,
@@ -79,13 +80,24 @@ impl Evidence {
                 evidence,
             });
         }
-        let floor2 = data.noise_floor().powi(2);
-        let excess = before.gap.powi(2) - floor2;
-        let excess_removed = if excess > 0.0 {
-            (before.gap.powi(2) - after.gap.powi(2)) / excess
-        } else {
-            1.0
-        };
+        // The misfit above the noise, each channel in units of its own noise floor (a noisy
+        // vibrometer must not hide what the force channel shows, nor the reverse).
+        let mut excess = 0.0;
+        let mut removed = 0.0;
+        for (gb, ga, floor) in [
+            (before.gap_envelope, after.gap_envelope, data.env_floor()),
+            (
+                before.gap_force.unwrap_or(0.0),
+                after.gap_force.unwrap_or(0.0),
+                data.force_floor(),
+            ),
+        ] {
+            if floor > 0.0 {
+                excess += ((gb * gb - floor * floor) / (floor * floor)).max(0.0);
+                removed += (gb * gb - ga * ga) / (floor * floor);
+            }
+        }
+        let excess_removed = if excess > 0.0 { removed / excess } else { 1.0 };
         Evidence {
             value: channels.iter().map(|c| c.evidence).sum(),
             threshold: opts.threshold(k),

@@ -20,7 +20,7 @@ pub fn fit_spec(
             |p| {
                 let s = simulate_spec(data, spec, p).ok()?;
                 let (e, f) = residuals(data, &s);
-                Some(weighted(&e, &f))
+                Some(weighted(data, &e, &f))
             },
             p0,
             &LmOptions {
@@ -67,7 +67,7 @@ pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> 
 /// the optimum and the HAC sandwich with the envelope and force channels as independent blocks
 /// (each channel's own correlation accounted for). `NaN` where they cannot be determined.
 pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
-    let r = weighted(&m.env_resid, &m.force_resid);
+    let r = weighted(data, &m.env_resid, &m.force_resid);
     let ne = m.env_resid.len();
     let blocks = [0..ne, ne..r.len()];
     let scales = m.spec.scales();
@@ -75,7 +75,7 @@ pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
         |p| {
             let s = simulate_spec(data, &m.spec, p).ok()?;
             let (e, f) = residuals(data, &s);
-            Some(weighted(&e, &f))
+            Some(weighted(data, &e, &f))
         },
         &m.p,
         &r,
@@ -188,11 +188,16 @@ pub(super) fn starts_for(
                 .filter(|&l| l > 0.0)
                 .map(|l| data.rig.tau_of_t(l).clamp(0.02, 2.0))
                 .unwrap_or(0.3);
-            vec![with(&[from_lag]), with(&[0.1])]
+            // And from (nearly) the current model: the extended fit is then never worse than it.
+            vec![with(&[from_lag]), with(&[0.1]), with(&[0.02])]
         }
         Effect::CubicStiffness => {
             let k = d.kappa_estimate.filter(|k| k.is_finite()).unwrap_or(0.0);
-            vec![with(&[k])]
+            if k == 0.0 {
+                vec![with(&[0.0])]
+            } else {
+                vec![with(&[k]), with(&[0.0])]
+            }
         }
         Effect::ThermalDrift => vec![with(&[0.0])],
         Effect::SensorLag => {

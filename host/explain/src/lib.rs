@@ -243,9 +243,19 @@ pub fn explain_with_progress(
         let Some(best) = ranked.first() else {
             break;
         };
-        if let Some(second) = ranked.get(1) {
-            if best.2.value - second.2.value < opts.min_margin {
-                ambiguous = vec![best.0.name().to_string(), second.0.name().to_string()];
+        // The runner-up among every candidate, qualified or not: an effect that explains the
+        // record about as well (or better) but misses a threshold by a little is no ground for
+        // naming the other.
+        let rival = rounds
+            .last()
+            .into_iter()
+            .flatten()
+            .filter(|c: &&Candidate| c.effect != best.0.name())
+            .filter_map(|c| Some((c.effect.clone(), c.evidence?)))
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((name, ev)) = rival {
+            if best.2.value - ev < opts.min_margin {
+                ambiguous = vec![best.0.name().to_string(), name];
                 break;
             }
         }

@@ -11,6 +11,7 @@ use std::time::Instant;
 use support::{chain, record, Contact};
 use tribo_explain::{explain, Conclusion, ExplainOptions, Explanation};
 use tribo_physics::identify::LawSpec;
+use tribo_physics::sensor::SensorModel;
 use tribo_physics::Record;
 
 const MU0: f64 = 0.02;
@@ -418,4 +419,77 @@ fn weaker_effects_are_missed_rather_than_misnamed() {
         }
     }
     assert!(wrong.is_empty(), "wrong names: {wrong:?}");
+}
+
+/// At every bench noise level (×1 to ×50 the simulator's default vibrometer noise): a clean record
+/// gets no name, an effect outside the vocabulary is "unexplained", and a 2 ms frictional lag and a
+/// 1 ms sensor lag (seen by the force channel, whatever the vibrometer's noise) are named alone.
+#[test]
+fn no_false_name_and_the_force_channel_effects_at_every_noise_level() {
+    use tribo_physics::bench::NOISE_LEVELS;
+    let mut failures = Vec::new();
+    for (li, level) in NOISE_LEVELS.iter().enumerate() {
+        let chain = |lag: f64, s: u64| SensorModel {
+            disp_noise_m: level.disp_m,
+            vel_noise_m_s: level.vel_m_s,
+            force_lag_s: lag,
+            seed: 500 + 10 * li as u64 + s,
+            ..SensorModel::default()
+        };
+        let cases = [
+            (
+                "clean",
+                record(&cv(), 0.3, 1.3, Some(&chain(0.0, 1))),
+                "base-adequate",
+            ),
+            (
+                "direction-dependent μ0 (outside)",
+                record(
+                    &Contact {
+                        mu0_backward: Some(0.7 * MU0),
+                        ..cv()
+                    },
+                    0.3,
+                    1.3,
+                    Some(&chain(0.0, 2)),
+                ),
+                "unexplained",
+            ),
+            (
+                "frictional lag 2 ms",
+                record(
+                    &Contact {
+                        memory_s: 2e-3,
+                        ..cv()
+                    },
+                    0.3,
+                    1.3,
+                    Some(&chain(0.0, 3)),
+                ),
+                "frictional-lag",
+            ),
+            (
+                "sensor lag 1 ms",
+                record(&cv(), 0.3, 1.3, Some(&chain(1e-3, 4))),
+                "sensor-lag",
+            ),
+        ];
+        for (name, rec, want) in cases {
+            let e = explain(&rec, &ExplainOptions::default()).unwrap();
+            let got = if e.missing_effects.is_empty() {
+                e.conclusion.name().to_string()
+            } else {
+                e.missing_effects.join("+")
+            };
+            eprintln!("{}: {name}: {got}", level.name);
+            if got != want {
+                failures.push(format!(
+                    "{}: {name}: {got}, not {want}\n{}",
+                    level.name,
+                    e.to_text()
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -158,3 +158,38 @@ fn speckle_dropouts_are_left_out_not_fitted() {
         }
     }
 }
+
+/// A converter too narrow for the first peaks (the velocity channel's ±range at 90 % of the peak
+/// speed: its first few peaks clipped): the clipped samples are left out and said so, and the
+/// constants keep the truth within 3σ. A channel clipped over much of the motion is still refused.
+#[test]
+fn a_few_clipped_peaks_are_left_out_and_many_refused() {
+    let mut cases = grid(2..3, 0.3, 1.0);
+    cases.retain(|c| {
+        c.noise.name == "x5"
+            && c.contact.name == "cv-0.02"
+            && c.rig_name == "35Hz"
+            && c.record.rate_hz == 10_000.0
+    });
+    let base = cases[0].record.clone();
+    let clean = base.make().unwrap();
+    let vpeak = clean.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let mut br = base.clone();
+    br.sensor.vel_range_m_s = 0.9 * vpeak;
+    let rec = br.make().unwrap();
+    let r = fit(&rec, LawSpec::CoulombViscous, &FitOptions::default()).unwrap();
+    assert!(r.span.clipped > 0, "{:?}", r.span);
+    for (j, t) in [0.02, 0.01].iter().enumerate() {
+        let z = (r.mu[j] - t) / r.mu_se[j];
+        assert!(z.abs() < 3.0, "mu{j} z = {z}: {r:?}");
+    }
+    let mut br = base;
+    br.sensor.vel_range_m_s = 0.3 * vpeak;
+    let rec = br.make().unwrap();
+    match fit(&rec, LawSpec::CoulombViscous, &FitOptions::default()) {
+        Err(tribo_physics::identify::FitError::NotAnalysable(
+            tribo_physics::identify::NotAnalysable::Saturated { .. },
+        )) => {}
+        other => panic!("{other:?}"),
+    }
+}

@@ -291,6 +291,13 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
             sp.spikes
         );
     }
+    if sp.clipped > 0 {
+        let _ = write!(
+            s,
+            "; {} samples at a converter's rail (clipped peaks) left out",
+            sp.clipped
+        );
+    }
     let _ = write!(
         s,
         "; noise read from the record: x {}, v {}",

@@ -164,11 +164,14 @@ pub fn gap_of(env: &[f64], force: &[f64]) -> f64 {
     rms(env).hypot(rms(force))
 }
 
-/// Weighted residual vector minimised by the fits: each block divided by `√n`, so that
-/// `Σ r² = gap²`.
-pub fn weighted(env: &[f64], force: &[f64]) -> Vec<f64> {
-    let we = 1.0 / (env.len().max(1) as f64).sqrt();
-    let wf = 1.0 / (force.len().max(1) as f64).sqrt();
+/// Weighted residual vector minimised by the fits: each channel divided by its own noise floor
+/// (the likelihood of Gaussian noise: a channel counts by how far its misfit stands above its
+/// noise, so a noisy vibrometer does not drown the force channel where lag and drift show), and by
+/// `√n`, so that every channel weighs by its misfit-to-noise ratio whatever the number of points
+/// compared.
+pub fn weighted(data: &Prepared, env: &[f64], force: &[f64]) -> Vec<f64> {
+    let we = 1.0 / ((env.len().max(1) as f64).sqrt() * data.env_floor());
+    let wf = 1.0 / ((force.len().max(1) as f64).sqrt() * data.force_floor().max(1e-300));
     env.iter()
         .map(|r| r * we)
         .chain(force.iter().map(|r| r * wf))

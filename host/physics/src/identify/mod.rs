@@ -269,6 +269,8 @@ pub struct EnvelopeData {
     /// Samples of the compared span left out as spikes ([`spikes`]: a speckle dropout of the
     /// vibrometer, a glitch).
     pub spikes: usize,
+    /// Samples of the compared span left out at a converter's rail ([`clipped`]).
+    pub clipped: usize,
 }
 
 /// Samples of an envelope that stand out from the median of their 9 neighbours by more than
@@ -339,10 +341,11 @@ impl EnvelopeData {
         let a_all = mark_crandall(&y[s..e], &ydot[s..e]);
         let noise = noise_sigma(&a_all).unwrap_or(0.0);
         let spike = spikes(&a_all, noise);
+        let clip = clipped(&y[s..e], &ydot[s..e]);
         // The first sample starts the simulation: never dropped.
         let idx: Vec<usize> = (0..e - s)
             .step_by(stride)
-            .filter(|&i| i == 0 || !spike[i])
+            .filter(|&i| i == 0 || !(spike[i] || clip[i]))
             .collect();
         Ok(EnvelopeData {
             tau: idx.iter().map(|&i| tau[s + i] - tau[s]).collect(),
@@ -352,6 +355,7 @@ impl EnvelopeData {
             noise,
             bias_var: span.envelope_bias_var(),
             spikes: spike.iter().filter(|&&b| b).count(),
+            clipped: clip.iter().filter(|&&b| b).count(),
         })
     }
     /// Initial amplitude.
@@ -421,7 +425,7 @@ pub fn fit_dimensionless(
     let span = motion_span(tau, y, ydot);
     let r = span.range();
     // The motion is screened, not the hold before it or the rest after it.
-    let sc = screen(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()])?;
+    let sc = screen_with(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()], true)?;
     let data = EnvelopeData::over(tau, y, ydot, &span, opts.max_points)?;
     let p0 = start_of(opts, spec, || {
         start_point(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()], spec)
@@ -430,6 +434,7 @@ pub fn fit_dimensionless(
     res.half_cycles = sc.half_cycles;
     res.span = MotionSpan {
         spikes: data.spikes,
+        clipped: data.clipped,
         ..span
     };
     Ok(res)

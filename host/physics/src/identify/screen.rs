@@ -134,6 +134,49 @@ pub fn check_finite(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<(), NotAnaly
 /// Checks that dimensionless samples can be fitted: finite, not saturated, oscillating at the natural
 /// half period π (in τ) above the noise for at least [`MIN_HALF_CYCLES`] half cycles.
 pub fn screen(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<Screening, NotAnalysable> {
+    screen_with(tau, y, ydot, false)
+}
+
+/// Samples at a channel's rail while the pin moves, in a channel that reaches its rail in at
+/// least two separate runs (a converter clipping the largest peaks): `true` for each such sample
+/// and its two neighbours. Empty of `true` for a channel that does not clip.
+pub fn clipped(y: &[f64], ydot: &[f64]) -> Vec<bool> {
+    let n = y.len().min(ydot.len());
+    let mut out = vec![false; n];
+    let vmax = ydot[..n].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let moving = |i: usize| ydot[i].abs() > 0.05 * vmax;
+    let runs_y = flat_extreme_runs(&y[..n], moving);
+    let runs_v = flat_extreme_runs(&ydot[..n], |i| ydot[i] != 0.0);
+    for (c, runs) in [(&y[..n], runs_y), (&ydot[..n], runs_v)] {
+        // A rail: one extreme value reached in two or more runs.
+        let hi = c.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let lo = c.iter().copied().fold(f64::INFINITY, f64::min);
+        for ext in [hi, lo] {
+            let at: Vec<&(usize, usize)> = runs.iter().filter(|r| c[r.0] == ext).collect();
+            if at.len() >= 2 {
+                for r in at {
+                    for i in r.0.saturating_sub(1)..(r.0 + r.1 + 1).min(n) {
+                        out[i] = true;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The most of a motion's samples that may sit at a converter's rail for the fit to leave them out
+/// rather than refuse the record.
+pub const MAX_CLIPPED_FRACTION: f64 = 0.05;
+
+/// [`screen`], with `allow_clipped`: a record whose clipped samples ([`clipped`]) are at most
+/// [`MAX_CLIPPED_FRACTION`] of it passes (the fit leaves them out).
+pub fn screen_with(
+    tau: &[f64],
+    y: &[f64],
+    ydot: &[f64],
+    allow_clipped: bool,
+) -> Result<Screening, NotAnalysable> {
     check_finite(tau, y, ydot)?;
     let n = tau.len().min(y.len()).min(ydot.len());
     if n < 8 {
@@ -149,14 +192,23 @@ pub fn screen(tau: &[f64], y: &[f64], ydot: &[f64]) -> Result<Screening, NotAnal
     // A long run: a fortieth of a cycle (9 samples at the rig's 10 kHz), at least 6.
     let dtau = (tau[n - 1] - tau[0]) / (n - 1) as f64;
     let long = ((2.0 * PI / dtau / 40.0).ceil() as usize).max(6);
-    if let Some((sample, samples)) = saturated(&flat_extreme_runs(y, moving), long) {
+    let few_clipped = allow_clipped && {
+        let c = clipped(y, ydot);
+        (c.iter().filter(|&&b| b).count() as f64) <= MAX_CLIPPED_FRACTION * n as f64
+    };
+    if few_clipped {
+        // Left out by the fit; the rest of the screening holds.
+    } else if let Some((sample, samples)) = saturated(&flat_extreme_runs(y, moving), long) {
         return Err(NotAnalysable::Saturated {
             channel: "displacement",
             sample,
             samples,
         });
     }
-    if let Some((sample, samples)) = saturated(&flat_extreme_runs(ydot, |i| ydot[i] != 0.0), long) {
+    if few_clipped {
+    } else if let Some((sample, samples)) =
+        saturated(&flat_extreme_runs(ydot, |i| ydot[i] != 0.0), long)
+    {
         return Err(NotAnalysable::Saturated {
             channel: "velocity",
             sample,

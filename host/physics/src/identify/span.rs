@@ -42,6 +42,9 @@ pub struct MotionSpan {
     /// Samples of the span left out of the comparison as spikes (set by the fit:
     /// [`super::spikes`]).
     pub spikes: usize,
+    /// Samples of the span left out at a converter's rail (set by the fit:
+    /// [`super::clipped`]).
+    pub clipped: usize,
 }
 
 impl MotionSpan {
@@ -55,6 +58,7 @@ impl MotionSpan {
             noise_ydot: 0.0,
             rest_level: 0.0,
             spikes: 0,
+            clipped: 0,
         }
     }
 
@@ -169,6 +173,7 @@ pub fn motion_span_from(tau: &[f64], y: &[f64], ydot: &[f64], start: usize) -> M
         noise_ydot,
         rest_level,
         spikes: 0,
+        clipped: 0,
     }
 }
 
