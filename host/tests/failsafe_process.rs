@@ -11,123 +11,14 @@
 //! * A held session (in-process rig, real time): the heartbeat thread alone keeps the lease through
 //!   a silence longer than it; dropping the hold sends `Safe`; without it the lease expires.
 
-use std::io::{BufRead, BufReader};
+mod support;
+
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc::{self, Receiver};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
+use support::{RigProcess, TRIBO};
 use tribo::link::{Address, Link};
 use tribo_wire::{limits, FaultReason};
-
-const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
-
-/// A `tribo rig --virtual` process and the lines of its console, with when they were read.
-struct RigProcess {
-    child: Child,
-    lines: Receiver<(Instant, String)>,
-    seen: Vec<(Instant, String)>,
-    /// What `--port` takes to reach it (printed by the rig: "virtual rig listening on …").
-    addr: String,
-}
-
-impl RigProcess {
-    fn start(speed: f64) -> RigProcess {
-        let mut child = Command::new(TRIBO)
-            .args([
-                "rig",
-                "--virtual",
-                "--listen",
-                "127.0.0.1:0",
-                "--speed",
-                &speed.to_string(),
-            ])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("tribo rig starts");
-        let out = child.stdout.take().unwrap();
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for l in BufReader::new(out).lines() {
-                let Ok(l) = l else { return };
-                if tx.send((Instant::now(), l)).is_err() {
-                    return;
-                }
-            }
-        });
-        let mut r = RigProcess {
-            child,
-            lines,
-            seen: Vec::new(),
-            addr: String::new(),
-        };
-        let (_, line) = r.wait_for("listening on", Duration::from_secs(20));
-        r.addr = line
-            .split("listening on ")
-            .nth(1)
-            .and_then(|s| s.split_whitespace().next())
-            .unwrap_or_else(|| panic!("no address in {line:?}"))
-            .to_string();
-        r
-    }
-
-    /// Waits for a console line containing `text` (seen before or new); returns it and when.
-    fn wait_for(&mut self, text: &str, timeout: Duration) -> (Instant, String) {
-        if let Some(l) = self.seen.iter().find(|(_, l)| l.contains(text)) {
-            return l.clone();
-        }
-        let deadline = Instant::now() + timeout;
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            match self.lines.recv_timeout(left) {
-                Ok(l) => {
-                    self.seen.push(l.clone());
-                    if l.1.contains(text) {
-                        return l;
-                    }
-                }
-                Err(_) => panic!(
-                    "no console line with {text:?} within {timeout:?}; console so far:\n{}",
-                    self.console()
-                ),
-            }
-        }
-    }
-
-    /// Reads the console for `d` more.
-    fn drain(&mut self, d: Duration) {
-        let deadline = Instant::now() + d;
-        while let Ok(l) = self
-            .lines
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-        {
-            self.seen.push(l);
-        }
-    }
-
-    fn console(&self) -> String {
-        self.seen
-            .iter()
-            .map(|(_, l)| l.as_str())
-            .collect::<Vec<_>>()
-            .join("\n")
-    }
-
-    /// A fresh host's look at the rig (this renews the lease, so only once the test is done).
-    fn status(&self) -> tribo_wire::Status {
-        let addr = Address::parse(&self.addr).expect("the rig's address");
-        let mut link = Link::open(&addr).expect("the rig's port opens");
-        link.hello().expect("hello");
-        link.status().expect("status")
-    }
-}
-
-impl Drop for RigProcess {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 fn tribo_run(rig: &RigProcess, store: &Path, extra: &[&str]) -> Command {
     let mut c = Command::new(TRIBO);

@@ -109,6 +109,11 @@ impl VirtualRig {
     /// invalid configuration.
     pub fn new(cfg: VirtualRigConfig) -> Result<VirtualRig, RigError> {
         let hw = SimHardware::new(&cfg)?;
+        Ok(VirtualRig::with_hardware(cfg, hw))
+    }
+
+    /// A rig at time 0 on hardware built from `cfg`.
+    fn with_hardware(cfg: VirtualRigConfig, hw: SimHardware) -> VirtualRig {
         let app_cfg = AppConfig::new(cfg.serial);
         let mut app = App::new(app_cfg, board_store());
         app.set_boot_report(BootReport {
@@ -138,7 +143,7 @@ impl VirtualRig {
             host_lease_ms: limits::HOST_LEASE_MS,
         };
         rig.app.poll(&mut rig.hw, 0);
-        Ok(rig)
+        rig
     }
 
     /// Device time, µs.
@@ -161,16 +166,14 @@ impl VirtualRig {
         &self.cfg
     }
 
-    /// This rig power-cycled with its load knob turned to `load_n` (the plate keeps its
-    /// temperature, the host lease its setting; the stored run and the clock start afresh). Refuses
-    /// a load the rig cannot take.
-    pub fn with_load(&self, load_n: f64) -> Result<VirtualRig, RigError> {
-        let mut cfg = self.cfg.clone();
-        cfg.load_n = load_n;
-        let mut rig = VirtualRig::new(cfg)?;
-        rig.hw.set_plate_temp_c(self.hw.plate_temp_c());
-        rig.set_host_lease_ms(self.host_lease_ms);
-        Ok(rig)
+    /// The load knob turned to `load_n` while the rig stays powered (a load is a weight on the
+    /// arm): the firmware, its run numbers, its stored run and its clock go on. Refuses a load the
+    /// rig cannot take.
+    pub fn turn_load_knob(&mut self, load_n: f64) -> Result<(), RigError> {
+        self.hw.set_load(load_n)?;
+        self.cfg.load_n = load_n;
+        self.event(format!("load knob turned to {load_n:.4} N"));
+        Ok(())
     }
 
     /// Cuts the power and turns it on again: the firmware restarts with empty RAM (an operation the

@@ -82,17 +82,40 @@ impl Default for VirtualArgs {
     }
 }
 
+/// A serial number for a virtual rig: `tribo` in ASCII, then 24 bits from the clock and the
+/// process id (the hello shows it as `747269626fXXXXXX`).
+pub fn fresh_serial() -> u64 {
+    let t = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    let mut x = t ^ ((std::process::id() as u64) << 32) ^ 0x9e37_79b9_7f4a_7c15;
+    // splitmix64's finaliser: every bit of the clock and the pid reaches the low 24.
+    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    x ^= x >> 31;
+    0x7472_6962_6f00_0000 | (x & 0x00ff_ffff)
+}
+
 impl VirtualArgs {
     /// The rig configuration these arguments describe.
     pub fn rig_config(&self) -> anyhow::Result<VirtualRigConfig> {
-        let mut c = match &self.config {
+        let (mut c, serial_given) = match &self.config {
             Some(p) => {
                 let text = std::fs::read_to_string(p)
                     .with_context(|| format!("cannot read {}", p.display()))?;
-                VirtualRigConfig::from_toml(&text).with_context(|| p.display().to_string())?
+                let c =
+                    VirtualRigConfig::from_toml(&text).with_context(|| p.display().to_string())?;
+                let given =
+                    toml::from_str::<toml::Table>(&text).is_ok_and(|t| t.contains_key("serial"));
+                (c, given)
             }
-            None => VirtualRigConfig::default(),
+            None => (VirtualRigConfig::default(), false),
         };
+        // Each virtual rig is a rig of its own: its own serial number (unless its TOML names one),
+        // so that "run 3 of rig S" never names runs of two rigs.
+        if !serial_given {
+            c.serial = fresh_serial();
+        }
         if let Some(l) = self.rig_load {
             c.load_n = l;
         }

@@ -155,9 +155,7 @@ pub fn clipped(y: &[f64], ydot: &[f64]) -> Vec<bool> {
             let at: Vec<&(usize, usize)> = runs.iter().filter(|r| c[r.0] == ext).collect();
             if at.len() >= 2 {
                 for r in at {
-                    for i in r.0.saturating_sub(1)..(r.0 + r.1 + 1).min(n) {
-                        out[i] = true;
-                    }
+                    out[r.0.saturating_sub(1)..(r.0 + r.1 + 1).min(n)].fill(true);
                 }
             }
         }

@@ -192,6 +192,27 @@ impl SimHardware {
         Ok(hw)
     }
 
+    /// The load knob turned to `load_n` (the rig stays powered: a load is a weight on the arm, not
+    /// a setting of the board). Refuses a load the rig cannot take, and leaves the knob where it is.
+    pub fn set_load(&mut self, load_n: f64) -> Result<(), RigError> {
+        let mut cfg = self.cfg.clone();
+        cfg.load_n = load_n;
+        cfg.validate()?;
+        let (load, law) = if cfg.load_n > 0.0 {
+            (cfg.load_n, cfg.law.clone())
+        } else {
+            (1e-3, FrictionLaw::polynomial(vec![0.0, 0.0]))
+        };
+        let rig = Rig::new(cfg.mass_kg, cfg.stiffness_n_per_m, load)?;
+        let model = Model::new(law).with_apparatus_damping(cfg.apparatus_mu1);
+        model.validate()?;
+        self.cal = Configure::real_rig(cfg.load_n.min(0.7) as f32).calibration;
+        self.rig = rig;
+        self.model = model;
+        self.cfg = cfg;
+        Ok(())
+    }
+
     /// The run store's flash (to inspect or damage it).
     pub fn flash(&mut self) -> &mut MemFlash<Vec<u8>> {
         &mut self.flash
