@@ -6,6 +6,7 @@
 //! | 1 | error: nothing usable was produced (the message says what to do next) |
 //! | 2 | usage: the command line was wrong (clap's own status, or a value the rig would refuse) |
 //! | 3 | finished, but the data is incomplete or not analysable: the output says exactly what is missing |
+//! | 130 | interrupted (Ctrl-C, SIGTERM, SIGHUP): stopped cleanly, the rig made safe, what was received kept |
 //!
 //! A library function that finished with incomplete data returns [`Incomplete`] as its error (after
 //! printing or storing everything it has); `main` maps it to status 3. Any other error is status 1.
@@ -19,6 +20,7 @@ pub enum Status {
     Error = 1,
     Usage = 2,
     Incomplete = 3,
+    Interrupted = 130,
 }
 
 impl Status {
@@ -40,6 +42,19 @@ impl fmt::Display for Incomplete {
 
 impl std::error::Error for Incomplete {}
 
+/// The command was interrupted (Ctrl-C, SIGTERM, SIGHUP) and stopped cleanly: the message says
+/// what was done before (how many runs were taken, what the interrupted one kept).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Interrupted(pub String);
+
+impl fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
 /// A command line clap accepted but a value of which the rig would refuse (an out-of-range
 /// setpoint, load or rate), caught before anything is sent: status 2, as for clap's own errors.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -55,7 +70,9 @@ impl std::error::Error for Usage {}
 
 /// The status an error from a command maps to.
 pub fn status_of(e: &anyhow::Error) -> Status {
-    if e.chain().any(|c| c.downcast_ref::<Incomplete>().is_some()) {
+    if e.chain().any(|c| c.downcast_ref::<Interrupted>().is_some()) {
+        Status::Interrupted
+    } else if e.chain().any(|c| c.downcast_ref::<Incomplete>().is_some()) {
         Status::Incomplete
     } else if e.chain().any(|c| c.downcast_ref::<Usage>().is_some()) {
         Status::Usage

@@ -71,6 +71,7 @@ fn main() -> std::process::ExitCode {
             let status = tribo::exit::status_of(&e);
             let label = match status {
                 tribo::exit::Status::Incomplete => "incomplete",
+                tribo::exit::Status::Interrupted => "interrupted",
                 _ => "error",
             };
             eprintln!("{label}: {e}");

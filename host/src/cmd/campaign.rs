@@ -354,7 +354,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 args.plan.display()
             )));
         }
-        if o.aborted || o.link_lost.is_some() {
+        if o.aborted || abort.load(Ordering::Relaxed) {
+            return Err(crate::exit::Interrupted(format!(
+                "campaign interrupted after {} of {} runs: run `tribo campaign {}` again to resume                  where it stopped",
+                i + usize::from(!o.aborted),
+                todo.len(),
+                args.plan.display()
+            ))
+            .into());
+        }
+        if o.link_lost.is_some() {
             println!(
                 "campaign interrupted: run `tribo campaign {}` again to resume where it stopped",
                 args.plan.display()
@@ -364,11 +373,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let _ = link.command(HostMsg::HeaterOff);
     if abort.load(Ordering::Relaxed) {
-        println!(
+        return Err(crate::exit::Interrupted(format!(
             "campaign interrupted: run `tribo campaign {}` again to resume",
             args.plan.display()
-        );
-        return Ok(());
+        ))
+        .into());
     }
     print_table(&plan, &store)
 }

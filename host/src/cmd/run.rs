@@ -588,12 +588,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ui.finish();
         let o = o.with_context(|| format!("run {k} on {}", link.name()))?;
         print_outcome(&o)?;
+        let taken = if args.repeat > 1 {
+            format!("; {} of {} runs taken", k - 1, args.repeat)
+        } else {
+            String::new()
+        };
+        if o.aborted {
+            // Interrupted: status 130, whatever the interrupted run kept.
+            return Err(crate::exit::Interrupted(format!(
+                "interrupted during run {k}: what it received is kept as an aborted run{taken}"
+            ))
+            .into());
+        }
         if let Some(e) = o.incomplete() {
             // Finished, but the run is not stored whole: exit status 3.
-            return Err(e.into());
+            return Err(anyhow::Error::new(e).context(format!("run {k}{taken}")));
         }
-        if o.aborted || o.link_lost.is_some() {
+        if o.link_lost.is_some() {
             break;
+        }
+        if abort.load(Ordering::Relaxed) && k < args.repeat.max(1) {
+            return Err(crate::exit::Interrupted(format!(
+                "interrupted after run {k}: {k} of {} runs taken",
+                args.repeat
+            ))
+            .into());
         }
     }
     Ok(())

@@ -103,7 +103,10 @@ pub fn settle(
     loop {
         if abort.load(Ordering::Relaxed) {
             let _ = link.command(HostMsg::HeaterOff);
-            bail!("interrupted while heating; the heater was switched off");
+            return Err(crate::exit::Interrupted(
+                "interrupted while heating; the heater was switched off".into(),
+            )
+            .into());
         }
         let s = link.status()?;
         if let Some(f) = s.heater_fault {
@@ -190,7 +193,10 @@ pub fn record_run(
         None => link.command(HostMsg::HeaterOff)?,
     }
     if abort.load(Ordering::Relaxed) {
-        bail!("interrupted before the release; nothing was recorded");
+        return Err(crate::exit::Interrupted(
+            "interrupted before the release; nothing was recorded".into(),
+        )
+        .into());
     }
     // Frames of the rig's previous run may still be on their way: the run taken here is numbered
     // after it.
