@@ -63,3 +63,43 @@ pub fn install_pipe_hook() {
         default(info)
     }));
 }
+
+static JSON_PRINTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Prints a command's one JSON object (a line), and remembers that it did.
+pub fn print_json(v: impl std::fmt::Display) -> std::io::Result<()> {
+    JSON_PRINTED.store(true, std::sync::atomic::Ordering::Relaxed);
+    crate::outln!("{v}")
+}
+
+/// Whether [`print_json`] printed the command's object.
+pub fn json_printed() -> bool {
+    JSON_PRINTED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// For a `--json` command that stops on an error before printing its object: prints one object
+/// all the same, `{"record", "verdict": "not-analysable" | "interrupted" | "error", "status",
+/// "message"}` (the status the process exits with, the message with its causes), so that a
+/// script reading standard output always gets one object. Returns the error.
+pub fn json_on_error(json: bool, record: &std::path::Path, e: anyhow::Error) -> anyhow::Error {
+    if json && !json_printed() {
+        let status = crate::exit::status_of(&e);
+        let verdict = match status {
+            crate::exit::Status::Incomplete => "not-analysable",
+            crate::exit::Status::Interrupted => "interrupted",
+            _ => "error",
+        };
+        let message = e
+            .chain()
+            .map(|c| c.to_string())
+            .collect::<Vec<_>>()
+            .join(": ");
+        let _ = print_json(serde_json::json!({
+            "record": record.display().to_string(),
+            "verdict": verdict,
+            "status": status.code(),
+            "message": message,
+        }));
+    }
+    e
+}

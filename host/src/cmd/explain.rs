@@ -95,6 +95,11 @@ pub struct Args {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> Result<()> {
+    let (json, path) = (args.json, args.record.clone());
+    run_inner(args).map_err(|e| crate::out::json_on_error(json, &path, e))
+}
+
+fn run_inner(args: Args) -> Result<()> {
     let base: LawSpec = args.base;
     let mut opts = ExplainOptions {
         base,
@@ -149,7 +154,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.json {
         let mut j = serde_json::to_value(&ex).context("writing the explanation as JSON")?;
         j["cross_check"] = crate::cmd::fit::cross_check_json(&check)?;
-        outln!("{j}")?;
+        crate::out::print_json(&j)?;
     } else {
         out!("{}", ex.to_text())?;
         if let Some(line) = crate::cmd::fit::cross_check_text(&check) {

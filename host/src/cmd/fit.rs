@@ -41,10 +41,23 @@ between measured and fitted envelopes. Both are relative to the initial amplitud
 eq. 10–13 in order of j and their standard errors), `gap`, `noise_floor`, `p_si`, `p_si_se` (SI
 coefficients of μ(v) = Σ p_j v^j, v in m/s), `params`, `params_se`, `iterations`, `converged`,
 `shape` (straight/convex/concave/mixed), `y0`, `y0_se` (fitted initial amplitude), `points`,
-`n_eff` (effectively independent residuals), `half_cycles`, `record`, `rig` (the constants used
-and where each came from: record, flag, default) and `defaults` (the constants a default stood in
-for). A record that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"reason\",
-\"message\"}`.
+`n_eff` (effectively independent residuals), `half_cycles`, `span` (the part of the record
+compared: `start`, `end`, `samples`, the noise of y and y' read from the record, `rest_level`,
+`spikes` and `clipped` samples left out), `cross_check` (the on-board result beside the host's:
+`onboard_mu`, `onboard_mu_se`, `z`, `agree`, `suspect`; `null` for a law the rig does not fit,
+`{\"unavailable\": why}` when there is none), `record`, `rig` (the constants used and where each
+came from: record, flag, default) and `defaults` (the constants a default stood in for). A record
+that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"message\", …}`, any
+other failure `{\"record\", \"verdict\": \"error\", \"status\", \"message\"}`: one object on every
+outcome.
+
+What is compared is derived from the record and printed on the `compared` line: from the release
+(a hold before it is skipped) to where the velocity sinks into its own noise (the stop and the rest
+after it are not compared); speckle spikes and a few clipped peaks are left out and counted.
+
+The on-board result (the rig's own for a run folder, else the firmware's pipeline run over the
+record) is shown beside the host fit, with the distance between them in combined σ; more than 3σ
+on μ0 or μ1 is called a disagreement, with what to suspect.
 
 `--windows N` also fits the law on N successive windows of equal amplitude drop (thesis
 ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains
@@ -92,6 +105,11 @@ pub struct Args {
 
 /// Runs `tribo fit`.
 pub fn run(a: Args) -> Result<()> {
+    let (json, path) = (a.json, a.record.clone());
+    run_inner(a).map_err(|e| crate::out::json_on_error(json, &path, e))
+}
+
+fn run_inner(a: Args) -> Result<()> {
     let spec = a.law;
     let holes = if a.longest_clean_stretch {
         crate::Holes::LongestCleanStretch
@@ -124,7 +142,7 @@ pub fn run(a: Args) -> Result<()> {
                     "rig": rig,
                     "defaults": rig.defaults(),
                 });
-                outln!("{j}")?;
+                crate::out::print_json(&j)?;
             }
             return Err(Incomplete(format!(
                 "{}: not analysable: {why}; no constant is fitted",
@@ -149,7 +167,7 @@ pub fn run(a: Args) -> Result<()> {
         if a.windows > 0 {
             j["windows"] = serde_json::to_value(&windows)?;
         }
-        outln!("{j}")?;
+        crate::out::print_json(&j)?;
     } else {
         out!("{}", table(&a.record.display().to_string(), &rig, &r, &rec))?;
         if let Some(line) = cross_check_text(&check) {

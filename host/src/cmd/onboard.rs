@@ -32,11 +32,18 @@ pub struct Args {
 /// Runs the subcommand. A record the pipeline refuses (too few cycles, no oscillation, a saturated
 /// channel, a non-finite sample) ends with status 3 and no coefficients (JSON: `null`s).
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let (json, path) = (args.json, args.record.clone());
+    run_inner(args).map_err(|e| crate::out::json_on_error(json, &path, e))
+}
+
+fn run_inner(args: Args) -> anyhow::Result<()> {
     let record = crate::load::load_for_analysis(&args.record)?;
     // The host's screening first: a record clipped by another acquisition's converter looks
     // unsaturated to the pipeline, whose converter range is made to span the record.
     if let Ok((tau, y, ydot)) = record.dimensionless() {
-        if let Err(why) = tribo_physics::identify::screen(&tau, &y, &ydot) {
+        let r = tribo_physics::identify::motion_span(&tau, &y, &ydot).range();
+        if let Err(why) = tribo_physics::identify::screen(&tau[r.clone()], &y[r.clone()], &ydot[r])
+        {
             return Err(crate::exit::Incomplete(format!(
                 "{}: not analysable: {why}; no coefficients",
                 args.record.display()
@@ -47,7 +54,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let result = analyse(&record).with_context(|| format!("{}", args.record.display()))?;
     let usable = matches!(result.verdict, Verdict::Ok | Verdict::EstimatorsDisagree);
     if args.json {
-        crate::outln!("{}", to_json(&result))?;
+        crate::out::print_json(to_json(&result))?;
     } else if usable {
         crate::out!("{}", to_text(&result))?;
     }

@@ -202,7 +202,13 @@ impl Prepared {
         for v in [&mut tau, &mut y, &mut ydot, &mut a_all] {
             v.truncate(n);
         }
-        let env_idx: Vec<usize> = (0..n).step_by(stride(n, max_env)).collect();
+        // Samples at a converter's rail (a few clipped peaks, which the screening lets through)
+        // are not compared, as in `tribo fit`.
+        let clip = tribo_physics::identify::clipped(&y, &ydot);
+        let env_idx: Vec<usize> = (0..n)
+            .step_by(stride(n, max_env))
+            .filter(|&i| i == 0 || !clip[i])
+            .collect();
         let a_meas = env_idx.iter().map(|&i| a_all[i]).collect();
         let f_meas = match (&rec.ft, rec.units) {
             (Some(f), _) => Some(

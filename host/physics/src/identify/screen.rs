@@ -165,7 +165,7 @@ pub fn clipped(y: &[f64], ydot: &[f64]) -> Vec<bool> {
 
 /// The most of a motion's samples that may sit at a converter's rail for the fit to leave them out
 /// rather than refuse the record.
-pub const MAX_CLIPPED_FRACTION: f64 = 0.05;
+pub const MAX_CLIPPED_FRACTION: f64 = 0.02;
 
 /// [`screen`], with `allow_clipped`: a record whose clipped samples ([`clipped`]) are at most
 /// [`MAX_CLIPPED_FRACTION`] of it passes (the fit leaves them out).
