@@ -106,3 +106,28 @@ fn each_virtual_rig_has_its_own_serial() {
     assert_ne!(sa, sb);
     assert_eq!(sa >> 24, 0x74_7269_626f, "{sa:016x}");
 }
+
+/// A store that cannot be written (a file in the way) is refused before anything is sent to the
+/// rig: the sphere is never released with nobody able to record it.
+#[test]
+fn an_unwritable_store_is_refused_before_the_release() {
+    let mut rig = RigProcess::start(f64::INFINITY);
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("afile"), b"").unwrap();
+    let out = tribo(
+        &["run", "--quiet", "--port", &rig.addr, "--load", "0.3"],
+        &dir.path().join("afile").join("runs"),
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("cannot be written") && err.contains("nothing was sent"),
+        "{err}"
+    );
+    rig.drain(std::time::Duration::from_millis(300));
+    let console = rig.console();
+    assert!(
+        !console.contains("release") && !console.contains("arm"),
+        "{console}"
+    );
+}

@@ -291,6 +291,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let abort = abort_flag();
+    args.link.writable_store()?;
     let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // Heartbeats while the campaign runs (prompts included); every exit leaves the rig safe.
     let _hold = link.hold();
@@ -356,7 +357,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         if o.aborted || abort.load(Ordering::Relaxed) {
             return Err(crate::exit::Interrupted(format!(
-                "campaign interrupted after {} of {} runs: run `tribo campaign {}` again to resume                  where it stopped",
+                "campaign interrupted after {} of {} runs: run `tribo campaign {}` again to resume where it stopped",
                 i + usize::from(!o.aborted),
                 todo.len(),
                 args.plan.display()

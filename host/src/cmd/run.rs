@@ -37,6 +37,23 @@ impl LinkArgs {
             .unwrap_or_else(tribo_store::default_store_dir)
     }
 
+    /// The store, checked writable before anything is armed (a file in the way, a read-only
+    /// folder): a sphere released with nobody able to record it is a run lost.
+    pub fn writable_store(&self) -> anyhow::Result<PathBuf> {
+        let store = self.store();
+        let fail = |e: std::io::Error| {
+            anyhow::anyhow!(
+                "the run store {} cannot be written ({e}): nothing was sent to the rig; pass --store with a folder you can write",
+                store.display()
+            )
+        };
+        std::fs::create_dir_all(&store).map_err(fail)?;
+        let probe = store.join(format!(".tribo-write-test-{}", std::process::id()));
+        std::fs::write(&probe, b"").map_err(fail)?;
+        std::fs::remove_file(&probe).map_err(fail)?;
+        Ok(store)
+    }
+
     /// The port to use, and, when no rig was named nor found and the default virtual rig's address
     /// is tried instead, why. An error lists what to do.
     pub fn port(&self) -> anyhow::Result<(Address, Option<String>)> {
@@ -570,10 +587,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let abort = abort_flag();
+    let store = args.link.writable_store()?;
     let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // From here on every exit leaves the rig safe (see `link::hold`).
     let _hold = link.hold();
-    let store = args.link.store();
     for k in 1..=args.repeat.max(1) {
         let mut plan = plan.clone();
         if args.repeat > 1 {

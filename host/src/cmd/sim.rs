@@ -97,7 +97,7 @@ pub struct Args {
     /// Write the dimensionless form `tau,y,ydot` instead of SI.
     #[arg(long)]
     pub dimensionless: bool,
-    /// Output CSV file.
+    /// Output CSV file (`-`: standard output).
     #[arg(short, long)]
     pub output: PathBuf,
     /// No progress messages: set by `tribo -q`/`--quiet`.
@@ -207,8 +207,13 @@ pub fn run(a: Args) -> Result<()> {
         let (t, y, v) = rec.dimensionless()?;
         rec = Record::new(t, y, v, Some(Rig::UNIT), Units::Dimensionless);
     }
-    rec.save(&a.output)
-        .with_context(|| format!("writing {}", a.output.display()))?;
+    if a.output.as_os_str() == "-" {
+        // `-o -`: the CSV on standard output (a pipe into another tool).
+        crate::out!("{}", rec.to_csv_string())?;
+    } else {
+        rec.save(&a.output)
+            .with_context(|| format!("writing {}", a.output.display()))?;
+    }
     if !a.quiet {
         eprintln!(
             "wrote {} samples ({} law, μ = {:?}) to {}",
