@@ -254,7 +254,28 @@ impl VirtualRigConfig {
         ] {
             check(name, "a finite number", v, true)?;
         }
+        // One source of limits: the loads the firmware (and so `tribo run --load`) takes.
+        let loads = tribo_wire::limits::LOAD_N;
+        check(
+            "load_n",
+            "within the rig's 0–0.7 N (what `tribo run --load` takes)",
+            self.load_n,
+            self.load_n >= *loads.start() as f64 && self.load_n <= *loads.end() as f64,
+        )?;
         self.law.validate()?;
+        // Friction opposes the motion: f(v) ≥ 0 at every sliding speed the rig reaches (y' up to
+        // the release amplitude k·x0/N; the lightest load and stiffest blade give about 20).
+        if let Some(v) = (1..=400)
+            .map(|i| 1e-4 * 1.04f64.powi(i))
+            .find(|&v| self.law.steady_force(v) < 0.0)
+        {
+            return Err(RigError::Setting {
+                name: "law",
+                rule: "a friction that opposes the motion (f(v) ≥ 0 at every sliding speed; a Coulomb \
+                       level μ0 ≥ 0)",
+                value: self.law.steady_force(v),
+            });
+        }
         Ok(())
     }
 }
@@ -270,5 +291,24 @@ mod tests {
         assert_eq!(d, ["mass_kg", "stiffness_n_per_m", "x0_m", "apparatus_mu1"]);
         assert_eq!(VirtualRigConfig::defaulted("").unwrap(), RIG_CONSTANTS);
         assert!(VirtualRigConfig::defaulted("load_n = = 1").is_err());
+    }
+
+    /// One source of limits: a load `tribo run --load` would refuse, or a friction that pushes the
+    /// sphere along, is refused as the rig is described; the thesis's quadratic fits (μ1 < 0 with
+    /// μ2 > 0, a friction that stays positive) are not.
+    #[test]
+    fn the_rig_takes_only_loads_and_laws_a_rig_can_have() {
+        let law = |t: &str| VirtualRigConfig::from_toml(&format!("load_n = 0.3\n[law]\n{t}"));
+        let e = law("kind = \"coulomb\"\nmu0 = -3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("opposes the motion"), "{e}");
+        assert!(law("kind = \"coulomb_viscous\"\nmu0 = -0.01\nmu1 = 0.01\n").is_err());
+        assert!(law("kind = \"quadratic\"\nmu0 = 0.02\nmu1 = -0.004\nmu2 = 0.003\n").is_ok());
+        let e = VirtualRigConfig::from_toml("load_n = 5\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("0–0.7 N"), "{e}");
+        assert!(VirtualRigConfig::from_toml("load_n = 0\n").is_ok());
     }
 }
