@@ -131,3 +131,67 @@ fn an_unwritable_store_is_refused_before_the_release() {
         "{console}"
     );
 }
+
+/// A run whose frame log is damaged is listed by `tribo runs` as damaged (it used to vanish), and
+/// `tribo pull --salvage` with no rig reachable keeps every intact record, says what is missing and
+/// exits 3; the run is then listed as incomplete.
+#[test]
+fn a_damaged_run_is_listed_and_salvaged_without_the_rig() {
+    let rig = RigProcess::start(f64::INFINITY);
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("runs");
+    let out = tribo(
+        &[
+            "run", "--quiet", "--port", &rig.addr, "--load", "0.3", "--label", "d",
+        ],
+        &store,
+    );
+    assert!(out.status.success());
+    drop(rig);
+    let run = std::fs::read_dir(&store)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.is_dir())
+        .unwrap();
+    let log = run.join("frames.log");
+    let mut bytes = std::fs::read(&log).unwrap();
+    for b in &mut bytes[4000..4100] {
+        *b ^= 0x5a;
+    }
+    std::fs::write(&log, bytes).unwrap();
+    let list = |store: &Path| {
+        let o = Command::new(TRIBO)
+            .args(["runs", "--json", "--store"])
+            .arg(store)
+            .output()
+            .unwrap();
+        assert!(o.status.success());
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let v = list(&store);
+    assert_eq!(v["damaged"].as_array().unwrap().len(), 1, "{v}");
+    assert_eq!(v["damaged"][0]["status"], "damaged");
+    let o = Command::new(TRIBO)
+        .args(["pull", "--salvage", "--port", "tcp://127.0.0.1:1"])
+        .arg(&run)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("salvaged") && err.contains("no rig could be reached"),
+        "{err}"
+    );
+    let v = list(&store);
+    assert!(v["damaged"].as_array().unwrap().is_empty(), "{v}");
+    let runs = v["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 1);
+    assert_eq!(runs[0]["status"], "incomplete", "{v}");
+    assert!(
+        runs[0]["completeness"]
+            .as_str()
+            .unwrap()
+            .contains("missing"),
+        "{v}"
+    );
+}

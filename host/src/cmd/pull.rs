@@ -26,7 +26,12 @@ pub struct Args {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (mut link, info) = args.link.connect()?;
+    let (mut link, info) = match (args.link.connect(), &args.run) {
+        (Ok(c), _) => c,
+        // No rig to fetch from: a salvage still repairs the log here and says what is missing.
+        (Err(e), Some(dir)) if args.salvage => return salvage_offline(dir, e),
+        (Err(e), _) => return Err(e),
+    };
     let mut ui = Ui::new(args.quiet);
     let o = pull_run(
         &mut link,
@@ -44,4 +49,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(e) => Err(e.into()),
         None => Ok(()),
     }
+}
+
+/// `--salvage` with no rig reachable: the log is repaired (every intact record kept, the damaged
+/// file beside it), the catalog updated, and what is missing said; status 3, since the run is not
+/// whole until the rig gives the rest.
+fn salvage_offline(dir: &std::path::Path, why: anyhow::Error) -> anyhow::Result<()> {
+    let (w, recovery) = tribo_store::RunWriter::resume(dir, true)
+        .map_err(|e| anyhow::anyhow!("cannot salvage {}: {e}", dir.display()))?;
+    drop(w);
+    if let Some(r) = recovery {
+        eprintln!("{}: {r}", dir.display());
+    }
+    let run = tribo_store::Run::open(dir)?;
+    let summary = run.completeness().summary();
+    if let Some(store) = dir.parent() {
+        if let Ok(cat) = tribo_store::Catalog::open(store) {
+            let _ = cat.upsert(&run);
+        }
+    }
+    crate::outln!("{}: salvaged offline: {summary}", dir.display())?;
+    Err(crate::exit::Incomplete(format!(
+        "{}: salvaged, but no rig could be reached to fetch what is missing ({}); `tribo pull {}` \
+         fetches it while the rig holds the run",
+        dir.display(),
+        crate::exit::chain_text(why.as_ref()),
+        dir.display()
+    ))
+    .into())
 }

@@ -32,14 +32,26 @@ pub struct Args {
     /// Print the run folders only (for scripts).
     #[arg(long)]
     pub paths: bool,
+    /// Print one JSON object: `{"runs": [{…}, …], "damaged": [{"path", "why"}, …]}`.
+    #[arg(long)]
+    pub json: bool,
     /// No progress messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]
     pub quiet: bool,
 }
 
 fn status_names() -> clap::builder::PossibleValuesParser {
-    clap::builder::PossibleValuesParser::new(RunStatus::ALL.map(RunStatus::name))
+    clap::builder::PossibleValuesParser::new(
+        RunStatus::ALL
+            .map(RunStatus::name)
+            .into_iter()
+            .chain([DAMAGED]),
+    )
 }
+
+/// The state of a run folder whose frame log cannot be read as it is (damage, not a torn tail):
+/// listed all the same, with what `tribo pull --salvage` does about it.
+const DAMAGED: &str = "damaged";
 
 fn load_range(s: &str) -> Result<(f64, f64), String> {
     parse_range(s, "load").map_err(|e| e.to_string())
@@ -113,10 +125,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             eprintln!("skipped {}: {e}", d.display());
         }
     }
+    // Folders the catalog cannot hold (their log is damaged): never hidden.
+    let known: std::collections::BTreeSet<PathBuf> = cat
+        .list(&Filter::default())?
+        .into_iter()
+        .map(|r| r.path)
+        .collect();
+    let only_filter_is_status = args.campaign.is_none()
+        && args.label.is_none()
+        && args.load.is_none()
+        && args.temp.is_none();
+    let damaged: Vec<(PathBuf, String)> =
+        if only_filter_is_status && args.status.as_deref().is_none_or(|s| s == DAMAGED) {
+            tribo_store::run::list_run_dirs(&store)?
+                .into_iter()
+                .filter(|d| !known.contains(d))
+                .map(|d| {
+                    let why = match tribo_store::Run::open(&d) {
+                        Ok(_) => "not in the catalog: `tribo runs --reindex`".to_string(),
+                        Err(e) => e.to_string(),
+                    };
+                    (d, why)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+    let only_damaged = args.status.as_deref() == Some(DAMAGED);
+    let status = args.status.filter(|s| s != DAMAGED);
     let mut f = Filter {
         campaign: args.campaign,
         label: args.label,
-        status: args.status,
+        status,
         ..Default::default()
     };
     if let Some((a, b)) = args.load {
@@ -127,11 +167,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         f.temp_min = Some(a);
         f.temp_max = Some(b);
     }
-    let rows = cat.list(&f)?;
+    let rows = if only_damaged {
+        Vec::new()
+    } else {
+        cat.list(&f)?
+    };
+    if args.json {
+        let runs: Vec<serde_json::Value> = rows
+            .iter()
+            .map(|r| {
+                serde_json::json!({
+                    "id": r.id, "path": r.path, "created": r.created, "status": r.status,
+                    "completeness": r.completeness, "blocks": r.blocks,
+                    "blocks_expected": r.blocks_expected, "lost_samples": r.lost_samples,
+                    "label": r.label, "campaign": r.campaign, "repeat": r.repeat,
+                    "load_n": r.load_n, "temp_c": r.temp_c, "serial": r.serial,
+                    "onboard_mu0": r.onboard_mu0, "onboard_mu1": r.onboard_mu1,
+                    "host_mu0": r.host_mu0, "host_mu1": r.host_mu1,
+                    "host_mu0_se": r.host_mu0_se, "host_mu1_se": r.host_mu1_se,
+                })
+            })
+            .collect();
+        let dmg: Vec<serde_json::Value> = damaged
+            .iter()
+            .map(|(p, why)| serde_json::json!({ "path": p, "status": DAMAGED, "why": why }))
+            .collect();
+        crate::out::print_json(serde_json::json!({ "runs": runs, "damaged": dmg }))?;
+        return Ok(());
+    }
     if args.paths {
         for r in rows {
             outln!("{}", r.path.display())?;
         }
+        for (p, _) in &damaged {
+            outln!("{}", p.display())?;
+        }
+        return Ok(());
+    }
+    if rows.is_empty() && !damaged.is_empty() {
+        print_damaged(&damaged)?;
         return Ok(());
     }
     if rows.is_empty() {
@@ -180,6 +254,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             opt(r.host_mu1),
         )?;
     }
+    print_damaged(&damaged)?;
     if incomplete {
         outln!(
             "blocks: held/in the run (? = the run's end was not received); an incomplete run is \
@@ -190,6 +265,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         outln!(
             "lost: samples the rig's acquisition lost (its gap frames); fits refuse to cross a gap: \
              `tribo fit --longest-clean-stretch RUN` fits the longest stretch without one"
+        )?;
+    }
+    Ok(())
+}
+
+/// The damaged run folders, each with its state and what to do.
+fn print_damaged(damaged: &[(PathBuf, String)]) -> anyhow::Result<()> {
+    for (p, why) in damaged {
+        let name = p.file_name().map_or_else(
+            || p.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        outln!("{name:<44} {DAMAGED:<10} {why}")?;
+    }
+    if !damaged.is_empty() {
+        outln!(
+            "damaged: the run's frame log cannot be read as it is; `tribo pull --salvage RUN` keeps \
+             every intact record (with or without the rig) and fetches what is missing"
         )?;
     }
     Ok(())
