@@ -206,7 +206,10 @@ fn child_tribo_run() {
         ramp: 10.0,
         quiet: true,
     };
-    tribo::cmd::run::run(args).unwrap();
+    // Exit as `tribo` would: the status of the exit contract (130 when interrupted).
+    if let Err(e) = tribo::cmd::run::run(args) {
+        std::process::exit(tribo::exit::status_of(&e).code() as i32);
+    }
 }
 
 /// Starts `tribo run` in a child process; returns it once it has logged a few dozen blocks, with
@@ -263,9 +266,10 @@ fn ctrl_c_aborts_the_run_cleanly() {
         .unwrap();
     assert!(kill.success());
     let status = child.wait().unwrap();
-    assert!(
-        status.success(),
-        "tribo run exits normally after Ctrl-C: {status:?}"
+    assert_eq!(
+        status.code(),
+        Some(130),
+        "tribo run stops cleanly after Ctrl-C, with the status of an interruption: {status:?}"
     );
     let run = Run::open(&dir).unwrap();
     assert!(run.recovery.is_none(), "flushed, nothing torn");
