@@ -146,13 +146,7 @@ impl CrossCheck {
 
     /// One sentence: the distances in σ and whether they agree (and what to suspect if not).
     pub fn summary(&self) -> String {
-        let z = |v: f64| {
-            if v.is_finite() {
-                format!("{v:+.1}σ")
-            } else {
-                "?σ".into()
-            }
-        };
+        let z = sigmas;
         let mut s = format!(
             "host − on-board: μ0 {}, μ1 {}: {}",
             z(self.z[0]),
@@ -171,13 +165,7 @@ impl CrossCheck {
 
     /// One line for the terminal (and a second with what to suspect when they disagree).
     pub fn text(&self) -> String {
-        let z = |v: f64| {
-            if v.is_finite() {
-                format!("{v:+.1}σ")
-            } else {
-                "?σ".into()
-            }
-        };
+        let z = sigmas;
         let src = match self.source {
             OnboardSource::Rig => "the rig's own result",
             OnboardSource::Record => "the firmware's pipeline on these samples",
@@ -200,6 +188,15 @@ impl CrossCheck {
             s.push_str(&format!("\n           suspect: {why}"));
         }
         s
+    }
+}
+
+/// A distance in combined σ, signed (`?σ` when unknown).
+fn sigmas(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:+.1}σ")
+    } else {
+        "?σ".into()
     }
 }
 

@@ -74,6 +74,23 @@ enum Pin {
     Free { t0_us: u64, sim: Box<Simulator> },
 }
 
+/// The rig constants, the contact model and the converters' calibration of a configuration
+/// (validated). Unloaded: the contact transmits no force whatever its law; only the apparatus
+/// damps. The dimensionless model needs N > 0, so it runs at a token load with no contact law.
+fn contact(cfg: &VirtualRigConfig) -> Result<(Rig, Model, [ChannelCal; CHANNELS]), RigError> {
+    cfg.validate()?;
+    let (load, law) = if cfg.load_n > 0.0 {
+        (cfg.load_n, cfg.law.clone())
+    } else {
+        (1e-3, FrictionLaw::polynomial(vec![0.0, 0.0]))
+    };
+    let rig = Rig::new(cfg.mass_kg, cfg.stiffness_n_per_m, load)?;
+    let model = Model::new(law).with_apparatus_damping(cfg.apparatus_mu1);
+    model.validate()?;
+    let cal = Configure::real_rig(cfg.load_n.min(0.7) as f32).calibration;
+    Ok((rig, model, cal))
+}
+
 /// The simulated hardware of one rig.
 pub struct SimHardware {
     cfg: VirtualRigConfig,
@@ -132,18 +149,7 @@ pub struct SimHardware {
 
 impl SimHardware {
     pub fn new(cfg: &VirtualRigConfig) -> Result<SimHardware, RigError> {
-        cfg.validate()?;
-        // Unloaded: the contact transmits no force whatever its law; only the apparatus damps. The
-        // dimensionless model needs N > 0, so it runs at a token load with no contact law.
-        let (load, law) = if cfg.load_n > 0.0 {
-            (cfg.load_n, cfg.law.clone())
-        } else {
-            (1e-3, FrictionLaw::polynomial(vec![0.0, 0.0]))
-        };
-        let rig = Rig::new(cfg.mass_kg, cfg.stiffness_n_per_m, load)?;
-        let model = Model::new(law).with_apparatus_damping(cfg.apparatus_mu1);
-        model.validate()?;
-        let cal = Configure::real_rig(cfg.load_n.min(0.7) as f32).calibration;
+        let (rig, model, cal) = contact(cfg)?;
         let mut hw = SimHardware {
             cfg: cfg.clone(),
             rig,
@@ -197,16 +203,8 @@ impl SimHardware {
     pub fn set_load(&mut self, load_n: f64) -> Result<(), RigError> {
         let mut cfg = self.cfg.clone();
         cfg.load_n = load_n;
-        cfg.validate()?;
-        let (load, law) = if cfg.load_n > 0.0 {
-            (cfg.load_n, cfg.law.clone())
-        } else {
-            (1e-3, FrictionLaw::polynomial(vec![0.0, 0.0]))
-        };
-        let rig = Rig::new(cfg.mass_kg, cfg.stiffness_n_per_m, load)?;
-        let model = Model::new(law).with_apparatus_damping(cfg.apparatus_mu1);
-        model.validate()?;
-        self.cal = Configure::real_rig(cfg.load_n.min(0.7) as f32).calibration;
+        let (rig, model, cal) = contact(&cfg)?;
+        self.cal = cal;
         self.rig = rig;
         self.model = model;
         self.cfg = cfg;
