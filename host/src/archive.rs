@@ -61,20 +61,29 @@ pub fn host_fit(run: &Run) -> Result<HostFit, HostFitError> {
     }
     let rec = run.record().map_err(HostFitError::Samples)?;
     rec.validate().map_err(HostFitError::Record)?;
-    let r = fit(
-        &rec,
-        tribo_physics::LawSpec::CoulombViscous,
-        &FitOptions::default(),
-    )
-    .map_err(HostFitError::Fit)?;
+    // The apparatus alone (load 0): its damping μ_a (viscous; stored as μ1), no Coulomb level.
+    let spec = if rec.apparatus {
+        tribo_physics::LawSpec::Viscous
+    } else {
+        tribo_physics::LawSpec::CoulombViscous
+    };
+    let r = fit(&rec, spec, &FitOptions::default()).map_err(HostFitError::Fit)?;
+    let fitted = |j: usize| spec.powers().contains(&j);
+    let mu = |v: &[f64], j: usize| {
+        if fitted(j) {
+            v.get(j).copied().unwrap_or(f64::NAN)
+        } else {
+            f64::NAN
+        }
+    };
     Ok(HostFit {
         law: r.law,
-        mu0: r.mu.first().copied().unwrap_or(f64::NAN),
-        mu1: r.mu.get(1).copied().unwrap_or(f64::NAN),
+        mu0: mu(&r.mu, 0),
+        mu1: mu(&r.mu, 1),
         gap: r.gap,
         converged: r.converged,
-        mu0_se: r.mu_se.first().copied().unwrap_or(f64::NAN),
-        mu1_se: r.mu_se.get(1).copied().unwrap_or(f64::NAN),
+        mu0_se: mu(&r.mu_se, 0),
+        mu1_se: mu(&r.mu_se, 1),
         verdict: Some(r.verdict.name().into()),
     })
 }

@@ -201,3 +201,69 @@ fn a_damaged_run_is_listed_and_salvaged_without_the_rig() {
         "{v}"
     );
 }
+
+/// The apparatus run (load 0, the blades alone: a calibration) is recorded, fitted for its damping
+/// μ_a with its ±, reported and replayed. (Before, `fit`, `report` and `replay` refused it: "load_n
+/// must be finite and > 0".)
+#[test]
+fn the_apparatus_run_is_recorded_fitted_reported_and_replayed() {
+    let rig = RigProcess::start(f64::INFINITY);
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("runs");
+    let out = tribo(
+        &[
+            "run",
+            "--quiet",
+            "--port",
+            &rig.addr,
+            "--load",
+            "0",
+            "--max-duration",
+            "4",
+        ],
+        &store,
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("the apparatus alone"), "{text}");
+    let run = std::fs::read_dir(&store)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.is_dir())
+        .unwrap();
+    let fit = Command::new(TRIBO)
+        .args(["fit", run.to_str().unwrap(), "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        fit.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fit.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&fit.stdout).unwrap();
+    assert_eq!(j["apparatus"], true, "{j}");
+    assert_eq!(j["law"], "viscous");
+    // The virtual rig's apparatus damping is 0.0011.
+    let (mu_a, se) = (j["mu_a"].as_f64().unwrap(), j["mu_a_se"].as_f64().unwrap());
+    assert!(
+        se > 0.0 && (mu_a - 0.0011).abs() < 5.0 * se + 1e-5,
+        "μ_a {mu_a} ± {se}"
+    );
+    for cmd in [["report", "--no-png"].as_slice(), ["replay"].as_slice()] {
+        let mut c = Command::new(TRIBO);
+        c.arg(cmd[0]).arg(&run).args(&cmd[1..]);
+        if cmd[0] == "report" {
+            c.arg("-o").arg(dir.path().join("report"));
+        }
+        let o = c.output().unwrap();
+        assert!(
+            o.status.success(),
+            "{cmd:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+}

@@ -48,6 +48,11 @@ pub struct Record {
     /// Low-pass cut-off of the force channel (the charge amplifier's, Hz), when the record says
     /// (`# force_cutoff_hz=300`); `None` = not stated.
     pub force_cutoff_hz: Option<f64>,
+    /// The apparatus alone (`# load_n=0`: no contact, a calibration run). Its friction
+    /// coefficients are undefined; only the blades' own damping μ_a means something. `rig.load_n`
+    /// then holds a token load ([`Record::apparatus_token_load`]) so that the dimensionless form
+    /// exists: a viscous law's μ1 does not depend on it.
+    pub apparatus: bool,
 }
 
 /// What kind of problem a [`RecordError`] is.
@@ -166,7 +171,14 @@ impl Record {
             rig,
             units,
             force_cutoff_hz: None,
+            apparatus: false,
         }
+    }
+
+    /// The token load of an apparatus record (`k · A`, A the largest |x|: y then spans about ±1).
+    pub fn apparatus_token_load(stiffness_n_per_m: f64, x: &[f64]) -> f64 {
+        let a = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        (stiffness_n_per_m * a).max(1e-12)
     }
 
     /// Number of samples.
@@ -422,7 +434,13 @@ impl Record {
             |i: Option<usize>, cols: &mut Vec<Vec<f64>>| i.map(|i| std::mem::take(&mut cols[i]));
         let rec = if let (Some(it), Some(ix), Some(iv)) = (find("t_s"), find("x_m"), find("v_m_s"))
         {
+            let apparatus = matches!(rig_vals, [Some(_), Some(_), Some(n)] if n == 0.0);
             let rig = match rig_vals {
+                [Some(m), Some(k), Some(_)] if apparatus => {
+                    let xs = find("x_m").map(|i| cols[i].as_slice()).unwrap_or(&[]);
+                    let token = Record::apparatus_token_load(k, xs);
+                    Some(Rig::new(m, k, token).map_err(RecordError::Rig)?)
+                }
                 [Some(m), Some(k), Some(n)] => Some(Rig::new(m, k, n).map_err(RecordError::Rig)?),
                 [None, None, None] => None,
                 _ => {
@@ -449,6 +467,7 @@ impl Record {
                 rig,
                 units: Units::Si,
                 force_cutoff_hz,
+                apparatus,
             }
         } else if let (Some(it), Some(iy), Some(iv)) = (find("tau"), find("y"), find("ydot")) {
             Record::new(
@@ -486,7 +505,8 @@ impl Record {
                 if let Some(r) = &self.rig {
                     let _ = writeln!(s, "# mass_kg={}", r.mass_kg);
                     let _ = writeln!(s, "# stiffness_n_per_m={}", r.stiffness_n_per_m);
-                    let _ = writeln!(s, "# load_n={}", r.load_n);
+                    let load = if self.apparatus { 0.0 } else { r.load_n };
+                    let _ = writeln!(s, "# load_n={load}");
                 }
                 if let (Some(fc), Some(_)) = (self.force_cutoff_hz, &self.ft) {
                     let _ = writeln!(s, "# force_cutoff_hz={fc}");

@@ -412,3 +412,33 @@ fn sensor_chain_quantises_filters_and_delays() {
         assert!(((x / q) - (x / q).round()).abs() < 1e-6);
     }
 }
+
+/// A record of the apparatus alone (`# load_n=0`) reads as such, has a dimensionless form (a token
+/// load), and writes `load_n=0` back.
+#[test]
+fn an_apparatus_record_reads_and_writes_as_load_zero() {
+    let mut text =
+        String::from("# mass_kg=0.04\n# stiffness_n_per_m=1150\n# load_n=0\nt_s,x_m,v_m_s\n");
+    for i in 0..12 {
+        let t = i as f64 * 1e-4;
+        let w = (1150.0f64 / 0.04).sqrt();
+        text.push_str(&format!(
+            "{t},{},{}\n",
+            6.67e-4 * (w * t).cos(),
+            -6.67e-4 * w * (w * t).sin()
+        ));
+    }
+    let text = text.as_str();
+    let rec = tribo_physics::Record::from_csv_str(text).unwrap();
+    assert!(rec.apparatus);
+    let rig = rec.rig().unwrap();
+    assert!((rig.load_n - 1150.0 * 6.67e-4).abs() < 1e-12, "{rig:?}");
+    assert!(rec.dimensionless().is_ok());
+    assert!(rec.to_csv_string().contains("# load_n=0\n"));
+    let plain = text.replace("load_n=0", "load_n=0.3");
+    assert!(
+        !tribo_physics::Record::from_csv_str(&plain)
+            .unwrap()
+            .apparatus
+    );
+}

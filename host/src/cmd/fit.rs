@@ -130,6 +130,19 @@ fn run_inner(a: Args) -> Result<()> {
         apparatus_mu1: a.apparatus_mu1,
         ..FitOptions::default()
     };
+    // The apparatus alone (load 0): no friction law, only the blades' damping μ_a (viscous).
+    let spec = if rec.apparatus {
+        if spec != LawSpec::CoulombViscous && spec != LawSpec::Viscous {
+            eprintln!(
+                "note: {} is the apparatus alone (load 0): it has no friction law; its damping is \
+                 fitted (viscous) instead of {spec}",
+                a.record.display()
+            );
+        }
+        LawSpec::Viscous
+    } else {
+        spec
+    };
     let r = match fit(&rec, spec, &opts) {
         Ok(r) => r,
         Err(FitError::NotAnalysable(why)) => {
@@ -152,7 +165,11 @@ fn run_inner(a: Args) -> Result<()> {
         }
         Err(e) => return Err(e).with_context(|| format!("{}", a.record.display())),
     };
-    let check = cross_check(&a.record, &rec, &r);
+    let check = if rec.apparatus {
+        Ok(None)
+    } else {
+        cross_check(&a.record, &rec, &r)
+    };
     let windows = if a.windows > 0 {
         fit_windows(&rec, spec, a.windows, &opts)?
     } else {
@@ -164,6 +181,12 @@ fn run_inner(a: Args) -> Result<()> {
         j["rig"] = serde_json::to_value(rig)?;
         j["defaults"] = serde_json::to_value(rig.defaults())?;
         j["cross_check"] = cross_check_json(&check)?;
+        if let Some((mu_a, se, c)) = apparatus_damping(&rec, &r) {
+            j["apparatus"] = true.into();
+            j["mu_a"] = mu_a.into();
+            j["mu_a_se"] = serde_json::to_value(se)?;
+            j["c_n_s_per_m"] = c.into();
+        }
         if a.windows > 0 {
             j["windows"] = serde_json::to_value(&windows)?;
         }
@@ -325,9 +348,41 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
     s
 }
 
+/// An apparatus record's damping: `(μ_a, its standard error, c = μ_a·m·Ω in N·s/m)`.
+fn apparatus_damping(rec: &Record, r: &FitResult) -> Option<(f64, f64, f64)> {
+    let rig = rec.rig.filter(|_| rec.apparatus)?;
+    let (mu_a, se) = (*r.mu.get(1)?, *r.mu_se.get(1)?);
+    Some((mu_a, se, mu_a * rig.mass_kg * rig.omega()))
+}
+
 fn table(record: &str, rig: &RigUsed, r: &FitResult, rec: &Record) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "record     {record}");
+    if let (Some((mu_a, se, c)), Some(rg)) = (apparatus_damping(rec, r), rec.rig) {
+        let _ = writeln!(
+            s,
+            "rig        m = {} kg, k = {} N/m, load 0: the apparatus alone (no contact)",
+            rg.mass_kg, rg.stiffness_n_per_m
+        );
+        let _ = writeln!(
+            s,
+            "mu_a       {:<30} c = {:.4e} N·s/m  (the blades' damping, = 2ζ; a contact's μ1 is \
+             fitted with it unless `--apparatus-mu1` holds it)",
+            pm(mu_a, se),
+            c
+        );
+        let _ = writeln!(
+            s,
+            "gap        {:.3e} = {:.2} × the noise floor {:.3e}",
+            r.gap,
+            r.gap_ratio(),
+            r.noise_floor
+        );
+        let _ = writeln!(s, "compared   {}", span_text(rec, r));
+        let _ = writeln!(s, "verdict    {}", r.verdict.sentence());
+        let _ = writeln!(s, "±          one standard error");
+        return s;
+    }
     let _ = writeln!(s, "rig        {}", rig.describe());
     let _ = writeln!(s, "law        {}", r.law);
     let unit = |j: usize| match j {

@@ -235,6 +235,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ))
     });
     println!("{}: {}", run.id(), c.summary());
+    if run.config().rig.load_n == 0.0 {
+        // The apparatus alone: the rig's analysis does not run on it (its friction coefficients
+        // are undefined); its damping, fitted by the host, is simulated instead.
+        println!(
+            "the apparatus alone (load 0): the on-board analysis does not run on it, nothing to \
+             replay through the pipeline"
+        );
+        let Some(mu_a) = run.host_fit().map(|h| h.mu1).filter(|m| m.is_finite()) else {
+            println!("no fitted apparatus damping to simulate (`tribo fit` the run first)");
+            return incomplete.map_or(Ok(()), |i| Err(i.into()));
+        };
+        return simulate_and_compare(&run, 0.0, mu_a, incomplete);
+    }
     let replayed = match replay_pipeline(&run) {
         Ok(r) => r,
         Err(e) => {
@@ -292,7 +305,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("no usable μ0/μ1 to simulate (μ0 = {mu0}, μ1 = {mu1})");
         return incomplete.map_or(Ok(()), |i| Err(i.into()));
     }
-    let rows = envelope_vs_simulation(&run, mu0, mu1)?;
+    simulate_and_compare(&run, mu0, mu1, incomplete)
+}
+
+/// The envelope against the simulated Coulomb–viscous law, per cycle, and the exit status.
+fn simulate_and_compare(
+    run: &Run,
+    mu0: f64,
+    mu1: f64,
+    incomplete: Option<crate::exit::Incomplete>,
+) -> anyhow::Result<()> {
+    let rows = envelope_vs_simulation(run, mu0, mu1)?;
     let a0 = rows.first().map_or(1.0, |r| r.2.max(1e-12));
     println!(
         "envelope vs the simulated Coulomb–viscous law (μ0 = {mu0:.5}, μ1 = {mu1:.5}), per cycle:"

@@ -391,6 +391,13 @@ pub fn result_table(run: &Run) -> String {
     } else if let Some(e) = &run.results.host_error {
         s.push_str(&format!("{:<10}no fit: {e}\n", "host"));
     }
+    if run.config().rig.load_n == 0.0 {
+        s.push_str(&format!(
+            "{:<10}the apparatus alone (load 0): no friction coefficient; μ1 is the blades' damping \
+             μ_a (hold it in a contact's fit with `tribo fit --apparatus-mu1`)\n",
+            "note"
+        ));
+    }
     if let (Some(h), Some(r)) = (host, ob) {
         if let Some(c) = crate::crosscheck::CrossCheck::of_stored(h, r) {
             s.push_str(&format!("{:<10}{}\n", "check", c.summary()));

@@ -12,6 +12,14 @@
 //!   and fails unless every test passed within its budgets.
 //! * `cargo xtask windows [--no-smoke]`: cross-builds `tribo.exe` for `x86_64-pc-windows-gnu` and
 //!   runs its smoke test under Wine (see [`windows`]).
+//! * `cargo xtask soak [RUNS] [SEED]`: the soak (`tests/soak.rs`): RUNS runs (default 1000) against
+//!   one virtual rig through a faulty line, a fault drawn at random for each, every stored run
+//!   checked against the rig's own copy; prints the figures (runs, faults by kind, intact, honestly
+//!   incomplete, mixed). CI runs a short one with the other tests.
+//! * `cargo xtask fuzz [RUNS]`: each libFuzzer target of the wire crate (`firmware/wire/fuzz`:
+//!   the frame decoder, the codec) for RUNS executions (default 10 000 000), with cargo-fuzz
+//!   (installed from crates.io when missing) on the machine's toolchain (`RUSTC_BOOTSTRAP=1`);
+//!   prints each target's count and time. Not in CI (minutes per target).
 //! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the
 //!   firmware, the on-target tests, the Windows build and its smoke test.
 
@@ -43,6 +51,8 @@ fn main() -> ExitCode {
         Some("firmware") => firmware(&args[1..]).map(|_| ()),
         Some("target-test") => target_test(&args[1..]),
         Some("windows") => windows::windows(&args[1..]),
+        Some("soak") => soak(&args[1..]),
+        Some("fuzz") => fuzz(&args[1..]),
         Some("ci") => ci(),
         _ => {
             eprintln!(
@@ -55,6 +65,10 @@ fn main() -> ExitCode {
                  target-test [FILTER]\n                     \
                  run the on-target tests on an emulated Cortex-M7 (QEMU; Debian package\n                     \
                  qemu-system-arm); FILTER runs only the tests whose name contains it\n  \
+                 fuzz [RUNS]        each wire fuzz target for RUNS executions (default 10 M)\n  \
+                 soak [RUNS] [SEED]\n                     \
+                 the soak: RUNS runs (default 1000) through a faulty line, random faults,\n                     \
+                 every stored run checked against the rig's own copy\n  \
                  windows [--no-smoke]\n                     \
                  cross-build tribo.exe (mingw-w64) and smoke-test it under Wine\n  \
                  ci                 rustfmt, clippy -D warnings, all tests, firmware build,\n                     \
@@ -70,6 +84,72 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `cargo xtask fuzz [RUNS]`.
+fn fuzz(args: &[String]) -> Result<(), String> {
+    let runs = args.first().map_or("10000000", String::as_str);
+    if runs.parse::<u64>().is_err() {
+        return Err(format!("RUNS must be a whole number, got {runs:?}"));
+    }
+    let has_fuzz = cargo()
+        .args(["fuzz", "--version"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_fuzz {
+        run(cargo().args(["install", "cargo-fuzz", "--locked"]))?;
+    }
+    let dir = root().join("firmware/wire");
+    for target in ["decoder", "codec"] {
+        let t0 = std::time::Instant::now();
+        let out = cargo()
+            .current_dir(&dir)
+            .env("RUSTC_BOOTSTRAP", "1")
+            .args(["fuzz", "run", "-O", target, "--"])
+            .arg(format!("-runs={runs}"))
+            .output()
+            .map_err(|e| format!("cargo fuzz: {e}"))?;
+        let log = String::from_utf8_lossy(&out.stderr);
+        if !out.status.success() {
+            return Err(format!(
+                "fuzz target {target} failed (its crash input is under firmware/wire/fuzz/artifacts):\n{}",
+                log.lines().rev().take(30).collect::<Vec<_>>().join("\n")
+            ));
+        }
+        let done = log
+            .lines()
+            .find(|l| l.starts_with("Done "))
+            .unwrap_or("(no summary line)");
+        eprintln!(
+            "fuzz {target}: {done} ({:.0} s in all)",
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+/// `cargo xtask soak [RUNS] [SEED]`.
+fn soak(args: &[String]) -> Result<(), String> {
+    let runs = args.first().map_or("1000", String::as_str);
+    let seed = args.get(1).map_or("1", String::as_str);
+    for (what, v) in [("RUNS", runs), ("SEED", seed)] {
+        if v.parse::<u64>().is_err() {
+            return Err(format!("{what} must be a whole number, got {v:?}"));
+        }
+    }
+    run(cargo()
+        .args([
+            "test",
+            "--release",
+            "-p",
+            "tribo-tests",
+            "--test",
+            "soak",
+            "--",
+            "--nocapture",
+        ])
+        .env("SOAK_RUNS", runs)
+        .env("SOAK_SEED", seed))
 }
 
 fn kib(bytes: u64) -> f64 {

@@ -428,10 +428,18 @@ impl Run {
             fill_gaps(e);
         }
         let cfg = self.config();
+        // The apparatus alone (load 0): a token load, so that the record has a dimensionless form
+        // (`Record::apparatus`).
+        let apparatus = cfg.rig.load_n == 0.0;
+        let load = if apparatus {
+            Record::apparatus_token_load(clean(cfg.rig.stiffness_n_per_m), &s.x)
+        } else {
+            clean(cfg.rig.load_n)
+        };
         let rig = Rig::new(
             clean(cfg.rig.mass_kg),
             clean(cfg.rig.stiffness_n_per_m),
-            clean(cfg.rig.load_n),
+            load,
         )
         .map_err(|e| {
             StoreError::caused(
@@ -441,6 +449,7 @@ impl Run {
             )
         })?;
         let mut r = Record::new(s.t, s.x, s.v, Some(rig), Units::Si);
+        r.apparatus = apparatus;
         r.ft = s.force;
         r.temp = s.temp_c;
         r.ecr = s.ecr_ohm;
