@@ -498,20 +498,41 @@ fn blocks_without_an_ecr_reading_stay_nan_in_samples_and_take_the_nearest_readin
     assert!((e[4 * BLOCK_LEN] / 1e10 - 1.0).abs() < 1e-5);
 }
 
-/// The frames of `run_frames` with every sample block in its v2 packed form.
+/// The frames of `run_frames` with every sample block in its v2 packed form, and, as v2 firmware
+/// sends it right after the header, the range the run starts on (a change at sample 0).
 fn packed(frames: &[Vec<u8>]) -> Vec<Vec<u8>> {
-    frames
-        .iter()
-        .map(|f| {
-            let fr = tribo_wire::frame::decode_one::<DeviceMsg>(f).unwrap();
-            match fr.msg {
-                DeviceMsg::Samples(b) => {
-                    encode_vec(fr.seq, &DeviceMsg::Packed(PackedBlock::pack(&b).unwrap())).unwrap()
-                }
-                _ => f.clone(),
+    let mut out = Vec::new();
+    for f in frames {
+        let fr = tribo_wire::frame::decode_one::<DeviceMsg>(f).unwrap();
+        match fr.msg {
+            DeviceMsg::Samples(b) => out.push(
+                encode_vec(fr.seq, &DeviceMsg::Packed(PackedBlock::pack(&b).unwrap())).unwrap(),
+            ),
+            DeviceMsg::RunStarted(h) => {
+                out.push(f.clone());
+                let first = frames.iter().find_map(|g| {
+                    match tribo_wire::frame::decode_one::<DeviceMsg>(g).ok()?.msg {
+                        DeviceMsg::Samples(b) if b.block == 0 => Some(b.ecr_range),
+                        _ => None,
+                    }
+                });
+                out.push(
+                    encode_vec(
+                        fr.seq.wrapping_add(1_000_000),
+                        &DeviceMsg::EcrRange(EcrRangeChange {
+                            run_id: h.run_id,
+                            first_sample: 0,
+                            range: first.unwrap_or(0),
+                            settling: 0,
+                        }),
+                    )
+                    .unwrap(),
+                );
             }
-        })
-        .collect()
+            _ => out.push(f.clone()),
+        }
+    }
+    out
 }
 
 #[test]
@@ -528,7 +549,18 @@ fn packed_blocks_read_back_as_the_same_samples() {
     let b = record(d.path(), &cfg, &v2, |_| {});
     assert!(b.is_complete());
     assert_eq!(b.meta.status, RunStatus::Complete);
-    assert_eq!(a.samples_si().unwrap(), b.samples_si().unwrap());
+    // The same samples (the packed run also says the range it starts on, as v2 firmware does).
+    let (sa, sb) = (a.samples_si().unwrap(), b.samples_si().unwrap());
+    assert_eq!((&sa.t, &sa.x, &sa.v), (&sb.t, &sb.x, &sb.v));
+    assert_eq!(
+        (&sa.force, &sa.temp_c, &sa.ecr_ohm),
+        (&sb.force, &sb.temp_c, &sb.ecr_ohm)
+    );
+    // Only the packed run knows each sample's range (from its events): the blocks' own, 2.
+    assert!(sb
+        .ecr_range
+        .as_ref()
+        .is_some_and(|r| r.iter().all(|&x| x == 2)));
     assert_eq!(
         a.blocks().cloned().collect::<Vec<_>>(),
         b.blocks().cloned().collect::<Vec<_>>()
@@ -541,13 +573,14 @@ fn a_packed_block_that_does_not_unpack_counts_as_missing() {
     let d = tempfile::tempdir().unwrap();
     let cfg = Configure::real_rig(0.3);
     let mut frames = packed(&run_frames(&cfg, 10, 0.02));
-    // Block 4 re-framed (valid CRC) with a codec format this build does not know.
-    let fr = tribo_wire::frame::decode_one::<DeviceMsg>(&frames[5]).unwrap();
+    // Block 4 re-framed (valid CRC) with a codec format this build does not know (frame 6: after
+    // the header and the range the run starts on).
+    let fr = tribo_wire::frame::decode_one::<DeviceMsg>(&frames[6]).unwrap();
     let DeviceMsg::Packed(mut p) = fr.msg else {
-        panic!("frame 5 is block 4")
+        panic!("frame 6 is block 4")
     };
     p.data[0] = 9;
-    frames[5] = encode_vec(fr.seq, &DeviceMsg::Packed(p)).unwrap();
+    frames[6] = encode_vec(fr.seq, &DeviceMsg::Packed(p)).unwrap();
     let run = record(d.path(), &cfg, &frames, |_| {});
     assert_eq!(run.missing_blocks(), vec![4]);
     assert_eq!(run.undecodable_records(), 1);
@@ -716,7 +749,12 @@ fn completeness_says_exactly_what_is_missing() {
         c.summary()
     );
     let r = without(&|m| matches!(m, DeviceMsg::EcrRange(_)));
-    assert_eq!(r.completeness().event_holes, vec![10]);
+    assert_eq!(r.completeness().event_holes, vec![0, 10]);
+    assert!(!r.is_complete());
+    // The range the run starts on alone: every block agrees with the first one's range, yet the
+    // run is not whole (the soak caught a lossy line losing just that frame).
+    let r = without(&|m| matches!(m, DeviceMsg::EcrRange(e) if e.first_sample == 0));
+    assert_eq!(r.completeness().event_holes, vec![0]);
     assert!(!r.is_complete());
 }
 

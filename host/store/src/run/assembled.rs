@@ -167,6 +167,14 @@ impl Assembled {
     /// the run's end brings them.)
     pub(super) fn event_holes(&self) -> Vec<u32> {
         let mut holes = vec![];
+        // A packed run (protocol v2) opens with the range its first sample was converted on: a
+        // change at sample 0, sent right after the header. Without it, the first range is a guess
+        // (the soak caught a lossy line that lost it while every block agreed with the guess).
+        if self.packed && !self.ecr_changes.contains_key(&0) {
+            if let Some(&first) = self.blocks.keys().next() {
+                holes.push(first);
+            }
+        }
         let mut prev: Option<&SampleBlock> = None;
         let first_range = self.blocks.get(&0).map(|b| b.ecr_range);
         let mut assumed: Option<(u32, u8)> = None;
