@@ -267,3 +267,44 @@ fn the_apparatus_run_is_recorded_fitted_reported_and_replayed() {
         );
     }
 }
+
+/// A second host on a busy rig is told the rig serves one host at a time and that nothing was
+/// sent or recorded (it was told "lost the link … `tribo pull` fetches the rest").
+#[test]
+fn a_second_host_on_a_busy_rig_is_told_why_and_that_nothing_was_recorded() {
+    use std::io::{BufRead, BufReader};
+    let rig = RigProcess::start(1.0);
+    let dir = tempfile::tempdir().unwrap();
+    let mut first = Command::new(TRIBO)
+        .args(["run", "--port", &rig.addr, "--load", "0.1"])
+        .arg("--store")
+        .arg(dir.path().join("a"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(first.stderr.take().unwrap());
+    let mut line = String::new();
+    while err.read_line(&mut line).unwrap() > 0 && !line.contains("recording run") {
+        line.clear();
+    }
+    let out = tribo(
+        &["run", "--quiet", "--port", &rig.addr, "--load", "0.3"],
+        &dir.path().join("b"),
+    );
+    let msg = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{msg}");
+    assert!(
+        msg.contains("one host at a time") && msg.contains("nothing was recorded"),
+        "{msg}"
+    );
+    assert!(!msg.contains("fetches the rest"), "{msg}");
+    assert!(
+        !dir.path().join("b").join("catalog.sqlite").exists() || {
+            std::fs::read_dir(dir.path().join("b"))
+                .unwrap()
+                .all(|e| !e.unwrap().path().is_dir())
+        }
+    );
+    let _ = first.wait();
+}

@@ -88,7 +88,16 @@ impl LinkArgs {
             ),
             (Err(e), _) => return Err(e.into()),
         };
-        let info = link.hello()?;
+        let info = match link.hello() {
+            Ok(i) => i,
+            // Closed before it said hello: a rig serving another host turns a second one away.
+            Err(e) if e.kind == LinkErrorKind::Closed => bail!(
+                "the rig on {port} closed the connection before answering: it serves one host at a \
+                 time, so another `tribo` is probably connected to it (wait for it, or stop it); \
+                 nothing was sent to the rig and nothing was recorded"
+            ),
+            Err(e) => return Err(e.into()),
+        };
         Ok((link, info))
     }
 
