@@ -88,6 +88,12 @@ fn a_refused_pull_between_runs_puts_no_block_of_another_run_into_the_next() {
         })
         .collect();
     assert_eq!(ids, [1, 2, 3], "run numbers go on when the load knob turns");
+    // `tribo table --json`: the two loads, the 0.3 N cell from A and the victim.
+    let o = tribo(&["table", "--json"], &store);
+    assert!(o.status.success());
+    let t: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(t["cols"], serde_json::json!([0.1, 0.3]), "{t}");
+    assert_eq!(t["cells"][0][1]["n"], 2, "{t}");
     let serial = |p: &Path| meta(p)["device"]["serial"].as_str().unwrap().to_string();
     assert_eq!(serial(&a), serial(&v));
     // The victim's host fit is the rig's own result, within their σ.
@@ -111,6 +117,15 @@ fn each_virtual_rig_has_its_own_serial() {
     let (sa, sb) = (a.info().serial, b.info().serial);
     assert_ne!(sa, sb);
     assert_eq!(sa >> 24, 0x74_7269_626f, "{sa:016x}");
+    // `tribo status --json`: one object, the same serial.
+    let o = Command::new(TRIBO)
+        .args(["status", "--json", "--port", &a.addr])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["serial"], format!("{sa:016x}"), "{j}");
+    assert!(j["status"]["state"].is_string(), "{j}");
 }
 
 /// A store that cannot be written (a file in the way) is refused before anything is sent to the

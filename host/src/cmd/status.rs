@@ -9,6 +9,10 @@ use tribo_wire::{Control, RigState, Status};
 pub struct Args {
     #[command(flatten)]
     pub link: LinkArgs,
+    /// Print one JSON object: `{"port", "firmware", "serial", "status": {…the rig's Status…},
+    /// "boot_message"}`.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The rig's state as a lab technician reads it.
@@ -88,6 +92,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (mut link, info) = args.link.connect()?;
     let s = link.status()?;
     let boot = link.boot_report().map(|b| b.message.as_str().to_owned());
+    if args.json {
+        crate::out::print_json(serde_json::json!({
+            "port": link.name(),
+            "firmware": firmware_version(&info),
+            "serial": format!("{:016x}", info.serial),
+            "status": s,
+            "boot_message": boot,
+        }))?;
+        return Ok(());
+    }
     let mut text = format!(
         "rig on {}: firmware {}, serial {:016x}\n",
         link.name(),

@@ -24,6 +24,10 @@ pub struct Args {
     /// Only this campaign's runs.
     #[arg(long)]
     pub campaign: Option<String>,
+    /// Print one JSON object: `{"value", "rows": [..], "cols": [..], "row_axis", "col_axis",
+    /// "cells": [[{"mean", "sd", "n"} | null, ..], ..]}`.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Runs the subcommand.
@@ -48,6 +52,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..Default::default()
         },
     )?;
+    if args.json {
+        let axis = |a: Axis| match a {
+            Axis::Load => "load_n",
+            Axis::Temp => "temp_c",
+        };
+        let cells: Vec<Vec<serde_json::Value>> = t
+            .cells
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .map(|c| match c {
+                        Some(c) => serde_json::json!({ "mean": c.mean, "sd": c.sd, "n": c.n }),
+                        None => serde_json::Value::Null,
+                    })
+                    .collect()
+            })
+            .collect();
+        crate::out::print_json(serde_json::json!({
+            "value": args.value,
+            "row_axis": axis(t.row_axis),
+            "col_axis": axis(t.col_axis),
+            "rows": t.rows,
+            "cols": t.cols,
+            "cells": cells,
+        }))?;
+        return Ok(());
+    }
     if t.rows.is_empty() {
         outln!(
             "no complete run with a {} value in {}: nothing to tabulate",
