@@ -208,6 +208,10 @@ struct State {
     sv_hold: f64,
     /// The two previous velocity counts (for the second difference).
     v_prev: (i32, i32),
+    /// A velocity sample that jumps from the previous one by more than this many counts is a
+    /// speckle dropout of the vibrometer (the motion changes by at most ω·Δt·ω·x0 a sample, under
+    /// 9 % of the release speed at 2 kS/s): the previous count stands in for it.
+    spike_counts: i32,
     /// Σ (second difference of the velocity counts)² and its number of terms.
     d2_sum: i64,
     d2_n: u32,
@@ -319,6 +323,16 @@ impl Pipeline {
             detector: ReversalDetector::new(f32::MAX),
             sv_hold: MIN_NOISE_COUNTS,
             v_prev: (0, 0),
+            spike_counts: {
+                // A quarter of the release speed ω·x0, in counts (at least one count).
+                let g = cal[Channel::Velocity as usize].gain.abs() as f64;
+                let c = if g > 0.0 {
+                    0.25 * omega * x0 / g
+                } else {
+                    f64::MAX
+                };
+                c.clamp(1.0, i32::MAX as f64) as i32
+            },
             d2_sum: 0,
             d2_n: 0,
             vsq_sum: 0,
@@ -480,6 +494,13 @@ impl Pipeline {
         if cx == 0 || cx == ADC_MAX || cv == 0 || cv == ADC_MAX {
             self.st.saturated = self.st.saturated.saturating_add(1);
         }
+        // A speckle dropout: the previous velocity count stands in for it (never for the first
+        // sample, which has no previous one).
+        let cv = if self.st.n > 0 && (cv as i32 - self.st.v_prev.0).abs() > self.st.spike_counts {
+            self.st.v_prev.0.clamp(0, u16::MAX as i32) as u16
+        } else {
+            cv
+        };
         let idx = self.st.n;
         self.st.n = self.st.n.saturating_add(1);
         if idx == 0 {

@@ -371,6 +371,33 @@ mod tests {
         );
     }
 
+    /// Speckle dropouts of the vibrometer (single-sample spikes in the velocity, up to full scale,
+    /// ten a second) do not stop the pipeline: it read "no oscillation" on every such record.
+    #[test]
+    fn speckle_dropouts_are_stood_in_for() {
+        let rec = exact_record(0.3, 0.02, 0.01, 10_000.0, 2.0);
+        let plain = analyse(&rec).unwrap();
+        let mut spiky = rec.clone();
+        let vmax = rec.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (k, i) in (500..spiky.len()).step_by(1_000).enumerate() {
+            spiky.v[i] = if k % 2 == 0 {
+                1.04 * vmax
+            } else {
+                -1.04 * vmax
+            };
+        }
+        let r = analyse(&spiky).unwrap();
+        assert_eq!(r.verdict, crate::wire::Verdict::Ok, "{r:?}");
+        assert!(
+            (r.best.mu0 - plain.best.mu0).abs() < 2e-4,
+            "{r:?} vs {plain:?}"
+        );
+        assert!(
+            (r.best.mu1 - plain.best.mu1).abs() < 2e-4,
+            "{r:?} vs {plain:?}"
+        );
+    }
+
     #[test]
     fn irregular_sampling_is_an_error_not_a_panic() {
         let mut rec = exact_record(0.2, 0.02, 0.005, 10_000.0, 0.5);
