@@ -308,31 +308,32 @@ pub fn apply_rig_flags(
         (None, Some(v)) => (v, Source::Record),
         (None, None) => (default, Source::Default),
     };
+    // What the file gave: all three, or some (the flags complete them).
+    let given: [Option<f64>; 3] = match rec.rig {
+        Some(r) => [Some(r.mass_kg), Some(r.stiffness_n_per_m), Some(r.load_n)],
+        None => rec.rig_partial,
+    };
     if rec.rig.is_none() && !flags.any() {
+        let missing: Vec<&str> = ["--mass-kg", "--stiffness", "--load-n"]
+            .iter()
+            .zip(given)
+            .filter(|(_, v)| v.is_none())
+            .map(|(f, _)| *f)
+            .collect();
         anyhow::bail!(
-            "the record has no rig constants: add `# mass_kg=…`, `# stiffness_n_per_m=…`, `# load_n=…` \
-             lines to it, or pass --mass-kg, --stiffness and --load-n"
+            "the record's rig constants are incomplete or absent: add `# mass_kg=…`, \
+             `# stiffness_n_per_m=…`, `# load_n=…` lines to it, or pass {}",
+            missing.join(", ")
         );
     }
-    let r = rec.rig;
-    let (m, mf) = pick(
-        flags.mass_kg,
-        r.map(|r| r.mass_kg),
-        Rig::REAL.mass_kg,
-        "mass_kg",
-    );
+    let (m, mf) = pick(flags.mass_kg, given[0], Rig::REAL.mass_kg, "mass_kg");
     let (k, kf) = pick(
         flags.stiffness_n_per_m,
-        r.map(|r| r.stiffness_n_per_m),
+        given[1],
         Rig::REAL.stiffness_n_per_m,
         "stiffness_n_per_m",
     );
-    let (n, nf) = pick(
-        flags.load_n,
-        r.map(|r| r.load_n),
-        Rig::REAL.load_n,
-        "load_n",
-    );
+    let (n, nf) = pick(flags.load_n, given[2], Rig::REAL.load_n, "load_n");
     rec.rig = Some(Rig::new(m, k, n)?);
     Ok(RigUsed {
         mass_kg: m,

@@ -345,3 +345,32 @@ fn at_five_times_the_default_noise_fit_explain_and_onboard_agree() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A record that gives some rig constants and not others is completed by the flags (it was refused
+/// as it was read, flags or not); without the flags the error names what is missing.
+#[test]
+fn rig_flags_complete_a_record_that_lacks_a_constant() {
+    let dir = std::env::temp_dir().join(format!("tribo-cli-fit-partial-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let rec = dir.join("rec.csv");
+    let rec_s = rec.to_str().unwrap();
+    sim_coulomb_viscous(rec_s, &["--load-n", "0.3", "--noise"]);
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let without: String = text
+        .lines()
+        .filter(|l| !l.starts_with("# load_n"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&rec, without).unwrap();
+    let out = tribo(&["fit", rec_s]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--load-n") && !err.contains("--mass-kg"), "{err}");
+    let out = tribo(&["fit", rec_s, "--load-n", "0.3", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["rig"]["mass_kg_from"], "record", "{v}");
+    assert_eq!(v["rig"]["load_n_from"], "flag", "{v}");
+    assert_eq!(v["verdict"], "adequate", "{v}");
+    std::fs::remove_dir_all(&dir).ok();
+}

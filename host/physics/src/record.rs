@@ -53,6 +53,9 @@ pub struct Record {
     /// then holds a token load ([`Record::apparatus_token_load`]) so that the dimensionless form
     /// exists: a viscous law's μ1 does not depend on it.
     pub apparatus: bool,
+    /// Rig constants a file gave when it did not give all three (`mass_kg`, `stiffness_n_per_m`,
+    /// `load_n`, in that order): `rig` is then `None`, and the command line completes them.
+    pub rig_partial: [Option<f64>; 3],
 }
 
 /// What kind of problem a [`RecordError`] is.
@@ -172,6 +175,7 @@ impl Record {
             units,
             force_cutoff_hz: None,
             apparatus: false,
+            rig_partial: [None; 3],
         }
     }
 
@@ -195,10 +199,25 @@ impl Record {
         match self.units {
             Units::Dimensionless => Ok(Rig::UNIT),
             Units::Si => self.rig.ok_or_else(|| {
-                RecordError::invalid(
-                    "record has no rig constants: add `# mass_kg=…`, `# stiffness_n_per_m=…`, \
-                     `# load_n=…` comment lines or pass them on the command line",
-                )
+                let missing: Vec<&str> = ["mass_kg", "stiffness_n_per_m", "load_n"]
+                    .iter()
+                    .zip(self.rig_partial)
+                    .filter(|(_, v)| v.is_none())
+                    .map(|(k, _)| *k)
+                    .collect();
+                if missing.len() < 3 {
+                    RecordError::invalid(format!(
+                        "incomplete rig constants: {} missing (add `# {}=…` to the record, or pass \
+                         it on the command line)",
+                        missing.join(", "),
+                        missing[0]
+                    ))
+                } else {
+                    RecordError::invalid(
+                        "record has no rig constants: add `# mass_kg=…`, `# stiffness_n_per_m=…`, \
+                         `# load_n=…` comment lines or pass them on the command line",
+                    )
+                }
             }),
         }
     }
@@ -442,19 +461,9 @@ impl Record {
                     Some(Rig::new(m, k, token).map_err(RecordError::Rig)?)
                 }
                 [Some(m), Some(k), Some(n)] => Some(Rig::new(m, k, n).map_err(RecordError::Rig)?),
-                [None, None, None] => None,
-                _ => {
-                    let missing: Vec<&str> = ["mass_kg", "stiffness_n_per_m", "load_n"]
-                        .iter()
-                        .zip(rig_vals)
-                        .filter(|(_, v)| v.is_none())
-                        .map(|(k, _)| *k)
-                        .collect();
-                    return err(format!(
-                        "incomplete rig constants: {} missing (give all of mass_kg, stiffness_n_per_m, load_n)",
-                        missing.join(", ")
-                    ));
-                }
+                // Some given, some not: kept for the command line to complete
+                // (`rig_partial`); without it, `Record::rig` says which are missing.
+                _ => None,
             };
             let (ift, itemp, iecr) = (find("ft_n"), find("temp_c"), find("ecr_ohm"));
             Record {
@@ -468,6 +477,7 @@ impl Record {
                 units: Units::Si,
                 force_cutoff_hz,
                 apparatus,
+                rig_partial: if rig.is_none() { rig_vals } else { [None; 3] },
             }
         } else if let (Some(it), Some(iy), Some(iv)) = (find("tau"), find("y"), find("ydot")) {
             Record::new(

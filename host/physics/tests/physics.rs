@@ -337,12 +337,24 @@ fn record_csv_round_trip_and_clear_errors() {
         ("t_s,x_m,v_m_s\n0,1,0\n1,2\n", "truncated"),
         ("a,b,c\n0,1,0\n", "unknown header"),
         ("", "no header"),
-        ("# mass_kg=0.04\nt_s,x_m,v_m_s\n0,1,0\n", "incomplete rig"),
         ("t_s,x_m,v_m_s\n0,1,0\n", "too short"),
     ] {
         let e = Record::from_csv_str(bad).unwrap_err().to_string();
         assert!(e.contains(needle), "{bad:?}: {e}");
     }
+    // Some rig constants and not others: read, kept for the command line to complete, and the
+    // record says which are missing when asked for its rig.
+    let mut partial = String::from("# mass_kg=0.04\nt_s,x_m,v_m_s\n");
+    for i in 0..10 {
+        partial.push_str(&format!("{},1,0\n", i as f64 * 1e-4));
+    }
+    let rec = Record::from_csv_str(&partial).unwrap();
+    assert_eq!(rec.rig_partial, [Some(0.04), None, None]);
+    let e = rec.rig().unwrap_err().to_string();
+    assert!(
+        e.contains("incomplete rig constants: stiffness_n_per_m, load_n missing"),
+        "{e}"
+    );
 }
 
 #[test]
