@@ -365,9 +365,16 @@ fn rig_flags_complete_a_record_that_lacks_a_constant() {
     let out = tribo(&["fit", rec_s]);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("--load-n") && !err.contains("--mass-kg"), "{err}");
+    assert!(
+        err.contains("--load-n") && !err.contains("--mass-kg"),
+        "{err}"
+    );
     let out = tribo(&["fit", rec_s, "--load-n", "0.3", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["rig"]["mass_kg_from"], "record", "{v}");
     assert_eq!(v["rig"]["load_n_from"], "flag", "{v}");
