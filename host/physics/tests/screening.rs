@@ -111,3 +111,31 @@ fn what_cannot_be_analysed_is_refused_with_its_reason() {
         }
     }
 }
+
+/// The fit's screening leaves a few clipped peaks out (`screen_with(…, true)`), but a channel stuck
+/// at its rail in one long stretch is still refused: only the runs it leaves out are excused.
+#[test]
+fn leaving_clipped_peaks_out_does_not_excuse_a_channel_stuck_at_its_rail() {
+    use tribo_physics::identify::screen_with;
+    let good = record(0.3, FrictionLaw::coulomb_viscous(0.02, 0.01), 3, 2e-5);
+    let mut stuck = good.clone();
+    let vmax = good.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    // 5 ms (a seventh of a cycle) stuck at the velocity channel's top while the pin moves.
+    for v in &mut stuck.v[3000..3050] {
+        *v = 1.01 * vmax;
+    }
+    let (t, y, v) = stuck.dimensionless().unwrap();
+    for allow in [false, true] {
+        assert!(
+            matches!(
+                screen_with(&t, &y, &v, allow),
+                Err(NotAnalysable::Saturated {
+                    channel: "velocity",
+                    ..
+                })
+            ),
+            "allow_clipped {allow}: {:?}",
+            screen_with(&t, &y, &v, allow)
+        );
+    }
+}

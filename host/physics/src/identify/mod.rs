@@ -72,8 +72,9 @@ pub struct FitOptions {
     pub apparatus_mu1: f64,
     /// Starting point (parameters of the law); `None` = fast estimators.
     pub start: Option<Vec<f64>>,
-    /// Also fit the initial amplitude (the first sample is as noisy as any other; windowed fits
-    /// do so too).
+    /// Also fit the initial amplitude (the first sample is as noisy as any other). Windowed fits
+    /// start each window from its first sample as measured (thesis Tables 6–7) and do not; that
+    /// sample's noise is then added to the constants' covariance instead.
     pub fit_initial_amplitude: bool,
 }
 
@@ -307,11 +308,7 @@ impl EnvelopeData {
                 "need ≥ 8 samples of τ, y, y' (got {n})"
             )));
         }
-        let mut span = motion_span(tau, y, ydot);
-        if span.start > 0 {
-            span = motion_span_from(tau, y, ydot, 0);
-        }
-        Self::over(tau, y, ydot, &span, max_points)
+        Self::over(tau, y, ydot, &motion_span_from(tau, y, ydot, 0), max_points)
     }
 
     /// From dimensionless samples over `span` (τ shifted to start at 0 at its first sample),

@@ -190,22 +190,28 @@ pub fn screen_with(
     // A long run: a fortieth of a cycle (9 samples at the rig's 10 kHz), at least 6.
     let dtau = (tau[n - 1] - tau[0]) / (n - 1) as f64;
     let long = ((2.0 * PI / dtau / 40.0).ceil() as usize).max(6);
-    let few_clipped = allow_clipped && {
-        let c = clipped(y, ydot);
-        (c.iter().filter(|&&b| b).count() as f64) <= MAX_CLIPPED_FRACTION * n as f64
+    // A few clipped peaks (at most MAX_CLIPPED_FRACTION of the samples) are left out by the fit:
+    // their runs do not count here. Any other flat run at a rail still does.
+    let clip = if allow_clipped {
+        clipped(y, ydot)
+    } else {
+        vec![false; n]
     };
-    if few_clipped {
-        // Left out by the fit; the rest of the screening holds.
-    } else if let Some((sample, samples)) = saturated(&flat_extreme_runs(y, moving), long) {
+    let masked = (clip.iter().filter(|&&b| b).count() as f64) <= MAX_CLIPPED_FRACTION * n as f64;
+    let unmasked = |runs: Vec<(usize, usize)>| -> Vec<(usize, usize)> {
+        runs.into_iter()
+            .filter(|r| !(masked && clip[r.0]))
+            .collect()
+    };
+    if let Some((sample, samples)) = saturated(&unmasked(flat_extreme_runs(y, moving)), long) {
         return Err(NotAnalysable::Saturated {
             channel: "displacement",
             sample,
             samples,
         });
     }
-    if few_clipped {
-    } else if let Some((sample, samples)) =
-        saturated(&flat_extreme_runs(ydot, |i| ydot[i] != 0.0), long)
+    if let Some((sample, samples)) =
+        saturated(&unmasked(flat_extreme_runs(ydot, |i| ydot[i] != 0.0)), long)
     {
         return Err(NotAnalysable::Saturated {
             channel: "velocity",

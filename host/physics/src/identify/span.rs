@@ -116,9 +116,10 @@ fn run_index(n: usize, run: usize, rev: bool, hit: impl Fn(usize) -> bool) -> Op
 /// record in which nothing leaves the noise spans the whole record (the screening refuses it).
 pub fn motion_span(tau: &[f64], y: &[f64], ydot: &[f64]) -> MotionSpan {
     let n = tau.len().min(y.len()).min(ydot.len());
+    let noise_y = noise_sigma(&y[..n]).unwrap_or(0.0);
     let noise_ydot = noise_sigma(&ydot[..n]).unwrap_or(0.0);
     if n < 16 {
-        return motion_span_from(tau, y, ydot, 0);
+        return span_from(tau, y, ydot, 0, (noise_y, noise_ydot));
     }
     let vmax = {
         // The largest |y'| not made by a spike: the largest over runs of SPAN_RUN samples of their
@@ -146,14 +147,28 @@ pub fn motion_span(tau: &[f64], y: &[f64], ydot: &[f64]) -> MotionSpan {
         }
         _ => 0,
     };
-    motion_span_from(tau, y, ydot, start)
+    span_from(tau, y, ydot, start, (noise_y, noise_ydot))
 }
 
 /// [`motion_span`] with the release at sample `start` (given, not searched).
 pub fn motion_span_from(tau: &[f64], y: &[f64], ydot: &[f64], start: usize) -> MotionSpan {
     let n = tau.len().min(y.len()).min(ydot.len());
-    let noise_y = noise_sigma(&y[..n]).unwrap_or(0.0);
-    let noise_ydot = noise_sigma(&ydot[..n]).unwrap_or(0.0);
+    let noise = (
+        noise_sigma(&y[..n]).unwrap_or(0.0),
+        noise_sigma(&ydot[..n]).unwrap_or(0.0),
+    );
+    span_from(tau, y, ydot, start, noise)
+}
+
+/// The span from `start` to where the motion sinks into the noise, given the noise of y and y'.
+fn span_from(
+    tau: &[f64],
+    y: &[f64],
+    ydot: &[f64],
+    start: usize,
+    (noise_y, noise_ydot): (f64, f64),
+) -> MotionSpan {
+    let n = tau.len().min(y.len()).min(ydot.len());
     let start = start.min(n.saturating_sub(1));
     let a_start = if n > 0 {
         y[start].hypot(ydot[start])

@@ -45,10 +45,10 @@ pub fn fit_windows(
 
 /// Splits the motion (from the release, [`motion_span`], until the envelope falls below 2 % of its
 /// start) into `windows` parts of equal amplitude drop and fits `spec` on each. Each window's
-/// simulation starts from the window's first sample with its amplitude fitted as a constant (that
-/// sample is as noisy as any other: held to it, the window's constants would carry its error
-/// without their ± knowing). Constants that drift from window to window beyond their ± mean the
-/// law misses something. The motion is [`screen`]ed first; the windows are not (each may hold only
+/// simulation starts from the window's first sample as measured (thesis Tables 6–7); that sample
+/// is as noisy as any other, and its noise, which moves every constant of the window together, is
+/// in their ± ([`fit_envelope`]). Constants that drift from window to window beyond their ± mean
+/// the law misses something. The motion is [`screen`]ed first; the windows are not (each may hold only
 /// a few half cycles).
 pub fn windowed_fits(
     tau: &[f64],
