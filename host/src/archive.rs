@@ -62,11 +62,7 @@ pub fn host_fit(run: &Run) -> Result<HostFit, HostFitError> {
     let rec = run.record().map_err(HostFitError::Samples)?;
     rec.validate().map_err(HostFitError::Record)?;
     // The apparatus alone (load 0): its damping μ_a (viscous; stored as μ1), no Coulomb level.
-    let spec = if rec.apparatus {
-        tribo_physics::LawSpec::Viscous
-    } else {
-        tribo_physics::LawSpec::CoulombViscous
-    };
+    let spec = tribo_physics::identify::law_for(&rec, tribo_physics::LawSpec::CoulombViscous);
     let r = fit(&rec, spec, &FitOptions::default()).map_err(HostFitError::Fit)?;
     let fitted = |j: usize| spec.powers().contains(&j);
     let mu = |v: &[f64], j: usize| {

@@ -129,12 +129,14 @@ impl CrossCheck {
         if host.law != LawSpec::CoulombViscous {
             return None;
         }
-        let verdict = match host.verdict.as_deref() {
-            Some("adequate") => Some(FitVerdict::Adequate),
-            Some("inadequate") => Some(FitVerdict::Inadequate),
-            Some("not-converged") => Some(FitVerdict::NotConverged),
-            _ => None,
-        };
+        // Stored by its name (`FitVerdict::name`).
+        let verdict = [
+            FitVerdict::Adequate,
+            FitVerdict::Inadequate,
+            FitVerdict::NotConverged,
+        ]
+        .into_iter()
+        .find(|v| host.verdict.as_deref() == Some(v.name()));
         Self::of_values(
             [host.mu0, host.mu1],
             [host.mu0_se, host.mu1_se],

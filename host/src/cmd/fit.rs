@@ -131,18 +131,15 @@ fn run_inner(a: Args) -> Result<()> {
         ..FitOptions::default()
     };
     // The apparatus alone (load 0): no friction law, only the blades' damping μ_a (viscous).
-    let spec = if rec.apparatus {
-        if spec != LawSpec::CoulombViscous && spec != LawSpec::Viscous {
-            eprintln!(
-                "note: {} is the apparatus alone (load 0): it has no friction law; its damping is \
-                 fitted (viscous) instead of {spec}",
-                a.record.display()
-            );
-        }
-        LawSpec::Viscous
-    } else {
-        spec
-    };
+    let fitted = tribo_physics::identify::law_for(&rec, spec);
+    if fitted != spec && spec != LawSpec::CoulombViscous {
+        eprintln!(
+            "note: {} is the apparatus alone (load 0): it has no friction law; its damping is \
+             fitted ({fitted}) instead of {spec}",
+            a.record.display()
+        );
+    }
+    let spec = fitted;
     let r = match fit(&rec, spec, &opts) {
         Ok(r) => r,
         Err(FitError::NotAnalysable(why)) => {
@@ -165,11 +162,8 @@ fn run_inner(a: Args) -> Result<()> {
         }
         Err(e) => return Err(e).with_context(|| format!("{}", a.record.display())),
     };
-    let check = if rec.apparatus {
-        Ok(None)
-    } else {
-        cross_check(&a.record, &rec, &r)
-    };
+    // `Ok(None)` for a law the rig does not fit (the apparatus run's viscous one included).
+    let check = cross_check(&a.record, &rec, &r);
     let windows = if a.windows > 0 {
         fit_windows(&rec, spec, a.windows, &opts)?
     } else {

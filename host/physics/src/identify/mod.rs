@@ -396,6 +396,16 @@ pub fn scaled_envelope(
         .collect())
 }
 
+/// The law a record can be fitted with when `asked` is: the apparatus alone (load 0,
+/// [`Record::apparatus`]) has no friction law, only the blades' damping (viscous).
+pub fn law_for(rec: &Record, asked: LawSpec) -> LawSpec {
+    if rec.apparatus {
+        LawSpec::Viscous
+    } else {
+        asked
+    }
+}
+
 /// Fits `spec` to an SI or dimensionless record (its rig constants must be known), after
 /// [`screen`]ing it.
 pub fn fit(rec: &Record, spec: LawSpec, opts: &FitOptions) -> Result<FitResult, FitError> {
