@@ -103,7 +103,7 @@ fn the_fit_holds_at_every_bench_noise_level() {
 #[test]
 fn a_hold_before_and_a_rest_after_change_nothing() {
     let mut cases = grid(5..6, 0.0, 0.0);
-    cases.retain(|c| c.noise.name == "x15" && c.contact.name == "cv-0.02" && c.rig_name == "35Hz");
+    cases.retain(|c| c.noise.name == "x15" && c.contact.name == "cv-0.02" && c.rig_name == "45Hz");
     let c = &cases[0];
     let plain = c.record.make().unwrap();
     let mut long = c.record.clone();
@@ -143,7 +143,7 @@ fn speckle_dropouts_are_left_out_not_fitted() {
         cases.retain(|c| {
             c.noise.name == "x5"
                 && c.contact.name == "cv-0.02"
-                && c.rig_name == "35Hz"
+                && c.rig_name == "45Hz"
                 && c.record.rate_hz == 10_000.0
         });
         let mut br = cases[0].record.clone();
@@ -168,7 +168,7 @@ fn a_few_clipped_peaks_are_left_out_and_many_refused() {
     cases.retain(|c| {
         c.noise.name == "x5"
             && c.contact.name == "cv-0.02"
-            && c.rig_name == "35Hz"
+            && c.rig_name == "45Hz"
             && c.record.rate_hz == 10_000.0
     });
     let base = cases[0].record.clone();
