@@ -61,6 +61,21 @@ pub struct Diagnostics {
     pub temp_slope_c_per_s: Option<f64>,
     /// Temperature change over the record (°C).
     pub temp_change_c: Option<f64>,
+    /// Scatter of the temperature about its trend: RMS of the segment means (each
+    /// [`crate::model::THERMAL_SEGMENT`] of τ) about the fitted line (°C).
+    pub temp_scatter_c: Option<f64>,
+}
+
+impl Diagnostics {
+    /// Whether the temperature column moves over the motion: a change more than five times its
+    /// scatter about the trend. Only then can the record show thermal drift beyond what the
+    /// envelope alone says.
+    pub fn temperature_moves(&self) -> bool {
+        match (self.temp_change_c, self.temp_scatter_c) {
+            (Some(d), Some(s)) => d.is_finite() && s.is_finite() && d.abs() > 5.0 * s && d != 0.0,
+            _ => false,
+        }
+    }
 }
 
 /// Computes the diagnostics of `base` on `data`.
@@ -177,6 +192,19 @@ pub fn diagnose(data: &Prepared, base: &FittedModel, law: LawSpec) -> Diagnostic
         }
         None => (None, None),
     };
+    let temp_scatter_c = match (data.temp, data.temp_seg.as_ref()) {
+        (Some((t0, slope)), Some(seg)) if !seg.is_empty() => {
+            let seg_len = crate::model::THERMAL_SEGMENT;
+            let ss: f64 = seg
+                .iter()
+                .enumerate()
+                .map(|(k, v)| v - (t0 + slope * (k as f64 + 0.5) * seg_len))
+                .map(|r| r * r)
+                .sum();
+            Some((ss / seg.len() as f64).sqrt())
+        }
+        _ => None,
+    };
 
     Diagnostics {
         residual_by_amplitude,
@@ -190,6 +218,7 @@ pub fn diagnose(data: &Prepared, base: &FittedModel, law: LawSpec) -> Diagnostic
         dissipation_ratio,
         temp_slope_c_per_s,
         temp_change_c,
+        temp_scatter_c,
     }
 }
 

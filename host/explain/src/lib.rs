@@ -20,7 +20,9 @@
 //!   noise floor, so that a systematic misfit from outside the vocabulary is not partly soaked up
 //!   by a wrong name; and beat the runner-up by a likelihood ratio of e⁵ (evidence margin 10).
 //!
-//! The best candidate is added and the search repeats. When nothing more qualifies and the misfit
+//! The best candidate is added and the search repeats. Once the model is at the noise floor, only an
+//! effect another channel points to is still tried: thermal drift, when the temperature column
+//! moves over the motion ([`diag::Diagnostics::temperature_moves`]). When nothing more qualifies and the misfit
 //! is still above 1.5 × the noise floor in some channel, the answer is "unexplained: N % of the gap
 //! remains; not one of the known effects" — never a name the evidence does not support.
 //!
@@ -198,15 +200,21 @@ pub fn explain_with_progress(
     let mut rounds = Vec::new();
     let mut ambiguous = Vec::new();
     for round in 0..opts.max_steps {
-        if cur.adequate(&data) && round > 0 {
-            break;
-        }
+        // Once the model is at the noise floor, the envelope and the force have nothing left to
+        // point at: an effect is still tried only where another channel points to it (thermal
+        // drift when the temperature column moves over the motion), and it must still pass the
+        // same tests. A second velocity term fitted to a misfit below the noise is not a finding.
+        let settled = round > 0 && cur.adequate(&data);
         let todo: Vec<Effect> = opts
             .candidates
             .iter()
             .copied()
             .filter(|&e| cur.spec.can_add(e, data.has_force(), data.has_temp()))
+            .filter(|&e| !settled || (e == Effect::ThermalDrift && diagnostics.temperature_moves()))
             .collect();
+        if todo.is_empty() {
+            break;
+        }
         let mut scored: Vec<(Effect, Option<(FittedModel, Evidence)>)> = Vec::new();
         for (i, &e) in todo.iter().enumerate() {
             progress(
