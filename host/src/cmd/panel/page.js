@@ -67,7 +67,7 @@ function onState(s) {
   $("lease").textContent = st ? st.lease : "—";
   $("magnet").textContent = st ? (st.magnet_on ? "on (holding the pin)" : "off") : "—";
   $("fault").textContent = st ? (st.heater_fault ? st.heater_fault + "; " : "") + (st.last_fault || "none since boot") : "—";
-  $("reset").textContent = st ? st.reset + (s.boot ? " (" + s.boot + ")" : "") : "—";
+  $("reset").textContent = st ? ((s.boot && s.boot !== st.reset) ? s.boot : st.reset) : "—";
   $("uptime").textContent = st ? st.uptime : "—";
   if (st) {
     $("plate").textContent = fmt(st.temp_c, 1) + " °C" + (st.setpoint_c !== null ? " → " + fmt(st.setpoint_c, 1) + " °C" : ", heater off");
@@ -142,16 +142,16 @@ function canvas(id) {
 }
 
 function axes(g, x0, x1, y0, y1, unit) {
-  const { ctx, w, h } = g, L = 48, B = 16;
+  const { ctx, w, h } = g, L = 48, B = 16, T = 14;
   const X = (x) => L + (x - x0) / (x1 - x0 || 1) * (w - L - 6);
-  const Y = (y) => h - B - (y - y0) / (y1 - y0 || 1) * (h - B - 6);
+  const Y = (y) => h - B - (y - y0) / (y1 - y0 || 1) * (h - B - T);
   ctx.strokeStyle = "#ccc"; ctx.fillStyle = "#6b7280"; ctx.font = "10px system-ui"; ctx.lineWidth = 1;
   for (let k = 0; k <= 4; k++) {
     const y = y0 + (y1 - y0) * k / 4;
     ctx.beginPath(); ctx.moveTo(L, Y(y)); ctx.lineTo(w - 6, Y(y)); ctx.stroke();
     ctx.fillText(y.toPrecision(3), 2, Y(y) + 3);
   }
-  ctx.fillText(unit, 2, 10);
+  ctx.fillText(unit, L, 10);
   for (let k = 0; k <= 5; k++) { const x = x0 + (x1 - x0) * k / 5; ctx.fillText(x.toFixed(1) + " s", X(x) - 10, h - 3); }
   return { X, Y };
 }

@@ -281,6 +281,8 @@ impl RigThread {
             match p {
                 Progress::Started { header, dir } => {
                     s.trace = Some(Trace::new(header, dir));
+                    // No status polls while the run streams: its frames say where it is.
+                    s.run_state(tribo_wire::RigState::Running);
                 }
                 Progress::Block {
                     block,
@@ -306,6 +308,7 @@ impl RigThread {
                     if let Some(t) = s.trace.as_mut() {
                         t.ended = Some(format!("{:?}", e.reason));
                     }
+                    s.run_state(tribo_wire::RigState::Finished);
                 }
                 Progress::Warning(w) => s.say(false, format!("warning: {w}")),
                 _ => {}

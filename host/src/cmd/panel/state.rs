@@ -265,6 +265,14 @@ impl Shared {
         self.status
     }
 
+    /// The rig's state as a run's frames tell it (no status is polled while a run streams).
+    pub fn run_state(&mut self, state: tribo_wire::RigState) {
+        if let Some(s) = self.status.as_mut() {
+            s.state = state;
+            s.magnet_on = false;
+        }
+    }
+
     pub fn settle_reset(&mut self) {
         self.settled_since = None;
     }
