@@ -372,7 +372,9 @@ fn a_run_from_the_page_gives_what_the_cli_gives_and_faults_show() {
     page.post("/window", json!({ "handle": first }));
 
     // The run, from the controlling page.
+    // At 20 kS/s, the rig's fastest rate, with every channel: the page must keep up.
     page.fill("load", "0.3");
+    page.fill("rate", "20000");
     page.click("configure");
     page.wait_text("message", "configured", Duration::from_secs(5));
     page.click("arm");
@@ -425,6 +427,23 @@ fn a_run_from_the_page_gives_what_the_cli_gives_and_faults_show() {
     ] {
         assert!(line.contains(&five(k)), "{k} {} not in {line:?}", five(k));
     }
+    // Every block reached the page (drawn decimated, none dropped), and drawing kept the page
+    // responsive.
+    let stats = page.js(
+        "return [run.blocks.size, panelStats.frames, panelStats.maxDrawMs, panelStats.totalDrawMs]",
+    );
+    assert_eq!(stats[0], r["blocks"], "{stats} {r}");
+    let (frames, max_ms, total_ms) = (
+        stats[1].as_f64().unwrap(),
+        stats[2].as_f64().unwrap(),
+        stats[3].as_f64().unwrap(),
+    );
+    eprintln!(
+        "20 kS/s × 5 channels: {} blocks on the page; {frames} redraws, {:.1} ms on average, {max_ms:.1} ms at most",
+        stats[0],
+        total_ms / frames
+    );
+    assert!(max_ms < 250.0, "a redraw took {max_ms} ms");
     let mu = page.text("mu");
     assert!(mu.contains(&five("host_mu0")), "{mu}");
     // The rig's own μ0 is the one it was simulated with.

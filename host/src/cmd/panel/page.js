@@ -222,14 +222,19 @@ function drawChannel(id, k, scale, unit, envelope) {
   }
 }
 
+// How long drawing takes (read by the browser tests): the page must stay responsive.
+window.panelStats = { frames: 0, maxDrawMs: 0, totalDrawMs: 0 };
 function draw() {
   if (dirty) {
     dirty = false;
+    const t0 = performance.now();
     drawPlate();
     drawChannel("c-x", 0, 1e6, "µm", true);
     drawChannel("c-v", 1, 1e3, "mm/s", false);
     drawChannel("c-f", 2, 1e3, "mN", false);
     drawChannel("c-ecr", 3, 1, "V", false);
+    const ms = performance.now() - t0;
+    panelStats.frames++; panelStats.totalDrawMs += ms; panelStats.maxDrawMs = Math.max(panelStats.maxDrawMs, ms);
   }
   requestAnimationFrame(draw);
 }
