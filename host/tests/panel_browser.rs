@@ -388,7 +388,7 @@ fn a_run_from_the_page_gives_what_the_cli_gives_and_faults_show() {
             .flatten()
     };
     let b1 = page.wait("the trace growing", Duration::from_secs(10), |p| {
-        blocks(p).filter(|b| *b >= 40)
+        blocks(p).filter(|b| *b >= 400)
     });
     page.screenshot(&figures_dir().join("panel-mid-run.png"));
     let b2 = page.wait("the trace growing more", Duration::from_secs(5), |p| {
