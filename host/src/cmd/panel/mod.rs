@@ -42,19 +42,24 @@ const CONTROL_STALE: Duration = Duration::from_secs(3);
 /// Arguments of `tribo panel`.
 #[derive(clap::Args, Debug)]
 #[command(after_help = "Examples:
-  tribo panel                                   the only attached rig (or tcp://127.0.0.1:7411), page on http://127.0.0.1:7420/
-  tribo panel --port tcp://127.0.0.1:7411       a virtual rig (`tribo rig --virtual` in another terminal)
-  tribo panel --listen 0.0.0.0:7420 --token S   served to the lab network: open http://THIS-PC:7420/?token=S
+  tribo panel
+      the only attached rig (else tcp://127.0.0.1:7411); the page on http://127.0.0.1:7420/
+  tribo panel --port tcp://127.0.0.1:7411 --listen 127.0.0.1:0
+      a virtual rig (`tribo rig --virtual` in another terminal); the page on a free port
+  tribo panel --listen 0.0.0.0:7420 --token S
+      served to the lab network: open http://THIS-PC:7420/?token=S
 
 The page shows the rig (connected, serial, state, lease, last fault and reset), the plate's
-temperature against its setpoint (\"settled\" within the settling tolerance for the settling time),
-the run as it is recorded (displacement with its envelope, velocity, force, ECR; lost blocks and
-acquisition gaps shaded), the result (on-board and host fit, as `tribo run` prints it, and a link to
-the run's report) and the campaign grid of the store (host μ0 per load × temperature, as `tribo
+temperature against its setpoint (\"settled\" within the settling tolerance for the settling
+time), the run as it is recorded (displacement with its envelope, velocity, force, ECR; lost blocks
+and acquisition gaps shaded), the result (on-board and host fit, as `tribo run` prints it, and a
+link to the run's report) and the store's campaign grid (host μ0 per load × temperature, as `tribo
 table`). Its controls (heater, configure, arm, release) go to the rig as `tribo run` sends them;
 one page controls, the others view; Safe works from every page. Runs are stored as `tribo run`
-stores them. Closing the panel (Ctrl-C) makes the rig safe; a killed panel leaves it to the rig's
-lease.")]
+stores them. GET /api/state gives the page's state as JSON, for scripts.
+
+Closing the panel (Ctrl-C: exit status 130) makes the rig safe; a killed panel leaves it to the
+rig's lease, which expires within 3 s.")]
 pub struct Args {
     #[command(flatten)]
     pub link: LinkArgs,
