@@ -381,21 +381,21 @@ fn a_run_from_the_page_gives_what_the_cli_gives_and_faults_show() {
     page.wait_text("state", "armed", Duration::from_secs(5));
     page.click("release");
     // The trace grows while the rig streams.
-    let blocks = |p: &Session| -> Option<u64> {
+    let blocks = |p: &Session| -> Option<(u64, bool)> {
         let t = p.text("trace-info");
-        t.contains("recording")
-            .then(|| t.split(": ").nth(1)?.split(' ').next()?.parse().ok())
-            .flatten()
+        let n = t.split(": ").nth(1)?.split(' ').next()?.parse().ok()?;
+        Some((n, t.contains("recording")))
     };
-    let b1 = page.wait("the trace growing", Duration::from_secs(10), |p| {
-        blocks(p).filter(|b| *b >= 400)
+    let (b1, arm_disabled) = page.wait("the trace growing", Duration::from_secs(10), |p| {
+        let b = blocks(p).filter(|(b, live)| *b >= 400 && *live)?.0;
+        Some((b, p.disabled("arm")))
     });
+    assert!(arm_disabled, "no control while recording");
     page.screenshot(&figures_dir().join("panel-mid-run.png"));
-    let b2 = page.wait("the trace growing more", Duration::from_secs(5), |p| {
-        blocks(p).filter(|b| *b > b1 + 20)
+    let b2 = page.wait("the trace growing more", Duration::from_secs(10), |p| {
+        blocks(p).map(|(b, _)| b).filter(|b| *b > b1 + 20)
     });
     assert!(b2 > b1);
-    assert!(page.disabled("arm"), "no control while recording");
     // The result, as the CLI gives it for the same stored run.
     let table = page.wait_text("result-table", "host fit", Duration::from_secs(30));
     page.wait("the report's link", Duration::from_secs(30), |p| {

@@ -298,7 +298,15 @@ impl Shared {
 
     pub fn status(&mut self, s: Status, fault: Option<String>) {
         let t = self.started.elapsed().as_secs_f64();
-        self.temps.push_back((t, s.temp_c, s.heater_setpoint_c));
+        // One point a second in the history (the newest is always the latest reading): what the
+        // pages are sent a few times a second stays small.
+        let n = self.temps.len();
+        let point = (t, s.temp_c, s.heater_setpoint_c);
+        if n >= 2 && t - self.temps[n - 2].0 < 1.0 {
+            self.temps[n - 1] = point;
+        } else {
+            self.temps.push_back(point);
+        }
         while self
             .temps
             .front()
@@ -386,7 +394,7 @@ impl Shared {
         let temps: Vec<Value> = self
             .temps
             .iter()
-            .map(|(t, c, sp)| json!([t - t_now, num(*c as f64), sp]))
+            .map(|(t, c, sp)| json!([((t - t_now) * 10.0).round() / 10.0, num(*c as f64), sp]))
             .collect();
         let control = match (&self.controller, client) {
             (None, _) => "free",
