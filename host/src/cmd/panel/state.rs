@@ -262,6 +262,10 @@ impl Shared {
     }
 
     pub fn connected(&mut self, port: String, serial: String, fw: String, boot: Option<String>) {
+        self.say(
+            true,
+            format!("connected to the rig on {port} (serial {serial})"),
+        );
         self.connected = true;
         self.port = Some(port);
         self.serial = Some(serial);
