@@ -5,6 +5,7 @@ pub mod devices;
 pub mod explain;
 pub mod fit;
 pub mod onboard;
+pub mod panel;
 pub mod pull;
 pub mod replay;
 pub mod report;

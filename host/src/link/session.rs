@@ -205,24 +205,46 @@ pub fn record_run(
     if plan.button {
         obs(Progress::WaitingForButton);
     } else {
-        // The acquisition may need a moment after arming: retry an interlock refusal briefly.
-        let t0 = Instant::now();
-        loop {
-            match link.command(HostMsg::Release) {
-                Ok(()) => break,
-                Err(e)
-                    if matches!(e.code, Some(ErrorCode::Interlock(Interlock::NotSampling)))
-                        && t0.elapsed() < Duration::from_secs(3) =>
-                {
-                    std::thread::sleep(Duration::from_millis(50));
-                }
-                Err(e) => {
-                    let _ = link.command(HostMsg::Disarm);
-                    return Err(e.into());
-                }
+        release(link)?;
+    }
+    stream_run(link, info, store, plan, previous_run, abort, obs)
+}
+
+/// Releases the armed pin: `Release`, retrying briefly while the acquisition starts after arming
+/// (the rig refuses with `NotSampling` until it samples). Any other refusal disarms the rig and is
+/// returned: the rig's own rule, in words.
+pub fn release(link: &mut Link) -> Result<(), LinkError> {
+    let t0 = Instant::now();
+    loop {
+        match link.command(HostMsg::Release) {
+            Ok(()) => return Ok(()),
+            Err(e)
+                if matches!(e.code, Some(ErrorCode::Interlock(Interlock::NotSampling)))
+                    && t0.elapsed() < Duration::from_secs(3) =>
+            {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            Err(e) => {
+                let _ = link.command(HostMsg::Disarm);
+                return Err(e);
             }
         }
     }
+}
+
+/// After the release (or while waiting for the button): streams the run into a new run folder
+/// under `store`, completes it with `Pull` if frames were lost, then fits and catalogs it.
+/// `previous_run` is the rig's run id before arming (frames of that run still on their way are
+/// not this run's). [`record_run`] is configure, heat, arm, [`release`], then this.
+pub fn stream_run(
+    link: &mut Link,
+    info: &DeviceInfo,
+    store: &Path,
+    plan: &RunPlan,
+    previous_run: u32,
+    abort: &AtomicBool,
+    obs: &mut dyn FnMut(Progress<'_>),
+) -> anyhow::Result<Outcome> {
     let port = link.name().to_string();
     let mut make = |h: &RunHeader| -> anyhow::Result<RunWriter> {
         let mut meta = RunMeta::new(h.config);

@@ -21,6 +21,11 @@ pub struct RigProcess {
 
 impl RigProcess {
     pub fn start(speed: f64) -> RigProcess {
+        RigProcess::start_with(speed, &[])
+    }
+
+    /// [`RigProcess::start`] with more `tribo rig` flags (`--mu0 0.003`…).
+    pub fn start_with(speed: f64, extra: &[&str]) -> RigProcess {
         let mut child = Command::new(TRIBO)
             .args([
                 "rig",
@@ -30,6 +35,7 @@ impl RigProcess {
                 "--speed",
                 &speed.to_string(),
             ])
+            .args(extra)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -92,6 +98,12 @@ impl RigProcess {
         {
             self.seen.push(l);
         }
+    }
+
+    /// Kills the rig's process (`kill -9`: the cable pulled, the rig gone).
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 
     pub fn console(&self) -> String {

@@ -25,6 +25,7 @@
 
 mod elf;
 mod memory;
+mod panel;
 mod qemu;
 mod windows;
 
@@ -203,6 +204,7 @@ fn ci() -> Result<(), String> {
         "warnings",
     ]))?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
+    panel::browser_tests()?;
     firmware(&[])?;
     firmware(&["--clippy".to_string()])?;
     target_test(&[])?;
