@@ -371,7 +371,7 @@ pub fn judge_rate(r: &ConverterReport) -> (f64, f64, bool) {
     let dt_s = r.last_us.saturating_sub(r.first_us) as f64 * 1e-6;
     let got = r.last_index.saturating_sub(r.first_index) as f64;
     let nominal = r.clock.rate_hz();
-    if dt_s <= 0.0 || !(nominal > 0.0) {
+    if dt_s <= 0.0 || nominal.is_nan() || nominal <= 0.0 {
         return (0.0, f64::NAN, false);
     }
     let expected = nominal * dt_s;
