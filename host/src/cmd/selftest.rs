@@ -330,7 +330,7 @@ fn throughput(link: &mut Link) -> anyhow::Result<Row> {
 
 /// A deliberate panic or stall, then the boot report after the reboot: the link it came on, the
 /// row.
-fn deliberate(mut link: Link, d: Deliberate) -> (Option<Link>, Row) {
+fn deliberate(mut link: Link, d: Deliberate, again: &LinkArgs) -> (Option<Link>, Row) {
     let (name, check) = match d {
         Deliberate::Panic => ("reset-record", SelfTestCheck::Panic),
         Deliberate::Stall => ("watchdog", SelfTestCheck::Stall),
@@ -342,8 +342,7 @@ fn deliberate(mut link: Link, d: Deliberate) -> (Option<Link>, Row) {
         return (Some(link), Row::failed(name, why));
     }
     let t0 = Instant::now();
-    let port = link.name().to_string();
-    match await_boot(link, &port, Duration::from_secs(20)) {
+    match await_boot(link, again, Duration::from_secs(20)) {
         Ok((link, boot)) => {
             let secs = t0.elapsed().as_secs_f64();
             let verdict = judge_reset(d, &boot);
@@ -370,14 +369,11 @@ fn deliberate(mut link: Link, d: Deliberate) -> (Option<Link>, Row) {
 }
 
 /// Says hello until the rig answers with a boot report (its first hello after the reset),
-/// reopening the port when the reset took it away (a USB rig enumerates again).
-fn await_boot(link: Link, port: &str, wait: Duration) -> anyhow::Result<(Link, BootReport)> {
+/// reopening the port as `again` names it (or finds it) when the reset took it away (a USB rig
+/// enumerates again; the port is closed meanwhile, so the system gives it its name back).
+fn await_boot(link: Link, again: &LinkArgs, wait: Duration) -> anyhow::Result<(Link, BootReport)> {
     let deadline = Instant::now() + wait;
     let mut link = Some(link);
-    let again = LinkArgs {
-        port: Address::parse(port).ok(),
-        store: None,
-    };
     let mut last_err = String::from("no answer");
     while Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(200));
@@ -482,6 +478,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Err(e) => rows.push(Row::failed("link-throughput", format!("{e:#}"))),
     }
     if !args.no_reset {
+        // After a reset: the port the rig was found on (a virtual rig's address, a serial port
+        // named or found), or found again as the first time when it was not named.
+        let again = if link.name().starts_with("tcp://") {
+            LinkArgs {
+                port: Address::parse(link.name()).ok(),
+                store: None,
+            }
+        } else {
+            args.link.clone()
+        };
         let mut link = Some(link);
         for d in [Deliberate::Panic, Deliberate::Stall] {
             let Some(l) = link.take() else {
@@ -496,7 +502,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 ));
                 continue;
             };
-            let (l, row) = deliberate(l, d);
+            let (l, row) = deliberate(l, d, &again);
             link = l;
             rows.push(row);
         }
