@@ -263,7 +263,8 @@ impl VirtualArgs {
 #[command(after_help = "Examples:
   tribo rig --virtual                        listen on tcp://127.0.0.1:7411
   tribo run --port tcp://127.0.0.1:7411 --load 0.3      (in another terminal)
-  tribo rig --virtual --listen 127.0.0.1:0 --speed 10 --mu0 0.015")]
+  tribo rig --virtual --listen 127.0.0.1:0 --speed 10 --mu0 0.015
+  tribo rig --virtual --fault stuck:v        a converter input stuck: `tribo selftest` names it")]
 pub struct Args {
     /// Run the virtual rig (the only kind this command can start).
     #[arg(long = "virtual")]
