@@ -21,7 +21,7 @@ use tribo_wire::{
 #[derive(clap::Args, Debug)]
 #[command(
     after_help = "Rows (the README's \"Bring-up on a NUCLEO-H743ZI\" says what to check when one fails):
-  sample-rate         samples the ADC delivered (by DMA index) against the rig's crystal time base, ppm
+  sample-rate         samples the ADC delivered (DMA index) against the crystal time base, ppm
   input-displacement  each analog input on open (or quiet) inputs: not at a rail, not one code
   input-velocity        (pins PA3, PC0, PB1, PF11)
   input-force
