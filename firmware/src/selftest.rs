@@ -28,8 +28,9 @@ const _: () = assert!(SELFTEST_CHANNELS == ANALOG_CHANNELS);
 pub const CONVERTER_MS: core::ops::RangeInclusive<u32> = 100..=60_000;
 /// Largest slice of the flash one check programs (one sector at most).
 pub const FLASH_MAX_BYTES: u32 = 128 * 1024;
-/// Bytes a flash check reads back per poll (bounds a poll's work).
-const READ_PER_POLL: usize = 1024;
+/// Bytes a flash check reads back and compares per poll (bounds a poll's work: ~5k instructions
+/// on the M7, `cargo xtask target-test app::selftest_checks`).
+const READ_PER_POLL: usize = 512;
 
 /// Samples per chunk read from the converter.
 const CHUNK: usize = 32;
