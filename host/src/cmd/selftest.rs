@@ -13,8 +13,8 @@ use tribo_firmware::selftest::{
     MIN_THROUGHPUT_BYTES_S, RATE_TOLERANCE_PPM,
 };
 use tribo_wire::{
-    filler_byte, BootReport, Channel, Configure, ConverterReport, DeviceMsg, ErrorCode,
-    FlashReport, HostMsg, SelfTestCheck, SelfTestReport, FILLER_MAX,
+    filler_byte, BootReport, Channel, Configure, ConverterReport, DeviceError, DeviceMsg,
+    ErrorCode, FlashReport, HostMsg, SelfTestCheck, SelfTestReport, FILLER_MAX,
 };
 
 /// Arguments of `tribo selftest`.
@@ -224,14 +224,38 @@ fn refusal(e: &LinkError) -> anyhow::Error {
     }
 }
 
+/// Whether the rig answered a frame it could not decode since the last command: a firmware
+/// older than the self-test answers its command so (without the command's sequence number).
+fn saw_malformed(link: &mut Link) -> bool {
+    let mut seen = false;
+    while let Ok(Some(f)) = link.next(Duration::from_millis(50)) {
+        seen |= matches!(
+            f.frame.msg,
+            DeviceMsg::Error(DeviceError {
+                code: ErrorCode::Malformed,
+                ..
+            })
+        );
+    }
+    seen
+}
+
 /// Sends a check and waits for its report.
 fn measure(
     link: &mut Link,
     check: SelfTestCheck,
     wait: Duration,
 ) -> anyhow::Result<SelfTestReport> {
-    link.command(HostMsg::SelfTest(check))
-        .map_err(|e| refusal(&e))?;
+    if let Err(e) = link.command(HostMsg::SelfTest(check)) {
+        if e.kind == LinkErrorKind::NoAnswer && saw_malformed(link) {
+            let old = LinkError {
+                code: Some(ErrorCode::Malformed),
+                ..e
+            };
+            return Err(refusal(&old));
+        }
+        return Err(refusal(&e));
+    }
     let deadline = Instant::now() + wait;
     while let Some(left) = deadline.checked_duration_since(Instant::now()) {
         match link.next(left)? {
