@@ -214,7 +214,8 @@ fn refusal(e: &LinkError) -> anyhow::Error {
     match e.code {
         Some(ErrorCode::Malformed) => anyhow::anyhow!(
             "the rig's firmware does not know the self-test (it is older than this tribo): flash the \
-             current firmware (`cargo xtask firmware --run`) and run `tribo selftest` again"
+             current firmware (the README's \"Bring-up on a NUCLEO-H743ZI\" says how) and run \
+             `tribo selftest` again"
         ),
         Some(ErrorCode::Busy) => anyhow::anyhow!(
             "the rig is busy (armed, running a run, still writing its last run to flash, or its \
