@@ -166,6 +166,11 @@ pub trait RunFlash {
     fn flash_read(&mut self, offset: u32, out: &mut [u8]) -> bool;
     /// Whether the last finished erase or program failed (reading it clears it).
     fn flash_take_error(&mut self) -> bool;
+    /// The flash controller's status and error flags raised since the last call (reading them
+    /// clears them), for the self-test; `None` where there is no such controller (a model).
+    fn flash_take_flags(&mut self) -> Option<u32> {
+        None
+    }
 }
 
 /// A monotonic clock, microseconds.

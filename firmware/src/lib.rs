@@ -29,5 +29,6 @@ pub mod lease;
 pub mod link_tx;
 pub mod reset;
 pub mod safety;
+pub mod selftest;
 pub mod thermocouple;
 pub mod watchdog;

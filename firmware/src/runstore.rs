@@ -160,6 +160,21 @@ impl<'a> RunStore<'a> {
         self.writer.state
     }
 
+    /// A sector of flash `g` that the held run's flash copy does not occupy and that the next
+    /// run reaches last (the sector before the copy's first; the last sector when no run is
+    /// held), for the self-test to erase and program; `None` when the copy fills every sector.
+    pub fn spare_sector(&self, g: FlashGeometry) -> Option<u32> {
+        if g.sectors == 0 {
+            return None;
+        }
+        if self.writer.geometry != g {
+            // No copy in this flash: the next run starts at sector 0.
+            return Some(g.sectors - 1);
+        }
+        let used = self.writer.sectors_used().max(self.writer.erased);
+        (used < g.sectors).then(|| (self.writer.start + g.sectors - 1) % g.sectors)
+    }
+
     /// The header frame, if a run is held.
     pub fn header(&self) -> Option<&[u8]> {
         (!self.header.is_empty()).then_some(&self.header[..])

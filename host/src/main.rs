@@ -30,6 +30,8 @@ enum Command {
     Run(tribo::cmd::run::Args),
     /// The rig's state, temperature, last fault and last reset cause.
     Status(tribo::cmd::status::Args),
+    /// Bring-up self-test: the rig measures its converter, flash, link, reset record and watchdog.
+    Selftest(tribo::cmd::selftest::Args),
     /// Fetch the rig's last run (or complete a stored one), resuming after the last good block.
     Pull(tribo::cmd::pull::Args),
     /// A series of runs over loads × temperatures × repetitions from PLAN.toml, resumable.
@@ -92,6 +94,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Devices(a) => tribo::cmd::devices::run(a),
         Command::Run(a) => tribo::cmd::run::run(tribo::cmd::run::Args { quiet, ..a }),
         Command::Status(a) => tribo::cmd::status::run(a),
+        Command::Selftest(a) => tribo::cmd::selftest::run(a),
         Command::Pull(a) => tribo::cmd::pull::run(tribo::cmd::pull::Args { quiet, ..a }),
         Command::Campaign(a) => {
             tribo::cmd::campaign::run(tribo::cmd::campaign::Args { quiet, ..a })

@@ -90,6 +90,7 @@ impl App<'_> {
                 }
             }
             HostMsg::Heartbeat => Ok(()),
+            HostMsg::SelfTest(check) => self.start_selftest(hw, check),
             HostMsg::Safe => {
                 info!("safe (host)");
                 self.make_safe(hw);
@@ -146,6 +147,8 @@ impl App<'_> {
             Some(p) => p.reset(&cfg).is_ok(),
             None => false,
         };
+        // A self-test check of the converter or the flash gives way to the run.
+        self.selftest = None;
         hw.adc_stop();
         // A converter that does not start is caught by the release interlock (NotSampling).
         self.clock = hw.adc_start(cfg.sample_rate_hz);

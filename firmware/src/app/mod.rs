@@ -215,6 +215,11 @@ pub struct App<'a> {
     last_setpoint: Option<HeaterSetpoint>,
     /// The current press of the button already counted as a long press.
     long_press_done: bool,
+    // ---- self-test ----
+    /// The self-test check under way, if any.
+    selftest: Option<selftest::SelfTestRun>,
+    /// A deliberate panic or stall the board must carry out (the application never panics).
+    deliberate: Option<crate::selftest::Deliberate>,
 }
 
 macro_rules! info {
@@ -229,6 +234,7 @@ mod faults;
 mod frames;
 mod run_end;
 mod sampling;
+mod selftest;
 
 impl<'a> App<'a> {
     pub fn new(cfg: AppConfig, store: RunStore<'a>) -> Self {
@@ -273,6 +279,8 @@ impl<'a> App<'a> {
             reset_cause: ResetCause::Unknown,
             last_setpoint: None,
             long_press_done: false,
+            selftest: None,
+            deliberate: None,
         }
     }
 
@@ -514,6 +522,7 @@ impl<'a> App<'a> {
                 self.analyse_step();
             }
         }
+        self.selftest_step(hw);
         let lamps = self.lamps(now);
         hw.set_lamps(lamps);
     }

@@ -17,12 +17,13 @@ pub mod sim;
 pub use config::{AcquisitionFaults, EcrModel, Noise, ThermalModel, VirtualRigConfig};
 pub use error::RigError;
 pub use serve::{in_process, serve, HostEvent, ServeOptions, TcpRig};
-pub use sim::{ConverterFault, HeaterStage, SimHardware};
+pub use sim::{ChannelFault, ConverterFault, HeaterStage, SimHardware};
 
 use std::io::{self, Write};
 use tribo_firmware::app::{App, AppConfig};
 use tribo_firmware::reset::{self, Record, ResetFlags};
 use tribo_firmware::runstore::{RunStore, BOARD_RING_BYTES, MAX_RUN_BLOCKS};
+use tribo_firmware::selftest::Deliberate;
 use tribo_firmware::watchdog::{self, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
 use tribo_wire::{limits, BootReport, Decoder, Frame, HostMsg, ResetCause};
 
@@ -214,6 +215,24 @@ impl VirtualRig {
         self.journal_commands(bytes);
         let now = self.now_us;
         self.guarded(|app, hw| app.on_bytes(hw, bytes, now));
+        self.deliberate();
+    }
+
+    /// What the board's application task does when the self-test asks for a deliberate panic or
+    /// stall (after the command's `Ack`): the panic comes from the next hardware call, the stall
+    /// is the thermocouple task's, which the watchdog must catch.
+    fn deliberate(&mut self) {
+        match self.app.take_deliberate() {
+            Some(Deliberate::Panic) => self.inject_panic(tribo_wire::DELIBERATE_PANIC),
+            Some(Deliberate::Stall) => self.stall_task(Task::Thermocouple),
+            None => {}
+        }
+    }
+
+    /// Makes an analog channel of the converter misbehave (or heals it with `None`); the fault
+    /// is in the front end, so it outlasts the MCU's resets.
+    pub fn set_channel_fault(&mut self, channel: usize, fault: Option<ChannelFault>) {
+        self.hw.set_channel_fault(channel, fault);
     }
 
     /// Bytes for the host produced so far.
@@ -374,6 +393,7 @@ impl VirtualRig {
                 HostMsg::Release => "host: release".into(),
                 HostMsg::Abort => "host: abort".into(),
                 HostMsg::Safe => "host: safe (heater and magnet off)".into(),
+                HostMsg::SelfTest(check) => format!("host: self-test {check:?}"),
                 HostMsg::Status
                 | HostMsg::Heartbeat
                 | HostMsg::Pull { .. }

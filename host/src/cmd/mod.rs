@@ -12,6 +12,7 @@ pub mod report;
 pub mod rig;
 pub mod run;
 pub mod runs;
+pub mod selftest;
 pub mod sim;
 pub mod status;
 pub mod table;

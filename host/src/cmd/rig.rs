@@ -10,7 +10,7 @@ use std::net::TcpListener;
 use std::path::PathBuf;
 use std::time::Duration;
 use tribo_physics::FrictionLaw;
-use tribo_rig::{HostEvent, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
+use tribo_rig::{ChannelFault, HostEvent, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
 
 /// The simulated rig, from a TOML file and/or flags (flags win).
 #[derive(clap::Args, Debug, Clone)]
@@ -57,6 +57,12 @@ pub struct VirtualArgs {
     /// Device seconds per wall-clock second (`inf`: as fast as the simulation goes).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
+    /// Break an analog input of the simulated converter, to see `tribo selftest` (or a run)
+    /// catch it: `stuck:CH` (the channel reads one code, mid-scale, or `stuck:CH=CODE`) or
+    /// `dead:CH` (its front end dead: the bottom rail, code 0). CH: x (displacement), v
+    /// (velocity), f (force), ecr. Repeat the flag for several.
+    #[arg(long = "fault", value_name = "FAULT", value_parser = parse_fault)]
+    pub faults: Vec<(usize, ChannelFault)>,
     /// Print the rig's console (state-changing commands, faults, resets) on standard output.
     #[arg(skip)]
     pub log_events: bool,
@@ -77,9 +83,38 @@ impl Default for VirtualArgs {
             fixed_load: false,
             button_after: None,
             speed: 1.0,
+            faults: Vec::new(),
             log_events: false,
         }
     }
+}
+
+/// A `--fault` value: `stuck:CH[=CODE]` or `dead:CH`, CH one of x, v, f, ecr (or their names).
+pub fn parse_fault(s: &str) -> Result<(usize, ChannelFault), String> {
+    let usage =
+        "expected stuck:CH, stuck:CH=CODE or dead:CH, CH one of x, v, f, ecr (e.g. stuck:x)";
+    let (kind, rest) = s.split_once(':').ok_or_else(|| format!("{s:?}: {usage}"))?;
+    let (ch, code) = match rest.split_once('=') {
+        Some((c, code)) => (c, Some(code)),
+        None => (rest, None),
+    };
+    let channel = match ch {
+        "x" | "displacement" => 0,
+        "v" | "velocity" => 1,
+        "f" | "force" => 2,
+        "ecr" => 3,
+        _ => return Err(format!("{s:?}: no channel {ch:?}; {usage}")),
+    };
+    let fault = match (kind, code) {
+        ("stuck", None) => ChannelFault::Stuck(32_768),
+        ("stuck", Some(c)) => ChannelFault::Stuck(
+            c.parse()
+                .map_err(|_| format!("{s:?}: the code must be a count 0–65535"))?,
+        ),
+        ("dead", None) => ChannelFault::Dead,
+        _ => return Err(format!("{s:?}: {usage}")),
+    };
+    Ok((channel, fault))
 }
 
 /// A serial number for a virtual rig: `tribo` in ASCII, then 24 bits from the clock and the
@@ -182,7 +217,10 @@ impl VirtualArgs {
     pub fn build(&self) -> anyhow::Result<(VirtualRig, ServeOptions)> {
         let cfg = self.rig_config()?;
         let opts = self.serve_options()?;
-        let rig = VirtualRig::new(cfg).context("virtual rig")?;
+        let mut rig = VirtualRig::new(cfg).context("virtual rig")?;
+        for &(channel, fault) in &self.faults {
+            rig.set_channel_fault(channel, Some(fault));
+        }
         Ok((rig, opts))
     }
 
@@ -225,7 +263,8 @@ impl VirtualArgs {
 #[command(after_help = "Examples:
   tribo rig --virtual                        listen on tcp://127.0.0.1:7411
   tribo run --port tcp://127.0.0.1:7411 --load 0.3      (in another terminal)
-  tribo rig --virtual --listen 127.0.0.1:0 --speed 10 --mu0 0.015")]
+  tribo rig --virtual --listen 127.0.0.1:0 --speed 10 --mu0 0.015
+  tribo rig --virtual --fault stuck:v        a converter input stuck: `tribo selftest` names it")]
 pub struct Args {
     /// Run the virtual rig (the only kind this command can start).
     #[arg(long = "virtual")]
@@ -244,8 +283,13 @@ pub struct Args {
 
 /// The rig's settings, one line.
 fn describe(cfg: &VirtualRigConfig, a: &VirtualArgs) -> String {
+    let faults: String = a
+        .faults
+        .iter()
+        .map(|(c, f)| format!(", input {} {f:?}", ["x", "v", "f", "ecr"][*c]))
+        .collect();
     format!(
-        "m = {} kg, k = {} N/m, load {} N{}, contact {}, apparatus μ1 {}, seed {}, speed ×{}",
+        "m = {} kg, k = {} N/m, load {} N{}, contact {}, apparatus μ1 {}, seed {}, speed ×{}{faults}",
         cfg.mass_kg,
         cfg.stiffness_n_per_m,
         cfg.load_n,

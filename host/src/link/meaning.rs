@@ -194,6 +194,7 @@ pub(super) fn command_name(m: &HostMsg) -> &'static str {
         HostMsg::Heartbeat => "heartbeat",
         HostMsg::Safe => "safe",
         HostMsg::PullBlocks { .. } => "pull-blocks",
+        HostMsg::SelfTest(_) => "self-test",
     }
 }
 

@@ -356,6 +356,11 @@ impl Link {
         self.boot.as_ref()
     }
 
+    /// Takes the boot report kept from a hello (the next hello that brings one sets it again).
+    pub fn take_boot_report(&mut self) -> Option<BootReport> {
+        self.boot.take()
+    }
+
     /// Faults the rig reported on this link so far, oldest first.
     pub fn faults(&self) -> &[FaultReport] {
         &self.faults
@@ -487,7 +492,8 @@ impl Link {
     /// when no answer comes; `Arm` and `Release` are not. Frames that are not the answer are kept
     /// for [`Link::next`].
     pub fn command(&mut self, msg: HostMsg) -> Result<(), LinkError> {
-        let retry = !matches!(msg, HostMsg::Arm | HostMsg::Release);
+        // A self-test check is not sent twice either: it acts (a panic, a stall, an erase).
+        let retry = !matches!(msg, HostMsg::Arm | HostMsg::Release | HostMsg::SelfTest(_));
         let attempts = if retry {
             self.timeouts.attempts.max(1)
         } else {

@@ -27,6 +27,8 @@ pub(super) struct FlashLink {
     /// An operation was asked and is not finished.
     pub(super) busy: AtomicBool,
     pub(super) failed: AtomicBool,
+    /// FLASH_SR2 as each operation left it, OR-ed, since the self-test last took them.
+    pub(super) flags: AtomicU32,
 }
 
 impl RunFlash for BoardHw {
@@ -100,6 +102,9 @@ impl RunFlash for BoardHw {
     fn flash_take_error(&mut self) -> bool {
         self.flash.failed.swap(false, Ordering::AcqRel)
     }
+    fn flash_take_flags(&mut self) -> Option<u32> {
+        Some(self.flash.flags.swap(0, Ordering::AcqRel))
+    }
 }
 
 /// embassy-stm32 0.6's H7 flash driver around each of its calls, for bank 2 (RM0433 §4.9):
@@ -156,27 +161,39 @@ mod bank2 {
 
 const SECTOR: u32 = FlashGeometry::H743_BANK2.sector_bytes;
 
-/// Erases one sector of bank 2 with the driver, flags cleared and PSIZE ×64 around it.
-pub(super) async fn erase_sector(region: &mut Bank2Region<'static, Async>, sector: u32) -> bool {
+/// Erases one sector of bank 2 with the driver, flags cleared and PSIZE ×64 around it (what it
+/// raised is added to `flags`).
+pub(super) async fn erase_sector(
+    region: &mut Bank2Region<'static, Async>,
+    sector: u32,
+    flags: &AtomicU32,
+) -> bool {
     bank2::prepare();
     let ok = region
         .erase(sector * SECTOR, (sector + 1) * SECTOR)
         .await
         .is_ok();
-    note_flags(bank2::clear_flags(), "erase");
+    note_flags(bank2::clear_flags(), "erase", flags);
     ok
 }
 
 /// Programs `data` at `offset` of bank 2 with the driver, flags cleared around it.
-async fn program(region: &mut Bank2Region<'static, Async>, offset: u32, data: &[u8]) -> bool {
+async fn program(
+    region: &mut Bank2Region<'static, Async>,
+    offset: u32,
+    data: &[u8],
+    flags: &AtomicU32,
+) -> bool {
     bank2::prepare();
     let ok = region.write(offset, data).await.is_ok();
-    note_flags(bank2::clear_flags(), "program");
+    note_flags(bank2::clear_flags(), "program", flags);
     ok
 }
 
-/// Logs the error flags (FLASH_SR2 bits 17..=28) an operation left.
-fn note_flags(sr: u32, what: &str) {
+/// Logs the error flags (FLASH_SR2 bits 17..=28) an operation left, and keeps SR2 for the
+/// self-test (`flags`).
+fn note_flags(sr: u32, what: &str, flags: &AtomicU32) {
+    flags.fetch_or(sr, Ordering::AcqRel);
     let errors = sr & 0x1FFE_0000;
     if errors != 0 {
         defmt::warn!(
@@ -195,9 +212,9 @@ pub(super) async fn flash_task(link: &'static FlashLink) {
         let ok = {
             let mut region = link.region.lock().await;
             match op {
-                FlashOp::Erase { sector } => erase_sector(&mut region, sector).await,
+                FlashOp::Erase { sector } => erase_sector(&mut region, sector, &link.flags).await,
                 FlashOp::Program { offset, len, data } => {
-                    program(&mut region, offset, &data[..len]).await
+                    program(&mut region, offset, &data[..len], &link.flags).await
                 }
             }
         };

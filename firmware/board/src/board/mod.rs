@@ -28,7 +28,7 @@
 //! peripherals and hands them out. Beside it: `hw` ([`BoardHw`], the hardware traits on this
 //! board), `flash` (bank 2 and its task), `host_link` (the USB tasks), `clocks` (the clock tree).
 use core::cell::Cell;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use defmt_rtt as _;
 use embassy_executor::Spawner;
@@ -50,7 +50,7 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
-use embassy_time::{Duration, Instant, Ticker};
+use embassy_time::{Duration, Instant, Ticker, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use static_cell::{ConstStaticCell, StaticCell};
 use tribo_firmware::app::{App, AppConfig};
@@ -58,6 +58,7 @@ use tribo_firmware::ecr::{count_to_volts, FULL_SCALE_V};
 use tribo_firmware::hal::*;
 use tribo_firmware::reset::{self, BootRecovery};
 use tribo_firmware::runstore::RunStore;
+use tribo_firmware::selftest::Deliberate;
 
 use tribo_firmware::thermocouple::{self as tc, Registers};
 use tribo_firmware::watchdog::{task, Liveness, BOARD_TASKS, FEED_PERIOD_MS};
@@ -105,6 +106,9 @@ struct Shared {
     /// The application's first poll (the recovery of the last run from flash) is over: the
     /// watchdog may start.
     app_started: Signal<Cs, ()>,
+    /// The self-test asked for a stalled thermocouple task: it waits forever from its next round
+    /// (the watchdog must catch it).
+    stall_thermocouple: AtomicBool,
     tx: Pipe<Cs, TX_PIPE>,
     rx: Channel<Cs, heapless::Vec<u8, 64>, 8>,
 }
@@ -146,7 +150,7 @@ async fn app_task(
             sector
         );
         let mut region = hw.flash.region.lock().await;
-        if !erase_sector(&mut region, sector).await {
+        if !erase_sector(&mut region, sector, &hw.flash.flags).await {
             defmt::error!("erase of bank 2 sector {} failed", sector);
         }
         reset::note_torn_sector(&mut boot, sector);
@@ -173,10 +177,30 @@ async fn app_task(
             // The receiver's mark of a new host connection: no half frame of the previous one is
             // completed by the new host's bytes, which come after it.
             Either::First(bytes) if bytes.is_empty() => app.link_reset(),
-            Either::First(bytes) => app.on_bytes(&mut hw, &bytes, now_us()),
+            Either::First(bytes) => {
+                app.on_bytes(&mut hw, &bytes, now_us());
+                if let Some(d) = app.take_deliberate() {
+                    deliberate(shared, d).await;
+                }
+            }
             Either::Second(()) => app.poll(&mut hw, now_us()),
         }
         shared.liveness.check_in(task::APP, now_ms());
+    }
+}
+
+/// The self-test's deliberate acts, after the command's `Ack` (queued for the USB sender, which
+/// gets 10 ms to send it: well inside the app task's 50 ms allowance): a panic, which the panic
+/// handler must turn into safe outputs, a reset record and a reset; or a stalled thermocouple
+/// task, which the watchdog task must catch, name and let the IWDG reset.
+async fn deliberate(shared: &'static Shared, d: Deliberate) {
+    defmt::warn!("self-test: deliberate {}", d);
+    match d {
+        Deliberate::Panic => {
+            Timer::after_millis(10).await;
+            panic!("{}", tribo_firmware::wire::DELIBERATE_PANIC);
+        }
+        Deliberate::Stall => shared.stall_thermocouple.store(true, Ordering::Release),
     }
 }
 
@@ -242,6 +266,10 @@ async fn thermocouple_task(
     let mut last_config_ms = now_ms();
     let mut ticker = Ticker::every(Duration::from_millis(100));
     loop {
+        if shared.stall_thermocouple.load(Ordering::Acquire) {
+            // The self-test's deliberate stall: silent from here on.
+            core::future::pending::<()>().await;
+        }
         shared.liveness.check_in(task::THERMOCOUPLE, now_ms());
         // Address 0x00 (read), then the 16 registers 0x00..=0x0F.
         let mut buf = [0u8; 1 + tc::REGISTERS];
@@ -331,6 +359,7 @@ async fn main(spawner: Spawner) {
         usb_suspended: AtomicBool::new(false),
         usb_event: Signal::new(),
         app_started: Signal::new(),
+        stall_thermocouple: AtomicBool::new(false),
         tx: Pipe::new(),
         rx: Channel::new(),
     });
@@ -376,6 +405,7 @@ async fn main(spawner: Spawner) {
         op: Signal::new(),
         busy: AtomicBool::new(false),
         failed: AtomicBool::new(false),
+        flags: AtomicU32::new(0),
     });
 
     // ADC1, 16 bits, calibrated by the driver; scans of displacement PA3, velocity PC0, force PB1,

@@ -450,4 +450,5 @@ fn settle_flash(b: &mut Bench) {
 mod commands;
 mod failsafe;
 mod run;
+mod selftest;
 mod store;

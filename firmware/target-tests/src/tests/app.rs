@@ -14,6 +14,7 @@ use tribo_firmware::hal::FlashGeometry;
 use tribo_firmware::runstore::{RunStore, BOARD_RING_BYTES, MAX_RUN_BLOCKS};
 use tribo_firmware::wire::crc32::Crc32;
 use tribo_firmware::wire::frame::MAX_FRAME;
+use tribo_firmware::wire::{filler_byte, SelfTestCheck, SelfTestReport, FILLER_MAX};
 use tribo_firmware::wire::{
     Channel, Configure, Decoder, DeviceError, DeviceMsg, Encoder, EndReason, FaultReport, HostMsg,
     OnboardResult, RigState, RunEnd, RunHeader, SampleBlock, Verdict, CHANNELS, PROTOCOL_VERSION,
@@ -71,6 +72,10 @@ pub struct Host {
     pub faults: heapless::Vec<(u64, FaultReport), 8>,
     /// Time the bench read at (set before each read).
     pub now_us: u64,
+    /// The self-test's reports: the last one that is not a filler frame, and the filler frames
+    /// received whole and in order.
+    pub selftest: Option<SelfTestReport>,
+    pub fillers: u32,
 }
 
 impl Host {
@@ -122,6 +127,17 @@ impl Host {
             DeviceMsg::Fault(r) => {
                 let _ = self.faults.push((self.now_us, r));
             }
+            DeviceMsg::SelfTest(SelfTestReport::Filler { index, data }) => {
+                let whole = index == self.fillers
+                    && data
+                        .iter()
+                        .enumerate()
+                        .all(|(i, &b)| b == filler_byte(index, i));
+                if whole {
+                    self.fillers += 1;
+                }
+            }
+            DeviceMsg::SelfTest(r) => self.selftest = Some(r),
             _ => {}
         }
     }
@@ -679,4 +695,92 @@ pub fn unloaded_run(cx: &mut Cx) -> Outcome {
             stall_us: 30_000,
         },
     )
+}
+
+/// The bring-up self-test's checks between runs (`HostMsg::SelfTest`): the converter's rate and
+/// inputs, a flash sector erased, programmed, read back and erased again, and filler frames
+/// through the link; each polled to its report within the application's budgets.
+pub fn selftest_checks(cx: &mut Cx) -> Outcome {
+    let rec = record(cx, "unloaded")?;
+    let mut r0 = [0u8; BOARD_RING_BYTES[0]];
+    let mut r1 = [0u8; BOARD_RING_BYTES[1]];
+    let mut r2 = [0u8; BOARD_RING_BYTES[2]];
+    let mut r3 = [0u8; BOARD_RING_BYTES[3]];
+    let mut index = [0u32; MAX_RUN_BLOCKS];
+    let mut flash = [0xFFu8; FlashGeometry::H743_BANK2.bytes() as usize];
+    let store = RunStore::new(
+        [&mut r0[..], &mut r1[..], &mut r2[..], &mut r3[..]],
+        &mut index,
+    );
+    let mut b = Bench::new(cx, rec, store, &mut flash);
+    b.run_until(cx, 10 * POLL_US);
+    b.command(
+        cx,
+        &HostMsg::Hello {
+            protocol: PROTOCOL_VERSION,
+        },
+    )?;
+    let checks = [
+        SelfTestCheck::Converter {
+            rate_hz: 10_000,
+            ms: 200,
+        },
+        SelfTestCheck::Flash { bytes: 4096 },
+        SelfTestCheck::Throughput {
+            frames: 64,
+            len: FILLER_MAX as u16,
+        },
+    ];
+    for check in checks {
+        b.host.selftest = None;
+        b.command(cx, &HostMsg::SelfTest(check))?;
+        let limit = b.now_us + 5_000_000;
+        while b.app.selftest_running() && b.now_us < limit {
+            b.now_us += POLL_US;
+            b.poll(cx);
+        }
+        check!(!b.app.selftest_running(), "{check:?}: no report within 5 s");
+        match (check, &b.host.selftest) {
+            (SelfTestCheck::Converter { .. }, Some(SelfTestReport::Converter(r))) => {
+                let (rate, ppm, ok) = tribo_firmware::selftest::judge_rate(r);
+                check!(ok, "converter at {rate} S/s: {ppm} ppm ({r:?})");
+                check!(r.samples >= 1900, "{r:?}");
+            }
+            (SelfTestCheck::Flash { .. }, Some(SelfTestReport::Flash(r))) => {
+                check_eq!(tribo_firmware::selftest::judge_flash(r), Ok(()));
+                check_eq!((r.sector, r.bytes, r.mismatches), (7, 4096, 0));
+            }
+            (SelfTestCheck::Throughput { .. }, Some(SelfTestReport::FillerDone { frames, .. })) => {
+                check_eq!((*frames, b.host.fillers), (64, 64));
+            }
+            (c, r) => check!(false, "{c:?} answered by {r:?}"),
+        }
+    }
+    let w = b.worst;
+    let counting = cx.counting();
+    let on = |v: u64| counting.then_some(v);
+    cx.note(format_args!(
+        "self-test: worst poll at {} ms ({} polls)",
+        w.poll_at_us / 1000,
+        w.polls
+    ));
+    let r1 = cx.figure(
+        "app.selftest.worst_poll",
+        on(w.poll),
+        "instructions",
+        Some(CALL_BUDGET),
+    );
+    let r2 = cx.figure(
+        "app.selftest.worst_on_bytes",
+        on(w.on_bytes),
+        "instructions",
+        Some(CALL_BUDGET),
+    );
+    let r3 = cx.figure(
+        "app.selftest.stack_bytes",
+        on(w.stack as u64),
+        "bytes",
+        Some(STACK_BUDGET),
+    );
+    r1.and(r2).and(r3)
 }

@@ -24,6 +24,7 @@ pub const TESTS: &[Test] = &[
     test!(pipeline::noisy),
     test!(app::coulomb_viscous_run),
     test!(app::unloaded_run),
+    test!(app::selftest_checks),
     test!(failsafe::thermocouple_words),
     test!(failsafe::bad_reads_in_a_row_fault_the_heater),
     test!(failsafe::runaway_and_watch),

@@ -26,9 +26,11 @@ macro_rules! wire_type {
 mod faults;
 mod result;
 mod samples;
+mod selftest;
 pub use faults::*;
 pub use result::*;
 pub use samples::*;
+pub use selftest::*;
 
 // ---------------------------------------------------------------------------------------------------
 // Host → rig
@@ -70,6 +72,9 @@ wire_type! {
         /// Send blocks `first .. first + count` of a stored run again, and nothing else (the host
         /// asks for exactly the blocks it is missing).
         PullBlocks { run_id: u32, first: u32, count: u32 },
+        /// One check of the bring-up self-test (`tribo selftest`; see [`SelfTestCheck`]). A
+        /// firmware older than the self-test answers `Error { Malformed }`.
+        SelfTest(SelfTestCheck),
     }
 }
 
@@ -419,6 +424,8 @@ wire_type! {
         /// Run frame: the ECR transimpedance range changed; samples from `first_sample` on were
         /// converted on `range`, the first `settling` of them while the amplifier settled.
         EcrRange(EcrRangeChange),
+        /// What a self-test check measured (see [`SelfTestReport`]).
+        SelfTest(SelfTestReport),
     }
 }
 

@@ -54,6 +54,17 @@ pub enum ConverterFault {
     Reset,
 }
 
+/// What can go wrong with an analog channel's front end (fault injection: `tribo rig --virtual
+/// --fault`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelFault {
+    /// The channel reads this code whatever its input (a converter input shorted to a fixed
+    /// voltage, a DMA that does not write it).
+    Stuck(u16),
+    /// The front end is dead: the channel sits at the converter's bottom rail (code 0).
+    Dead,
+}
+
 /// What can go wrong with the heater's power stage (fault injection).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HeaterStage {
@@ -138,6 +149,8 @@ pub struct SimHardware {
     force_lp: Butterworth2,
     /// Force samples waiting out the channel's lag.
     force_delay: std::collections::VecDeque<f64>,
+    /// Faults of the analog channels' front ends, by converter channel.
+    channel_faults: [Option<ChannelFault>; ANALOG_CHANNELS],
     // User interface.
     pub(crate) button: bool,
     lamps: Lamps,
@@ -182,6 +195,7 @@ impl SimHardware {
             overrun_at_us: None,
             force_lp: Butterworth2::new(cfg.force_cutoff_hz, 10_000.0),
             force_delay: std::collections::VecDeque::new(),
+            channel_faults: [None; ANALOG_CHANNELS],
             button: false,
             lamps: Lamps::default(),
             connected: true,
@@ -209,6 +223,14 @@ impl SimHardware {
         self.model = model;
         self.cfg = cfg;
         Ok(())
+    }
+
+    /// Makes converter channel `channel` (0 displacement, 1 velocity, 2 force, 3 ECR) misbehave,
+    /// or heals it (`None`). Out-of-range channels are ignored.
+    pub fn set_channel_fault(&mut self, channel: usize, fault: Option<ChannelFault>) {
+        if let Some(f) = self.channel_faults.get_mut(channel) {
+            *f = fault;
+        }
     }
 
     /// The run store's flash (to inspect or damage it).
@@ -487,12 +509,20 @@ impl SimHardware {
         self.ecr_dev = rho * self.ecr_dev
             + (1.0 - rho * rho).sqrt() * self.cfg.ecr.fluctuation_decades * self.rng.normal();
         let e = self.ecr_output() + n.ecr_v * self.rng.normal();
-        [
+        let mut s = [
             self.cal[0].to_count(x as f32),
             self.cal[1].to_count(v as f32),
             self.cal[2].to_count(f as f32),
             self.cal[3].to_count(e as f32),
-        ]
+        ];
+        for (c, fault) in s.iter_mut().zip(self.channel_faults) {
+            match fault {
+                Some(ChannelFault::Stuck(code)) => *c = code,
+                Some(ChannelFault::Dead) => *c = 0,
+                None => {}
+            }
+        }
+        s
     }
 
     fn ecr_output(&self) -> f64 {

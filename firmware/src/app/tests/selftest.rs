@@ -1,0 +1,186 @@
+//! The self-test's checks through the application (the measurements themselves are tested in
+//! `crate::selftest`): between runs only, one at a time, reports sent whole and in order.
+
+use super::*;
+use crate::selftest::{judge_channel, judge_flash, judge_rate, ChannelProblem, Deliberate};
+use crate::wire::{filler_byte, SelfTestCheck, SelfTestReport};
+
+fn reports(msgs: &[DeviceMsg]) -> Vec<SelfTestReport> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            DeviceMsg::SelfTest(r) => Some(r.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Runs until a report other than a filler frame comes (at most `ms`); the reports on the way.
+fn until_report(b: &mut Bench, ms: u64) -> Vec<SelfTestReport> {
+    let mut got = Vec::new();
+    for _ in 0..ms {
+        b.run_for(1);
+        let msgs = b.msgs();
+        got.extend(reports(&msgs));
+        if got
+            .last()
+            .is_some_and(|r| !matches!(r, SelfTestReport::Filler { .. }))
+        {
+            return got;
+        }
+    }
+    panic!("no report within {ms} ms: {got:?}");
+}
+
+#[test]
+fn a_converter_check_counts_the_samples_against_the_time_base_then_stops_the_converter() {
+    let mut b = Bench::new();
+    let check = SelfTestCheck::Converter {
+        rate_hz: 10_000,
+        ms: 500,
+    };
+    assert_eq!(b.command(HostMsg::SelfTest(check)).0, Ok(()));
+    assert!(b.app.selftest_running() && b.hw.adc_running());
+    // One check at a time.
+    assert_eq!(b.command(HostMsg::SelfTest(check)).0, Err(ErrorCode::Busy));
+    let got = until_report(&mut b, 1000);
+    let [SelfTestReport::Converter(r)] = &got[..] else {
+        panic!("{got:?}")
+    };
+    let (rate, ppm, ok) = judge_rate(r);
+    assert!(ok, "{rate} S/s, {ppm} ppm");
+    assert!((4_990..=5_010).contains(&r.samples), "{r:?}");
+    // The mock's inputs hold perfectly still (no noise at all): every one reads a single code,
+    // which on a real converter means it does not convert.
+    for s in &r.channels {
+        assert_eq!(
+            judge_channel(s, r.samples),
+            Err(ChannelProblem::Stuck),
+            "{s:?}"
+        );
+    }
+    assert!(!b.app.selftest_running() && !b.hw.adc_running());
+}
+
+#[test]
+fn a_flash_check_uses_a_sector_no_run_needs_and_leaves_it_erased() {
+    let mut b = Bench::new();
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Flash { bytes: 2048 }))
+            .0,
+        Ok(())
+    );
+    let got = until_report(&mut b, 5000);
+    let [SelfTestReport::Flash(r)] = &got[..] else {
+        panic!("{got:?}")
+    };
+    assert_eq!(judge_flash(r), Ok(()), "{r:?}");
+    assert_eq!(
+        (r.sector, r.bytes),
+        (7, 2048),
+        "no run held: the last sector"
+    );
+    assert_eq!(b.hw.flash.erase_count(7), 2);
+    assert!(b.hw.flash.bytes()[7 * 128 * 1024..]
+        .iter()
+        .all(|&x| x == 0xFF));
+    // Armed: refused (the converter and the flash are the run's).
+    b.ready();
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Flash { bytes: 256 }))
+            .0,
+        Err(ErrorCode::Busy)
+    );
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Panic)).0,
+        Err(ErrorCode::Busy)
+    );
+    assert_eq!(b.app.take_deliberate(), None);
+}
+
+#[test]
+fn the_flash_check_waits_for_the_run_s_flash_copy_and_spares_the_sectors_it_holds() {
+    let mut b = Bench::new();
+    full_run(&mut b);
+    settle_flash(&mut b);
+    // The second run starts at sector 1 (after the first one's): the spare sector is the one
+    // before it, which the next runs reach last.
+    full_run(&mut b);
+    assert_eq!(b.app.store().flash_state(), FlashState::Writing);
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Flash { bytes: 256 }))
+            .0,
+        Err(ErrorCode::Busy),
+        "the run is still being written to flash"
+    );
+    settle_flash(&mut b);
+    let run = b.app.store().run_id();
+    let held: Vec<u8> = b.hw.flash.bytes()[128 * 1024..129 * 1024].to_vec();
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Flash { bytes: 256 }))
+            .0,
+        Ok(())
+    );
+    let got = until_report(&mut b, 5000);
+    let [SelfTestReport::Flash(r)] = &got[..] else {
+        panic!("{got:?}")
+    };
+    assert_eq!((r.sector, judge_flash(r)), (0, Ok(())), "{r:?}");
+    assert_eq!(&b.hw.flash.bytes()[128 * 1024..129 * 1024], &held[..]);
+    assert_eq!(b.app.store().run_id(), run);
+}
+
+#[test]
+fn a_deliberate_act_is_handed_to_the_board_once_after_the_ack() {
+    let mut b = Bench::new();
+    let (r, msgs) = b.command(HostMsg::SelfTest(SelfTestCheck::Stall));
+    assert_eq!(r, Ok(()));
+    assert!(msgs.iter().any(|m| matches!(m, DeviceMsg::Ack { .. })));
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Panic)).0,
+        Err(ErrorCode::Busy),
+        "the stall is still to be carried out"
+    );
+    assert_eq!(b.app.take_deliberate(), Some(Deliberate::Stall));
+    assert_eq!(b.app.take_deliberate(), None);
+    b.run_for(10);
+    assert_eq!(b.app.take_deliberate(), None);
+}
+
+#[test]
+fn filler_frames_wait_for_a_link_that_has_no_room_and_none_is_lost() {
+    let mut b = Bench::new();
+    let check = SelfTestCheck::Throughput {
+        frames: 60,
+        len: 200,
+    };
+    assert_eq!(b.command(HostMsg::SelfTest(check)).0, Ok(()));
+    b.run_for(2);
+    b.hw.connected = false;
+    b.run_for(20);
+    b.hw.connected = true;
+    let got = until_report(&mut b, 1000);
+    let mut next = 0;
+    for r in &got {
+        match r {
+            SelfTestReport::Filler { index, data } => {
+                assert_eq!(*index, next);
+                assert_eq!(data.len(), 200);
+                assert!(data
+                    .iter()
+                    .enumerate()
+                    .all(|(i, &x)| x == filler_byte(*index, i)));
+                next += 1;
+            }
+            SelfTestReport::FillerDone { frames, refused } => {
+                assert_eq!((*frames, next), (60, 60));
+                assert!(*refused >= 20, "{refused}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+    assert_eq!(
+        b.app.dropped_frames(),
+        0,
+        "a refused filler is not a dropped frame"
+    );
+}

@@ -1,0 +1,453 @@
+//! The bring-up self-test: the measurements the application makes for `tribo selftest`
+//! (`HostMsg::SelfTest`), through the same hardware traits as everything else, so that the board,
+//! the virtual rig and the host's tests run the very same code; and the limits a report is judged
+//! by, so that the host judges a report the way this crate documents it.
+//!
+//! * [`ConverterProbe`]: the converter started at a rate, every sample it delivers read for a
+//!   while: how many it delivered (their index in the DMA's stream) against the rig's time base,
+//!   and each analog channel's statistics on whatever its input holds.
+//! * [`FlashProbe`]: one sector of the run flash that the stored run does not occupy, erased,
+//!   checked erased, programmed with a pattern, read back, erased again; with the times and the
+//!   flash controller's flags.
+//! * [`Throughput`]: filler frames as fast as the link takes them (the host times them).
+//! * [`Deliberate`]: a panic or a stalled task on purpose, carried out by the board's task (or
+//!   the virtual rig's emulation of it), never by the application, which cannot panic on any input.
+//!
+//! Judging ([`judge_rate`], [`judge_channel`], [`judge_flash`], [`judge_reset`]) is pure: a
+//! report in, a verdict and its reason out.
+
+use crate::hal::{FlashGeometry, RunFlash, SampleSource, ANALOG_CHANNELS};
+use crate::wire::{
+    filler_byte, BootReport, ChannelStats, ConverterReport, FlashReport, ResetCause, SampleClock,
+    SELFTEST_CHANNELS,
+};
+
+const _: () = assert!(SELFTEST_CHANNELS == ANALOG_CHANNELS);
+
+/// Shortest and longest converter check, ms.
+pub const CONVERTER_MS: core::ops::RangeInclusive<u32> = 100..=60_000;
+/// Largest slice of the flash one check programs (one sector at most).
+pub const FLASH_MAX_BYTES: u32 = 128 * 1024;
+/// Bytes a flash check reads back and compares per poll (bounds a poll's work: ~5k instructions
+/// on the M7, `cargo xtask target-test app::selftest_checks`).
+const READ_PER_POLL: usize = 512;
+
+/// Samples per chunk read from the converter.
+const CHUNK: usize = 32;
+
+/// The converter check in progress (see the module docs).
+#[derive(Debug, Clone)]
+pub struct ConverterProbe {
+    clock: SampleClock,
+    until_us: u64,
+    /// (index, time) of the first read, and of the latest.
+    first: Option<(u64, u64)>,
+    last: (u64, u64),
+    /// Index of the sample expected next.
+    next: u64,
+    lost: u64,
+    n: u64,
+    sum: [u64; ANALOG_CHANNELS],
+    sum_sq: [u64; ANALOG_CHANNELS],
+    min: [u16; ANALOG_CHANNELS],
+    max: [u16; ANALOG_CHANNELS],
+    rail: [u32; ANALOG_CHANNELS],
+}
+
+impl ConverterProbe {
+    /// A check of the converter just started with `clock` at `now_us`, for `ms`.
+    pub fn new(clock: SampleClock, now_us: u64, ms: u32) -> Self {
+        let ms = ms.clamp(*CONVERTER_MS.start(), *CONVERTER_MS.end());
+        ConverterProbe {
+            clock,
+            until_us: now_us + ms as u64 * 1000,
+            first: None,
+            last: (0, now_us),
+            next: 0,
+            lost: 0,
+            n: 0,
+            sum: [0; ANALOG_CHANNELS],
+            sum_sq: [0; ANALOG_CHANNELS],
+            min: [u16::MAX; ANALOG_CHANNELS],
+            max: [0; ANALOG_CHANNELS],
+            rail: [0; ANALOG_CHANNELS],
+        }
+    }
+
+    /// Reads every sample the converter has delivered by `now_us`; the report once the check's
+    /// time is over. The first read is the time base's origin: its samples are in the statistics,
+    /// not in the count.
+    pub fn step<S: SampleSource + ?Sized>(
+        &mut self,
+        adc: &mut S,
+        now_us: u64,
+    ) -> Option<ConverterReport> {
+        let mut buf = [[0u16; ANALOG_CHANNELS]; CHUNK];
+        loop {
+            let b = adc.adc_read(&mut buf);
+            if b.first > self.next {
+                self.lost += b.first - self.next;
+            }
+            self.next = b.end();
+            for s in &buf[..b.len] {
+                self.n += 1;
+                for (c, &v) in s.iter().enumerate() {
+                    self.sum[c] += v as u64;
+                    self.sum_sq[c] += v as u64 * v as u64;
+                    self.min[c] = self.min[c].min(v);
+                    self.max[c] = self.max[c].max(v);
+                    if v == 0 || v == u16::MAX {
+                        self.rail[c] += 1;
+                    }
+                }
+            }
+            if b.len < CHUNK {
+                break;
+            }
+        }
+        if self.first.is_none() {
+            self.first = Some((self.next, now_us));
+            // Samples lost before the first read are not the converter's fault.
+            self.lost = 0;
+        }
+        self.last = (self.next, now_us);
+        (now_us >= self.until_us).then(|| self.report())
+    }
+
+    /// The report of what was read so far.
+    pub fn report(&self) -> ConverterReport {
+        let (first_index, first_us) = self.first.unwrap_or(self.last);
+        let mut channels = [ChannelStats::default(); SELFTEST_CHANNELS];
+        for (c, ch) in channels.iter_mut().enumerate() {
+            if self.n == 0 {
+                continue;
+            }
+            let n = self.n as f64;
+            let mean = self.sum[c] as f64 / n;
+            let var = (self.sum_sq[c] as f64 / n - mean * mean).max(0.0);
+            *ch = ChannelStats {
+                min: self.min[c],
+                max: self.max[c],
+                mean: mean as f32,
+                sd: crate::wire::sqrt_f32(var as f32),
+                at_rail: self.rail[c],
+            };
+        }
+        ConverterReport {
+            clock: self.clock,
+            first_index,
+            last_index: self.last.0,
+            first_us,
+            last_us: self.last.1,
+            lost: self.lost.min(u32::MAX as u64) as u32,
+            samples: self.n.min(u32::MAX as u64) as u32,
+            channels,
+        }
+    }
+}
+
+/// Byte `i` of the pattern a flash check programs into `sector`.
+pub const fn flash_pattern(sector: u32, i: usize) -> u8 {
+    filler_byte(sector ^ 0x5E1F_7E57, i)
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// Waiting for the flash to be free, then the first erase.
+    Start,
+    Erasing {
+        second: bool,
+    },
+    /// Checking `bytes` read back erased (after either erase) or as programmed.
+    Verify {
+        what: Expect,
+        at: u32,
+    },
+    Programming {
+        at: u32,
+    },
+    Done,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Expect {
+    Erased { second: bool },
+    Pattern,
+}
+
+/// The flash check in progress (see the module docs): one operation or one slice of reading per
+/// poll, so the application's polls keep their budget. Times are the rig's time base at the polls
+/// that started and saw the end of each step (resolution: one poll).
+#[derive(Debug, Clone)]
+pub struct FlashProbe {
+    phase: Phase,
+    base: u32,
+    since_us: u64,
+    report: FlashReport,
+}
+
+impl FlashProbe {
+    /// A check of `sector`, `bytes` of it (whole flash words, at least one, at most the sector).
+    pub fn new(sector: u32, bytes: u32, g: FlashGeometry) -> Self {
+        let word = crate::hal::FLASH_WORD as u32;
+        let bytes = bytes.clamp(word, g.sector_bytes.min(FLASH_MAX_BYTES)) / word * word;
+        FlashProbe {
+            phase: Phase::Start,
+            base: sector * g.sector_bytes,
+            since_us: 0,
+            report: FlashReport {
+                sector,
+                bytes,
+                erase_ok: true,
+                program_ok: true,
+                mismatches: 0,
+                erase_us: 0,
+                program_us: 0,
+                read_us: 0,
+                erase2_us: 0,
+                flags: None,
+            },
+        }
+    }
+
+    fn elapsed(&self, now_us: u64) -> u32 {
+        now_us.saturating_sub(self.since_us).min(u32::MAX as u64) as u32
+    }
+
+    /// One step at `now_us`; the report once the check is over.
+    pub fn step<F: RunFlash + ?Sized>(
+        &mut self,
+        flash: &mut F,
+        now_us: u64,
+    ) -> Option<FlashReport> {
+        if flash.flash_busy() {
+            return None;
+        }
+        let t = self.elapsed(now_us);
+        let r = &mut self.report;
+        match self.phase {
+            Phase::Start => {
+                // Flags of earlier operations are not this check's.
+                let _ = flash.flash_take_error();
+                let _ = flash.flash_take_flags();
+                if flash.flash_erase(r.sector) {
+                    self.since_us = now_us;
+                    self.phase = Phase::Erasing { second: false };
+                } else {
+                    r.erase_ok = false;
+                    self.phase = Phase::Done;
+                }
+            }
+            Phase::Erasing { second } => {
+                if flash.flash_take_error() {
+                    r.erase_ok = false;
+                }
+                if second {
+                    r.erase2_us = t;
+                } else {
+                    r.erase_us = t;
+                }
+                self.since_us = now_us;
+                self.phase = Phase::Verify {
+                    what: Expect::Erased { second },
+                    at: 0,
+                };
+            }
+            Phase::Verify { what, at } => {
+                let n = (r.bytes - at).min(READ_PER_POLL as u32) as usize;
+                let mut buf = [0u8; READ_PER_POLL];
+                if flash.flash_read(self.base + at, &mut buf[..n]) {
+                    let sector = r.sector;
+                    r.mismatches += buf[..n]
+                        .iter()
+                        .enumerate()
+                        .filter(|&(i, &b)| {
+                            b != match what {
+                                Expect::Pattern => flash_pattern(sector, at as usize + i),
+                                Expect::Erased { .. } => 0xFF,
+                            }
+                        })
+                        .count() as u32;
+                } else {
+                    r.mismatches += n as u32;
+                }
+                let at = at + n as u32;
+                if at < r.bytes {
+                    self.phase = Phase::Verify { what, at };
+                } else {
+                    match what {
+                        Expect::Erased { second: false } => {
+                            self.since_us = now_us;
+                            self.phase = Phase::Programming { at: 0 };
+                        }
+                        Expect::Pattern => {
+                            r.read_us = t;
+                            if flash.flash_erase(r.sector) {
+                                self.since_us = now_us;
+                                self.phase = Phase::Erasing { second: true };
+                            } else {
+                                r.erase_ok = false;
+                                self.phase = Phase::Done;
+                            }
+                        }
+                        Expect::Erased { second: true } => self.phase = Phase::Done,
+                    }
+                }
+            }
+            Phase::Programming { at } => {
+                if at > 0 && flash.flash_take_error() {
+                    r.program_ok = false;
+                }
+                if at >= r.bytes || !r.program_ok {
+                    r.program_us = t;
+                    self.since_us = now_us;
+                    self.phase = Phase::Verify {
+                        what: Expect::Pattern,
+                        at: 0,
+                    };
+                } else {
+                    let n = (r.bytes - at).min(crate::hal::FLASH_MAX_PROGRAM as u32) as usize;
+                    let mut data = [0u8; crate::hal::FLASH_MAX_PROGRAM];
+                    for (i, b) in data[..n].iter_mut().enumerate() {
+                        *b = flash_pattern(r.sector, at as usize + i);
+                    }
+                    if flash.flash_program(self.base + at, &data[..n]) {
+                        self.phase = Phase::Programming { at: at + n as u32 };
+                    } else {
+                        r.program_ok = false;
+                    }
+                }
+            }
+            Phase::Done => {}
+        }
+        if self.phase == Phase::Done {
+            self.report.flags = flash.flash_take_flags();
+            return Some(self.report);
+        }
+        None
+    }
+}
+
+/// A throughput check in progress: filler frames `next..frames` still to send.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Throughput {
+    pub next: u32,
+    pub frames: u32,
+    pub len: u16,
+    pub refused: u32,
+}
+
+/// What the board (or the virtual rig) must do on purpose after acknowledging the command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Deliberate {
+    /// Panic with [`crate::wire::DELIBERATE_PANIC`].
+    Panic,
+    /// Stop the thermocouple task (it waits forever): the watchdog must catch it.
+    Stall,
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Judging
+// ---------------------------------------------------------------------------------------------------
+
+/// A delivered sample count may differ from the time base's by this many samples (the two reads'
+/// quantisation: a sample may be converting at each) ...
+pub const RATE_SLACK_SAMPLES: f64 = 3.0;
+/// ... plus this much of it: the sample timer and the time base both run from the crystal, so any
+/// larger difference is the trigger chain dropping or adding conversions.
+pub const RATE_TOLERANCE_PPM: f64 = 100.0;
+/// A channel whose samples sit at a rail more than this fraction of the time is "at a rail".
+pub const RAIL_FRACTION: f64 = 0.5;
+/// Largest sector erase time accepted, µs (the STM32H743's datasheet maximum at ×64
+/// parallelism; a PSIZE left at ×8 erases several times slower).
+pub const ERASE_MAX_US: u32 = 2_200_000;
+/// Slowest link accepted, bytes/s: the raw data of the fastest run (20 kS/s, five channels of
+/// two bytes), so a live stream never waits on the link.
+pub const MIN_THROUGHPUT_BYTES_S: f64 = 200_000.0;
+
+/// The converter's rate against the time base: (measured rate S/s, deviation ppm, within the
+/// tolerance).
+pub fn judge_rate(r: &ConverterReport) -> (f64, f64, bool) {
+    let dt_s = r.last_us.saturating_sub(r.first_us) as f64 * 1e-6;
+    let got = r.last_index.saturating_sub(r.first_index) as f64;
+    let nominal = r.clock.rate_hz();
+    if dt_s <= 0.0 || nominal.is_nan() || nominal <= 0.0 {
+        return (0.0, f64::NAN, false);
+    }
+    let expected = nominal * dt_s;
+    let rate = got / dt_s;
+    let ppm = (got / expected - 1.0) * 1e6;
+    let ok = (got - expected).abs() <= RATE_SLACK_SAMPLES + expected * RATE_TOLERANCE_PPM * 1e-6;
+    (rate, ppm, ok)
+}
+
+/// What is wrong with a channel on open inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelProblem {
+    /// No sample was read.
+    NoSamples,
+    /// Pinned at a converter rail (0 or 65535) most of the time: shorted, saturated, or a dead
+    /// front end.
+    AtRail,
+    /// Every sample the same code: a converter that does not convert, a DMA that does not write.
+    Stuck,
+}
+
+/// A channel's statistics on open (or quiet) inputs: in range and moving.
+pub fn judge_channel(s: &ChannelStats, samples: u32) -> Result<(), ChannelProblem> {
+    if samples == 0 {
+        return Err(ChannelProblem::NoSamples);
+    }
+    if s.at_rail as f64 > RAIL_FRACTION * samples as f64 {
+        return Err(ChannelProblem::AtRail);
+    }
+    if s.min == s.max {
+        return Err(ChannelProblem::Stuck);
+    }
+    Ok(())
+}
+
+/// A flash check: `Err` names the first thing wrong.
+pub fn judge_flash(r: &FlashReport) -> Result<(), &'static str> {
+    if !r.erase_ok {
+        return Err("an erase was refused or failed");
+    }
+    if !r.program_ok {
+        return Err("a program was refused or failed");
+    }
+    if r.mismatches > 0 {
+        return Err("bytes read back wrong");
+    }
+    if r.erase_us > ERASE_MAX_US || r.erase2_us > ERASE_MAX_US {
+        return Err("a sector erase took longer than the datasheet's maximum");
+    }
+    Ok(())
+}
+
+/// The boot report after a deliberate act: `Err` says what it should have said.
+pub fn judge_reset(d: Deliberate, boot: &BootReport) -> Result<(), &'static str> {
+    match d {
+        Deliberate::Panic => {
+            if boot.cause != ResetCause::Panic {
+                Err("the boot report does not say Panic")
+            } else if !boot.message.contains(crate::wire::DELIBERATE_PANIC) {
+                Err("the boot report's message is not the deliberate panic's")
+            } else {
+                Ok(())
+            }
+        }
+        Deliberate::Stall => {
+            if boot.cause != ResetCause::Watchdog {
+                Err("the boot report does not say Watchdog")
+            } else if !boot.message.contains("thermocouple") {
+                Err("the boot report does not name the stalled task (thermocouple)")
+            } else {
+                Ok(())
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

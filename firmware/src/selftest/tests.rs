@@ -1,0 +1,206 @@
+use super::*;
+use crate::acquisition::{Batch, ConverterModel};
+use crate::hal::{AnalogSample, FlashGeometry};
+use crate::runstore::memflash::MemFlash;
+use crate::wire::{BootReport, ResetCause};
+
+/// The board's converter (timer, DMA ring, reader) modelled, with a signal per channel.
+struct Adc {
+    model: ConverterModel,
+    signal: fn(u64) -> AnalogSample,
+}
+
+impl SampleSource for Adc {
+    fn adc_clock(&self, rate_hz: u32) -> Option<SampleClock> {
+        self.model.clock_for(rate_hz)
+    }
+    fn adc_start(&mut self, rate_hz: u32) -> Option<SampleClock> {
+        self.model.start(rate_hz, 0)
+    }
+    fn adc_stop(&mut self) {
+        self.model.stop()
+    }
+    fn adc_running(&self) -> bool {
+        self.model.is_running()
+    }
+    fn adc_next_index(&mut self) -> u64 {
+        self.model.next_index()
+    }
+    fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
+        self.model.read(out)
+    }
+}
+
+/// Noisy mid-scale displacement and velocity, a constant force, an ECR at the bottom rail.
+fn signal(k: u64) -> AnalogSample {
+    let noise = (k.wrapping_mul(2_654_435_761) >> 7) as u16 % 9;
+    [30_000 + noise, 33_000 - noise, 12_345, 0]
+}
+
+/// Runs a converter check of `ms` at 10 kS/s with 500 µs polls; `claimed` replaces the clock the
+/// probe is told (a converter running at another rate than the timer says).
+fn converter_check(
+    ms: u32,
+    claimed: Option<SampleClock>,
+    stall_at_us: Option<u64>,
+) -> ConverterReport {
+    let mut adc = Adc {
+        model: ConverterModel::new(crate::acquisition::clock::BOARD_TIMER_HZ),
+        signal,
+    };
+    let clock = adc.adc_start(10_000).unwrap();
+    let mut probe = ConverterProbe::new(claimed.unwrap_or(clock), 0, ms);
+    let mut t = 0;
+    loop {
+        t += 500;
+        while let Some(ts) = adc.model.due(t) {
+            let k = adc.model.next_index();
+            let _ = ts;
+            adc.model.convert(&(adc.signal)(k));
+        }
+        if stall_at_us == Some(t) {
+            adc.model.stall_reader(t + 300_000);
+        }
+        if let Some(r) = probe.step(&mut adc, t) {
+            return r;
+        }
+        assert!(t < 100_000_000, "the check never ended");
+    }
+}
+
+#[test]
+fn a_converter_on_time_passes_and_its_channels_are_judged_on_what_they_read() {
+    let r = converter_check(2000, None, None);
+    let (rate, ppm, ok) = judge_rate(&r);
+    assert!(ok, "rate {rate} S/s, {ppm} ppm: {r:?}");
+    assert!(ppm.abs() < 100.0, "{ppm}");
+    assert_eq!(r.lost, 0);
+    assert!((19_990..=20_010).contains(&r.samples), "{}", r.samples);
+    // Displacement and velocity move around mid-scale: in range, not stuck.
+    assert_eq!(judge_channel(&r.channels[0], r.samples), Ok(()));
+    assert_eq!(judge_channel(&r.channels[1], r.samples), Ok(()));
+    assert!(
+        (r.channels[0].mean - 30_004.0).abs() < 1.0,
+        "{:?}",
+        r.channels[0]
+    );
+    assert!(r.channels[0].sd > 1.0 && r.channels[0].sd < 4.0);
+    // One code throughout: stuck. The bottom rail: at a rail.
+    assert_eq!(
+        judge_channel(&r.channels[2], r.samples),
+        Err(ChannelProblem::Stuck)
+    );
+    assert_eq!(
+        judge_channel(&r.channels[3], r.samples),
+        Err(ChannelProblem::AtRail)
+    );
+    assert_eq!(
+        judge_channel(&ChannelStats::default(), 0),
+        Err(ChannelProblem::NoSamples)
+    );
+}
+
+#[test]
+fn a_converter_off_its_timer_by_a_thousandth_fails_the_rate_and_lost_samples_are_counted() {
+    // The timer delivers 10 kS/s, the clock claims 10.01 kS/s: −1000 ppm.
+    let r = converter_check(2000, Some(SampleClock::exact(10_010)), None);
+    let (_, ppm, ok) = judge_rate(&r);
+    assert!(!ok, "{ppm}");
+    assert!((ppm + 999.0).abs() < 60.0, "{ppm}");
+    // A reader stalled for 300 ms is lapped by the DMA (its ring holds 205 ms at 10 kS/s): the
+    // samples it lost are counted, and the rate stands (the count is the DMA's, not the reader's).
+    let r = converter_check(2000, None, Some(500_000));
+    assert!(r.lost > 500, "{r:?}");
+    assert!(judge_rate(&r).2, "{r:?}");
+}
+
+fn flash() -> MemFlash<Vec<u8>> {
+    MemFlash::new(
+        vec![0xFF; FlashGeometry::H743_BANK2.bytes() as usize],
+        FlashGeometry::H743_BANK2,
+    )
+    .with_h743_timing()
+}
+
+fn flash_check(f: &mut MemFlash<Vec<u8>>, sector: u32, bytes: u32) -> FlashReport {
+    let mut p = FlashProbe::new(sector, bytes, FlashGeometry::H743_BANK2);
+    let mut t = 0;
+    loop {
+        t += 500;
+        f.advance(t);
+        if let Some(r) = p.step(f, t) {
+            return r;
+        }
+        assert!(t < 60_000_000, "the check never ended");
+    }
+}
+
+#[test]
+fn a_flash_check_erases_programs_reads_back_and_leaves_the_sector_erased() {
+    let mut f = flash();
+    // Another sector holds something that must survive.
+    f.bytes_mut()[0..4].copy_from_slice(&[1, 2, 3, 4]);
+    let r = flash_check(&mut f, 7, 4096);
+    assert_eq!(judge_flash(&r), Ok(()), "{r:?}");
+    assert_eq!((r.sector, r.bytes, r.mismatches), (7, 4096, 0));
+    // The model's erase takes 1.1 s, seen at the next poll.
+    assert!((1_100_000..=1_100_500).contains(&r.erase_us), "{r:?}");
+    assert!((1_100_000..=1_100_500).contains(&r.erase2_us), "{r:?}");
+    // 16 programs of 256 bytes, one per poll.
+    assert!(
+        r.program_us >= 16 * 500 && r.program_us <= 18 * 500,
+        "{r:?}"
+    );
+    assert_eq!(r.flags, None, "a model has no controller flags");
+    assert_eq!(f.erase_count(7), 2);
+    assert_eq!(f.violations(), 0);
+    assert!(f.bytes()[7 * 128 * 1024..].iter().all(|&b| b == 0xFF));
+    assert_eq!(&f.bytes()[0..4], &[1, 2, 3, 4]);
+}
+
+#[test]
+fn a_flash_that_fails_or_erases_slowly_fails_the_check() {
+    let mut f = flash();
+    f.fail_next_operation();
+    let r = flash_check(&mut f, 3, 1024);
+    assert_eq!(
+        judge_flash(&r),
+        Err("an erase was refused or failed"),
+        "{r:?}"
+    );
+    // An erase at a slower parallelism (three times the typical time).
+    let mut f = MemFlash::new(
+        vec![0xFF; FlashGeometry::H743_BANK2.bytes() as usize],
+        FlashGeometry::H743_BANK2,
+    )
+    .with_timing(3_300_000, 20);
+    let r = flash_check(&mut f, 3, 1024);
+    assert_eq!(
+        judge_flash(&r),
+        Err("a sector erase took longer than the datasheet's maximum")
+    );
+    // Bytes that do not read back as programmed.
+    let mut r = flash_check(&mut flash(), 2, 256);
+    r.mismatches = 1;
+    assert_eq!(judge_flash(&r), Err("bytes read back wrong"));
+}
+
+#[test]
+fn the_boot_report_after_a_deliberate_act_must_name_it() {
+    let boot = |cause, msg: &str| BootReport {
+        cause,
+        message: heapless::String::try_from(msg).unwrap(),
+    };
+    let panic = boot(ResetCause::Panic, "panicked: self-test: deliberate panic");
+    assert_eq!(judge_reset(Deliberate::Panic, &panic), Ok(()));
+    assert!(judge_reset(Deliberate::Panic, &boot(ResetCause::Software, "")).is_err());
+    assert!(judge_reset(
+        Deliberate::Panic,
+        &boot(ResetCause::Panic, "index out of bounds")
+    )
+    .is_err());
+    let wd = boot(ResetCause::Watchdog, "task thermocouple silent for 301 ms");
+    assert_eq!(judge_reset(Deliberate::Stall, &wd), Ok(()));
+    assert!(judge_reset(Deliberate::Stall, &boot(ResetCause::Watchdog, "")).is_err());
+    assert!(judge_reset(Deliberate::Stall, &panic).is_err());
+}

@@ -1,0 +1,195 @@
+//! `tribo selftest` against a virtual rig in a process of its own (`tribo rig --virtual`), as a
+//! technician runs it: every measured row passes on a sound rig (exit 0), and a broken converter
+//! input (`--fault`) fails its row, named, with a non-zero exit.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Output, Stdio};
+
+const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
+
+/// A `tribo rig --virtual` process, killed when dropped.
+struct Rig {
+    child: Child,
+    addr: String,
+}
+
+impl Drop for Rig {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn rig(extra: &[&str]) -> Rig {
+    let mut child = Command::new(TRIBO)
+        .args([
+            "rig",
+            "--virtual",
+            "--listen",
+            "127.0.0.1:0",
+            "--speed",
+            "2",
+        ])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("tribo rig starts");
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let first = lines.next().expect("the rig prints its address").unwrap();
+    let addr = first
+        .split("listening on ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no address in {first:?}"))
+        .trim()
+        .to_string();
+    // The console goes on: keep reading it so the rig never blocks on a full pipe.
+    std::thread::spawn(move || for _ in lines.by_ref() {});
+    Rig { child, addr }
+}
+
+fn selftest(r: &Rig, extra: &[&str]) -> Output {
+    Command::new(TRIBO)
+        .args(["selftest", "--port", &r.addr, "--seconds", "1"])
+        .args(extra)
+        .output()
+        .expect("tribo selftest runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn a_sound_virtual_rig_passes_every_measured_row() {
+    let r = rig(&[]);
+    let o = selftest(&r, &["--json"]);
+    let (out, err) = (text(&o.stdout), text(&o.stderr));
+    assert!(o.status.success(), "{out}\n{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON object");
+    assert_eq!(v["passed"], true, "{v:#}");
+    assert_eq!(v["failed"].as_array().unwrap().len(), 0);
+    let rows = v["rows"].as_array().unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r["row"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        [
+            "sample-rate",
+            "input-displacement",
+            "input-velocity",
+            "input-force",
+            "input-ecr",
+            "flash",
+            "flash-flags",
+            "link-throughput",
+            "reset-record",
+            "watchdog"
+        ]
+    );
+    let row = |n: &str| rows.iter().find(|r| r["row"] == n).unwrap();
+    // Only the controller's flags need the chip; everything else was measured and passed.
+    for r in rows {
+        let want = if r["row"] == "flash-flags" {
+            "hardware-only"
+        } else {
+            "pass"
+        };
+        assert_eq!(r["verdict"], want, "{r:#}");
+    }
+    let rate = &row("sample-rate")["figures"];
+    assert!(rate["ppm"].as_f64().unwrap().abs() < 200.0, "{rate}");
+    assert!(rate["samples"].as_u64().unwrap() > 9_000, "{rate}");
+    let flash = &row("flash")["figures"];
+    assert_eq!(flash["mismatches"], 0);
+    // The simulated flash erases a sector in the STM32H743's typical 1.1 s (device time).
+    assert!(flash["erase_us"].as_u64().unwrap() >= 1_100_000, "{flash}");
+    assert_eq!(row("link-throughput")["figures"]["missing"], 0);
+    assert_eq!(row("reset-record")["figures"]["cause"], "Panic");
+    assert_eq!(row("watchdog")["figures"]["cause"], "Watchdog");
+    assert!(
+        row("watchdog")["figures"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("thermocouple"),
+        "{v:#}"
+    );
+    // The table, as a technician reads it, from the same rig after its two resets.
+    let o = selftest(&r, &["--no-reset"]);
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}\n{}", text(&o.stderr));
+    assert!(out.contains("self-test of the rig on tcp://"), "{out}");
+    assert!(out.contains("\nsample-rate        pass  "), "{out}");
+    assert!(
+        out.contains("\nflash-flags        --    hardware only"),
+        "{out}"
+    );
+    assert!(
+        !out.contains("reset-record"),
+        "--no-reset leaves it out: {out}"
+    );
+}
+
+#[test]
+fn a_stuck_input_fails_its_row_by_name() {
+    let r = rig(&["--fault", "stuck:v=40000"]);
+    let o = selftest(&r, &["--no-reset"]);
+    let (out, err) = (text(&o.stdout), text(&o.stderr));
+    assert_eq!(o.status.code(), Some(1), "{out}\n{err}");
+    assert!(
+        out.contains("input-velocity     FAIL  PC0") && out.contains("stuck at code 40000"),
+        "{out}"
+    );
+    assert_eq!(out.matches("FAIL").count(), 1, "only that row fails: {out}");
+    assert!(
+        err.contains("self-test failed: input-velocity"),
+        "the error names the row: {err}"
+    );
+}
+
+#[test]
+fn a_dead_front_end_fails_as_a_rail_in_the_json_too() {
+    let r = rig(&["--fault", "dead:ecr", "--fault", "stuck:x"]);
+    let o = selftest(&r, &["--no-reset", "--json"]);
+    let out = text(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON object");
+    assert_eq!(v["passed"], false);
+    assert_eq!(
+        v["failed"],
+        serde_json::json!(["input-displacement", "input-ecr"]),
+        "{v:#}"
+    );
+    let ecr = v["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["row"] == "input-ecr")
+        .unwrap();
+    assert_eq!(ecr["verdict"], "fail");
+    assert!(
+        ecr["summary"].as_str().unwrap().contains("at a rail"),
+        "{ecr}"
+    );
+    assert_eq!(ecr["figures"]["max"], 0);
+}
+
+#[test]
+fn a_fault_flag_that_names_no_channel_is_refused_with_the_forms_it_takes() {
+    let o = Command::new(TRIBO)
+        .args([
+            "rig",
+            "--virtual",
+            "--listen",
+            "127.0.0.1:0",
+            "--fault",
+            "stuck:z",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("no channel \"z\"") && err.contains("stuck:CH=CODE"),
+        "{err}"
+    );
+}
