@@ -351,6 +351,9 @@ impl Bench {
     /// every run frame until the end (or, for a run without one, until the rig falls silent).
     pub fn rig_frames(&mut self, run_id: u32) -> Vec<Vec<u8>> {
         self.session(Faults::default(), |link| {
+            // A clean line: a late answer is a busy machine (CI runs tests side by side), not
+            // a fault under test.
+            link.timeouts.reply = Duration::from_secs(3);
             link.hello().expect("hello");
             // A rig reconnected first sends the rest of its live stream (what the cable's absence
             // held back): let it pass, then ask.

@@ -61,7 +61,13 @@ fn record(bench: &mut Bench, faults: Faults, store: &std::path::Path, load: f32)
             record_run(link, &info, store, &p, &AtomicBool::new(false), &mut |_| {})
         })
         .0
-        .expect("the run finishes (complete or not)")
+        .unwrap_or_else(|e| {
+            panic!(
+                "the run finishes (complete or not): {e:#}; the rig's last fault: {:?} at {} µs",
+                bench.rig().app().last_fault(),
+                bench.rig().now_us()
+            )
+        })
 }
 
 fn pull(bench: &mut Bench, faults: Faults, store: &std::path::Path) -> Outcome {

@@ -224,6 +224,20 @@ pub fn release(link: &mut Link) -> Result<(), LinkError> {
             {
                 std::thread::sleep(Duration::from_millis(50));
             }
+            // The plate's temperature not read yet (the thermocouple's first conversion after a
+            // boot) is a wait, not a fault: the heater has no fault and the temperature is unknown.
+            // A real fault shows in the status and is reported at once.
+            Err(e)
+                if matches!(
+                    e.code,
+                    Some(ErrorCode::Interlock(Interlock::HeaterUnhealthy))
+                ) && t0.elapsed() < Duration::from_secs(3)
+                    && link
+                        .status()
+                        .is_ok_and(|s| s.heater_fault.is_none() && !s.temp_c.is_finite()) =>
+            {
+                std::thread::sleep(Duration::from_millis(50));
+            }
             Err(e) => {
                 let _ = link.command(HostMsg::Disarm);
                 return Err(e);
