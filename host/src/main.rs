@@ -55,6 +55,9 @@ enum Command {
     Explain(tribo::cmd::explain::Args),
     /// Figures (SVG/PNG) and a self-contained HTML page of a run, a record or a campaign.
     Report(tribo::cmd::report::Args),
+    /// Write a run or record as CSV, JSON or Parquet, or the catalog of runs as one table.
+    #[command(long_about = tribo::cmd::export::LONG_ABOUT)]
+    Export(tribo::cmd::export::Args),
 }
 
 /// Errors are printed as the chain of their causes, one per line, without a backtrace (which
@@ -103,5 +106,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fit(a) => tribo::cmd::fit::run(a),
         Command::Explain(a) => tribo::cmd::explain::run(tribo::cmd::explain::Args { quiet, ..a }),
         Command::Report(a) => tribo::cmd::report::run(a),
+        Command::Export(a) => tribo::cmd::export::run(tribo::cmd::export::Args { quiet, ..a }),
     }
 }
