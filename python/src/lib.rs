@@ -253,15 +253,28 @@ fn open_grid(path: &Path, allow_incomplete: bool) -> Res<GridRun> {
                     Failure::Tribo(format!("cannot read the run {}: {e}", path.display()))
                 })?
             } else {
+                // What salvaging would leave missing, to name it.
+                let missing = tribo_store::Run::open_salvage(path)
+                    .map(|r| r.missing_blocks())
+                    .unwrap_or_default();
+                let named = if missing.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        " (blocks lost in the damage: {})",
+                        tribo_store::run::block_ranges(&missing)
+                    )
+                };
                 return Err(Failure::Incomplete {
                     msg: format!(
-                        "{}: {e}. Open it with allow_incomplete=True (what is intact, its holes \
-                         NaN and `mask` True there), or repair it with `tribo pull --salvage {}`",
+                        "{}: {e}{named}. Open it with allow_incomplete=True (what is intact, its \
+                         holes NaN and `mask` True there), or repair it with `tribo pull \
+                         --salvage {}`",
                         path.display(),
                         path.display()
                     ),
                     path: path.into(),
-                    missing: Vec::new(),
+                    missing,
                 });
             }
         }
