@@ -65,12 +65,13 @@ def run_dir(store) -> Path:
 
 @pytest.fixture()
 def damaged_run(tmp_path, run_dir) -> Path:
-    """A copy of a complete run whose frame log has a flipped byte in the middle (a bad
-    sector): one record's CRC fails."""
+    """A copy of a complete run whose frame log has a bad sector in the middle (4 KiB of
+    zeros): the records there fail their CRC and the blocks in them are lost."""
     dst = tmp_path / run_dir.name
     shutil.copytree(run_dir, dst)
     log = dst / "frames.log"
     data = bytearray(log.read_bytes())
-    data[len(data) // 2] ^= 0xFF
+    mid = len(data) // 2
+    data[mid : mid + 4096] = bytes(4096)
     log.write_bytes(bytes(data))
     return dst

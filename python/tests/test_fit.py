@@ -33,7 +33,8 @@ def test_fit_of_a_run_object_and_a_csv_record_are_the_cli_json(cli, store, tmp_p
     f = tribo.fit(tribo.read_record(rec))
     j = cli_json(cli, "fit", "--json", rec)
     assert f.json == j
-    assert f.verdict == "adequate" and f.span["held"] if "held" in f.span else True
+    # The hold before the release (0.5 s at 10 kS/s) is skipped.
+    assert f.verdict == "adequate" and 4900 < f.span["start"] < 5100
     assert abs(f.mu[0] - 0.02) < 5 * f.mu_se[0]
     # A flag overriding the record's constant.
     f = tribo.fit(rec, load_n=0.35)
@@ -57,7 +58,8 @@ def test_explain_is_the_cli_json(cli, store):
     d = runs_of(store)[1]  # a quadratic contact
     e = tribo.explain(d, max_steps=2)
     assert e.json == cli_json(cli, "explain", "--json", "--max-steps", "2", d)
-    assert e.base_fit == tribo.fit(d).json["mu"] or e.base_fit["mu"] == tribo.fit(d).mu
+    # Its base law is `tribo fit`'s answer, to the last digit.
+    assert e.base_fit["mu"] == tribo.fit(d).mu and e.base_fit["mu_se"] == tribo.fit(d).mu_se
     assert e.gap_final <= e.gap_initial
 
 
@@ -84,7 +86,7 @@ def test_a_bad_law_is_a_value_error(run_dir):
 
 
 def test_a_long_fit_releases_the_gil():
-    s = tribo.simulate(law="quadratic", mu=[0.02, 0.01, 0.004], noise=True, duration_s=8, rate_hz=20000)
+    s = tribo.simulate(law="quadratic", mu=[0.02, 0.01, 0.004], noise=True, duration_s=4)
     done = threading.Event()
     ticks = 0
 
