@@ -500,7 +500,7 @@ fn simulate<'py>(py: Python<'py>, flags: Vec<String>) -> PyResult<Bound<'py, PyD
 /// A record given as arrays (from Python), or read from a path as `tribo fit` reads it.
 enum Source {
     Path(PathBuf),
-    Arrays(Record, String),
+    Arrays(Box<Record>, String),
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -544,7 +544,7 @@ fn source_of(
     rec.temp = col(temp)?;
     rec.ecr = col(ecr)?;
     Ok(Source::Arrays(
-        rec,
+        Box::new(rec),
         name.unwrap_or_else(|| "<record>".into()),
     ))
 }
@@ -561,7 +561,7 @@ impl Source {
             }
             Source::Arrays(rec, name) => {
                 rec.validate().map_err(|e| record_failure(&e))?;
-                Ok((rec, PathBuf::from(name), Vec::new()))
+                Ok((*rec, PathBuf::from(name), Vec::new()))
             }
         }
     }

@@ -379,6 +379,8 @@ fn write_parquet(t: &Table, path: &Path) -> Result<()> {
         .collect();
     let props = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
+        // Samples are nearly all distinct: a dictionary only costs time before falling back.
+        .set_dictionary_enabled(false)
         .set_key_value_metadata(Some(kv))
         .set_created_by(format!("tribo {}", env!("CARGO_PKG_VERSION")))
         .build();
@@ -436,6 +438,9 @@ fn write_parquet(t: &Table, path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Run folders the catalog cannot hold (their log is damaged), each with why.
+pub type Damaged = Vec<(PathBuf, String)>;
+
 /// The catalog's runs matching `filter` (rebuilding the catalog first when it lags the run
 /// folders, as `tribo runs` does, or when `reindex`), and the run folders it cannot hold
 /// (their log is damaged) with why.
@@ -443,7 +448,7 @@ pub fn catalog_rows(
     store: &Path,
     filter: &Filter,
     reindex: bool,
-) -> Result<(Vec<CatalogRow>, Vec<(PathBuf, String)>)> {
+) -> Result<(Vec<CatalogRow>, Damaged)> {
     if !store.is_dir() {
         bail!(
             "no run store at {}: take a run with `tribo run` or `tribo demo`, or point --store at one",

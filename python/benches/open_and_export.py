@@ -1,6 +1,6 @@
 """Benchmark: a 60 s run at 20 kS/s × 5 channels into numpy, to Parquet, and the file sizes.
 
-    python python/bench.py [--run RUN_FOLDER] [--keep DIR]
+    python python/benches/open_and_export.py [--run RUN_FOLDER] [--keep DIR]
 
 Without --run it takes the run first: a virtual rig (`tribo rig --virtual --speed inf`) and
 `tribo run --load 0 --rate 20000 --max-duration 60` (the apparatus alone: its slow decay lasts
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import tribo
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def tribo_bin() -> str:
