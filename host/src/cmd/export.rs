@@ -27,7 +27,8 @@ SOURCE is a run folder of the store or a record (CSV). The formats:
 
   csv      the physics record format (`# mass_kg=…` lines, `t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]`):
            what `tribo fit` reads
-  json     one object: `metadata`, `result`, `units` and `columns` (`{\"t_s\": [...], ...}`)
+  json     one object: `metadata` (the Parquet key-value metadata below, its JSON parsed) and
+           `columns` (`{\"t_s\": [...], ...}`, null for NaN); for --catalog `{\"runs\": [...]}`
   parquet  one row per sample, typed columns whose names carry their unit: `t_s`, `x_m`,
            `v_m_s`, `ft_n`, `temp_c`, `ecr_ohm` (float64; NaN where the rig had no ECR
            reading), and for a run `sample_index` (int64: jumps across the rig's acquisition
