@@ -14,7 +14,7 @@ use parquet::data_type::{BoolType, ByteArray, ByteArrayType, DoubleType, Int32Ty
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 use parquet::file::writer::SerializedFileWriter;
-use parquet::schema::types::Type;
+use parquet::schema::types::{ColumnPath, Type};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tribo_store::{Catalog, CatalogRow, Filter};
@@ -378,13 +378,16 @@ fn write_parquet(t: &Table, path: &Path) -> Result<()> {
         .iter()
         .map(|(k, v)| KeyValue::new(k.clone(), v.clone()))
         .collect();
-    let props = WriterProperties::builder()
+    let mut props = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
-        // Samples are nearly all distinct: a dictionary only costs time before falling back.
-        .set_dictionary_enabled(false)
         .set_key_value_metadata(Some(kv))
-        .set_created_by(format!("tribo {}", env!("CARGO_PKG_VERSION")))
-        .build();
+        .set_created_by(format!("tribo {}", env!("CARGO_PKG_VERSION")));
+    // Motion samples are nearly all distinct: a dictionary only costs time before it falls
+    // back. The slow channels (temperature, ECR held over a block) and text keep theirs.
+    for name in ["t_s", "x_m", "v_m_s", "ft_n", "sample_index"] {
+        props = props.set_column_dictionary_enabled(ColumnPath::from(name), false);
+    }
+    let props = props.build();
     let file = std::fs::File::create(path)?;
     let mut w = SerializedFileWriter::new(file, schema, Arc::new(props))?;
     let mut rg = w.next_row_group()?;
