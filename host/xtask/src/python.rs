@@ -80,7 +80,7 @@ pub fn wheel(release: bool) -> Result<PathBuf, String> {
     cmd.current_dir(root())
         .env("CARGO_TARGET_DIR", &target)
         .env("PYO3_PYTHON", &build)
-        .args(["build", "-m", "python/Cargo.toml", "-o"])
+        .args(["build", "--strip", "-m", "python/Cargo.toml", "-o"])
         .arg(&out);
     if release {
         cmd.arg("--release");
