@@ -59,6 +59,9 @@ enum Command {
     Report(tribo::cmd::report::Args),
     /// The rig's front panel in a web browser: live state, plate, trace, result and controls.
     Panel(tribo::cmd::panel::Args),
+    /// Write a run or record as CSV, JSON or Parquet, or the catalog of runs as one table.
+    #[command(long_about = tribo::cmd::export::LONG_ABOUT)]
+    Export(tribo::cmd::export::Args),
 }
 
 /// Errors are printed as the chain of their causes, one per line, without a backtrace (which
@@ -109,5 +112,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Explain(a) => tribo::cmd::explain::run(tribo::cmd::explain::Args { quiet, ..a }),
         Command::Report(a) => tribo::cmd::report::run(a),
         Command::Panel(a) => tribo::cmd::panel::run(tribo::cmd::panel::Args { quiet, ..a }),
+        Command::Export(a) => tribo::cmd::export::run(tribo::cmd::export::Args { quiet, ..a }),
     }
 }

@@ -343,7 +343,7 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
 }
 
 /// An apparatus record's damping: `(μ_a, its standard error, c = μ_a·m·Ω in N·s/m)`.
-fn apparatus_damping(rec: &Record, r: &FitResult) -> Option<(f64, f64, f64)> {
+pub fn apparatus_damping(rec: &Record, r: &FitResult) -> Option<(f64, f64, f64)> {
     let rig = rec.rig.filter(|_| rec.apparatus)?;
     let (mu_a, se) = (*r.mu.get(1)?, *r.mu_se.get(1)?);
     Some((mu_a, se, mu_a * rig.mass_kg * rig.omega()))

@@ -3,6 +3,7 @@ pub mod campaign;
 pub mod demo;
 pub mod devices;
 pub mod explain;
+pub mod export;
 pub mod fit;
 pub mod onboard;
 pub mod panel;

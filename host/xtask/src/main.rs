@@ -20,12 +20,14 @@
 //!   the frame decoder, the codec) for RUNS executions (default 10 000 000), with cargo-fuzz
 //!   (installed from crates.io when missing) on the machine's toolchain (`RUSTC_BOOTSTRAP=1`);
 //!   prints each target's count and time. Not in CI (minutes per target).
+//! * `cargo xtask wheel [--release] [--test]`: the Python package's wheel (see [`python`]).
 //! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the
 //!   firmware, the on-target tests, the Windows build and its smoke test.
 
 mod elf;
 mod memory;
 mod panel;
+mod python;
 mod qemu;
 mod windows;
 
@@ -54,6 +56,7 @@ fn main() -> ExitCode {
         Some("windows") => windows::windows(&args[1..]),
         Some("soak") => soak(&args[1..]),
         Some("fuzz") => fuzz(&args[1..]),
+        Some("wheel") => python::wheel_cmd(&args[1..]),
         Some("ci") => ci(),
         _ => {
             eprintln!(
@@ -72,6 +75,8 @@ fn main() -> ExitCode {
                  every stored run checked against the rig's own copy\n  \
                  windows [--no-smoke]\n                     \
                  cross-build tribo.exe (mingw-w64) and smoke-test it under Wine\n  \
+                 wheel [--release] [--test]\n                     \
+                 build the Python package's wheel (maturin); --test: its pytest suite\n  \
                  ci                 rustfmt, clippy -D warnings, all tests, firmware build,\n                     \
                  on-target tests, Windows build and smoke test"
             );
@@ -205,6 +210,7 @@ fn ci() -> Result<(), String> {
     ]))?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     panel::browser_tests()?;
+    python::ci()?;
     firmware(&[])?;
     firmware(&["--clippy".to_string()])?;
     target_test(&[])?;

@@ -1,0 +1,106 @@
+"""fit and explain: the CLI's `--json` to the last digit."""
+
+import json
+import threading
+import time
+
+import pytest
+
+import tribo
+
+
+def cli_json(cli, *args):
+    return json.loads(cli(*args, check=False).stdout)
+
+
+@pytest.mark.parametrize("law", ["coulomb-viscous", "quadratic", "viscous", "poly:3"])
+def test_fit_of_a_run_is_the_cli_json(cli, run_dir, law):
+    f = tribo.fit(run_dir, law=law)
+    assert f.json == cli_json(cli, "fit", "--json", "--law", law, run_dir)
+    assert f.law == law and len(f.mu) == len(f.mu_se)
+
+
+def test_fit_of_a_run_object_and_a_csv_record_are_the_cli_json(cli, store, tmp_path):
+    from conftest import runs_of
+
+    run = tribo.open_run(runs_of(store)[1])
+    f = tribo.fit(run, law="quadratic", windows=3)
+    assert f.json == cli_json(cli, "fit", "--json", "--law", "quadratic", "--windows", "3", run.path)
+    assert len(f.windows) == 3
+    rec = tmp_path / "bench.csv"
+    cli("sim", "--noise", "--disp-noise-m", "3e-7", "--vel-noise-m-s", "2.5e-4", "--held-s", "0.5",
+        "--duration-s", "2", "--force-lag-s", "0.003", "-o", rec)
+    f = tribo.fit(tribo.read_record(rec))
+    j = cli_json(cli, "fit", "--json", rec)
+    assert f.json == j
+    # The hold before the release (0.5 s at 10 kS/s) is skipped.
+    assert f.verdict == "adequate" and 4900 < f.span["start"] < 5100
+    assert abs(f.mu[0] - 0.02) < 5 * f.mu_se[0]
+    # A flag overriding the record's constant.
+    f = tribo.fit(rec, load_n=0.35)
+    assert f.json == cli_json(cli, "fit", "--json", "--load-n", "0.35", rec)
+    assert f.rig["load_n_from"] == "flag"
+
+
+def test_fit_of_an_in_memory_record_equals_the_fit_of_its_file(cli, tmp_path):
+    rec = tmp_path / "q.csv"
+    cli("sim", "--law", "quadratic", "--mu", "0.02,0.01,0.004", "--noise", "-o", rec)
+    s = tribo.simulate(law="quadratic", mu=[0.02, 0.01, 0.004], noise=True)
+    a = tribo.fit(s, law="quadratic").json
+    b = cli_json(cli, "fit", "--json", "--law", "quadratic", rec)
+    assert a.pop("record") == "<record>" and b.pop("record") == str(rec)
+    assert a == b
+
+
+def test_explain_is_the_cli_json(cli, store):
+    from conftest import runs_of
+
+    d = runs_of(store)[1]  # a quadratic contact
+    e = tribo.explain(d, max_steps=2)
+    assert e.json == cli_json(cli, "explain", "--json", "--max-steps", "2", d)
+    # Its base law is `tribo fit`'s answer, to the last digit.
+    assert e.base_fit["mu"] == tribo.fit(d).mu and e.base_fit["mu_se"] == tribo.fit(d).mu_se
+    assert e.gap_final <= e.gap_initial
+
+
+def test_not_analysable_is_its_own_exception_as_the_cli_status_3(cli, tmp_path):
+    rec = tmp_path / "still.csv"
+    # Friction so high the carriage barely moves: no oscillation to fit.
+    cli("sim", "--mu", "0.9,0.0", "--duration-s", "0.5", "-o", rec)
+    p = cli("fit", "--json", rec, check=False)
+    assert p.returncode == 3 and json.loads(p.stdout)["verdict"] == "not-analysable"
+    with pytest.raises(tribo.NotAnalysable) as e:
+        tribo.fit(rec)
+    assert e.value.reason == json.loads(p.stdout)["reason"]
+    assert "not analysable" in str(e.value) and str(rec) in str(e.value)
+    with pytest.raises(tribo.NotAnalysable):
+        tribo.explain(rec)
+    assert issubclass(tribo.NotAnalysable, tribo.TriboError)
+
+
+def test_a_bad_law_is_a_value_error(run_dir):
+    with pytest.raises(ValueError):
+        tribo.fit(run_dir, law="cubic-spline")
+    with pytest.raises(ValueError):
+        tribo.explain(run_dir, only=["no-such-effect"])
+
+
+def test_a_long_fit_releases_the_gil():
+    s = tribo.simulate(law="quadratic", mu=[0.02, 0.01, 0.004], noise=True, duration_s=4)
+    done = threading.Event()
+    ticks = 0
+
+    def work():
+        tribo.explain(s, max_steps=1)
+        done.set()
+
+    th = threading.Thread(target=work)
+    t0 = time.perf_counter()
+    th.start()
+    while not done.is_set():
+        ticks += 1
+        time.sleep(0.001)
+    th.join()
+    took = time.perf_counter() - t0
+    # With the GIL held the whole time this loop could not have run while the fit did.
+    assert took > 0.05 and ticks > 0.3 * took / 0.002, (took, ticks)
