@@ -55,6 +55,8 @@ enum Command {
     Explain(tribo::cmd::explain::Args),
     /// Figures (SVG/PNG) and a self-contained HTML page of a run, a record or a campaign.
     Report(tribo::cmd::report::Args),
+    /// Push this PC's runs to the lab catalog (PostgreSQL): idempotent, resumable, from many PCs at once.
+    Sync(tribo::cmd::sync::Args),
 }
 
 /// Errors are printed as the chain of their causes, one per line, without a backtrace (which
@@ -103,5 +105,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fit(a) => tribo::cmd::fit::run(a),
         Command::Explain(a) => tribo::cmd::explain::run(tribo::cmd::explain::Args { quiet, ..a }),
         Command::Report(a) => tribo::cmd::report::run(a),
+        Command::Sync(a) => tribo::cmd::sync::run(tribo::cmd::sync::Args { quiet, ..a }),
     }
 }

@@ -13,4 +13,5 @@ pub mod run;
 pub mod runs;
 pub mod sim;
 pub mod status;
+pub mod sync;
 pub mod table;
