@@ -124,6 +124,11 @@ pub(crate) fn explain(url: &LabUrl, what: &str, e: postgres::Error) -> StoreErro
             "{what}: the server at {at} has no such database: create it (`createdb`, README \"A \
              catalog for the whole lab\") or fix the URL"
         ),
+        _ if crate::chain(&e).to_lowercase().contains("certificate") => format!(
+            "{what}: the server at {at} showed a TLS certificate this PC does not trust (or that is \
+             not for this host name): give the lab's certificate authority with \
+             sslrootcert=PATH.pem in the URL, and the server's name as its certificate says"
+        ),
         _ if is_transient(&e) => format!(
             "{what}: the lab catalog at {at} cannot be reached or was lost (server down, restarting, \
              or the network cut): check the server and this PC's network; nothing is half-written, \
@@ -201,6 +206,17 @@ impl LabCatalog {
 
     pub fn url(&self) -> &LabUrl {
         &self.url
+    }
+
+    /// Whether this connection is encrypted (the server's own view: `pg_stat_ssl`).
+    pub fn uses_tls(&self) -> Result<bool> {
+        let mut c = self.client.borrow_mut();
+        c.query_one(
+            "SELECT COALESCE((SELECT ssl FROM pg_stat_ssl WHERE pid = pg_backend_pid()), false)",
+            &[],
+        )
+        .map(|r| r.get(0))
+        .map_err(|e| explain(&self.url, "reading the connection's state", e))
     }
 
     /// The schema version the server holds (0: none yet).

@@ -24,6 +24,8 @@ pub struct PgServer {
     data: PathBuf,
     dir: tempfile::TempDir,
     as_user: Option<String>,
+    /// More server settings (`-c ssl=on …`), kept across restarts.
+    extra: std::cell::RefCell<String>,
 }
 
 fn find_bin() -> Option<PathBuf> {
@@ -100,6 +102,7 @@ impl PgServer {
             data,
             dir,
             as_user,
+            extra: Default::default(),
         };
         let out = s
             .cmd("initdb")
@@ -143,9 +146,10 @@ impl PgServer {
     /// Starts the (stopped) server again on the same port.
     pub fn start_again(&self) {
         let opts = format!(
-            "-p {} -k {} -c listen_addresses=127.0.0.1 -c fsync=off -c max_connections=60",
+            "-p {} -k {} -c listen_addresses=127.0.0.1 -c fsync=off -c max_connections=60 {}",
             self.port,
-            self.dir.path().display()
+            self.dir.path().display(),
+            self.extra.borrow()
         );
         // Wait for a port freed by a stop to be bound again.
         for attempt in 0.. {
@@ -180,6 +184,99 @@ impl PgServer {
             .arg(&self.data)
             .args(["-w", "-m", "fast", "stop"])
             .output();
+    }
+
+    /// Restarts the server with TLS on: a certificate authority and a certificate for
+    /// `localhost` and 127.0.0.1 signed by it (made with the `openssl` command). Returns the
+    /// authority's PEM file (what `sslrootcert=` takes).
+    pub fn enable_tls(&self) -> PathBuf {
+        let d = self.dir.path();
+        let ext = d.join("ext.cnf");
+        std::fs::write(
+            &ext,
+            "basicConstraints=CA:FALSE\nsubjectAltName=DNS:localhost,IP:127.0.0.1\n",
+        )
+        .unwrap();
+        let s = |p: &str| d.join(p).to_string_lossy().into_owned();
+        for args in [
+            vec![
+                "req",
+                "-x509",
+                "-newkey",
+                "rsa:2048",
+                "-nodes",
+                "-days",
+                "2",
+                "-subj",
+                "/CN=tribo test CA",
+                "-keyout",
+                &s("ca.key"),
+                "-out",
+                &s("ca.pem"),
+                "-addext",
+                "basicConstraints=critical,CA:TRUE",
+                "-addext",
+                "keyUsage=critical,keyCertSign,cRLSign",
+            ],
+            vec![
+                "req",
+                "-newkey",
+                "rsa:2048",
+                "-nodes",
+                "-subj",
+                "/CN=localhost",
+                "-keyout",
+                &s("server.key"),
+                "-out",
+                &s("server.csr"),
+            ],
+            vec![
+                "x509",
+                "-req",
+                "-in",
+                &s("server.csr"),
+                "-CA",
+                &s("ca.pem"),
+                "-CAkey",
+                &s("ca.key"),
+                "-CAcreateserial",
+                "-days",
+                "2",
+                "-extfile",
+                &s("ext.cnf"),
+                "-out",
+                &s("server.pem"),
+            ],
+        ] {
+            let out = Command::new("openssl")
+                .args(&args)
+                .output()
+                .expect("the openssl command (Debian package openssl, a dependency of postgresql)");
+            assert!(
+                out.status.success(),
+                "openssl {args:?}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        let key = d.join("server.key");
+        let mut perm = std::fs::metadata(&key).unwrap().permissions();
+        std::os::unix::fs::PermissionsExt::set_mode(&mut perm, 0o600);
+        std::fs::set_permissions(&key, perm).unwrap();
+        if let Some(u) = &self.as_user {
+            let _ = Command::new("chown")
+                .arg(format!("{u}:"))
+                .arg(&key)
+                .arg(d.join("server.pem"))
+                .status();
+        }
+        *self.extra.borrow_mut() = format!(
+            "-c ssl=on -c ssl_cert_file={} -c ssl_key_file={}",
+            s("server.pem"),
+            s("server.key")
+        );
+        self.stop();
+        self.start_again();
+        d.join("ca.pem")
     }
 
     /// Runs SQL as the superuser through `psql` on the server's socket; panics on failure.

@@ -331,3 +331,33 @@ fn a_network_cut_fails_clearly_and_the_next_sync_sends_the_rest() {
     );
     assert_eq!(count(&pg), 60);
 }
+
+#[test]
+fn tls_when_the_url_asks_for_it_with_the_server_s_certificate_verified() {
+    if PgServer::skip() {
+        return;
+    }
+    let pg = PgServer::start();
+    let ca = pg.enable_tls();
+    let env =
+        |k: &str| (k == "PGPASSWORD").then(|| tribo_catalog::testing::ADMIN_PASSWORD.to_string());
+    let base = format!(
+        "postgres://{}@localhost:{}/lab",
+        tribo_catalog::testing::ADMIN,
+        pg.port
+    );
+    let parse = |u: &str| tribo_catalog::LabUrl::parse_with(u, &env).unwrap();
+    let tls = parse(&format!(
+        "{base}?sslmode=verify-full&sslrootcert={}",
+        ca.display()
+    ));
+    let lab = LabCatalog::connect(&tls).unwrap();
+    assert!(lab.uses_tls().unwrap());
+    let plain = LabCatalog::connect(&parse(&base)).unwrap();
+    assert!(!plain.uses_tls().unwrap());
+    // A certificate from an authority this PC was not given: refused, and said so.
+    let e = tribo_catalog::chain(
+        &LabCatalog::connect(&parse(&format!("{base}?sslmode=require"))).unwrap_err(),
+    );
+    assert!(e.contains("sslrootcert"), "{e}");
+}

@@ -25,6 +25,7 @@
 
 mod elf;
 mod memory;
+mod postgres;
 mod qemu;
 mod windows;
 
@@ -202,6 +203,7 @@ fn ci() -> Result<(), String> {
         "-D",
         "warnings",
     ]))?;
+    postgres::ensure()?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     firmware(&[])?;
     firmware(&["--clippy".to_string()])?;
