@@ -32,7 +32,7 @@ fn run(pc: usize, i: usize) -> LabRun {
             created: format!("2026-{:02}-{:02}T12:00:00Z", 1 + i % 12, 1 + i % 28),
             status: "complete".into(),
             label: Some(
-                if i % 3 == 0 {
+                if i.is_multiple_of(3) {
                     "DLC on steel"
                 } else {
                     "steel on steel"
@@ -158,6 +158,16 @@ fn main() {
                 |_| {},
             );
         }
+        let (_, ri) = time(|| {
+            tribo_store::Catalog::open(store.path())
+                .unwrap()
+                .reindex()
+                .unwrap()
+        });
+        println!(
+            "the local catalog of those {folders} folders rebuilt from their logs first (as `tribo runs` does): {:.2} s",
+            ri.as_secs_f64()
+        );
         let opts = tribo_catalog::SyncOptions {
             pc: "pc-real".into(),
             ..Default::default()

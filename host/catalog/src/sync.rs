@@ -125,10 +125,17 @@ fn lab_run(
                 .into(),
         );
     };
-    // The on-board result's ± are in the log (the catalog row holds its μ only).
-    let ob = tribo_store::Run::open(&dir)
+    // The on-board result's ± : in the run's results (`tribo run` saves them there), else read
+    // from its log (the catalog row holds its μ only).
+    let ob = std::fs::read_to_string(dir.join(tribo_store::run::RESULT_FILE))
         .ok()
-        .and_then(|r| r.result().copied());
+        .and_then(|t| toml::from_str::<tribo_store::Results>(&t).ok())
+        .and_then(|r| r.onboard)
+        .or_else(|| {
+            tribo_store::Run::open(&dir)
+                .ok()
+                .and_then(|r| r.result().copied())
+        });
     let ob = ob.as_ref();
     let log = dir.join(LOG_FILE);
     let log_bytes = std::fs::metadata(&log)
