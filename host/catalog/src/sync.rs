@@ -220,7 +220,8 @@ pub fn sync(
         );
         if let Some(k) = key.and_then(|(s, n)| known.get(&(s, n as i64))) {
             let bytes = std::fs::metadata(dir.join(LOG_FILE)).map_or(0, |m| m.len() as i64);
-            if k.log_bytes > bytes {
+            // A fuller copy from anywhere, or as full a copy from another PC: the lab keeps it.
+            if k.log_bytes > bytes || (k.log_bytes == bytes && k.pc != opts.pc) {
                 report.fuller_elsewhere += 1;
                 continue;
             }

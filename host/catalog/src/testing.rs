@@ -259,9 +259,12 @@ impl PgServer {
             );
         }
         let key = d.join("server.key");
-        let mut perm = std::fs::metadata(&key).unwrap().permissions();
-        std::os::unix::fs::PermissionsExt::set_mode(&mut perm, 0o600);
-        std::fs::set_permissions(&key, perm).unwrap();
+        #[cfg(unix)]
+        {
+            let mut perm = std::fs::metadata(&key).unwrap().permissions();
+            std::os::unix::fs::PermissionsExt::set_mode(&mut perm, 0o600);
+            std::fs::set_permissions(&key, perm).unwrap();
+        }
         if let Some(u) = &self.as_user {
             let _ = Command::new("chown")
                 .arg(format!("{u}:"))
