@@ -278,13 +278,26 @@ fn pcs_sync_at_once_one_is_killed_and_the_lab_reads_across_rigs() {
     // A campaign's report from one rig's runs in the lab.
     let rep = tempfile::tempdir().unwrap();
     let out = ok(tribo(
-        &["report", "dlc-60", "--catalog", &writer, "--rig", serials[2], "--no-png", "-o", &rep.path().to_string_lossy()],
+        &[
+            "report",
+            "dlc-60",
+            "--catalog",
+            &writer,
+            "--rig",
+            serials[2],
+            "--no-png",
+            "-o",
+            &rep.path().to_string_lossy(),
+        ],
         "wpw",
     )
     .output()
     .unwrap());
     let html = std::fs::read_to_string(rep.path().join("report.html")).unwrap();
-    assert!(out.contains("report.html") && html.contains("dlc-60"), "{out}");
+    assert!(
+        out.contains("report.html") && html.contains("dlc-60"),
+        "{out}"
+    );
     let text = ok(tribo(&["runs", "--catalog", &writer], "wpw")
         .output()
         .unwrap());

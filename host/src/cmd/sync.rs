@@ -132,7 +132,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         r.unchanged,
         match r.fuller_elsewhere + r.pushed.kept {
             0 => String::new(),
-            n => format!(", {n} kept as the lab has them (as full a copy or fuller, from another PC)"),
+            n => format!(
+                ", {n} kept as the lab has them (as full a copy or fuller, from another PC)"
+            ),
         }
     )?;
     if r.reconnects > 0 {

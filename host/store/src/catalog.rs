@@ -11,6 +11,10 @@ use std::path::{Path, PathBuf};
 
 pub const CATALOG_FILE: &str = "catalog.sqlite";
 
+/// The SQLite catalog's schema version (its `user_version`): a catalog of a newer tribo is
+/// refused, not misread. Catalogs of earlier tribos (version 0) are migrated on opening.
+pub const CATALOG_VERSION: i64 = 1;
+
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS runs (
     id TEXT PRIMARY KEY,
@@ -349,6 +353,20 @@ impl Catalog {
         let conn = Connection::open(root.join(CATALOG_FILE)).map_err(|e| db_err("open", e))?;
         conn.busy_timeout(std::time::Duration::from_secs(5))
             .map_err(|e| db_err("open", e))?;
+        let version: i64 = conn
+            .query_row("PRAGMA user_version", [], |r| r.get(0))
+            .map_err(|e| db_err("open", e))?;
+        if version > CATALOG_VERSION {
+            return Err(StoreError::new(
+                ErrorKind::Catalog,
+                format!(
+                    "{} was written by a newer tribo (catalog version {version}, this tribo knows up to \
+                     {CATALOG_VERSION}): update tribo, or move it away and run `tribo runs --reindex` \
+                     (the catalog is only an index of the run folders)",
+                    root.join(CATALOG_FILE).display()
+                ),
+            ));
+        }
         conn.execute_batch(SCHEMA)
             .map_err(|e| db_err("schema", e))?;
         // A catalog made by an earlier tribo: add the columns it lacks (acquisition gaps: its runs
@@ -375,6 +393,10 @@ impl Catalog {
                 conn.execute_batch(&format!("ALTER TABLE runs ADD COLUMN {column} {decl}"))
                     .map_err(|e| db_err("schema", e))?;
             }
+        }
+        if version < CATALOG_VERSION {
+            conn.pragma_update(None, "user_version", CATALOG_VERSION)
+                .map_err(|e| db_err("schema", e))?;
         }
         Ok(Catalog {
             conn,
