@@ -10,7 +10,7 @@ use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use tribo_store::catalog::RunCatalog;
+use tribo_store::catalog::{Axis, Cell, RunCatalog, Table, Value};
 use tribo_store::{CatalogRow, Filter, StoreError};
 
 /// One run as pushed to the lab catalog: the local catalog's row and what places it in the lab.
@@ -68,6 +68,25 @@ const COLUMNS: &str = "rig_serial,rig_run,run_id,pc,log_dir,log_sha256,log_bytes
 created,status,label,sample,lubricant,campaign,repeat,load_n,temp_c,firmware,samples,missing_blocks,\
 verdict,cycles,onboard_mu0,onboard_mu1,onboard_mu0_se,onboard_mu1_se,host_mu0,host_mu1,host_gap,\
 host_mu0_se,host_mu1_se,lost_samples,blocks,blocks_expected,completeness";
+
+/// The rows a [`Filter`] keeps ([`filter_params`] are its parameters $1..$8).
+const FILTER: &str = "WHERE ($1::text IS NULL OR campaign = $1) AND ($2::text IS NULL OR strpos(label, $2) > 0) \
+     AND ($3::text IS NULL OR status = $3) AND ($4::float8 IS NULL OR load_n >= $4 - 1e-9) \
+     AND ($5::float8 IS NULL OR load_n <= $5 + 1e-9) AND ($6::float8 IS NULL OR temp_c >= $6 - 1e-9) \
+     AND ($7::float8 IS NULL OR temp_c <= $7 + 1e-9) AND ($8::text IS NULL OR rig_serial = $8)";
+
+fn filter_params(f: &Filter) -> [&(dyn ToSql + Sync); 8] {
+    [
+        &f.campaign,
+        &f.label,
+        &f.status,
+        &f.load_min,
+        &f.load_max,
+        &f.temp_min,
+        &f.temp_max,
+        &f.rig,
+    ]
+}
 
 /// The lab catalog: a connection to the server, its schema checked (and migrated) on connecting.
 pub struct LabCatalog {
@@ -398,21 +417,8 @@ impl LabCatalog {
     pub fn lab_runs(&self, f: &Filter) -> Result<Vec<LabRow>> {
         f.check()?;
         self.select(
-            "WHERE ($1::text IS NULL OR campaign = $1) AND ($2::text IS NULL OR strpos(label, $2) > 0) \
-             AND ($3::text IS NULL OR status = $3) AND ($4::float8 IS NULL OR load_n >= $4 - 1e-9) \
-             AND ($5::float8 IS NULL OR load_n <= $5 + 1e-9) AND ($6::float8 IS NULL OR temp_c >= $6 - 1e-9) \
-             AND ($7::float8 IS NULL OR temp_c <= $7 + 1e-9) AND ($8::text IS NULL OR rig_serial = $8) \
-             ORDER BY created, rig_serial, rig_run",
-            &[
-                &f.campaign,
-                &f.label,
-                &f.status,
-                &f.load_min,
-                &f.load_max,
-                &f.temp_min,
-                &f.temp_max,
-                &f.rig,
-            ],
+            &format!("{FILTER} ORDER BY created, rig_serial, rig_run"),
+            &filter_params(f),
         )
     }
 
@@ -507,5 +513,74 @@ impl RunCatalog for LabCatalog {
     }
     fn describe(&self) -> String {
         format!("the lab catalog at {}", self.url.shown())
+    }
+    /// The campaign table, grouped and averaged by the server (the same groups, mean and sample
+    /// standard deviation as [`tribo_store::catalog::tabulate`]), so that a table over a lab's
+    /// years of runs does not fetch them all.
+    fn table(&self, rows: Axis, cols: Axis, value: Value, f: &Filter) -> Result<Table> {
+        if rows == cols {
+            return Err(StoreError::new(
+                tribo_store::ErrorKind::Invalid,
+                "rows and columns must differ: use --rows temp --cols load",
+            ));
+        }
+        let mut f = f.clone();
+        f.status.get_or_insert_with(|| "complete".into());
+        f.check()?;
+        let v = match value {
+            Value::Mu0 => "host_mu0",
+            Value::Mu1 => "host_mu1",
+            Value::OnboardMu0 => "onboard_mu0",
+            Value::OnboardMu1 => "onboard_mu1",
+        };
+        let ((rc, rk), (cc, ck)) = (col_key(rows), col_key(cols));
+        let sql = format!(
+            "SELECT {rk}, {ck}, avg({v}), stddev_samp({v}), count(*) FROM tribo_runs {FILTER} \
+             AND {v} BETWEEN -1e300 AND 1e300 AND {rc} BETWEEN -1e300 AND 1e300 \
+             AND {cc} BETWEEN -1e300 AND 1e300 GROUP BY 1, 2 ORDER BY 1, 2"
+        );
+        let got = self
+            .client
+            .borrow_mut()
+            .query(&sql, &filter_params(&f))
+            .map_err(|e| explain(&self.url, "tabulating the lab catalog", e))?;
+        let groups: BTreeMap<(i64, i64), Cell> = got
+            .iter()
+            .map(|r| {
+                (
+                    (r.get(0), r.get(1)),
+                    Cell {
+                        mean: r.get(2),
+                        sd: r.get(3),
+                        n: r.get::<_, i64>(4) as usize,
+                    },
+                )
+            })
+            .collect();
+        let mut rk: Vec<i64> = groups.keys().map(|k| k.0).collect();
+        let mut ck: Vec<i64> = groups.keys().map(|k| k.1).collect();
+        rk.dedup();
+        ck.sort_unstable();
+        ck.dedup();
+        let scale = |a: Axis| if a == Axis::Load { 1e-3 } else { 1.0 };
+        Ok(Table {
+            cells: rk
+                .iter()
+                .map(|a| ck.iter().map(|b| groups.get(&(*a, *b)).copied()).collect())
+                .collect(),
+            rows: rk.iter().map(|&a| a as f64 * scale(rows)).collect(),
+            cols: ck.iter().map(|&b| b as f64 * scale(cols)).collect(),
+            row_axis: rows,
+            col_axis: cols,
+        })
+    }
+}
+
+/// A table axis's column and its group key: loads to the mN, temperatures to the °C, rounded half
+/// away from zero as Rust's `round` ([`tribo_store::catalog::tabulate`]).
+fn col_key(a: Axis) -> (&'static str, &'static str) {
+    match a {
+        Axis::Load => ("load_n", "round((load_n * 1000)::numeric)::bigint"),
+        Axis::Temp => ("temp_c", "round(temp_c::numeric)::bigint"),
     }
 }

@@ -123,11 +123,20 @@ fn sync_is_idempotent_reads_across_rigs_and_follows_a_log_that_grows() {
     );
     rows.iter_mut().for_each(|r| r.status = "complete".into());
     let expect = tribo_store::catalog::tabulate(&rows, Axis::Temp, Axis::Load, Value::OnboardMu0);
-    assert_eq!(t.cells.len(), expect.cells.len());
+    assert_eq!((&t.rows, &t.cols), (&expect.rows, &expect.cols));
+    assert!(t
+        .cells
+        .iter()
+        .flatten()
+        .any(|c| c.is_some_and(|c| c.n > 1 && c.sd.is_some())));
     for (x, y) in t.cells.iter().flatten().zip(expect.cells.iter().flatten()) {
         let (x, y) = (x.unwrap(), y.unwrap());
         assert_eq!(x.n, y.n);
         assert!((x.mean - y.mean).abs() < 1e-12);
+        match (x.sd, y.sd) {
+            (Some(a), Some(b)) => assert!((a - b).abs() <= 1e-9 * b.abs(), "{a} {b}"),
+            (a, b) => assert_eq!(a, b),
+        }
     }
 
     // A run half-received, synced, then completed by a pull: its row follows.
