@@ -56,6 +56,7 @@ enum Command {
     /// Figures (SVG/PNG) and a self-contained HTML page of a run, a record or a campaign.
     Report(tribo::cmd::report::Args),
     /// Push this PC's runs to the lab catalog (PostgreSQL): idempotent, resumable, from many PCs at once.
+    #[command(long_about = tribo::cmd::sync::LONG_ABOUT)]
     Sync(tribo::cmd::sync::Args),
 }
 

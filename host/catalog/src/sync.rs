@@ -108,12 +108,8 @@ fn local_rows(store: &Path, report: &mut SyncReport) -> Result<Vec<CatalogRow>> 
     cat.list(&Filter::default())
 }
 
-/// The lab's copy of a local run: `None` (with why) when the run cannot be placed in the lab.
-fn lab_run(
-    row: CatalogRow,
-    opts: &SyncOptions,
-    store: &Path,
-) -> std::result::Result<LabRun, String> {
+/// The lab's copy of a local run, or why it cannot be placed in the lab.
+fn lab_run(row: CatalogRow, opts: &SyncOptions) -> std::result::Result<LabRun, String> {
     let dir = row.path.clone();
     let meta: RunMeta = std::fs::read_to_string(dir.join(META_FILE))
         .map_err(|e| format!("{META_FILE}: {e}"))
@@ -145,11 +141,7 @@ fn lab_run(
     let log_sha256 = file_sha256(&log).map_err(|e| format!("{LOG_FILE}: {e}"))?;
     let abs = std::path::absolute(&dir).unwrap_or(dir.clone());
     let log_dir = match &opts.shared_as {
-        Some(shared) => {
-            let name = dir.file_name().map(PathBuf::from).unwrap_or_default();
-            let _ = store;
-            shared.join(name)
-        }
+        Some(shared) => shared.join(dir.file_name().unwrap_or_default()),
         None => abs,
     };
     let fin = |v: f32| Some(v as f64).filter(|v| v.is_finite());
@@ -241,7 +233,7 @@ pub fn sync(
     for chunk in todo.chunks(opts.batch.max(1)) {
         let mut runs = Vec::with_capacity(chunk.len());
         for row in chunk {
-            match lab_run(row.clone(), opts, store) {
+            match lab_run(row.clone(), opts) {
                 Ok(r) => runs.push(r),
                 Err(why) => report.skipped.push((row.path.clone(), why)),
             }

@@ -8,24 +8,31 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tribo_catalog::{LabCatalog, LabUrl, RunCatalog, SyncOptions};
 
-/// The help of `--catalog`, the same for every command that takes it.
+/// The help of `--catalog` in `runs`, `table`, `report` and `pull`.
 pub const CATALOG_HELP: &str = "The lab catalog to read instead of this PC's own: a PostgreSQL URL, postgres://USER@HOST[:PORT]/DATABASE[?sslmode=verify-full&sslrootcert=CA.pem] (default: $TRIBO_CATALOG, else the store's SQLite catalog). No password in it: it comes from PGPASSWORD or ~/.pgpass";
 
-/// Arguments of `tribo sync`.
-///
-/// Pushes every run of this PC's store to the lab catalog, a PostgreSQL database many PCs share:
-/// its metadata, the on-board and host results with their ±, its campaign, the rig's serial
-/// number, the frame log's SHA-256 and where the log is. The logs themselves stay where they are.
-///
-/// Safe to run at any time, as often as wanted, from every PC at once: a run the lab already
-/// holds as this PC has it is not sent again; runs go in batches, each one transaction, so a
-/// sync killed midway leaves whole runs and the next one sends the rest; a run completed later
-/// (by `tribo pull`) updates its row; a fuller copy of a run from another PC is never replaced by
-/// a shorter one. A server that restarts, or a network that drops, is waited for (`--wait`).
-///
-/// The first sync against an empty database creates the catalog's tables: run it once as the
-/// catalog's owner (README, "A catalog for the whole lab"). Prints what was sent; `--json` for
-/// scripts.
+/// `tribo sync --help`: what it does, in full.
+pub const LONG_ABOUT: &str = "Push this PC's runs to the lab catalog (PostgreSQL).
+
+Pushes every run of this PC's store to the lab catalog, a PostgreSQL database many PCs share: its \
+metadata, the on-board and host results with their ±, its campaign, the rig's serial number, the \
+frame log's SHA-256 and where the log is. The logs themselves stay where they are.
+
+Safe to run at any time, as often as wanted, from every PC at once: a run the lab already holds as \
+this PC has it is not sent again; runs go in batches, each one transaction, so a sync killed midway \
+leaves whole runs and the next one sends the rest; a run completed later (by `tribo pull`) updates \
+its row; a fuller copy of a run from another PC is never replaced by a shorter one. A server that \
+restarts, or a network that drops, is waited for (--wait).
+
+The first sync against an empty database creates the catalog's tables: run it once as the \
+catalog's owner (README, \"A catalog for the whole lab\"). Then `tribo runs`, `table` and `report \
+CAMPAIGN` read the lab with --catalog URL (or TRIBO_CATALOG), across rigs (--rig SERIAL), and \
+`tribo pull --from-catalog SERIAL/RUN` copies a run from a shared folder.
+
+Example, the password in ~/.pgpass (labserver:5432:tribo:rig2:PASSWORD, mode 0600):
+  tribo sync --catalog 'postgres://rig2@labserver/tribo?sslmode=verify-full&sslrootcert=lab-ca.pem'";
+
+/// Arguments of `tribo sync` (what it does: [`LONG_ABOUT`]).
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
