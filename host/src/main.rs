@@ -62,6 +62,9 @@ enum Command {
     /// Write a run or record as CSV, JSON or Parquet, or the catalog of runs as one table.
     #[command(long_about = tribo::cmd::export::LONG_ABOUT)]
     Export(tribo::cmd::export::Args),
+    /// Push this PC's runs to the lab catalog (PostgreSQL): idempotent, resumable, from many PCs at once.
+    #[command(long_about = tribo::cmd::sync::LONG_ABOUT)]
+    Sync(tribo::cmd::sync::Args),
 }
 
 /// Errors are printed as the chain of their causes, one per line, without a backtrace (which
@@ -113,5 +116,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Report(a) => tribo::cmd::report::run(a),
         Command::Panel(a) => tribo::cmd::panel::run(tribo::cmd::panel::Args { quiet, ..a }),
         Command::Export(a) => tribo::cmd::export::run(tribo::cmd::export::Args { quiet, ..a }),
+        Command::Sync(a) => tribo::cmd::sync::run(tribo::cmd::sync::Args { quiet, ..a }),
     }
 }

@@ -16,4 +16,5 @@ pub mod runs;
 pub mod selftest;
 pub mod sim;
 pub mod status;
+pub mod sync;
 pub mod table;

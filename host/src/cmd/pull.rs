@@ -19,6 +19,13 @@ pub struct Args {
     /// (the damaged file is kept beside it as frames.log.damaged), then fetch what is missing.
     #[arg(long)]
     pub salvage: bool,
+    /// Fetch this run's log from where the lab catalog says it is (a shared folder) instead of
+    /// from a rig: a run's name or SERIAL/RUN, as `tribo runs --catalog URL` lists them. The log's
+    /// SHA-256 is checked against the catalog's.
+    #[arg(long, value_name = "ID", conflicts_with_all = ["run", "salvage"])]
+    pub from_catalog: Option<String>,
+    #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
+    pub catalog: Option<String>,
     /// No progress bar or messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]
     pub quiet: bool,
@@ -26,6 +33,9 @@ pub struct Args {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(id) = &args.from_catalog {
+        return super::sync::pull_from_catalog(args.catalog.as_deref(), id, &args.link.store());
+    }
     let (mut link, info) = match (args.link.connect(), &args.run) {
         (Ok(c), _) => c,
         // No rig to fetch from: a salvage still repairs the log here and says what is missing.

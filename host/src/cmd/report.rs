@@ -6,7 +6,7 @@ use anyhow::{bail, Context};
 use std::path::{Path, PathBuf};
 use tribo_physics::identify::LawSpec;
 use tribo_report::{write_record_report, ReportFiles, ReportInputs};
-use tribo_store::{Catalog, Filter, Run};
+use tribo_store::{Filter, Run};
 
 /// Arguments of `tribo report`.
 ///
@@ -24,6 +24,11 @@ pub struct Args {
     /// Run store, for a campaign (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
     pub store: Option<PathBuf>,
+    /// A campaign's runs of this rig only (its serial number).
+    #[arg(long, value_name = "SERIAL")]
+    pub rig: Option<String>,
+    #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
+    pub catalog: Option<String>,
     /// Select the campaign's runs by label substring instead of campaign name.
     #[arg(long)]
     pub label: bool,
@@ -128,7 +133,8 @@ fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
         .store
         .clone()
         .unwrap_or_else(tribo_store::default_store_dir);
-    if !store.is_dir() {
+    let lab = tribo_catalog::lab_url(args.catalog.as_deref()).is_some();
+    if !lab && !store.is_dir() {
         bail!(
             "{:?} is neither a run folder, a record file, nor a campaign: there is no run store at {} \
              (point --store at one)",
@@ -136,25 +142,27 @@ fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
             store.display()
         );
     }
-    let cat = Catalog::open(&store)?;
+    let cat = super::sync::open_catalog(args.catalog.as_deref(), &store)?;
     let filter = if args.label {
         Filter {
             label: Some(args.target.clone()),
+            rig: args.rig.clone(),
             ..Filter::default()
         }
     } else {
         Filter {
             campaign: Some(args.target.clone()),
+            rig: args.rig.clone(),
             ..Filter::default()
         }
     };
-    let rows = cat.list(&filter)?;
+    let rows = cat.runs(&filter)?;
     if rows.is_empty() {
         bail!(
-            "no run of {} {:?} in the catalog of {} (see `tribo runs`; `tribo runs --reindex` rebuilds the catalog)",
+            "no run of {} {:?} in {} (see `tribo runs`; `tribo runs --reindex` rebuilds a PC's own catalog)",
             if args.label { "label" } else { "campaign" },
             args.target,
-            store.display()
+            cat.describe()
         );
     }
     let title = if args.label {
@@ -200,6 +208,8 @@ mod tests {
             target: target.into(),
             out,
             store: None,
+            rig: None,
+            catalog: None,
             label: false,
             laws: vec![LawSpec::CoulombViscous],
             no_png: true,

@@ -26,6 +26,11 @@ pub struct Args {
     /// Temperature range, °C: `60` (±0.5) or `25..60`.
     #[arg(long, value_parser = temp_range)]
     pub temp: Option<(f64, f64)>,
+    /// Runs of this rig (its serial number, as `tribo devices` shows it).
+    #[arg(long, value_name = "SERIAL")]
+    pub rig: Option<String>,
+    #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
+    pub catalog: Option<String>,
     /// Rebuild the catalog from the run folders first.
     #[arg(long)]
     pub reindex: bool,
@@ -91,6 +96,9 @@ pub fn parse_range(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(url) = super::sync::lab_url(args.catalog.as_deref())? {
+        return lab(args, &url);
+    }
     let store = args
         .store
         .clone()
@@ -132,6 +140,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|r| r.path)
         .collect();
     let only_filter_is_status = args.campaign.is_none()
+        && args.rig.is_none()
         && args.label.is_none()
         && args.load.is_none()
         && args.temp.is_none();
@@ -157,6 +166,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         campaign: args.campaign,
         label: args.label,
         status,
+        rig: args.rig,
         ..Default::default()
     };
     if let Some((a, b)) = args.load {
@@ -285,5 +295,117 @@ fn print_damaged(damaged: &[(PathBuf, String)]) -> anyhow::Result<()> {
              every intact record (with or without the rig) and fetches what is missing"
         )?;
     }
+    Ok(())
+}
+
+/// `tribo runs --catalog URL`: the lab catalog's runs, across rigs and PCs.
+fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
+    if args.reindex {
+        anyhow::bail!("--reindex rebuilds this PC's own catalog: leave --catalog out (or TRIBO_CATALOG unset), then `tribo sync`");
+    }
+    if args.status.as_deref() == Some(DAMAGED) {
+        anyhow::bail!("the lab catalog holds no damaged run (a log that cannot be read is not synced): `tribo runs --status damaged` on the PC that holds it");
+    }
+    let lab = tribo_catalog::LabCatalog::connect(url)?;
+    let mut f = Filter {
+        campaign: args.campaign,
+        label: args.label,
+        status: args.status,
+        rig: args.rig,
+        ..Default::default()
+    };
+    if let Some((a, b)) = args.load {
+        f.load_min = Some(a);
+        f.load_max = Some(b);
+    }
+    if let Some((a, b)) = args.temp {
+        f.temp_min = Some(a);
+        f.temp_max = Some(b);
+    }
+    let rows = lab.lab_runs(&f)?;
+    if args.json {
+        let runs: Vec<serde_json::Value> = rows
+            .iter()
+            .map(|l| {
+                let r = &l.run.row;
+                serde_json::json!({
+                    "id": r.id, "rig": l.run.rig_serial, "rig_run": l.run.rig_run, "pc": l.run.pc,
+                    "path": l.run.log_dir, "log_sha256": l.run.log_sha256, "log_bytes": l.run.log_bytes,
+                    "synced_at": l.synced_at, "created": r.created, "status": r.status,
+                    "completeness": r.completeness, "blocks": r.blocks,
+                    "blocks_expected": r.blocks_expected, "lost_samples": r.lost_samples,
+                    "label": r.label, "sample": r.sample, "lubricant": r.lubricant,
+                    "campaign": r.campaign, "repeat": r.repeat,
+                    "load_n": r.load_n, "temp_c": r.temp_c, "serial": r.serial,
+                    "onboard_mu0": r.onboard_mu0, "onboard_mu1": r.onboard_mu1,
+                    "onboard_mu0_se": l.run.onboard_mu0_se, "onboard_mu1_se": l.run.onboard_mu1_se,
+                    "host_mu0": r.host_mu0, "host_mu1": r.host_mu1,
+                    "host_mu0_se": r.host_mu0_se, "host_mu1_se": r.host_mu1_se,
+                })
+            })
+            .collect();
+        crate::out::print_json(
+            serde_json::json!({ "catalog": url.shown(), "runs": runs, "damaged": [] }),
+        )?;
+        return Ok(());
+    }
+    if args.paths {
+        for l in rows {
+            outln!("{}", l.run.log_dir)?;
+        }
+        return Ok(());
+    }
+    if rows.is_empty() {
+        outln!(
+            "no run matches in the lab catalog at {} (`tribo sync` sends a PC's runs)",
+            url.shown()
+        )?;
+        return Ok(());
+    }
+    let opt = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.5}"));
+    outln!(
+        "{:<16} {:>6} {:<12} {:<10} {:>11} {:>7} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}  run",
+        "rig",
+        "run",
+        "pc",
+        "status",
+        "blocks",
+        "load N",
+        "°C",
+        "campaign",
+        "rep",
+        "μ0 rig",
+        "μ1 rig",
+        "μ0 host",
+        "μ1 host"
+    )?;
+    for l in &rows {
+        let r = &l.run.row;
+        outln!(
+            "{:<16} {:>6} {:<12} {:<10} {:>11} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}  {}",
+            l.run.rig_serial,
+            l.run.rig_run,
+            l.run.pc,
+            r.status,
+            match r.blocks_expected {
+                Some(m) => format!("{}/{m}", r.blocks),
+                None => format!("{}/?", r.blocks),
+            },
+            r.load_n,
+            r.temp_c.map_or("—".into(), |t| format!("{t:.1}")),
+            r.campaign.as_deref().unwrap_or("—"),
+            r.repeat.map_or("—".into(), |x| x.to_string()),
+            opt(r.onboard_mu0),
+            opt(r.onboard_mu1),
+            opt(r.host_mu0),
+            opt(r.host_mu1),
+            r.id,
+        )?;
+    }
+    outln!(
+        "{} runs from the lab catalog at {}; `tribo pull --from-catalog SERIAL/RUN` fetches one's log from a shared folder",
+        rows.len(),
+        url.shown()
+    )?;
     Ok(())
 }

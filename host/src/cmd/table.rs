@@ -4,7 +4,7 @@
 use crate::outln;
 use std::path::PathBuf;
 use tribo_store::catalog::{Axis, Value};
-use tribo_store::{Catalog, Filter};
+use tribo_store::Filter;
 
 /// Arguments of `tribo table`.
 #[derive(clap::Args, Debug)]
@@ -24,6 +24,11 @@ pub struct Args {
     /// Only this campaign's runs.
     #[arg(long)]
     pub campaign: Option<String>,
+    /// Only this rig's runs (its serial number).
+    #[arg(long, value_name = "SERIAL")]
+    pub rig: Option<String>,
+    #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
+    pub catalog: Option<String>,
     /// Print one JSON object: `{"value", "rows": [..], "cols": [..], "row_axis", "col_axis",
     /// "cells": [[{"mean", "sd", "n"} | null, ..], ..]}`.
     #[arg(long)]
@@ -36,19 +41,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .store
         .clone()
         .unwrap_or_else(tribo_store::default_store_dir);
-    if !store.is_dir() {
+    let lab = tribo_catalog::lab_url(args.catalog.as_deref()).is_some();
+    if !lab && !store.is_dir() {
         anyhow::bail!("no run store at {}: run a campaign first (`tribo campaign PLAN.toml`), or point --store at one", store.display());
     }
     let rows: Axis = args.rows.parse()?;
     let cols: Axis = args.cols.parse()?;
     let value: Value = args.value.parse()?;
-    let cat = Catalog::open(&store)?;
+    let cat = super::sync::open_catalog(args.catalog.as_deref(), &store)?;
     let t = cat.table(
         rows,
         cols,
         value,
         &Filter {
             campaign: args.campaign.clone(),
+            rig: args.rig.clone(),
             ..Default::default()
         },
     )?;
@@ -83,7 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         outln!(
             "no complete run with a {} value in {}: nothing to tabulate",
             args.value,
-            store.display()
+            cat.describe()
         )?;
         return Ok(());
     }

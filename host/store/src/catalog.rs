@@ -11,6 +11,10 @@ use std::path::{Path, PathBuf};
 
 pub const CATALOG_FILE: &str = "catalog.sqlite";
 
+/// The SQLite catalog's schema version (its `user_version`): a catalog of a newer tribo is
+/// refused, not misread. Catalogs of earlier tribos (version 0) are migrated on opening.
+pub const CATALOG_VERSION: i64 = 1;
+
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS runs (
     id TEXT PRIMARY KEY,
@@ -109,6 +113,8 @@ pub struct Filter {
     pub load_max: Option<f64>,
     pub temp_min: Option<f64>,
     pub temp_max: Option<f64>,
+    /// Runs of this rig (its serial number).
+    pub rig: Option<String>,
 }
 
 impl Filter {
@@ -275,9 +281,42 @@ impl Table {
     }
 }
 
+/// One catalog, whatever holds it: the store's own SQLite file ([`Catalog`]) or a lab-wide server
+/// (`tribo-catalog`). What `tribo runs`, `table`, `campaign` and `report --campaign` read.
+pub trait RunCatalog {
+    /// Runs matching `f`, oldest first; an invalid filter ([`Filter::check`]) is an error.
+    fn runs(&self, f: &Filter) -> Result<Vec<CatalogRow>>;
+    /// Where the catalog is, for messages (a folder, or a server's URL without any password).
+    fn describe(&self) -> String;
+    /// Campaign table of `value` over complete runs matching `f` ([`tabulate`]).
+    fn table(&self, rows: Axis, cols: Axis, value: Value, f: &Filter) -> Result<Table> {
+        if rows == cols {
+            return Err(StoreError::new(
+                ErrorKind::Invalid,
+                "rows and columns must differ: use --rows temp --cols load",
+            ));
+        }
+        let mut f = f.clone();
+        f.status.get_or_insert_with(|| "complete".into());
+        Ok(tabulate(&self.runs(&f)?, rows, cols, value))
+    }
+}
+
+impl RunCatalog for Catalog {
+    fn runs(&self, f: &Filter) -> Result<Vec<CatalogRow>> {
+        self.list(f)
+    }
+    fn describe(&self) -> String {
+        self.root.join(CATALOG_FILE).display().to_string()
+    }
+    fn table(&self, rows: Axis, cols: Axis, value: Value, f: &Filter) -> Result<Table> {
+        Catalog::table(self, rows, cols, value, f)
+    }
+}
+
 /// The frame log's size and modification time, `bytes:nanoseconds` (empty when unreadable): what
 /// tells a catalogued run whose log changed since.
-fn log_stamp(dir: &Path) -> String {
+pub fn log_stamp(dir: &Path) -> String {
     std::fs::metadata(dir.join(crate::run::LOG_FILE))
         .ok()
         .map(|m| {
@@ -314,6 +353,20 @@ impl Catalog {
         let conn = Connection::open(root.join(CATALOG_FILE)).map_err(|e| db_err("open", e))?;
         conn.busy_timeout(std::time::Duration::from_secs(5))
             .map_err(|e| db_err("open", e))?;
+        let version: i64 = conn
+            .query_row("PRAGMA user_version", [], |r| r.get(0))
+            .map_err(|e| db_err("open", e))?;
+        if version > CATALOG_VERSION {
+            return Err(StoreError::new(
+                ErrorKind::Catalog,
+                format!(
+                    "{} was written by a newer tribo (catalog version {version}, this tribo knows up to \
+                     {CATALOG_VERSION}): update tribo, or move it away and run `tribo runs --reindex` \
+                     (the catalog is only an index of the run folders)",
+                    root.join(CATALOG_FILE).display()
+                ),
+            ));
+        }
         conn.execute_batch(SCHEMA)
             .map_err(|e| db_err("schema", e))?;
         // A catalog made by an earlier tribo: add the columns it lacks (acquisition gaps: its runs
@@ -340,6 +393,10 @@ impl Catalog {
                 conn.execute_batch(&format!("ALTER TABLE runs ADD COLUMN {column} {decl}"))
                     .map_err(|e| db_err("schema", e))?;
             }
+        }
+        if version < CATALOG_VERSION {
+            conn.pragma_update(None, "user_version", CATALOG_VERSION)
+                .map_err(|e| db_err("schema", e))?;
         }
         Ok(Catalog {
             conn,
@@ -461,13 +518,14 @@ impl Catalog {
                  WHERE (?1 IS NULL OR campaign = ?1) AND (?2 IS NULL OR instr(label, ?2) > 0) \
                  AND (?3 IS NULL OR status = ?3) AND (?4 IS NULL OR load_n >= ?4 - 1e-9) \
                  AND (?5 IS NULL OR load_n <= ?5 + 1e-9) AND (?6 IS NULL OR temp_c >= ?6 - 1e-9) \
-                 AND (?7 IS NULL OR temp_c <= ?7 + 1e-9) ORDER BY created, id",
+                 AND (?7 IS NULL OR temp_c <= ?7 + 1e-9) AND (?8 IS NULL OR serial = ?8) ORDER BY created, id",
             )
             .map_err(|e| db_err("query", e))?;
         let rows = stmt
             .query_map(
                 params![
-                    f.campaign, f.label, f.status, f.load_min, f.load_max, f.temp_min, f.temp_max
+                    f.campaign, f.label, f.status, f.load_min, f.load_max, f.temp_min, f.temp_max,
+                    f.rig
                 ],
                 |r| {
                     Ok(CatalogRow {
@@ -518,50 +576,56 @@ impl Catalog {
         }
         let mut f = f.clone();
         f.status.get_or_insert_with(|| "complete".into());
-        let key = |a: Axis, r: &CatalogRow| -> Option<i64> {
-            match a {
-                Axis::Load => Some((r.load_n * 1000.0).round() as i64),
-                Axis::Temp => r.temp_c.filter(|t| t.is_finite()).map(|t| t.round() as i64),
-            }
-        };
-        let scale = |a: Axis| if a == Axis::Load { 1e-3 } else { 1.0 };
-        let mut groups: BTreeMap<(i64, i64), Vec<f64>> = BTreeMap::new();
-        let (mut rk, mut ck) = (Vec::new(), Vec::new());
-        for r in self.list(&f)? {
-            let (Some(a), Some(b)) = (key(rows, &r), key(cols, &r)) else {
-                continue;
-            };
-            let v = match value {
-                Value::Mu0 => r.host_mu0,
-                Value::Mu1 => r.host_mu1,
-                Value::OnboardMu0 => r.onboard_mu0,
-                Value::OnboardMu1 => r.onboard_mu1,
-            };
-            let Some(v) = v.filter(|v| v.is_finite()) else {
-                continue;
-            };
-            groups.entry((a, b)).or_default().push(v);
-            rk.push(a);
-            ck.push(b);
+        Ok(tabulate(&self.list(&f)?, rows, cols, value))
+    }
+}
+
+/// The campaign table of `value` over `runs`: mean ± sd over repetitions for each (row, column)
+/// pair. Loads are grouped to the mN, temperatures to the °C.
+pub fn tabulate(runs: &[CatalogRow], rows: Axis, cols: Axis, value: Value) -> Table {
+    let key = |a: Axis, r: &CatalogRow| -> Option<i64> {
+        match a {
+            Axis::Load => Some((r.load_n * 1000.0).round() as i64),
+            Axis::Temp => r.temp_c.filter(|t| t.is_finite()).map(|t| t.round() as i64),
         }
-        rk.sort_unstable();
-        rk.dedup();
-        ck.sort_unstable();
-        ck.dedup();
-        let cells = rk
-            .iter()
-            .map(|a| {
-                ck.iter()
-                    .map(|b| groups.get(&(*a, *b)).and_then(|v| Cell::of(v)))
-                    .collect()
-            })
-            .collect();
-        Ok(Table {
-            rows: rk.iter().map(|&a| a as f64 * scale(rows)).collect(),
-            cols: ck.iter().map(|&b| b as f64 * scale(cols)).collect(),
-            cells,
-            row_axis: rows,
-            col_axis: cols,
+    };
+    let scale = |a: Axis| if a == Axis::Load { 1e-3 } else { 1.0 };
+    let mut groups: BTreeMap<(i64, i64), Vec<f64>> = BTreeMap::new();
+    let (mut rk, mut ck) = (Vec::new(), Vec::new());
+    for r in runs {
+        let (Some(a), Some(b)) = (key(rows, r), key(cols, r)) else {
+            continue;
+        };
+        let v = match value {
+            Value::Mu0 => r.host_mu0,
+            Value::Mu1 => r.host_mu1,
+            Value::OnboardMu0 => r.onboard_mu0,
+            Value::OnboardMu1 => r.onboard_mu1,
+        };
+        let Some(v) = v.filter(|v| v.is_finite()) else {
+            continue;
+        };
+        groups.entry((a, b)).or_default().push(v);
+        rk.push(a);
+        ck.push(b);
+    }
+    rk.sort_unstable();
+    rk.dedup();
+    ck.sort_unstable();
+    ck.dedup();
+    let cells = rk
+        .iter()
+        .map(|a| {
+            ck.iter()
+                .map(|b| groups.get(&(*a, *b)).and_then(|v| Cell::of(v)))
+                .collect()
         })
+        .collect();
+    Table {
+        rows: rk.iter().map(|&a| a as f64 * scale(rows)).collect(),
+        cols: ck.iter().map(|&b| b as f64 * scale(cols)).collect(),
+        cells,
+        row_axis: rows,
+        col_axis: cols,
     }
 }

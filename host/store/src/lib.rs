@@ -30,7 +30,7 @@ pub mod log;
 pub mod run;
 mod time;
 
-pub use catalog::{Catalog, CatalogRow, Filter, Reindexed};
+pub use catalog::{Catalog, CatalogRow, Filter, Reindexed, RunCatalog};
 pub use log::{LogHeader, LogReader, LogWriter, Recovery};
 pub use run::{
     Completeness, DeviceMeta, Filed, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples,

@@ -830,3 +830,22 @@ fn a_run_whose_log_lost_frames_is_not_complete_whatever_its_metadata_says() {
     std::fs::write(&log, &bytes[..bytes.len() / 2]).unwrap();
     assert_eq!(cat.stale().unwrap(), vec![run.dir().to_owned()]);
 }
+
+#[test]
+fn a_catalog_of_a_newer_tribo_is_refused_and_one_of_an_older_is_versioned() {
+    let d = tempfile::tempdir().unwrap();
+    {
+        let c = Catalog::open(d.path()).unwrap();
+        assert!(c.list(&Filter::default()).unwrap().is_empty());
+    }
+    let conn = rusqlite::Connection::open(d.path().join(catalog::CATALOG_FILE)).unwrap();
+    let v: i64 = conn
+        .query_row("PRAGMA user_version", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(v, catalog::CATALOG_VERSION);
+    conn.pragma_update(None, "user_version", catalog::CATALOG_VERSION + 1)
+        .unwrap();
+    drop(conn);
+    let e = Catalog::open(d.path()).err().unwrap().to_string();
+    assert!(e.contains("newer tribo") && e.contains("--reindex"), "{e}");
+}

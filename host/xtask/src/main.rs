@@ -27,6 +27,7 @@
 mod elf;
 mod memory;
 mod panel;
+mod postgres;
 mod python;
 mod qemu;
 mod windows;
@@ -208,6 +209,7 @@ fn ci() -> Result<(), String> {
         "-D",
         "warnings",
     ]))?;
+    postgres::ensure()?;
     run(cargo().args(["test", "--workspace", "--no-fail-fast"]))?;
     panel::browser_tests()?;
     python::ci()?;

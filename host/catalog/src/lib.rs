@@ -1,0 +1,73 @@
+//! The lab catalog: every run of every rig and PC of a lab in one PostgreSQL database, next to
+//! each PC's own SQLite catalog (`tribo-store`), which stays the default and needs nothing set up.
+//!
+//! * [`RunCatalog`] is the one catalog interface: [`tribo_store::Catalog`] (a store's SQLite file)
+//!   and [`LabCatalog`] (a server) both implement it; [`open`] gives the one a command was
+//!   pointed at (`--catalog URL`, `TRIBO_CATALOG`, else the store's own).
+//! * [`url`]: the server's address, without a password (refused on the command line), with the
+//!   password from `PGPASSWORD` or the password file, TLS (rustls) when the URL asks for it.
+//! * [`schema`]: versioned migrations, run on first use under a lock, refused against a newer
+//!   schema.
+//! * [`sync`]: pushes a PC's runs (metadata, on-board and host results with their ±, campaign,
+//!   rig serial, the frame log's SHA-256 and where it lives): idempotent, resumable, safe from
+//!   many PCs at once (one transaction per batch, one row per rig serial and rig run number).
+//! * [`testing`]: a real PostgreSQL server in a temporary folder, and synthetic run folders, for
+//!   the tests and the benchmark.
+
+pub mod lab;
+pub mod schema;
+pub mod sync;
+pub mod testing;
+pub mod url;
+
+pub use lab::{LabCatalog, LabRow, LabRun, PushCounts};
+pub use sync::{sync, SyncOptions, SyncReport};
+pub use tribo_store::RunCatalog;
+pub use url::LabUrl;
+
+use std::path::Path;
+use tribo_store::{ErrorKind, StoreError};
+
+pub type Result<T, E = StoreError> = std::result::Result<T, E>;
+
+/// A catalog error with nothing underneath.
+pub(crate) fn err(msg: impl Into<String>) -> StoreError {
+    StoreError::new(ErrorKind::Catalog, msg)
+}
+
+/// A catalog error caused by `e`.
+pub(crate) fn caused(
+    msg: impl Into<String>,
+    e: impl std::error::Error + Send + Sync + 'static,
+) -> StoreError {
+    StoreError::caused(ErrorKind::Catalog, msg, e)
+}
+
+/// An error and its causes, one per line (what the CLI prints).
+pub fn chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut c = e.source();
+    while let Some(x) = c {
+        s.push_str("\n  caused by: ");
+        s.push_str(&x.to_string());
+        c = x.source();
+    }
+    s
+}
+
+/// The catalog named by `catalog` (a `postgres://` URL), else by `TRIBO_CATALOG`, else the SQLite
+/// catalog of the store at `store`.
+pub fn open(catalog: Option<&str>, store: &Path) -> Result<Box<dyn RunCatalog>> {
+    match lab_url(catalog) {
+        Some(url) => Ok(Box::new(LabCatalog::connect(&LabUrl::parse(&url)?)?)),
+        None => Ok(Box::new(tribo_store::Catalog::open(store)?)),
+    }
+}
+
+/// The lab catalog's URL: `catalog`, else `TRIBO_CATALOG` (empty = none).
+pub fn lab_url(catalog: Option<&str>) -> Option<String> {
+    catalog
+        .map(str::to_string)
+        .or_else(|| std::env::var("TRIBO_CATALOG").ok())
+        .filter(|s| !s.trim().is_empty())
+}

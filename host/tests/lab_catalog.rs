@@ -1,0 +1,468 @@
+//! `tribo sync`, `runs`/`table --catalog` and `pull --from-catalog` as a lab uses them: real
+//! `tribo` processes against a real PostgreSQL server (started in a temporary folder), several
+//! PCs at once, one killed midway.
+
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+use tribo_catalog::testing::{synthetic_run, PgServer, ADMIN, ADMIN_PASSWORD};
+
+const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
+
+fn tribo(args: &[&str], password: &str) -> Command {
+    let mut c = Command::new(TRIBO);
+    c.args(args)
+        .env("PGPASSWORD", password)
+        .env_remove("TRIBO_CATALOG")
+        .env_remove("PGPASSFILE")
+        .stdin(Stdio::null());
+    c
+}
+
+fn ok(o: Output) -> String {
+    assert!(
+        o.status.success(),
+        "status {:?}\nstdout: {}\nstderr: {}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn store_of(dir: &Path, serial: &str, n: u32) {
+    for i in 0..n {
+        synthetic_run(dir, serial, i + 1, 2, 0.01, |m| {
+            m.campaign = Some("dlc-60".into());
+            m.temp_setpoint_c = Some(if i % 2 == 0 { 60.0 } else { 25.0 });
+            m.load_n = 0.2;
+        });
+    }
+}
+
+fn count(pg: &PgServer) -> usize {
+    pg.psql("lab", "SELECT count(*) FROM tribo_runs")
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn pcs_sync_at_once_one_is_killed_and_the_lab_reads_across_rigs() {
+    if PgServer::skip() {
+        return;
+    }
+    let pg = PgServer::start();
+    let admin = pg.url(ADMIN, "lab");
+    // A password on the command line is refused, and not echoed.
+    let o = tribo(
+        &[
+            "runs",
+            "--catalog",
+            &pg.url(&format!("{ADMIN}:hunter2"), "lab"),
+        ],
+        "",
+    )
+    .output()
+    .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("PGPASSWORD") && !err.contains("hunter2"),
+        "{err}"
+    );
+
+    // The owner's first sync creates the tables; then a writer role, as the README says.
+    let empty = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(empty.path().join("runs")).unwrap();
+    ok(tribo(
+        &[
+            "sync",
+            "--store",
+            &empty.path().join("runs").to_string_lossy(),
+            "--catalog",
+            &admin,
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap());
+    pg.psql(
+        "lab",
+        "CREATE ROLE writer LOGIN PASSWORD 'wpw'; GRANT SELECT, INSERT, UPDATE ON tribo_runs TO writer; \
+         GRANT SELECT ON tribo_schema TO writer",
+    );
+    let writer = pg.url("writer", "lab");
+
+    // Three PCs, and a fourth process syncing the first PC's store again, all at once.
+    let stores: Vec<_> = (0..3).map(|_| tempfile::tempdir().unwrap()).collect();
+    let serials = ["00000000000000a1", "00000000000000b2", "00000000000000c3"];
+    for (s, serial) in stores.iter().zip(serials) {
+        store_of(s.path(), serial, 40);
+    }
+    let mut kids: Vec<_> = stores
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let store = s.path().to_string_lossy().into_owned();
+            tribo(
+                &[
+                    "-q",
+                    "sync",
+                    "--store",
+                    &store,
+                    "--catalog",
+                    &writer,
+                    "--pc",
+                    &format!("pc{i}"),
+                    "--batch",
+                    "7",
+                ],
+                "wpw",
+            )
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+        })
+        .collect();
+    let store0 = stores[0].path().to_string_lossy().into_owned();
+    kids.push(
+        tribo(
+            &[
+                "-q",
+                "sync",
+                "--store",
+                &store0,
+                "--catalog",
+                &writer,
+                "--pc",
+                "pc0",
+                "--batch",
+                "3",
+            ],
+            "wpw",
+        )
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap(),
+    );
+    for k in kids {
+        ok(k.wait_with_output().unwrap());
+    }
+    assert_eq!(count(&pg), 120);
+    let again = ok(tribo(
+        &[
+            "sync",
+            "--store",
+            &store0,
+            "--catalog",
+            &writer,
+            "--pc",
+            "pc0",
+            "--json",
+        ],
+        "wpw",
+    )
+    .output()
+    .unwrap());
+    let j: serde_json::Value = serde_json::from_str(&again).unwrap();
+    assert_eq!(
+        (j["unchanged"].as_u64(), j["inserted"].as_u64()),
+        (Some(40), Some(0)),
+        "{j}"
+    );
+
+    // A PC killed mid-sync leaves whole batches; the next sync sends the rest.
+    let big = tempfile::tempdir().unwrap();
+    store_of(big.path(), "00000000000000d4", 300);
+    let bigs = big.path().to_string_lossy().into_owned();
+    let mut k = tribo(
+        &[
+            "-q",
+            "sync",
+            "--store",
+            &bigs,
+            "--catalog",
+            &writer,
+            "--pc",
+            "pc3",
+            "--batch",
+            "10",
+        ],
+        "wpw",
+    )
+    .stdout(Stdio::null())
+    .stderr(Stdio::null())
+    .spawn()
+    .unwrap();
+    let t = Instant::now();
+    while count(&pg) == 120 && t.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    k.kill().unwrap();
+    k.wait().unwrap();
+    let sent = count(&pg) - 120;
+    assert!(
+        sent > 0 && sent.is_multiple_of(10),
+        "whole batches only: {sent}"
+    );
+    let j: serde_json::Value = serde_json::from_str(&ok(tribo(
+        &[
+            "sync",
+            "--store",
+            &bigs,
+            "--catalog",
+            &writer,
+            "--pc",
+            "pc3",
+            "--json",
+        ],
+        "wpw",
+    )
+    .output()
+    .unwrap()))
+    .unwrap();
+    assert_eq!(
+        j["inserted"].as_u64().unwrap() + j["unchanged"].as_u64().unwrap(),
+        300,
+        "{j}"
+    );
+    assert_eq!(count(&pg), 420);
+
+    // Reading the lab: across rigs, one rig, a campaign table.
+    let runs: serde_json::Value = serde_json::from_str(&ok(tribo(
+        &["runs", "--catalog", &writer, "--temp", "60", "--json"],
+        "wpw",
+    )
+    .output()
+    .unwrap()))
+    .unwrap();
+    assert_eq!(runs["runs"].as_array().unwrap().len(), 210);
+    let one: serde_json::Value = serde_json::from_str(&ok(tribo(
+        &["runs", "--catalog", &writer, "--rig", serials[1], "--json"],
+        "wpw",
+    )
+    .output()
+    .unwrap()))
+    .unwrap();
+    let one = one["runs"].as_array().unwrap();
+    assert_eq!(one.len(), 40);
+    assert!(one
+        .iter()
+        .all(|r| r["rig"] == serials[1] && r["pc"] == "pc1"));
+    let table: serde_json::Value = serde_json::from_str(&ok(tribo(
+        &[
+            "table",
+            "--catalog",
+            &writer,
+            "--campaign",
+            "dlc-60",
+            "--value",
+            "onboard-mu0",
+            "--json",
+        ],
+        "wpw",
+    )
+    .output()
+    .unwrap()))
+    .unwrap();
+    let n: u64 = table["cells"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|r| r.as_array().unwrap())
+        .map(|c| c["n"].as_u64().unwrap())
+        .sum();
+    assert_eq!(n, 420);
+    // A campaign's report from one rig's runs in the lab.
+    let rep = tempfile::tempdir().unwrap();
+    let out = ok(tribo(
+        &[
+            "report",
+            "dlc-60",
+            "--catalog",
+            &writer,
+            "--rig",
+            serials[2],
+            "--no-png",
+            "-o",
+            &rep.path().to_string_lossy(),
+        ],
+        "wpw",
+    )
+    .output()
+    .unwrap());
+    let html = std::fs::read_to_string(rep.path().join("report.html")).unwrap();
+    assert!(
+        out.contains("report.html") && html.contains("dlc-60"),
+        "{out}"
+    );
+    let text = ok(tribo(&["runs", "--catalog", &writer], "wpw")
+        .output()
+        .unwrap());
+    assert!(text.contains("420 runs from the lab catalog"), "{text}");
+
+    // A reader may read, not write: a clear error, nothing written.
+    pg.psql("lab", "CREATE ROLE reader LOGIN PASSWORD 'rpw'; GRANT SELECT ON tribo_runs, tribo_schema TO reader");
+    let fresh = tempfile::tempdir().unwrap();
+    store_of(fresh.path(), "00000000000000e5", 2);
+    let o = tribo(
+        &[
+            "sync",
+            "--store",
+            &fresh.path().to_string_lossy(),
+            "--catalog",
+            &pg.url("reader", "lab"),
+        ],
+        "rpw",
+    )
+    .output()
+    .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("may not") && err.contains("INSERT and UPDATE"),
+        "{err}"
+    );
+    assert_eq!(count(&pg), 420);
+}
+
+#[test]
+fn pull_from_catalog_fetches_a_run_from_a_shared_folder_and_checks_its_hash() {
+    if PgServer::skip() {
+        return;
+    }
+    let pg = PgServer::start();
+    let admin = pg.url(ADMIN, "lab");
+    let shared = tempfile::tempdir().unwrap();
+    store_of(shared.path(), "00000000000000a1", 2);
+    let s = shared.path().to_string_lossy().into_owned();
+    ok(tribo(
+        &[
+            "sync",
+            "--store",
+            &s,
+            "--catalog",
+            &admin,
+            "--pc",
+            "rig-pc",
+            "--shared-as",
+            &s,
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap());
+    let mine = tempfile::tempdir().unwrap();
+    let m = mine.path().join("runs");
+    let ms = m.to_string_lossy().into_owned();
+    let out = ok(tribo(
+        &[
+            "pull",
+            "--store",
+            &ms,
+            "--catalog",
+            &admin,
+            "--from-catalog",
+            "00000000000000a1/2",
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap());
+    assert!(
+        out.contains("from PC \"rig-pc\"") && out.contains("complete"),
+        "{out}"
+    );
+    let listed = ok(tribo(&["runs", "--store", &ms, "--json"], "")
+        .output()
+        .unwrap());
+    let j: serde_json::Value = serde_json::from_str(&listed).unwrap();
+    assert_eq!(j["runs"].as_array().unwrap().len(), 1, "{j}");
+    assert_eq!(j["runs"][0]["status"], "complete");
+    // Again: already here.
+    let out = ok(tribo(
+        &[
+            "pull",
+            "--store",
+            &ms,
+            "--catalog",
+            &admin,
+            "--from-catalog",
+            "00000000000000a1/2",
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap());
+    assert!(out.contains("already here"), "{out}");
+    // A log changed since its PC synced is refused.
+    for dir in tribo_store::run::list_run_dirs(shared.path()).unwrap() {
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .open(dir.join("frames.log"))
+            .unwrap();
+        std::io::Write::write_all(&mut f, b"x").unwrap();
+    }
+    let other = mine.path().join("other");
+    let o = tribo(
+        &[
+            "pull",
+            "--store",
+            &other.to_string_lossy(),
+            "--catalog",
+            &admin,
+            "--from-catalog",
+            "00000000000000a1/1",
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("not the one the lab catalog holds"),
+        "{err}"
+    );
+    assert!(
+        !other.join("x").exists()
+            && tribo_store::run::list_run_dirs(&other).map_or(0, |d| d.len()) == 0
+    );
+    // A log on a folder this PC cannot reach: says where it is.
+    ok(tribo(
+        &[
+            "sync",
+            "--store",
+            &s,
+            "--catalog",
+            &admin,
+            "--pc",
+            "rig-pc",
+            "--shared-as",
+            "/nowhere/lab",
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap());
+    let o = tribo(
+        &[
+            "pull",
+            "--store",
+            &other.to_string_lossy(),
+            "--catalog",
+            &admin,
+            "--from-catalog",
+            "00000000000000a1/2",
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("cannot reach") && err.contains("/nowhere/lab"),
+        "{err}"
+    );
+}
