@@ -491,19 +491,16 @@ pub fn catalog_rows(
 
 /// One catalog row as JSON: the fields of `tribo runs --json` and the rest of the row.
 pub fn catalog_row_json(r: &CatalogRow) -> serde_json::Value {
-    serde_json::json!({
-        "id": r.id, "path": r.path, "created": r.created, "status": r.status,
-        "completeness": r.completeness, "blocks": r.blocks,
-        "blocks_expected": r.blocks_expected, "lost_samples": r.lost_samples,
-        "label": r.label, "campaign": r.campaign, "repeat": r.repeat,
-        "load_n": r.load_n, "temp_c": r.temp_c, "serial": r.serial,
-        "onboard_mu0": r.onboard_mu0, "onboard_mu1": r.onboard_mu1,
-        "host_mu0": r.host_mu0, "host_mu1": r.host_mu1,
-        "host_mu0_se": r.host_mu0_se, "host_mu1_se": r.host_mu1_se,
-        "sample": r.sample, "lubricant": r.lubricant, "firmware": r.firmware,
-        "samples": r.samples, "missing_blocks": r.missing_blocks, "verdict": r.verdict,
-        "cycles": r.cycles, "host_gap": r.host_gap,
-    })
+    let mut j = crate::cmd::runs::run_json(r);
+    crate::cmd::runs::with_fields(
+        &mut j,
+        serde_json::json!({
+            "sample": r.sample, "lubricant": r.lubricant, "firmware": r.firmware,
+            "samples": r.samples, "missing_blocks": r.missing_blocks, "verdict": r.verdict,
+            "cycles": r.cycles, "host_gap": r.host_gap,
+        }),
+    );
+    j
 }
 
 fn catalog_json(rows: &[CatalogRow]) -> serde_json::Value {

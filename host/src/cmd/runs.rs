@@ -2,7 +2,7 @@
 
 use crate::outln;
 use std::path::PathBuf;
-use tribo_store::{Catalog, Filter, RunStatus};
+use tribo_store::{Catalog, CatalogRow, Filter, RunStatus};
 
 /// Arguments of `tribo runs`. The `lost` column counts the samples a run's rig lost (acquisition
 /// gaps: the run went on, and fits will not cross them).
@@ -183,21 +183,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cat.list(&f)?
     };
     if args.json {
-        let runs: Vec<serde_json::Value> = rows
-            .iter()
-            .map(|r| {
-                serde_json::json!({
-                    "id": r.id, "path": r.path, "created": r.created, "status": r.status,
-                    "completeness": r.completeness, "blocks": r.blocks,
-                    "blocks_expected": r.blocks_expected, "lost_samples": r.lost_samples,
-                    "label": r.label, "campaign": r.campaign, "repeat": r.repeat,
-                    "load_n": r.load_n, "temp_c": r.temp_c, "serial": r.serial,
-                    "onboard_mu0": r.onboard_mu0, "onboard_mu1": r.onboard_mu1,
-                    "host_mu0": r.host_mu0, "host_mu1": r.host_mu1,
-                    "host_mu0_se": r.host_mu0_se, "host_mu1_se": r.host_mu1_se,
-                })
-            })
-            .collect();
+        let runs: Vec<serde_json::Value> = rows.iter().map(run_json).collect();
         let dmg: Vec<serde_json::Value> = damaged
             .iter()
             .map(|(p, why)| serde_json::json!({ "path": p, "status": DAMAGED, "why": why }))
@@ -327,21 +313,20 @@ fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
         let runs: Vec<serde_json::Value> = rows
             .iter()
             .map(|l| {
-                let r = &l.run.row;
-                serde_json::json!({
-                    "id": r.id, "rig": l.run.rig_serial, "rig_run": l.run.rig_run, "pc": l.run.pc,
-                    "path": l.run.log_dir, "log_sha256": l.run.log_sha256, "log_bytes": l.run.log_bytes,
-                    "synced_at": l.synced_at, "created": r.created, "status": r.status,
-                    "completeness": r.completeness, "blocks": r.blocks,
-                    "blocks_expected": r.blocks_expected, "lost_samples": r.lost_samples,
-                    "label": r.label, "sample": r.sample, "lubricant": r.lubricant,
-                    "campaign": r.campaign, "repeat": r.repeat,
-                    "load_n": r.load_n, "temp_c": r.temp_c, "serial": r.serial,
-                    "onboard_mu0": r.onboard_mu0, "onboard_mu1": r.onboard_mu1,
-                    "onboard_mu0_se": l.run.onboard_mu0_se, "onboard_mu1_se": l.run.onboard_mu1_se,
-                    "host_mu0": r.host_mu0, "host_mu1": r.host_mu1,
-                    "host_mu0_se": r.host_mu0_se, "host_mu1_se": r.host_mu1_se,
-                })
+                // The run as `tribo runs --json` gives it, and where the lab has it.
+                let mut j = run_json(&l.run.row);
+                with_fields(
+                    &mut j,
+                    serde_json::json!({
+                        "rig": l.run.rig_serial, "rig_run": l.run.rig_run, "pc": l.run.pc,
+                        "path": l.run.log_dir, "log_sha256": l.run.log_sha256,
+                        "log_bytes": l.run.log_bytes, "synced_at": l.synced_at,
+                        "sample": l.run.row.sample, "lubricant": l.run.row.lubricant,
+                        "onboard_mu0_se": l.run.onboard_mu0_se,
+                        "onboard_mu1_se": l.run.onboard_mu1_se,
+                    }),
+                );
+                j
             })
             .collect();
         crate::out::print_json(
@@ -408,4 +393,26 @@ fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
         url.shown()
     )?;
     Ok(())
+}
+
+/// One catalogued run as `tribo runs --json` gives it: the one spelling of a run's row, which the
+/// lab catalog's listing, `tribo export --catalog` and the Python package extend.
+pub fn run_json(r: &CatalogRow) -> serde_json::Value {
+    serde_json::json!({
+        "id": r.id, "path": r.path, "created": r.created, "status": r.status,
+        "completeness": r.completeness, "blocks": r.blocks,
+        "blocks_expected": r.blocks_expected, "lost_samples": r.lost_samples,
+        "label": r.label, "campaign": r.campaign, "repeat": r.repeat,
+        "load_n": r.load_n, "temp_c": r.temp_c, "serial": r.serial,
+        "onboard_mu0": r.onboard_mu0, "onboard_mu1": r.onboard_mu1,
+        "host_mu0": r.host_mu0, "host_mu1": r.host_mu1,
+        "host_mu0_se": r.host_mu0_se, "host_mu1_se": r.host_mu1_se,
+    })
+}
+
+/// `j` (an object) with the fields of `more` (an object) added or replaced.
+pub fn with_fields(j: &mut serde_json::Value, more: serde_json::Value) {
+    if let (Some(o), serde_json::Value::Object(m)) = (j.as_object_mut(), more) {
+        o.extend(m);
+    }
 }
