@@ -789,7 +789,7 @@ fn catalog_runs(
         load_max: load.map(|l| l.1),
         temp_min: temp.map(|t| t.0),
         temp_max: temp.map(|t| t.1),
-        rig: None,
+        ..Default::default()
     };
     if let Err(e) = filter.check() {
         return Err(PyValueError::new_err(e.to_string()));

@@ -69,13 +69,15 @@ created,status,label,sample,lubricant,campaign,repeat,load_n,temp_c,firmware,sam
 verdict,cycles,onboard_mu0,onboard_mu1,onboard_mu0_se,onboard_mu1_se,host_mu0,host_mu1,host_gap,\
 host_mu0_se,host_mu1_se,lost_samples,blocks,blocks_expected,completeness";
 
-/// The rows a [`Filter`] keeps ([`filter_params`] are its parameters $1..$8).
+/// The rows a [`Filter`] keeps ([`filter_params`] are its parameters $1..$10).
 const FILTER: &str = "WHERE ($1::text IS NULL OR campaign = $1) AND ($2::text IS NULL OR strpos(label, $2) > 0) \
      AND ($3::text IS NULL OR status = $3) AND ($4::float8 IS NULL OR load_n >= $4 - 1e-9) \
      AND ($5::float8 IS NULL OR load_n <= $5 + 1e-9) AND ($6::float8 IS NULL OR temp_c >= $6 - 1e-9) \
-     AND ($7::float8 IS NULL OR temp_c <= $7 + 1e-9) AND ($8::text IS NULL OR rig_serial = $8)";
+     AND ($7::float8 IS NULL OR temp_c <= $7 + 1e-9) AND ($8::text IS NULL OR rig_serial = $8) \
+     AND ($9::text IS NULL OR substr(created, 1, 10) >= $9) \
+     AND ($10::text IS NULL OR substr(created, 1, 10) <= $10)";
 
-fn filter_params(f: &Filter) -> [&(dyn ToSql + Sync); 8] {
+fn filter_params(f: &Filter) -> [&(dyn ToSql + Sync); 10] {
     [
         &f.campaign,
         &f.label,
@@ -85,6 +87,8 @@ fn filter_params(f: &Filter) -> [&(dyn ToSql + Sync); 8] {
         &f.temp_min,
         &f.temp_max,
         &f.rig,
+        &f.since,
+        &f.until,
     ]
 }
 

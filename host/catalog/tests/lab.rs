@@ -370,3 +370,79 @@ fn tls_when_the_url_asks_for_it_with_the_server_s_certificate_verified() {
     );
     assert!(e.contains("sslrootcert"), "{e}");
 }
+
+/// "Every run … this year, on any rig": `--since`/`--until` on the server select by the run's
+/// day as each PC's own catalog does (both ends whole days, UTC), and a day not written
+/// `YYYY-MM-DD` is refused.
+#[test]
+fn runs_of_a_period_across_rigs_as_each_pc_selects_them() {
+    if PgServer::skip() {
+        return;
+    }
+    let pg = PgServer::start();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let days = [
+        "2025-12-31T23:59:59Z",
+        "2026-01-01T00:00:00Z",
+        "2026-06-15T12:00:00Z",
+    ];
+    for (dir, serial) in [
+        (a.path(), "00000000000000a1"),
+        (b.path(), "00000000000000b2"),
+    ] {
+        for (i, created) in days.iter().enumerate() {
+            synthetic_run(dir, serial, i as u32 + 1, 2, 0.01, |m| {
+                m.created = created.to_string();
+                m.label = Some(format!("DLC {i}"));
+            });
+        }
+    }
+    let url = pg.admin();
+    for (dir, pc) in [(a.path(), "pc-a"), (b.path(), "pc-b")] {
+        sync(dir, &url, &opts(pc), &mut |_, _| {}).unwrap();
+    }
+    let lab = LabCatalog::connect(&url).unwrap();
+    let period = |since: Option<&str>, until: Option<&str>| Filter {
+        since: since.map(Into::into),
+        until: until.map(Into::into),
+        ..Default::default()
+    };
+    let this_year = lab.runs(&period(Some("2026-01-01"), None)).unwrap();
+    assert_eq!(this_year.len(), 4);
+    let rigs: std::collections::BTreeSet<_> =
+        this_year.iter().filter_map(|r| r.serial.clone()).collect();
+    assert_eq!(rigs.len(), 2);
+    assert!(this_year.iter().all(|r| r.created.starts_with("2026")));
+    assert_eq!(
+        lab.runs(&period(None, Some("2025-12-31"))).unwrap().len(),
+        2
+    );
+    assert_eq!(
+        lab.runs(&period(Some("2026-01-01"), Some("2026-01-01")))
+            .unwrap()
+            .len(),
+        2
+    );
+    let local = tribo_store::Catalog::open(a.path()).unwrap();
+    local.reindex().unwrap();
+    for (s, u) in [(Some("2026-01-01"), None), (None, Some("2025-12-31"))] {
+        let mine: Vec<String> = local
+            .list(&period(s, u))
+            .unwrap()
+            .into_iter()
+            .map(|r| r.created)
+            .collect();
+        let lab_mine: Vec<String> = lab
+            .runs(&Filter {
+                rig: Some("00000000000000a1".into()),
+                ..period(s, u)
+            })
+            .unwrap()
+            .into_iter()
+            .map(|r| r.created)
+            .collect();
+        assert_eq!(mine, lab_mine);
+    }
+    let e = lab.runs(&period(Some("2026-1-1"), None)).unwrap_err();
+    assert!(e.to_string().contains("YYYY-MM-DD"), "{e}");
+}

@@ -29,6 +29,12 @@ pub struct Args {
     /// Runs of this rig (its serial number, as `tribo devices` shows it).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
+    /// Runs taken on or after this day (UTC), e.g. `--since 2026-01-01` for this year's.
+    #[arg(long, value_name = "YYYY-MM-DD", value_parser = day)]
+    pub since: Option<String>,
+    /// Runs taken on or before this day (UTC).
+    #[arg(long, value_name = "YYYY-MM-DD", value_parser = day)]
+    pub until: Option<String>,
     #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Rebuild the catalog from the run folders first.
@@ -57,6 +63,16 @@ fn status_names() -> clap::builder::PossibleValuesParser {
 /// The state of a run folder whose frame log cannot be read as it is (damage, not a torn tail):
 /// listed all the same, with what `tribo pull --salvage` does about it.
 const DAMAGED: &str = "damaged";
+
+fn day(s: &str) -> Result<String, String> {
+    if tribo_store::catalog::is_day(s) {
+        Ok(s.to_string())
+    } else {
+        Err(format!(
+            "{s:?} is not a day: write it YYYY-MM-DD, e.g. 2026-01-01"
+        ))
+    }
+}
 
 fn load_range(s: &str) -> Result<(f64, f64), String> {
     parse_range(s, "load").map_err(|e| e.to_string())
@@ -96,6 +112,14 @@ pub fn parse_range(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let (Some(a), Some(b)) = (&args.since, &args.until) {
+        if a > b {
+            return Err(crate::exit::Usage(format!(
+                "--since {a} is after --until {b}: no run can be in between"
+            ))
+            .into());
+        }
+    }
     if let Some(url) = super::sync::lab_url(args.catalog.as_deref())? {
         return lab(args, &url);
     }
@@ -167,6 +191,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         label: args.label,
         status,
         rig: args.rig,
+        since: args.since,
+        until: args.until,
         ..Default::default()
     };
     if let Some((a, b)) = args.load {
@@ -298,6 +324,8 @@ fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
         label: args.label,
         status: args.status,
         rig: args.rig,
+        since: args.since,
+        until: args.until,
         ..Default::default()
     };
     if let Some((a, b)) = args.load {

@@ -115,6 +115,27 @@ pub struct Filter {
     pub temp_max: Option<f64>,
     /// Runs of this rig (its serial number).
     pub rig: Option<String>,
+    /// Runs taken on or after this day (`YYYY-MM-DD`, UTC, as the run's `created`).
+    pub since: Option<String>,
+    /// Runs taken on or before this day (`YYYY-MM-DD`, UTC).
+    pub until: Option<String>,
+}
+
+/// Whether `s` is a calendar day written `YYYY-MM-DD` (what the catalog's `created` begins with).
+pub fn is_day(s: &str) -> bool {
+    let b = s.as_bytes();
+    let num = |r: std::ops::Range<usize>| -> Option<u32> {
+        let t = s.get(r)?;
+        t.bytes()
+            .all(|c| c.is_ascii_digit())
+            .then(|| t.parse().ok())?
+    };
+    b.len() == 10
+        && b[4] == b'-'
+        && b[7] == b'-'
+        && num(0..4).is_some()
+        && num(5..7).is_some_and(|m| (1..=12).contains(&m))
+        && num(8..10).is_some_and(|d| (1..=31).contains(&d))
 }
 
 impl Filter {
@@ -141,6 +162,26 @@ impl Filter {
                         format!("{what} range {a}..{b} is empty: write the smaller bound first"),
                     ));
                 }
+            }
+        }
+        for (what, day) in [("since", &self.since), ("until", &self.until)] {
+            if let Some(d) = day {
+                if !is_day(d) {
+                    return Err(StoreError::new(
+                        ErrorKind::Invalid,
+                        format!(
+                            "--{what} {d:?} is not a day: write it YYYY-MM-DD, e.g. 2026-01-01"
+                        ),
+                    ));
+                }
+            }
+        }
+        if let (Some(a), Some(b)) = (&self.since, &self.until) {
+            if a > b {
+                return Err(StoreError::new(
+                    ErrorKind::Invalid,
+                    format!("--since {a} is after --until {b}: no run can be in between"),
+                ));
             }
         }
         Ok(())
@@ -518,19 +559,27 @@ impl Catalog {
                  WHERE (?1 IS NULL OR campaign = ?1) AND (?2 IS NULL OR instr(label, ?2) > 0) \
                  AND (?3 IS NULL OR status = ?3) AND (?4 IS NULL OR load_n >= ?4 - 1e-9) \
                  AND (?5 IS NULL OR load_n <= ?5 + 1e-9) AND (?6 IS NULL OR temp_c >= ?6 - 1e-9) \
-                 AND (?7 IS NULL OR temp_c <= ?7 + 1e-9) AND (?8 IS NULL OR serial = ?8) ORDER BY created, id",
+                 AND (?7 IS NULL OR temp_c <= ?7 + 1e-9) AND (?8 IS NULL OR serial = ?8) \
+                 AND (?9 IS NULL OR substr(created, 1, 10) >= ?9) \
+                 AND (?10 IS NULL OR substr(created, 1, 10) <= ?10) ORDER BY created, id",
             )
             .map_err(|e| db_err("query", e))?;
         let rows = stmt
             .query_map(
                 params![
                     f.campaign, f.label, f.status, f.load_min, f.load_max, f.temp_min, f.temp_max,
-                    f.rig
+                    f.rig, f.since, f.until
                 ],
                 |r| {
                     Ok(CatalogRow {
                         id: r.get(0)?,
-                        path: PathBuf::from(r.get::<_, String>(1)?),
+                        // A run folder lives in the store: where this catalog was opened from
+                        // (a store catalogued as `runs` and opened as `/lab/runs`, or from
+                        // another folder, is the same store with the same runs).
+                        path: {
+                            let p = PathBuf::from(r.get::<_, String>(1)?);
+                            p.file_name().map_or(p.clone(), |n| self.root.join(n))
+                        },
                         created: r.get(2)?,
                         status: r.get(3)?,
                         label: r.get(4)?,

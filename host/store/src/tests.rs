@@ -382,6 +382,10 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
                 m.repeat = Some(rep);
                 m.temp_setpoint_c = Some(temp);
                 m.label = Some(format!("r{rep}"));
+                if temp == 60.0 {
+                    // Taken last year, one a day: what --since/--until select by.
+                    m.created = format!("2025-06-0{rep}T23:59:59Z");
+                }
             });
             let host = HostFit {
                 law: tribo_physics::LawSpec::CoulombViscous,
@@ -410,6 +414,52 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
     );
     let all = cat.list(&Filter::default()).unwrap();
     assert_eq!(all.len(), 9);
+    let days = |since: Option<&str>, until: Option<&str>| {
+        cat.list(&Filter {
+            since: since.map(Into::into),
+            until: until.map(Into::into),
+            ..Default::default()
+        })
+    };
+    let this_year = days(Some("2026-01-01"), None).unwrap();
+    assert_eq!(this_year.len(), 6);
+    assert!(this_year.iter().all(|r| r.temp_c == Some(25.0)));
+    let last_year = days(None, Some("2025-12-31")).unwrap();
+    assert_eq!(last_year.len(), 3);
+    assert!(last_year.iter().all(|r| r.temp_c == Some(60.0)));
+    // Both ends are whole days: a run at 23:59:59 of the day is in.
+    // The same store opened by another path (here a link to it; a relative `--store runs` and
+    // its absolute path alike): its runs are in the folder it was opened as. (The rows kept the
+    // path they were catalogued under, and `tribo runs` called every run "damaged: not in the
+    // catalog" when the store was named another way.)
+    #[cfg(unix)]
+    {
+        let other = tempfile::tempdir().unwrap();
+        let link = other.path().join("store");
+        std::os::unix::fs::symlink(d.path(), &link).unwrap();
+        let rows = Catalog::open(&link)
+            .unwrap()
+            .list(&Filter::default())
+            .unwrap();
+        assert_eq!(rows.len(), 9);
+        assert!(
+            rows.iter()
+                .all(|r| r.path.starts_with(&link) && r.path.is_dir()),
+            "{:?}",
+            rows[0].path
+        );
+    }
+    let one = days(Some("2025-06-02"), Some("2025-06-02")).unwrap();
+    assert_eq!(one.len(), 1);
+    assert_eq!(one[0].label.as_deref(), Some("r2"));
+    for (since, until) in [
+        (Some("2026-13-01"), None),
+        (None, Some("26-01-01")),
+        (Some("2026-02-01"), Some("2026-01-31")),
+    ] {
+        let e = days(since, until).unwrap_err().to_string();
+        assert!(e.contains("--since") || e.contains("--until"), "{e}");
+    }
     let hot = cat
         .list(&Filter {
             temp_min: Some(50.0),
