@@ -167,7 +167,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         && args.rig.is_none()
         && args.label.is_none()
         && args.load.is_none()
-        && args.temp.is_none();
+        && args.temp.is_none()
+        && args.since.is_none()
+        && args.until.is_none();
     let damaged: Vec<(PathBuf, String)> =
         if only_filter_is_status && args.status.as_deref().is_none_or(|s| s == DAMAGED) {
             tribo_store::run::list_run_dirs(&store)?
@@ -185,24 +187,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Vec::new()
         };
     let only_damaged = args.status.as_deref() == Some(DAMAGED);
-    let status = args.status.filter(|s| s != DAMAGED);
-    let mut f = Filter {
-        campaign: args.campaign,
-        label: args.label,
-        status,
-        rig: args.rig,
-        since: args.since,
-        until: args.until,
-        ..Default::default()
-    };
-    if let Some((a, b)) = args.load {
-        f.load_min = Some(a);
-        f.load_max = Some(b);
-    }
-    if let Some((a, b)) = args.temp {
-        f.temp_min = Some(a);
-        f.temp_max = Some(b);
-    }
+    let status = args.status.clone().filter(|s| s != DAMAGED);
+    let f = filter(&args, status);
     let rows = if only_damaged {
         Vec::new()
     } else {
@@ -319,23 +305,7 @@ fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
         anyhow::bail!("the lab catalog holds no damaged run (a log that cannot be read is not synced): `tribo runs --status damaged` on the PC that holds it");
     }
     let lab = tribo_catalog::LabCatalog::connect(url)?;
-    let mut f = Filter {
-        campaign: args.campaign,
-        label: args.label,
-        status: args.status,
-        rig: args.rig,
-        since: args.since,
-        until: args.until,
-        ..Default::default()
-    };
-    if let Some((a, b)) = args.load {
-        f.load_min = Some(a);
-        f.load_max = Some(b);
-    }
-    if let Some((a, b)) = args.temp {
-        f.temp_min = Some(a);
-        f.temp_max = Some(b);
-    }
+    let f = filter(&args, args.status.clone());
     let rows = lab.lab_runs(&f)?;
     if args.json {
         let runs: Vec<serde_json::Value> = rows
@@ -421,6 +391,22 @@ fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
         url.shown()
     )?;
     Ok(())
+}
+
+/// The catalog filter the arguments ask for, with `status` (`damaged` is not a catalog state).
+fn filter(args: &Args, status: Option<String>) -> Filter {
+    Filter {
+        campaign: args.campaign.clone(),
+        label: args.label.clone(),
+        status,
+        load_min: args.load.map(|l| l.0),
+        load_max: args.load.map(|l| l.1),
+        temp_min: args.temp.map(|t| t.0),
+        temp_max: args.temp.map(|t| t.1),
+        rig: args.rig.clone(),
+        since: args.since.clone(),
+        until: args.until.clone(),
+    }
 }
 
 /// One catalogued run as `tribo runs --json` gives it: the one spelling of a run's row, which the
