@@ -72,7 +72,7 @@ impl Diagnostics {
     /// envelope alone says.
     pub fn temperature_moves(&self) -> bool {
         match (self.temp_change_c, self.temp_scatter_c) {
-            (Some(d), Some(s)) => d.is_finite() && s.is_finite() && d.abs() > 5.0 * s && d != 0.0,
+            (Some(d), Some(s)) => d.is_finite() && s.is_finite() && d.abs() > 5.0 * s,
             _ => false,
         }
     }

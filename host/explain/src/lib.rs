@@ -20,11 +20,12 @@
 //!   noise floor, so that a systematic misfit from outside the vocabulary is not partly soaked up
 //!   by a wrong name; and beat the runner-up by a likelihood ratio of e⁵ (evidence margin 10).
 //!
-//! The best candidate is added and the search repeats. Once the model is at the noise floor, only an
-//! effect another channel points to is still tried: thermal drift, when the temperature column
-//! moves over the motion ([`diag::Diagnostics::temperature_moves`]). When nothing more qualifies and the misfit
-//! is still above 1.5 × the noise floor in some channel, the answer is "unexplained: N % of the gap
-//! remains; not one of the known effects" — never a name the evidence does not support.
+//! The best candidate is added and the search repeats. Once the model is at the noise floor, only
+//! an effect another channel points to is still tried: thermal drift, when the temperature column
+//! moves over the motion ([`diag::Diagnostics::temperature_moves`]). When nothing more qualifies
+//! and the misfit is still above 1.5 × the noise floor in some channel, the answer is
+//! "unexplained: N % of the gap remains; not one of the known effects" — never a name the
+//! evidence does not support.
 //!
 //! The gap is the one of `tribo fit`: RMS(measured − simulated envelope) / initial amplitude,
 //! extended to the force channel as `√(gap_env² + gap_force²)`, the force residual being

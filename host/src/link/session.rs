@@ -210,32 +210,15 @@ pub fn record_run(
     stream_run(link, info, store, plan, previous_run, abort, obs)
 }
 
-/// Releases the armed pin: `Release`, retrying briefly while the acquisition starts after arming
-/// (the rig refuses with `NotSampling` until it samples). Any other refusal disarms the rig and is
-/// returned: the rig's own rule, in words.
+/// Releases the armed pin: `Release`, retried for up to 3 s while the rig is still starting
+/// ([`still_starting`]). Any other refusal disarms the rig and is returned: the rig's own rule, in
+/// words.
 pub fn release(link: &mut Link) -> Result<(), LinkError> {
     let t0 = Instant::now();
     loop {
         match link.command(HostMsg::Release) {
             Ok(()) => return Ok(()),
-            Err(e)
-                if matches!(e.code, Some(ErrorCode::Interlock(Interlock::NotSampling)))
-                    && t0.elapsed() < Duration::from_secs(3) =>
-            {
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            // The plate's temperature not read yet (the thermocouple's first conversion after a
-            // boot) is a wait, not a fault: the heater has no fault and the temperature is unknown.
-            // A real fault shows in the status and is reported at once.
-            Err(e)
-                if matches!(
-                    e.code,
-                    Some(ErrorCode::Interlock(Interlock::HeaterUnhealthy))
-                ) && t0.elapsed() < Duration::from_secs(3)
-                    && link
-                        .status()
-                        .is_ok_and(|s| s.heater_fault.is_none() && !s.temp_c.is_finite()) =>
-            {
+            Err(e) if t0.elapsed() < Duration::from_secs(3) && still_starting(link, &e) => {
                 std::thread::sleep(Duration::from_millis(50));
             }
             Err(e) => {
@@ -243,6 +226,20 @@ pub fn release(link: &mut Link) -> Result<(), LinkError> {
                 return Err(e);
             }
         }
+    }
+}
+
+/// Whether a refused `Release` is a wait, not a rule: the acquisition not sampling yet after
+/// arming (`NotSampling`), or the plate's temperature not read yet (the thermocouple's first
+/// conversion after a boot: `HeaterUnhealthy` while the status shows no heater fault and no
+/// temperature). A real heater fault shows in the status and is reported at once.
+fn still_starting(link: &mut Link, e: &LinkError) -> bool {
+    match e.code {
+        Some(ErrorCode::Interlock(Interlock::NotSampling)) => true,
+        Some(ErrorCode::Interlock(Interlock::HeaterUnhealthy)) => link
+            .status()
+            .is_ok_and(|s| s.heater_fault.is_none() && !s.temp_c.is_finite()),
+        _ => false,
     }
 }
 
