@@ -7,7 +7,7 @@ use std::path::Path;
 use tribo::cmd::campaign::{finished, Args, Plan, Point};
 use tribo::cmd::run::LinkArgs;
 use tribo::link::Address;
-use tribo_store::catalog::{Axis, Value};
+use tribo_store::catalog::{Axis, Bin, RunCatalog, Value};
 use tribo_store::{Catalog, Filter};
 
 fn write_plan(dir: &Path, text: &str) -> std::path::PathBuf {
@@ -25,6 +25,7 @@ fn args(plan: &Path, port: &Address, store: &Path) -> Args {
         },
         no_prompt: true,
         dry_run: false,
+        catalog: None,
         quiet: true,
     }
 }
@@ -133,7 +134,9 @@ fn campaign_resumes_without_redoing_finished_runs() {
             },
         )
         .unwrap();
-    assert_eq!(t.cols, vec![0.3]);
+    // The plan sets no temperature: every run is in the one heater-off row, whatever the plate read.
+    assert_eq!(t.rows, vec![Bin::HeaterOff]);
+    assert_eq!(t.cols, vec![Bin::LoadMn(300)]);
     let cell = t.cells[0][0].unwrap();
     assert_eq!(cell.n, 3);
     assert!((cell.mean - truth.0).abs() < 1e-3, "{cell:?} vs {truth:?}");
@@ -185,4 +188,22 @@ fn a_campaign_over_loads_on_the_virtual_rig_gets_the_same_dimensionless_friction
         cycles(0.5),
         cycles(0.2)
     );
+    // A heater-off campaign whose knob turns between runs (the virtual rig rebuilds, its plate
+    // read anew): one "heater off" row in the table and one "heater off" series in the report's
+    // figure, whatever each run's plate read (it split into 22, 38 and 39 °C cells of one run each).
+    let t = cat.table(Axis::Temp, Axis::Load, Value::Mu0, &f).unwrap();
+    assert_eq!(t.rows, vec![Bin::HeaterOff], "{}", t.render());
+    assert_eq!(t.cols, vec![Bin::LoadMn(200), Bin::LoadMn(500)]);
+    let points: Vec<_> = rows
+        .iter()
+        .map(tribo_report::store::campaign_point)
+        .collect();
+    let report = tribo_report::campaign_report(&points, &Default::default()).unwrap();
+    let means: Vec<&str> = report.figures[0].panels[0]
+        .series
+        .iter()
+        .map(|s| s.name.as_str())
+        .filter(|n| n.contains("mean"))
+        .collect();
+    assert_eq!(means, ["heater off (mean ± sd)"]);
 }

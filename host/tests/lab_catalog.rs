@@ -466,3 +466,142 @@ fn pull_from_catalog_fetches_a_run_from_a_shared_folder_and_checks_its_hash() {
         "{err}"
     );
 }
+
+mod support;
+
+/// `tribo campaign --catalog URL` on two rigs, one PC each: each PC's campaign syncs its runs and
+/// prints the lab's table, so the second one sees the runs of both rigs in one cell. With the
+/// server out of reach the campaign's runs are kept and its own table shown, and it says to run
+/// `tribo sync` later (exit 1: what was asked, the lab's table, was not done).
+#[test]
+fn a_campaign_on_two_rigs_ends_with_the_lab_s_table() {
+    if PgServer::skip() {
+        return;
+    }
+    let pg = PgServer::start();
+    let admin = pg.url(ADMIN, "lab");
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan.toml");
+    std::fs::write(
+        &plan,
+        "name = \"cross\"\nloads_n = [0.3]\nrepeats = 2\nmax_duration_s = 8.0\n",
+    )
+    .unwrap();
+    let plan = plan.to_string_lossy().into_owned();
+    let campaign = |rig: &support::RigProcess, store: &str, catalog: &str| {
+        tribo(
+            &[
+                "campaign",
+                &plan,
+                "--no-prompt",
+                "--port",
+                &rig.addr,
+                "--store",
+                store,
+                "--catalog",
+                catalog,
+            ],
+            ADMIN_PASSWORD,
+        )
+        .output()
+        .unwrap()
+    };
+    let cell = |out: &str| -> String {
+        out.lines()
+            .skip_while(|l| !l.starts_with("μ0"))
+            .find(|l| l.starts_with("heater off"))
+            .unwrap_or_else(|| panic!("no heater-off row in\n{out}"))
+            .to_string()
+    };
+    let (r1, r2) = (
+        support::RigProcess::start(20.0),
+        support::RigProcess::start(20.0),
+    );
+    assert_ne!(r1.info().serial, r2.info().serial);
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let out = ok(campaign(&r1, &a.to_string_lossy(), &admin));
+    assert!(out.contains("every rig in the lab catalog"), "{out}");
+    assert!(cell(&out).ends_with("(2)"), "{out}");
+    let out = ok(campaign(&r2, &b.to_string_lossy(), &admin));
+    assert!(
+        cell(&out).ends_with("(4)"),
+        "both rigs' runs in one cell\n{out}"
+    );
+    let listed = ok(tribo(
+        &["runs", "--catalog", &admin, "--campaign", "cross", "--json"],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap());
+    let j: serde_json::Value = serde_json::from_str(&listed).unwrap();
+    let serials: std::collections::BTreeSet<&str> = j["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["serial"].as_str().unwrap())
+        .collect();
+    assert_eq!(serials.len(), 2, "{j}");
+    // `table` and `report` take the days the runs were taken in, as `runs` does.
+    let table = |period: &[&str]| {
+        let mut a = vec![
+            "table",
+            "--catalog",
+            &admin,
+            "--campaign",
+            "cross",
+            "--json",
+        ];
+        a.extend_from_slice(period);
+        let j: serde_json::Value =
+            serde_json::from_str(&ok(tribo(&a, ADMIN_PASSWORD).output().unwrap())).unwrap();
+        j["cells"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|r| {
+                r.as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|c| c["n"].as_u64().unwrap_or(0))
+            })
+            .sum::<u64>()
+    };
+    assert_eq!(table(&["--since", "2000-01-01"]), 4);
+    assert_eq!(table(&["--until", "2000-01-01"]), 0);
+    let report = dir.path().join("report");
+    let o = tribo(
+        &[
+            "report",
+            "cross",
+            "--catalog",
+            &admin,
+            "--until",
+            "2000-01-01",
+            "--no-png",
+            "-o",
+            &report.to_string_lossy(),
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no run of campaign"));
+
+    // The server out of reach: a finished campaign shows its own table and says what to do.
+    let gone = "postgres://tribo@127.0.0.1:1/lab";
+    let o = campaign(&r1, &a.to_string_lossy(), gone);
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert_eq!(o.status.code(), Some(1), "{out}\n{err}");
+    assert!(
+        out.contains("this PC's runs") && cell(&out).ends_with("(2)"),
+        "{out}"
+    );
+    assert!(
+        err.contains("tribo sync") && err.contains("stored"),
+        "{err}"
+    );
+}

@@ -766,7 +766,7 @@ fn explain(
 /// The catalog's runs (`tribo runs --json`'s fields and the rest of each row) and the damaged
 /// run folders, as JSON text `{"runs": [...], "damaged": [...]}`.
 #[pyfunction]
-#[pyo3(signature = (store, *, status=None, load=None, temp=None, campaign=None, label=None, reindex=false))]
+#[pyo3(signature = (store, *, status=None, load=None, temp=None, campaign=None, label=None, rig=None, since=None, until=None, reindex=false))]
 #[allow(clippy::too_many_arguments)]
 fn catalog_runs(
     py: Python<'_>,
@@ -776,11 +776,13 @@ fn catalog_runs(
     temp: Option<(f64, f64)>,
     campaign: Option<String>,
     label: Option<String>,
+    rig: Option<String>,
+    since: Option<String>,
+    until: Option<String>,
     reindex: bool,
 ) -> PyResult<String> {
     const DAMAGED: &str = "damaged";
     let only_damaged = status.as_deref() == Some(DAMAGED);
-    let only_status = campaign.is_none() && label.is_none() && load.is_none() && temp.is_none();
     let filter = tribo_store::Filter {
         campaign,
         label,
@@ -789,8 +791,11 @@ fn catalog_runs(
         load_max: load.map(|l| l.1),
         temp_min: temp.map(|t| t.0),
         temp_max: temp.map(|t| t.1),
-        ..Default::default()
+        rig,
+        since,
+        until,
     };
+    let only_status = filter.selects_by_status_only();
     if let Err(e) = filter.check() {
         return Err(PyValueError::new_err(e.to_string()));
     }

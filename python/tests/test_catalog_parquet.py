@@ -40,6 +40,35 @@ def test_catalog_filters(cli, store):
     assert "no run store" in str(e.value)
 
 
+def test_catalog_by_rig_and_day_as_the_cli(cli, store):
+    import datetime
+
+    cat = tribo.catalog(store)
+    rows = cat.runs().rows
+    day = datetime.date.fromisoformat(rows[0]["created"][:10])
+    ours = [r for r in rows if r["created"][:10] == day.isoformat()]
+    assert len(cat.runs(since=day, until=day)) == len(ours) > 0
+    assert len(cat.runs(since=day.isoformat())) == len([r for r in rows if r["created"][:10] >= day.isoformat()])
+    assert len(cat.runs(until=day - datetime.timedelta(days=1))) == len(
+        [r for r in rows if r["created"][:10] < day.isoformat()]
+    )
+    for args in (["--since", day.isoformat()], ["--until", day.isoformat()]):
+        kw = {args[0][2:]: args[1]}
+        j = json.loads(cli("runs", "--json", "--store", store, *args).stdout)
+        assert [r["id"] for r in cat.runs(**kw)] == [r["id"] for r in j["runs"]]
+    serial = rows[0]["serial"]
+    mine = cat.runs(rig=serial)
+    assert len(mine) == len([r for r in rows if r["serial"] == serial]) > 0
+    j = json.loads(cli("runs", "--json", "--store", store, "--rig", serial).stdout)
+    assert [r["id"] for r in mine] == [r["id"] for r in j["runs"]]
+    with pytest.raises(ValueError):
+        cat.runs(since="2026-13-01")
+    with pytest.raises(ValueError):
+        cat.runs(since="2026-02-01", until="2026-01-31")
+    with pytest.raises(TypeError):
+        cat.runs(since=datetime.datetime(2026, 1, 1))
+
+
 def test_a_damaged_run_is_listed_as_damaged(tmp_path, store, damaged_run, cli):
     import shutil
 

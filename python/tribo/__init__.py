@@ -18,6 +18,7 @@ Errors are exceptions a script can catch, all subclasses of :class:`TriboError`:
 
 from __future__ import annotations
 
+import datetime
 import json
 import os
 from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple, Union
@@ -302,13 +303,19 @@ class Catalog:
         temp: Union[None, float, Tuple[float, float], str] = None,
         campaign: Optional[str] = None,
         label: Optional[str] = None,
+        rig: Optional[str] = None,
+        since: Union[None, str, datetime.date] = None,
+        until: Union[None, str, datetime.date] = None,
         reindex: bool = False,
     ) -> RunTable:
         """The runs matching every filter given, as ``tribo runs`` selects them.
 
         ``status``: complete, incomplete, aborted, recording or damaged. ``load`` (N) and
         ``temp`` (°C): a value (matches ±0.0005 N, ±0.5 °C, as the CLI), a ``(lo, hi)`` range or
-        the CLI's ``"0.1..0.4"``. ``campaign``: its name; ``label``: a substring.
+        the CLI's ``"0.1..0.4"``. ``campaign``: its name; ``label``: a substring; ``rig``: the
+        rig's serial number. ``since`` and ``until``: the first and last day (UTC, both
+        included) the runs were taken, a ``datetime.date`` or ``"YYYY-MM-DD"``; a damaged run,
+        whose day is not known, is then left out, as with every filter but ``status``.
         """
         text = _tribo.catalog_runs(
             self.store,
@@ -317,6 +324,9 @@ class Catalog:
             temp=_range(temp, 0.5),
             campaign=campaign,
             label=label,
+            rig=rig,
+            since=_day(since),
+            until=_day(until),
             reindex=reindex,
         )
         j = json.loads(text)
@@ -325,6 +335,14 @@ class Catalog:
     def to_parquet(self, output: PathLike) -> int:
         """Writes the catalog as ``tribo export --catalog --format parquet``; returns the rows."""
         return _tribo.export_catalog_parquet(self.store, os.fspath(output))
+
+
+def _day(v: Union[None, str, datetime.date]) -> Optional[str]:
+    if v is None or isinstance(v, str):
+        return v
+    if isinstance(v, datetime.datetime):
+        raise TypeError("since/until take a day (datetime.date or 'YYYY-MM-DD'), not a datetime")
+    return v.isoformat()
 
 
 def _range(v: Any, tol: float) -> Optional[Tuple[float, float]]:

@@ -76,6 +76,9 @@ def catalog_runs(
     temp: Optional[Tuple[float, float]] = None,
     campaign: Optional[str] = None,
     label: Optional[str] = None,
+    rig: Optional[str] = None,
+    since: Optional[str] = None,
+    until: Optional[str] = None,
     reindex: bool = False,
 ) -> str: ...
 def export_parquet(source: str, output: str) -> int: ...

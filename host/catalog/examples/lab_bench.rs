@@ -45,6 +45,7 @@ fn run(pc: usize, i: usize) -> LabRun {
             repeat: Some((i % 3) as u32 + 1),
             load_n: load,
             temp_c: Some(temp),
+            temp_setpoint_c: Some(temp),
             firmware: Some("0.1.0".into()),
             serial: Some(format!("{:016x}", 0xa000 + pc)),
             samples: 20_000,

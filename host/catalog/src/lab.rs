@@ -10,7 +10,7 @@ use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use tribo_store::catalog::{Axis, Cell, RunCatalog, Table, Value};
+use tribo_store::catalog::{table_filter, Axis, Bin, Cell, RunCatalog, Table, Value};
 use tribo_store::{CatalogRow, Filter, StoreError};
 
 /// One run as pushed to the lab catalog: the local catalog's row and what places it in the lab.
@@ -67,7 +67,7 @@ pub struct Known {
 const COLUMNS: &str = "rig_serial,rig_run,run_id,pc,log_dir,log_sha256,log_bytes,pc_stamp,row_hash,\
 created,status,label,sample,lubricant,campaign,repeat,load_n,temp_c,firmware,samples,missing_blocks,\
 verdict,cycles,onboard_mu0,onboard_mu1,onboard_mu0_se,onboard_mu1_se,host_mu0,host_mu1,host_gap,\
-host_mu0_se,host_mu1_se,lost_samples,blocks,blocks_expected,completeness";
+host_mu0_se,host_mu1_se,lost_samples,blocks,blocks_expected,completeness,temp_setpoint_c";
 
 /// The rows a [`Filter`] keeps ([`filter_params`] are its parameters $1..$10).
 const FILTER: &str = "WHERE ($1::text IS NULL OR campaign = $1) AND ($2::text IS NULL OR strpos(label, $2) > 0) \
@@ -141,7 +141,11 @@ pub(crate) fn explain(url: &LabUrl, what: &str, e: postgres::Error) -> StoreErro
             "{what}: the server at {at} refused the role {user:?}{}: check the role, and its \
              password in PGPASSWORD or the password file (~/.pgpass; on Windows \
              %APPDATA%\\postgresql\\pgpass.conf)",
-            if url.has_password() { "" } else { " (no password was found in PGPASSWORD or the password file)" }
+            match (url.has_password(), url.pgpass_ignored()) {
+                (true, _) => String::new(),
+                (false, Some(why)) => format!(" (no password: {why})"),
+                (false, None) => " (no password was found in PGPASSWORD or the password file)".into(),
+            }
         ),
         Some(c) if *c == SqlState::INVALID_CATALOG_NAME => format!(
             "{what}: the server at {at} has no such database: create it (`createdb`, README \"A \
@@ -369,7 +373,7 @@ impl LabCatalog {
             let expected = w.blocks_expected.map(|b| b as i64);
             let repeat = opt_i32(w.repeat);
             let cycles = opt_i32(w.cycles);
-            let params: [&(dyn ToSql + Sync); 36] = [
+            let params: [&(dyn ToSql + Sync); 37] = [
                 &r.rig_serial,
                 &r.rig_run,
                 &w.id,
@@ -406,6 +410,7 @@ impl LabCatalog {
                 &blocks,
                 &expected,
                 &w.completeness,
+                &w.temp_setpoint_c,
             ];
             match tx.query_opt(&stmt, &params)? {
                 Some(row) if row.get::<_, bool>(0) => counts.inserted += 1,
@@ -472,6 +477,7 @@ impl LabCatalog {
                             repeat: r.get::<_, Option<i32>>(15).map(|v| v as u32),
                             load_n: r.get(16),
                             temp_c: r.get(17),
+                            temp_setpoint_c: r.get(36),
                             firmware: r.get(18),
                             serial: Some(r.get(0)),
                             samples: r.get::<_, i64>(19) as u64,
@@ -491,7 +497,7 @@ impl LabCatalog {
                             completeness: r.get(35),
                         },
                     },
-                    synced_at: r.get(36),
+                    synced_at: r.get(37),
                 }
             })
             .collect())
@@ -522,37 +528,34 @@ impl RunCatalog for LabCatalog {
     /// standard deviation as [`tribo_store::catalog::tabulate`]), so that a table over a lab's
     /// years of runs does not fetch them all.
     fn table(&self, rows: Axis, cols: Axis, value: Value, f: &Filter) -> Result<Table> {
-        if rows == cols {
-            return Err(StoreError::new(
-                tribo_store::ErrorKind::Invalid,
-                "rows and columns must differ: use --rows temp --cols load",
-            ));
-        }
-        let mut f = f.clone();
-        f.status.get_or_insert_with(|| "complete".into());
-        f.check()?;
+        let f = table_filter(rows, cols, f)?;
         let v = match value {
             Value::Mu0 => "host_mu0",
             Value::Mu1 => "host_mu1",
             Value::OnboardMu0 => "onboard_mu0",
             Value::OnboardMu1 => "onboard_mu1",
         };
-        let ((rc, rk), (cc, ck)) = (col_key(rows), col_key(cols));
+        let (rk, ck) = (bin_key(rows), bin_key(cols));
         let sql = format!(
             "SELECT {rk}, {ck}, avg({v}), stddev_samp({v}), count(*) FROM tribo_runs {FILTER} \
-             AND {v} BETWEEN -1e300 AND 1e300 AND {rc} BETWEEN -1e300 AND 1e300 \
-             AND {cc} BETWEEN -1e300 AND 1e300 GROUP BY 1, 2 ORDER BY 1, 2"
+             AND {v} BETWEEN -1e300 AND 1e300 AND {rk} IS NOT NULL AND {ck} IS NOT NULL \
+             GROUP BY 1, 2"
         );
         let got = self
             .client
             .borrow_mut()
             .query(&sql, &filter_params(&f))
             .map_err(|e| explain(&self.url, "tabulating the lab catalog", e))?;
-        let groups: BTreeMap<(i64, i64), Cell> = got
+        let bin = |a: Axis, k: i64| match a {
+            Axis::Load => Bin::LoadMn(k),
+            Axis::Temp if k == HEATER_OFF => Bin::HeaterOff,
+            Axis::Temp => Bin::SetpointC(k),
+        };
+        let groups: BTreeMap<(Bin, Bin), Cell> = got
             .iter()
             .map(|r| {
                 (
-                    (r.get(0), r.get(1)),
+                    (bin(rows, r.get(0)), bin(cols, r.get(1))),
                     Cell {
                         mean: r.get(2),
                         sd: r.get(3),
@@ -561,30 +564,24 @@ impl RunCatalog for LabCatalog {
                 )
             })
             .collect();
-        let mut rk: Vec<i64> = groups.keys().map(|k| k.0).collect();
-        let mut ck: Vec<i64> = groups.keys().map(|k| k.1).collect();
-        rk.dedup();
-        ck.sort_unstable();
-        ck.dedup();
-        let scale = |a: Axis| if a == Axis::Load { 1e-3 } else { 1.0 };
-        Ok(Table {
-            cells: rk
-                .iter()
-                .map(|a| ck.iter().map(|b| groups.get(&(*a, *b)).copied()).collect())
-                .collect(),
-            rows: rk.iter().map(|&a| a as f64 * scale(rows)).collect(),
-            cols: ck.iter().map(|&b| b as f64 * scale(cols)).collect(),
-            row_axis: rows,
-            col_axis: cols,
-        })
+        Ok(Table::of_groups(groups, rows, cols))
     }
 }
 
-/// A table axis's column and its group key: loads to the mN, temperatures to the °C, rounded half
-/// away from zero as Rust's `round` ([`tribo_store::catalog::tabulate`]).
-fn col_key(a: Axis) -> (&'static str, &'static str) {
+/// The group key of the heater off on the temperature axis (no setpoint can be this).
+const HEATER_OFF: i64 = i64::MIN;
+
+/// A table axis's group key, computed by the server as [`Bin`] is in Rust: loads to the mN and
+/// setpoints to the °C, `floor(x + 0.5)` (the same double arithmetic, so the same integers); a run
+/// with the heater off is [`HEATER_OFF`]; NULL where the run has no finite value.
+fn bin_key(a: Axis) -> String {
+    let half_up =
+        |x: &str| format!("CASE WHEN {x} BETWEEN -1e15 AND 1e15 THEN floor({x} + 0.5)::bigint END");
     match a {
-        Axis::Load => ("load_n", "round((load_n * 1000)::numeric)::bigint"),
-        Axis::Temp => ("temp_c", "round(temp_c::numeric)::bigint"),
+        Axis::Load => half_up("load_n * 1000"),
+        Axis::Temp => format!(
+            "(CASE WHEN temp_setpoint_c IS NULL THEN '{HEATER_OFF}'::bigint ELSE {} END)",
+            half_up("temp_setpoint_c")
+        ),
     }
 }

@@ -56,11 +56,16 @@ pub fn chain(e: &dyn std::error::Error) -> String {
 }
 
 /// The catalog named by `catalog` (a `postgres://` URL), else by `TRIBO_CATALOG`, else the SQLite
-/// catalog of the store at `store`.
+/// catalog of the store at `store`, brought up to date with its run folders
+/// ([`tribo_store::Catalog::refresh`]).
 pub fn open(catalog: Option<&str>, store: &Path) -> Result<Box<dyn RunCatalog>> {
     match lab_url(catalog) {
         Some(url) => Ok(Box::new(LabCatalog::connect(&LabUrl::parse(&url)?)?)),
-        None => Ok(Box::new(tribo_store::Catalog::open(store)?)),
+        None => {
+            let cat = tribo_store::Catalog::open(store)?;
+            cat.refresh(false)?;
+            Ok(Box::new(cat))
+        }
     }
 }
 

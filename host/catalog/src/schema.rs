@@ -51,6 +51,12 @@ pub const MIGRATIONS: &[&str] = &[
     CREATE INDEX tribo_runs_temp ON tribo_runs (temp_c);
     CREATE INDEX tribo_runs_created ON tribo_runs (created);
     CREATE INDEX tribo_runs_run_id ON tribo_runs (run_id);",
+    // 2: the heater's setpoint, which tells a heater-off run (NULL) from one held at a setpoint
+    // (`temp_c` is the setpoint, else the plate's reading). Rows synced before do not know: they keep
+    // their nominal temperature as their setpoint until their PC's next `tribo sync` sends them
+    // again (their PC stamp and row hash are cleared so that it does, and the row is replaced).
+    "ALTER TABLE tribo_runs ADD COLUMN temp_setpoint_c DOUBLE PRECISION;
+    UPDATE tribo_runs SET temp_setpoint_c = temp_c, pc_stamp = '', row_hash = '';",
 ];
 
 /// The schema version this tribo writes and reads.

@@ -12,7 +12,7 @@ use crate::{caused, err, Result};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tribo_store::catalog::log_stamp;
-use tribo_store::run::{list_run_dirs, LOG_FILE, META_FILE};
+use tribo_store::run::{LOG_FILE, META_FILE};
 use tribo_store::{Catalog, CatalogRow, Filter, RunMeta};
 
 /// How to sync.
@@ -96,13 +96,7 @@ fn local_rows(store: &Path, report: &mut SyncReport) -> Result<Vec<CatalogRow>> 
         )));
     }
     let cat = Catalog::open(store)?;
-    let folders = list_run_dirs(store)?.len();
-    let rows = cat.list(&Filter::default())?;
-    if folders != rows.len()
-        || rows.iter().any(|r| r.completeness.is_empty())
-        || !cat.stale()?.is_empty()
-    {
-        let r = cat.reindex()?;
+    if let Some(r) = cat.refresh(false)? {
         report.skipped.extend(r.unreadable);
     }
     cat.list(&Filter::default())

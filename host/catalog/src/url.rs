@@ -28,6 +28,8 @@ pub struct LabUrl {
     shown: String,
     pub(crate) config: postgres::Config,
     pub(crate) tls: Tls,
+    /// A password file passed over, and why (others may read it), as libpq passes it over.
+    pub(crate) pgpass_ignored: Option<String>,
 }
 
 impl std::fmt::Debug for LabUrl {
@@ -217,10 +219,26 @@ impl LabUrl {
                 })?;
             config.user(&user);
         }
-        if let Some(pw) = env("PGPASSWORD").or_else(|| pgpass(&config, env)) {
+        let mut pgpass_ignored = None;
+        let pw = match env("PGPASSWORD") {
+            Some(pw) => Some(pw),
+            None => match pgpass(&config, env) {
+                Ok(pw) => pw,
+                Err(why) => {
+                    pgpass_ignored = Some(why);
+                    None
+                }
+            },
+        };
+        if let Some(pw) = pw {
             config.password(pw);
         }
-        Ok(LabUrl { shown, config, tls })
+        Ok(LabUrl {
+            shown,
+            config,
+            tls,
+            pgpass_ignored,
+        })
     }
 
     /// The URL as given (it holds no password: one is refused).
@@ -236,6 +254,11 @@ impl LabUrl {
     /// Whether a password was found (in `PGPASSWORD` or the password file).
     pub fn has_password(&self) -> bool {
         self.config.get_password().is_some()
+    }
+
+    /// The password file that was passed over and why (group or world may read it), if any.
+    pub fn pgpass_ignored(&self) -> Option<&str> {
+        self.pgpass_ignored.as_deref()
     }
 
     pub fn tls(&self) -> &Tls {
@@ -265,15 +288,43 @@ fn percent_decode(s: &str) -> Result<String> {
 
 /// The password file's line for this server, database and user, as libpq reads it: fields
 /// `host:port:database:user:password`, `*` matches anything, `\:` and `\\` escape, `#` comments.
-fn pgpass(config: &postgres::Config, env: &dyn Fn(&str) -> Option<String>) -> Option<String> {
-    let file = env("PGPASSFILE").map(PathBuf::from).or_else(|| {
+/// On Unix a file that the group or others may read or write is passed over, as libpq does (its
+/// passwords are as good as public): the error says so.
+fn pgpass(
+    config: &postgres::Config,
+    env: &dyn Fn(&str) -> Option<String>,
+) -> std::result::Result<Option<String>, String> {
+    let Some(file) = env("PGPASSFILE").map(PathBuf::from).or_else(|| {
         if cfg!(windows) {
             env("APPDATA").map(|a| PathBuf::from(a).join("postgresql").join("pgpass.conf"))
         } else {
             env("HOME").map(|h| PathBuf::from(h).join(".pgpass"))
         }
-    })?;
-    let text = std::fs::read_to_string(file).ok()?;
+    }) else {
+        return Ok(None);
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        if let Ok(m) = std::fs::metadata(&file) {
+            let mode = m.permissions().mode() & 0o777;
+            if mode & 0o077 != 0 {
+                return Err(format!(
+                    "the password file {} was not read: its group or others may read or change it \
+                     (mode {mode:04o}); `chmod 600 {}`, as libpq asks",
+                    file.display(),
+                    file.display()
+                ));
+            }
+        }
+    }
+    let Ok(text) = std::fs::read_to_string(file) else {
+        return Ok(None);
+    };
+    Ok(pgpass_found(config, &text))
+}
+
+fn pgpass_found(config: &postgres::Config, text: &str) -> Option<String> {
     let host = match config.get_hosts().first()? {
         postgres::config::Host::Tcp(h) => h.clone(),
         #[cfg(unix)]
@@ -287,7 +338,7 @@ fn pgpass(config: &postgres::Config, env: &dyn Fn(&str) -> Option<String>) -> Op
         .to_string();
     let user = config.get_user().unwrap_or("").to_string();
     let db = config.get_dbname().unwrap_or(&user).to_string();
-    pgpass_lookup(&text, [&host, &port, &db, &user])
+    pgpass_lookup(text, [&host, &port, &db, &user])
 }
 
 /// The password of the first line of a password file matching `want` (host, port, database,
@@ -392,6 +443,17 @@ mod tests {
             "PGPASSFILE" => Some(p.clone()),
             _ => None,
         };
+        // Readable by the group: passed over, and the reason kept for the error to say.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&pass, std::fs::Permissions::from_mode(0o640)).unwrap();
+            let u = LabUrl::parse_with("postgres://writer@db.lab/tribo", &env2).unwrap();
+            assert!(!u.has_password());
+            let why = u.pgpass_ignored().expect("the reason");
+            assert!(why.contains("0640") && why.contains("chmod 600"), "{why}");
+            std::fs::set_permissions(&pass, std::fs::Permissions::from_mode(0o600)).unwrap();
+        }
         let u = LabUrl::parse_with(
             "postgres://writer@db.lab/tribo?sslmode=verify-full&sslrootcert=%2Fetc%2Flab.pem",
             &env2,

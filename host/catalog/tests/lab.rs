@@ -6,7 +6,7 @@ use std::sync::mpsc;
 use std::time::Duration;
 use tribo_catalog::testing::{synthetic_run, PgServer};
 use tribo_catalog::{sync, LabCatalog, RunCatalog, SyncOptions};
-use tribo_store::catalog::{Axis, Value};
+use tribo_store::catalog::{Axis, Bin, Value};
 use tribo_store::Filter;
 
 fn opts(pc: &str) -> SyncOptions {
@@ -208,7 +208,11 @@ fn a_newer_schema_is_refused_and_an_older_one_is_migrated_once() {
     for h in handles {
         assert_eq!(h.join().unwrap().unwrap(), tribo_catalog::schema::VERSION);
     }
-    assert_eq!(pg.psql("lab", "SELECT count(*) FROM tribo_schema"), "1");
+    // One row per migration: each applied once.
+    assert_eq!(
+        pg.psql("lab", "SELECT count(*) FROM tribo_schema"),
+        tribo_catalog::schema::VERSION.to_string()
+    );
     pg.psql("lab", "INSERT INTO tribo_schema (version) VALUES (99)");
     let e = LabCatalog::connect(&url).unwrap_err().to_string();
     assert!(
@@ -445,4 +449,113 @@ fn runs_of_a_period_across_rigs_as_each_pc_selects_them() {
     }
     let e = lab.runs(&period(Some("2026-1-1"), None)).unwrap_err();
     assert!(e.to_string().contains("YYYY-MM-DD"), "{e}");
+}
+
+/// Heater-off runs are one cell on the server as in each PC's table (`tabulate`), and the server's
+/// half-up rounding of a 29.5 °C setpoint is Rust's. Rows synced before the server knew setpoints
+/// (schema 1) read as their nominal temperature (a heater-off run at its plate's reading) until
+/// their PC syncs again, which replaces them.
+#[test]
+fn heater_off_runs_are_one_cell_in_the_lab_and_rows_from_schema_1_are_mended_by_the_next_sync() {
+    if PgServer::skip() {
+        return;
+    }
+    let pg = PgServer::start();
+    let url = pg.admin();
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    // (setpoint, load) of each run; rig a1 then rig b2. The plates read 41.5 °C (the synthetic
+    // runs' header).
+    let plan: [(Option<f64>, f64); 8] = [
+        (None, 0.3),
+        (None, 0.3),
+        (Some(29.5), 0.3),
+        (Some(30.4), 0.3),
+        (None, 0.5),
+        (Some(60.0), 0.5),
+        (None, 0.3),
+        (Some(29.5), 0.5),
+    ];
+    for (i, &(sp, load)) in plan.iter().enumerate() {
+        let (dir, serial) = if i < 5 {
+            (a.path(), "00000000000000a1")
+        } else {
+            (b.path(), "00000000000000b2")
+        };
+        synthetic_run(dir, serial, i as u32 + 1, 2, 0.01 + 0.001 * i as f32, |m| {
+            m.campaign = Some("off".into());
+            m.load_n = load;
+            m.temp_setpoint_c = sp;
+        });
+    }
+    let local = |d: &Path| {
+        let cat = tribo_store::Catalog::open(d).unwrap();
+        cat.refresh(false).unwrap();
+        cat.list(&Filter::default()).unwrap()
+    };
+    let mut rows = local(a.path());
+    rows.extend(local(b.path()));
+    assert_eq!(rows.len(), 8);
+    assert!(rows.iter().all(|r| r.status == "complete"));
+    let expect = tribo_store::catalog::tabulate(&rows, Axis::Temp, Axis::Load, Value::OnboardMu0);
+    let table = || {
+        LabCatalog::connect(&url)
+            .unwrap()
+            .table(
+                Axis::Temp,
+                Axis::Load,
+                Value::OnboardMu0,
+                &Filter::default(),
+            )
+            .unwrap()
+    };
+    for (d, pc) in [(a.path(), "pc-a"), (b.path(), "pc-b")] {
+        sync(d, &url, &opts(pc), &mut |_, _| {}).unwrap();
+    }
+    let same = |t: &tribo_store::catalog::Table| {
+        assert_eq!(
+            (&t.rows, &t.cols),
+            (&expect.rows, &expect.cols),
+            "{}",
+            t.render()
+        );
+        for (x, y) in t.cells.iter().flatten().zip(expect.cells.iter().flatten()) {
+            assert_eq!(x.map(|c| c.n), y.map(|c| c.n), "{}", t.render());
+        }
+    };
+    let t = table();
+    same(&t);
+    assert_eq!(
+        t.rows,
+        [Bin::HeaterOff, Bin::SetpointC(30), Bin::SetpointC(60)],
+        "{}",
+        t.render()
+    );
+    assert_eq!(
+        t.cells[0][0].unwrap().n,
+        3,
+        "heater off at 0.3 N, two rigs\n{}",
+        t.render()
+    );
+    assert_eq!(
+        t.cells[1][0].unwrap().n,
+        2,
+        "29.5 and 30.4 °C: 30 °C\n{}",
+        t.render()
+    );
+
+    // The server as a tribo of schema 1 left it: no setpoint column. Migrated, its rows read as
+    // their nominal temperatures (the heater-off runs at their plates' readings) ...
+    pg.psql(
+        "lab",
+        "ALTER TABLE tribo_runs DROP COLUMN temp_setpoint_c; DELETE FROM tribo_schema WHERE version > 1",
+    );
+    let t = table();
+    assert!(!t.rows.contains(&Bin::HeaterOff), "{}", t.render());
+    assert!(t.rows.contains(&Bin::SetpointC(42)), "{}", t.render());
+    // ... until each PC syncs again: every row is sent again and replaced.
+    for (d, pc, n) in [(a.path(), "pc-a", 5), (b.path(), "pc-b", 3)] {
+        let r = sync(d, &url, &opts(pc), &mut |_, _| {}).unwrap();
+        assert_eq!((r.pushed.updated, r.unchanged), (n, 0), "{r:?}");
+    }
+    same(&table());
 }

@@ -16,7 +16,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 pts.push(CampaignPoint {
                     run: format!("T{t}-N{n}-{r}"),
                     load_n: n,
-                    temp_c: Some(t + 0.3 * r as f64),
+                    temp_c: Some(t),
+                    temp_setpoint_c: Some(t),
                     mu0: Some(0.010 + 0.003 * ti as f64 + 0.0004 * r as f64 + 0.001 * li as f64),
                     mu1: Some(0.004 - 0.0015 * ti as f64 + 0.0001 * r as f64),
                     mu0_se: None,

@@ -7,6 +7,7 @@ use crate::{write_report, Report, ReportError, ReportFiles};
 use std::collections::BTreeMap;
 use std::path::Path;
 use tribo_physics::stats::mean_sd;
+use tribo_store::catalog::Bin;
 
 /// One run of a campaign (e.g. a row of the store's catalog).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -17,6 +18,9 @@ pub struct CampaignPoint {
     pub load_n: f64,
     /// Nominal plane temperature (°C): the setpoint, else the measured one.
     pub temp_c: Option<f64>,
+    /// The heater's setpoint (°C); `None`: the heater was off. What the run is grouped by
+    /// ([`Bin::temp`], the rule of `tribo table`).
+    pub temp_setpoint_c: Option<f64>,
     /// Dimensionless Coulomb and viscous constants of the host fit.
     pub mu0: Option<f64>,
     pub mu1: Option<f64>,
@@ -55,51 +59,13 @@ pub fn write_campaign_report(
     write_report(&campaign_report(points, inputs)?, out_dir)
 }
 
-/// Values grouped by proximity: sorted, a new cluster wherever the gap to the previous value
-/// exceeds `tol` (temperatures measured at 25.2 and 25.6 °C are one setting, not two).
-struct Clusters {
-    /// `(lo, hi, mean)` per cluster, ascending.
-    spans: Vec<(f64, f64, f64)>,
-}
+/// The runs of one group by x bin: `(x values, values)`.
+type Cells = BTreeMap<Bin, (Vec<f64>, Vec<f64>)>;
 
-impl Clusters {
-    fn new(mut v: Vec<f64>, tol: f64) -> Clusters {
-        v.sort_by(f64::total_cmp);
-        let mut spans: Vec<(f64, f64, f64)> = Vec::new();
-        let mut members: Vec<f64> = Vec::new();
-        for x in v {
-            if let Some(&last) = members.last() {
-                if x - last > tol {
-                    let m = members.iter().sum::<f64>() / members.len() as f64;
-                    spans.push((members[0], last, m));
-                    members.clear();
-                }
-            }
-            members.push(x);
-        }
-        if let Some(&last) = members.last() {
-            let m = members.iter().sum::<f64>() / members.len() as f64;
-            spans.push((members[0], last, m));
-        }
-        Clusters { spans }
-    }
-    /// Index of the cluster holding `x` (which must be one of the values given).
-    fn of(&self, x: f64) -> usize {
-        self.spans
-            .iter()
-            .position(|&(lo, hi, _)| x >= lo && x <= hi)
-            .unwrap_or(0)
-    }
-    fn mean(&self, i: usize) -> f64 {
-        self.spans[i].2
-    }
-}
-
-/// The runs of one group by x cluster: `(x values, values)`.
-type Cells = BTreeMap<usize, (Vec<f64>, Vec<f64>)>;
-
-/// One figure: `value` against `x`, one series per group (clusters of `group` within `g_tol`),
-/// means over the runs of each x cluster (within `x_tol`) with ±sd bars, plus the single runs.
+/// One figure: `value` against `x`, one series per group bin (`group`, `None`: not recorded),
+/// means over the runs of each x bin (`x_bin`) with ±sd bars, plus the single runs at their own
+/// `x`. The bins are the campaign table's ([`Bin`]): a figure and `tribo table` never group the
+/// same runs differently.
 #[allow(clippy::too_many_arguments)]
 fn grouped_figure(
     points: &[CampaignPoint],
@@ -109,17 +75,15 @@ fn grouped_figure(
     x_label: &str,
     y_label: &str,
     x: impl Fn(&CampaignPoint) -> Option<f64>,
-    x_tol: f64,
-    group: impl Fn(&CampaignPoint) -> Option<f64>,
-    g_tol: f64,
-    g_label: impl Fn(f64) -> String,
+    x_bin: impl Fn(&CampaignPoint) -> Option<Bin>,
+    group: impl Fn(&CampaignPoint) -> Option<Bin>,
     value: impl Fn(&CampaignPoint) -> Option<f64>,
     value_se: impl Fn(&CampaignPoint) -> Option<f64>,
 ) -> Option<Figure> {
-    let rows: Vec<(f64, Option<f64>, f64)> = points
+    let rows: Vec<(f64, Bin, Option<Bin>, f64)> = points
         .iter()
-        .filter_map(|p| Some((x(p)?, group(p).filter(|g| g.is_finite()), value(p)?)))
-        .filter(|(xv, _, val)| xv.is_finite() && val.is_finite())
+        .filter_map(|p| Some((x(p)?, x_bin(p)?, group(p), value(p)?)))
+        .filter(|(xv, _, _, val)| xv.is_finite() && val.is_finite())
         .collect();
     // Each run's own ± (x, value, se), for its bar and the axis floor.
     let run_se: Vec<(f64, f64, f64)> = points
@@ -130,39 +94,36 @@ fn grouped_figure(
     if rows.is_empty() {
         return None;
     }
-    let xc = Clusters::new(rows.iter().map(|r| r.0).collect(), x_tol);
-    let gc = Clusters::new(rows.iter().filter_map(|r| r.1).collect(), g_tol);
-    // group cluster (None: not recorded) -> x cluster -> (xs, values)
-    let mut groups: BTreeMap<Option<usize>, Cells> = BTreeMap::new();
-    for &(xv, g, val) in &rows {
-        let cell = groups
-            .entry(g.map(|g| gc.of(g)))
-            .or_default()
-            .entry(xc.of(xv))
-            .or_default();
+    // group bin (None: not recorded) -> x bin -> (xs, values)
+    let mut groups: BTreeMap<Option<Bin>, Cells> = BTreeMap::new();
+    for &(xv, xb, g, val) in &rows {
+        let cell = groups.entry(g).or_default().entry(xb).or_default();
         cell.0.push(xv);
         cell.1.push(val);
     }
+    let any_group = groups.keys().any(Option::is_some);
     let mut p = Panel::new(title, x_label, y_label);
     p.legend_pos = LegendPos::Auto;
     for (i, (g, cells)) in groups.iter().enumerate() {
         let label = match g {
-            Some(g) => g_label(gc.mean(*g)),
-            None if gc.spans.is_empty() => "all runs".to_string(),
+            Some(g) => g.label(),
+            None if !any_group => "all runs".to_string(),
             None => "not recorded".to_string(),
         };
         let mut means = Vec::new();
         let mut bars = Vec::new();
         let mut singles = Vec::new();
-        for (ix, (xs, vals)) in cells {
+        for (xb, (xs, vals)) in cells {
             let (m, sd) = mean_sd(vals);
-            let xm = xc.mean(*ix);
+            // A setting's mean sits at the setting; the heater-off runs' at their mean reading.
+            let xm = xb.value().unwrap_or_else(|| mean_sd(xs).0);
             means.push((xm, m));
             if vals.len() > 1 {
                 bars.push((xm, m - sd, m + sd));
             }
             singles.extend(xs.iter().zip(vals).map(|(x, v)| (*x, *v)));
         }
+        means.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut s = Series::line(format!("{label} (mean ± sd)"), i, means);
         s.errors = bars;
         p.series.push(s);
@@ -192,7 +153,7 @@ fn grouped_figure(
 /// runs' median standard error, so that a difference far below the ± is not stretched into a
 /// slope.
 fn y_range_with_floor(
-    rows: &[(f64, Option<f64>, f64)],
+    rows: &[(f64, Bin, Option<Bin>, f64)],
     run_se: &[(f64, f64, f64)],
 ) -> Option<(f64, f64)> {
     let mut ses: Vec<f64> = run_se.iter().map(|r| r.2).collect();
@@ -200,7 +161,7 @@ fn y_range_with_floor(
     let se = *ses.get(ses.len() / 2)?;
     let vals = rows
         .iter()
-        .map(|r| r.2)
+        .map(|r| r.3)
         .chain(run_se.iter().flat_map(|r| [r.1 - r.2, r.1 + r.2]));
     let (lo, hi) = vals.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
         (a.min(v), b.max(v))
@@ -219,11 +180,6 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
         _ => "—".into(),
     }
 }
-
-/// Runs whose loads differ by at most this are one load setting (N).
-pub const LOAD_TOL_N: f64 = 2e-3;
-/// Runs whose temperatures differ by at most this from the next are one temperature setting (°C).
-pub const TEMP_TOL_C: f64 = 2.0;
 
 /// Builds a campaign report in memory. Errors if there is no point or a point has a bad load.
 pub fn campaign_report(
@@ -244,8 +200,8 @@ pub fn campaign_report(
     }
     let mut notes = Vec::new();
     let mut figures = Vec::new();
-    let temp_label = |t: f64| format!("{t:.0} °C");
-    let load_label = |n: f64| format!("N = {n:.3} N");
+    let load = |p: &CampaignPoint| Bin::load(p.load_n);
+    let temp = |p: &CampaignPoint| Bin::temp(p.temp_setpoint_c);
     let f = grouped_figure(
         points,
         "mu0_vs_load",
@@ -257,10 +213,8 @@ pub fn campaign_report(
         "normal load N (N)",
         "μ0",
         |p| Some(p.load_n),
-        LOAD_TOL_N,
-        |p| p.temp_c,
-        TEMP_TOL_C,
-        temp_label,
+        load,
+        temp,
         |p| p.mu0,
         |p| p.mu0_se,
     );
@@ -278,10 +232,8 @@ pub fn campaign_report(
         "normal load N (N)",
         "μ1",
         |p| Some(p.load_n),
-        LOAD_TOL_N,
-        |p| p.temp_c,
-        TEMP_TOL_C,
-        temp_label,
+        load,
+        temp,
         |p| p.mu1,
         |p| p.mu1_se,
     );
@@ -299,10 +251,8 @@ pub fn campaign_report(
         "plane temperature (°C)",
         "cycles until the stop",
         |p| p.temp_c,
-        TEMP_TOL_C,
-        |p| Some(p.load_n),
-        LOAD_TOL_N,
-        load_label,
+        temp,
+        load,
         |p| p.cycles,
         |_| None,
     );

@@ -7,7 +7,8 @@
 //!   -> Result<ReportFiles, ReportError>`: one run. Writes `<fig>.svg` (+ `<fig>.png`) per figure
 //!   and `report.html` into `out_dir` (created if missing).
 //! - [`write_campaign_report`]`(points: &[CampaignPoint], inputs: &CampaignInputs, out_dir: &Path)
-//!   -> Result<ReportFiles, ReportError>`: a set of runs (μ0 vs load, cycles vs temperature).
+//!   -> Result<ReportFiles, ReportError>`: a set of runs (μ0 vs load, cycles vs temperature),
+//!   grouped by the campaign table's bins ([`tribo_store::catalog::Bin`]; feature `store`).
 //! - [`record_report`] / [`campaign_report`] build the same figures and tables in memory
 //!   ([`Report`]) without writing anything; [`write_report`] writes a [`Report`].
 //! - [`store::write_run_report`]`(run: &tribo_store::Run, out_dir: &Path)
@@ -30,6 +31,7 @@
 //! Rendering uses `plotters`: SVG needs no font; PNG uses the embedded DejaVu Sans
 //! (`assets/`, Bitstream Vera licence).
 
+#[cfg(feature = "store")]
 pub mod campaign;
 pub mod crosscheck;
 mod html;
@@ -39,6 +41,7 @@ pub mod run;
 #[cfg(feature = "store")]
 pub mod store;
 
+#[cfg(feature = "store")]
 pub use campaign::{campaign_report, write_campaign_report, CampaignInputs, CampaignPoint};
 pub use plot::Figure;
 pub use regime::{classify_regime, Regime, RegimeAssessment};

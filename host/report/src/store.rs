@@ -104,6 +104,7 @@ pub fn campaign_point(row: &CatalogRow) -> CampaignPoint {
         run: row.id.clone(),
         load_n: row.load_n,
         temp_c: row.temp_c,
+        temp_setpoint_c: row.temp_setpoint_c,
         mu0: row.host_mu0,
         mu1: row.host_mu1,
         mu0_se: row.host_mu0_se,

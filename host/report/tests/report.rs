@@ -298,6 +298,7 @@ fn campaign() -> Vec<CampaignPoint> {
                     run: format!("run-{ti}-{li}-{r}"),
                     load_n: n,
                     temp_c: Some(t + 0.6 * r as f64),
+                    temp_setpoint_c: Some(t),
                     mu0: Some(0.01 + 0.001 * ti as f64 + 0.0005 * r as f64),
                     mu1: Some(0.002),
                     mu0_se: None,
@@ -320,11 +321,11 @@ fn a_campaign_plots_means_with_spread_per_group() {
         ["mu0_vs_load", "mu1_vs_load", "cycles_vs_temperature"]
     );
     let mu0 = &report.figures[0].panels[0];
-    // Two temperature settings (measured 25.0/25.6/26.2 and 60.0/60.6/61.2 °C): a mean line and the
-    // single runs each.
+    // Two temperature settings (setpoints 25 and 60 °C, read 25.0/25.6/26.2 and 60.0/60.6/61.2 °C):
+    // a mean line and the single runs each.
     assert_eq!(mu0.series.len(), 4);
     let mean = &mu0.series[0];
-    assert_eq!(mean.name, "26 °C (mean ± sd)");
+    assert_eq!(mean.name, "25 °C (mean ± sd)");
     assert_eq!(mean.data.len(), 3);
     // Mean and sample sd of 0.0100, 0.0105, 0.0110.
     let (x, m) = mean.data[1];
@@ -334,11 +335,11 @@ fn a_campaign_plots_means_with_spread_per_group() {
     assert!((hi - lo - 2.0 * 0.0005).abs() < 1e-12);
     assert_eq!(mu0.series[1].data.len(), 9);
     // Cycles against temperature: one series per load, a mean per temperature setting at the
-    // setting's mean temperature, the single runs at their own temperatures.
+    // setpoint, the single runs at their own temperatures.
     let cyc = &report.figures[2].panels[0];
     assert_eq!(cyc.series.len(), 6);
     assert_eq!(cyc.series[0].data.len(), 2);
-    assert!((cyc.series[0].data[0].0 - 25.6).abs() < 1e-9);
+    assert!((cyc.series[0].data[0].0 - 25.0).abs() < 1e-9);
     let xs: Vec<f64> = cyc.series[1].data.iter().map(|d| d.0).collect();
     assert_eq!(xs.len(), 6);
     assert!(xs.contains(&25.0) && xs.contains(&61.2));
@@ -359,15 +360,29 @@ fn campaign_gaps_are_notes_and_bad_points_errors() {
     let mut pts = campaign();
     for p in &mut pts {
         p.temp_c = None;
+        p.temp_setpoint_c = None;
         p.cycles = None;
     }
     let r = campaign_report(&pts, &CampaignInputs::default()).unwrap();
     assert_eq!(r.figures.len(), 2);
     assert!(r.notes[0].contains("cycles-vs-temperature"));
-    // No temperature: the μ0 points form one group.
+    // No setpoint and no reading: the μ0 points form one group, the heater off.
     assert_eq!(
         r.figures[0].panels[0].series[0].name,
-        "all runs (mean ± sd)"
+        "heater off (mean ± sd)"
+    );
+    // A setpoint that is not a number: the group is "not recorded", next to the others.
+    pts[0].temp_setpoint_c = Some(f64::NAN);
+    let r = campaign_report(&pts, &CampaignInputs::default()).unwrap();
+    let names: Vec<&str> = r.figures[0].panels[0]
+        .series
+        .iter()
+        .map(|s| s.name.as_str())
+        .filter(|n| n.contains("mean"))
+        .collect();
+    assert_eq!(
+        names,
+        ["not recorded (mean ± sd)", "heater off (mean ± sd)"]
     );
 
     assert!(campaign_report(&[], &CampaignInputs::default()).is_err());
@@ -455,6 +470,7 @@ fn a_campaign_axis_never_stretches_a_difference_far_below_the_standard_error() {
             run: format!("run-{i}"),
             load_n: n,
             temp_c: Some(25.0),
+            temp_setpoint_c: Some(25.0),
             mu0: Some(0.02 - 1e-7 * i as f64),
             mu1: Some(0.004),
             mu0_se: Some(1e-5),
@@ -476,4 +492,98 @@ fn a_campaign_axis_never_stretches_a_difference_far_below_the_standard_error() {
         .expect("the runs' ± drawn");
     assert_eq!(bars.errors.len(), 4);
     assert!(bars.errors.iter().all(|e| (e.2 - e.1 - 2e-5).abs() < 1e-12));
+}
+
+/// The campaign figure and `tribo table` bin the same runs the same way (one rule,
+/// `tribo_store::catalog::Bin`): heater-off runs whose plates read 22.0 and 38.8 °C are one
+/// "heater off" group (they were split into 22 and 39 °C groups of one run), a setpoint of 29.5 °C
+/// is the 30 °C setting in both (the figure clustered by proximity, the table rounded), and every
+/// mean the figure draws is the table's cell.
+#[test]
+fn the_campaign_figure_groups_runs_as_the_campaign_table_does() {
+    use tribo_store::catalog::{tabulate, Axis, Bin, Value};
+    use tribo_store::CatalogRow;
+    let runs: [(Option<f64>, f64, f64, f64); 7] = [
+        // (setpoint, plate reading, load, μ0)
+        (None, 22.0, 0.3, 0.020),
+        (None, 38.8, 0.3, 0.022),
+        (None, 25.0, 0.5, 0.021),
+        (Some(29.5), 29.5, 0.3, 0.030),
+        (Some(30.4), 30.4, 0.3, 0.031),
+        (Some(30.4), 30.4, 0.4995, 0.032),
+        (Some(60.0), 60.0, 0.3, 0.040),
+    ];
+    let rows: Vec<CatalogRow> = runs
+        .iter()
+        .enumerate()
+        .map(|(i, &(sp, t, n, mu0))| CatalogRow {
+            id: format!("run-{i}"),
+            path: format!("runs/run-{i}").into(),
+            created: "2026-11-26T00:00:00Z".into(),
+            status: "complete".into(),
+            label: None,
+            sample: None,
+            lubricant: None,
+            campaign: Some("c".into()),
+            repeat: None,
+            load_n: n,
+            temp_c: sp.or(Some(t)),
+            temp_setpoint_c: sp,
+            firmware: None,
+            serial: None,
+            samples: 1000,
+            missing_blocks: 0,
+            verdict: None,
+            cycles: Some(20),
+            onboard_mu0: None,
+            onboard_mu1: None,
+            host_mu0: Some(mu0),
+            host_mu1: Some(0.004),
+            host_gap: None,
+            host_mu0_se: None,
+            host_mu1_se: None,
+            lost_samples: 0,
+            blocks: 10,
+            blocks_expected: Some(10),
+            completeness: "complete".into(),
+        })
+        .collect();
+    let t = tabulate(&rows, Axis::Temp, Axis::Load, Value::Mu0);
+    assert_eq!(
+        t.rows,
+        [Bin::HeaterOff, Bin::SetpointC(30), Bin::SetpointC(60)]
+    );
+    assert_eq!(t.cols, [Bin::LoadMn(300), Bin::LoadMn(500)]);
+    assert_eq!(t.cells[0][0].unwrap().n, 2, "{}", t.render());
+    assert_eq!(t.cells[1][0].unwrap().n, 2, "{}", t.render());
+    assert!(t.render().contains("heater off"), "{}", t.render());
+
+    let points: Vec<CampaignPoint> = rows
+        .iter()
+        .map(tribo_report::store::campaign_point)
+        .collect();
+    let report = campaign_report(&points, &CampaignInputs::default()).unwrap();
+    let panel = &report.figures[0].panels[0];
+    let means: Vec<_> = panel
+        .series
+        .iter()
+        .filter(|s| s.name.ends_with("(mean ± sd)"))
+        .collect();
+    let names: Vec<&str> = means.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "heater off (mean ± sd)",
+            "30 °C (mean ± sd)",
+            "60 °C (mean ± sd)"
+        ]
+    );
+    for (r, s) in means.iter().enumerate() {
+        let cells: Vec<f64> = t.cells[r].iter().flatten().map(|c| c.mean).collect();
+        let drawn: Vec<f64> = s.data.iter().map(|d| d.1).collect();
+        assert_eq!(drawn.len(), cells.len(), "{}", s.name);
+        for (a, b) in drawn.iter().zip(&cells) {
+            assert!((a - b).abs() < 1e-15, "{}: drawn {a}, table {b}", s.name);
+        }
+    }
 }

@@ -23,7 +23,8 @@ use serde::Deserialize;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
-use tribo_store::catalog::{Axis, Value};
+use tribo_catalog::LabCatalog;
+use tribo_store::catalog::{Axis, RunCatalog, Value};
 use tribo_store::run::{list_run_dirs, META_FILE};
 use tribo_store::{Catalog, Filter, RunMeta, RunStatus};
 use tribo_wire::{Configure, HostMsg};
@@ -247,6 +248,12 @@ pub struct Args {
     /// Show what would be run and what is already done, and stop.
     #[arg(long)]
     pub dry_run: bool,
+    /// The lab catalog (postgres://USER@HOST[:PORT]/DATABASE, default: $TRIBO_CATALOG): once the
+    /// runs are taken they are synced to it (as `tribo sync`), and the table at the end is the
+    /// lab's: the campaign's runs on every rig that took part. No password in the URL: it comes
+    /// from PGPASSWORD or ~/.pgpass.
+    #[arg(long, value_name = "URL")]
+    pub catalog: Option<String>,
     /// No progress bar or messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]
     pub quiet: bool,
@@ -286,7 +293,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
         if todo.is_empty() {
-            print_table(&plan, &store)?;
+            print_table(&plan, &store, args.catalog.as_deref(), args.quiet)?;
         }
         return Ok(());
     }
@@ -380,20 +387,66 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ))
         .into());
     }
-    print_table(&plan, &store)
+    print_table(&plan, &store, args.catalog.as_deref(), args.quiet)
 }
 
-fn print_table(plan: &Plan, store: &Path) -> anyhow::Result<()> {
-    let cat = Catalog::open(store)?;
+/// The campaign's tables (μ0 and μ1, host fit): the lab's when a lab catalog is given (this
+/// store synced to it first), else the store's own.
+fn print_table(
+    plan: &Plan,
+    store: &Path,
+    catalog: Option<&str>,
+    quiet: bool,
+) -> anyhow::Result<()> {
     let f = Filter {
         campaign: Some(plan.name.clone()),
         ..Default::default()
     };
+    let (cat, what): (Box<dyn RunCatalog>, _) = match super::sync::lab_url(catalog)? {
+        Some(url) => {
+            // A server that cannot be reached is waited for a little, not a sync's minute: the
+            // runs are safe in the store, and `tribo sync` sends them later.
+            let opts = tribo_catalog::SyncOptions {
+                wait: std::time::Duration::from_secs(10),
+                ..Default::default()
+            };
+            let synced = tribo_catalog::sync(store, &url, &opts, &mut |_, _| {}).and_then(|r| {
+                if !quiet {
+                    eprintln!(
+                        "synced to {}: {} new, {} updated, {} already there",
+                        url.shown(),
+                        r.pushed.inserted,
+                        r.pushed.updated,
+                        r.unchanged
+                    );
+                }
+                LabCatalog::connect(&url)
+            });
+            match synced {
+                Ok(lab) => (Box::new(lab), "every rig in the lab catalog"),
+                Err(e) => {
+                    // The runs are whole and stored: show this PC's table, then say what failed.
+                    print_tables(&Catalog::open(store)?, &f, "this PC's runs")?;
+                    return Err(anyhow::Error::new(e).context(format!(
+                        "the campaign's runs are stored in {}, but syncing them to the lab catalog \
+                         failed: run `tribo sync` when {} can be reached",
+                        store.display(),
+                        url.shown()
+                    )));
+                }
+            }
+        }
+        None => (Box::new(Catalog::open(store)?), "this PC's runs"),
+    };
+    print_tables(cat.as_ref(), &f, what)
+}
+
+fn print_tables(cat: &dyn RunCatalog, f: &Filter, what: &str) -> anyhow::Result<()> {
     for v in [Value::Mu0, Value::Mu1] {
-        let t = cat.table(Axis::Temp, Axis::Load, v, &f)?;
+        let t = cat.table(Axis::Temp, Axis::Load, v, f)?;
         if !t.rows.is_empty() {
             println!(
-                "{} (host fit, mean ± sd over repetitions):",
+                "{} (host fit, mean ± sd over repetitions; {what}):",
                 if v == Value::Mu0 { "μ0" } else { "μ1" }
             );
             print!("{}", t.render());

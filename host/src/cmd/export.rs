@@ -461,15 +461,8 @@ pub fn catalog_rows(
     }
     filter.check()?;
     let cat = Catalog::open(store)?;
+    cat.refresh(reindex)?;
     let folders = tribo_store::run::list_run_dirs(store)?;
-    let rows = cat.list(&Filter::default())?;
-    if reindex
-        || folders.len() != rows.len()
-        || rows.iter().any(|r| r.completeness.is_empty())
-        || !cat.stale()?.is_empty()
-    {
-        cat.reindex()?;
-    }
     let known: std::collections::BTreeSet<PathBuf> = cat
         .list(&Filter::default())?
         .into_iter()
@@ -534,6 +527,7 @@ pub fn catalog_table(rows: &[CatalogRow]) -> Table {
         Data::F64(rows.iter().map(|r| r.load_n).collect()),
     );
     t.push("temp_c", "°C", of(|r| r.temp_c));
+    t.push("temp_setpoint_c", "°C", of(|r| r.temp_setpoint_c));
     t.push("serial", "", os(|r| r.serial.clone()));
     t.push("onboard_mu0", "", of(|r| r.onboard_mu0));
     t.push("onboard_mu1", "", of(|r| r.onboard_mu1));

@@ -27,6 +27,8 @@ pub struct Args {
     /// A campaign's runs of this rig only (its serial number).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
+    #[command(flatten)]
+    pub period: super::runs::Period,
     #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Select the campaign's runs by label substring instead of campaign name.
@@ -129,6 +131,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
+    args.period.check()?;
     let store = args
         .store
         .clone()
@@ -143,7 +146,7 @@ fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
         );
     }
     let cat = super::sync::open_catalog(args.catalog.as_deref(), &store)?;
-    let filter = if args.label {
+    let filter = args.period.apply(if args.label {
         Filter {
             label: Some(args.target.clone()),
             rig: args.rig.clone(),
@@ -155,7 +158,7 @@ fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
             rig: args.rig.clone(),
             ..Filter::default()
         }
-    };
+    });
     let rows = cat.runs(&filter)?;
     if rows.is_empty() {
         bail!(
@@ -209,6 +212,7 @@ mod tests {
             out,
             store: None,
             rig: None,
+            period: Default::default(),
             catalog: None,
             label: false,
             laws: vec![LawSpec::CoulombViscous],

@@ -29,12 +29,8 @@ pub struct Args {
     /// Runs of this rig (its serial number, as `tribo devices` shows it).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
-    /// Runs taken on or after this day (UTC), e.g. `--since 2026-01-01` for this year's.
-    #[arg(long, value_name = "YYYY-MM-DD", value_parser = day)]
-    pub since: Option<String>,
-    /// Runs taken on or before this day (UTC).
-    #[arg(long, value_name = "YYYY-MM-DD", value_parser = day)]
-    pub until: Option<String>,
+    #[command(flatten)]
+    pub period: Period,
     #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Rebuild the catalog from the run folders first.
@@ -63,6 +59,42 @@ fn status_names() -> clap::builder::PossibleValuesParser {
 /// The state of a run folder whose frame log cannot be read as it is (damage, not a torn tail):
 /// listed all the same, with what `tribo pull --salvage` does about it.
 const DAMAGED: &str = "damaged";
+
+/// `--since`/`--until`: the days a command's runs were taken in (`tribo runs`, `table`, `report
+/// CAMPAIGN`), on the local and the lab catalog alike.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct Period {
+    /// Runs taken on or after this day (UTC), e.g. `--since 2026-01-01` for this year's.
+    #[arg(long, value_name = "YYYY-MM-DD", value_parser = day)]
+    pub since: Option<String>,
+    /// Runs taken on or before this day (UTC).
+    #[arg(long, value_name = "YYYY-MM-DD", value_parser = day)]
+    pub until: Option<String>,
+}
+
+impl Period {
+    /// A period that ends before it begins is a usage error (status 2).
+    pub fn check(&self) -> anyhow::Result<()> {
+        if let (Some(a), Some(b)) = (&self.since, &self.until) {
+            if a > b {
+                return Err(crate::exit::Usage(format!(
+                    "--since {a} is after --until {b}: no run can be in between"
+                ))
+                .into());
+            }
+        }
+        Ok(())
+    }
+
+    /// `f` restricted to the period.
+    pub fn apply(&self, f: Filter) -> Filter {
+        Filter {
+            since: self.since.clone(),
+            until: self.until.clone(),
+            ..f
+        }
+    }
+}
 
 fn day(s: &str) -> Result<String, String> {
     if tribo_store::catalog::is_day(s) {
@@ -112,14 +144,7 @@ pub fn parse_range(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if let (Some(a), Some(b)) = (&args.since, &args.until) {
-        if a > b {
-            return Err(crate::exit::Usage(format!(
-                "--since {a} is after --until {b}: no run can be in between"
-            ))
-            .into());
-        }
-    }
+    args.period.check()?;
     if let Some(url) = super::sync::lab_url(args.catalog.as_deref())? {
         return lab(args, &url);
     }
@@ -131,17 +156,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("no run store at {}: take a run with `tribo run` or `tribo demo`, or point --store at one", store.display());
     }
     let cat = Catalog::open(&store)?;
-    // Folders the catalog does not know (a killed recorder, runs copied in), logs changed since
-    // they were catalogued (a pull completed one, a copy truncated one), or rows from a tribo that
-    // did not record completeness: rebuild it.
-    let folders = tribo_store::run::list_run_dirs(&store)?.len();
-    let rows = cat.list(&Filter::default())?;
-    if args.reindex
-        || folders != rows.len()
-        || rows.iter().any(|r| r.completeness.is_empty())
-        || !cat.stale()?.is_empty()
-    {
-        let r = cat.reindex()?;
+    if let Some(r) = cat.refresh(args.reindex)? {
         if !args.quiet {
             eprintln!(
                 "catalog rebuilt from the run folders: {} runs, {} of them incomplete",
@@ -163,13 +178,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .into_iter()
         .map(|r| r.path)
         .collect();
-    let only_filter_is_status = args.campaign.is_none()
-        && args.rig.is_none()
-        && args.label.is_none()
-        && args.load.is_none()
-        && args.temp.is_none()
-        && args.since.is_none()
-        && args.until.is_none();
+    let only_filter_is_status = filter(&args, None).selects_by_status_only();
     let damaged: Vec<(PathBuf, String)> =
         if only_filter_is_status && args.status.as_deref().is_none_or(|s| s == DAMAGED) {
             tribo_store::run::list_run_dirs(&store)?
@@ -238,7 +247,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "μ0 host",
         "μ1 host"
     )?;
-    for r in rows {
+    for r in &rows {
         outln!(
             "{:<44} {:<10} {:>11} {:>6} {:>7.3} {:>6} {:<12} {:>4} {:>9} {:>9} {:>9} {:>9}",
             r.id,
@@ -253,7 +262,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "—".into()
             },
             r.load_n,
-            r.temp_c.map_or("—".into(), |t| format!("{t:.1}")),
+            temp_cell(r),
             r.campaign.as_deref().unwrap_or("—"),
             r.repeat.map_or("—".into(), |x| x.to_string()),
             opt(r.onboard_mu0),
@@ -269,6 +278,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
              completed by `tribo pull RUN` while the rig holds it"
         )?;
     }
+    if rows.iter().any(|r| r.temp_setpoint_c.is_none()) {
+        outln!("°C: the heater's setpoint; ~22.4: the heater off, the plate read 22.4 °C")?;
+    }
     if any_lost {
         outln!(
             "lost: samples the rig's acquisition lost (its gap frames); fits refuse to cross a gap: \
@@ -276,6 +288,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// A run's temperature in a listing: its setpoint, or `~` and the plate's reading with the heater
+/// off (a campaign table's "heater off" cell).
+fn temp_cell(r: &CatalogRow) -> String {
+    match (r.temp_setpoint_c, r.temp_c) {
+        (Some(t), _) => format!("{t:.1}"),
+        (None, Some(t)) => format!("~{t:.1}"),
+        (None, None) => "—".into(),
+    }
 }
 
 /// The damaged run folders, each with its state and what to do.
@@ -375,7 +397,7 @@ fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
                 None => format!("{}/?", r.blocks),
             },
             r.load_n,
-            r.temp_c.map_or("—".into(), |t| format!("{t:.1}")),
+            temp_cell(r),
             r.campaign.as_deref().unwrap_or("—"),
             r.repeat.map_or("—".into(), |x| x.to_string()),
             opt(r.onboard_mu0),
@@ -384,6 +406,9 @@ fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
             opt(r.host_mu1),
             r.id,
         )?;
+    }
+    if rows.iter().any(|l| l.run.row.temp_setpoint_c.is_none()) {
+        outln!("°C: the heater's setpoint; ~22.4: the heater off, the plate read 22.4 °C")?;
     }
     outln!(
         "{} runs from the lab catalog at {}; `tribo pull --from-catalog SERIAL/RUN` fetches one's log from a shared folder",
@@ -404,8 +429,8 @@ fn filter(args: &Args, status: Option<String>) -> Filter {
         temp_min: args.temp.map(|t| t.0),
         temp_max: args.temp.map(|t| t.1),
         rig: args.rig.clone(),
-        since: args.since.clone(),
-        until: args.until.clone(),
+        since: args.period.since.clone(),
+        until: args.period.until.clone(),
     }
 }
 
@@ -417,7 +442,8 @@ pub fn run_json(r: &CatalogRow) -> serde_json::Value {
         "completeness": r.completeness, "blocks": r.blocks,
         "blocks_expected": r.blocks_expected, "lost_samples": r.lost_samples,
         "label": r.label, "campaign": r.campaign, "repeat": r.repeat,
-        "load_n": r.load_n, "temp_c": r.temp_c, "serial": r.serial,
+        "load_n": r.load_n, "temp_c": r.temp_c, "temp_setpoint_c": r.temp_setpoint_c,
+        "serial": r.serial,
         "onboard_mu0": r.onboard_mu0, "onboard_mu1": r.onboard_mu1,
         "host_mu0": r.host_mu0, "host_mu1": r.host_mu1,
         "host_mu0_se": r.host_mu0_se, "host_mu1_se": r.host_mu1_se,

@@ -27,16 +27,22 @@ pub struct Args {
     /// Only this rig's runs (its serial number).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
+    #[command(flatten)]
+    pub period: super::runs::Period,
     #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
     pub catalog: Option<String>,
-    /// Print one JSON object: `{"value", "rows": [..], "cols": [..], "row_axis", "col_axis",
-    /// "cells": [[{"mean", "sd", "n"} | null, ..], ..]}`.
+    /// Print one JSON object: `{"value", "row_axis", "col_axis", "rows": [..], "cols": [..],
+    /// "row_labels": [..], "col_labels": [..], "cells": [[{"mean", "sd", "n"} | null, ..], ..]}`.
+    /// Rows and columns are loads (N, to the mN) and heater setpoints (°C, to the degree); a
+    /// temperature of `null` (labelled "heater off") holds every run taken with the heater off,
+    /// whatever its plate read.
     #[arg(long)]
     pub json: bool,
 }
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    args.period.check()?;
     let store = args
         .store
         .clone()
@@ -53,11 +59,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rows,
         cols,
         value,
-        &Filter {
+        &args.period.apply(Filter {
             campaign: args.campaign.clone(),
             rig: args.rig.clone(),
             ..Default::default()
-        },
+        }),
     )?;
     if args.json {
         let axis = |a: Axis| match a {
@@ -80,8 +86,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "value": args.value,
             "row_axis": axis(t.row_axis),
             "col_axis": axis(t.col_axis),
-            "rows": t.rows,
-            "cols": t.cols,
+            "rows": t.row_values(),
+            "cols": t.col_values(),
+            "row_labels": t.rows.iter().map(|b| b.label()).collect::<Vec<_>>(),
+            "col_labels": t.cols.iter().map(|b| b.label()).collect::<Vec<_>>(),
             "cells": cells,
         }))?;
         return Ok(());

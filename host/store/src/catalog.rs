@@ -13,7 +13,7 @@ pub const CATALOG_FILE: &str = "catalog.sqlite";
 
 /// The SQLite catalog's schema version (its `user_version`): a catalog of a newer tribo is
 /// refused, not misread. Catalogs of earlier tribos (version 0) are migrated on opening.
-pub const CATALOG_VERSION: i64 = 1;
+pub const CATALOG_VERSION: i64 = 2;
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS runs (
@@ -45,7 +45,8 @@ CREATE TABLE IF NOT EXISTS runs (
     completeness TEXT NOT NULL DEFAULT '',
     log_stamp TEXT NOT NULL DEFAULT '',
     host_mu0_se REAL,
-    host_mu1_se REAL
+    host_mu1_se REAL,
+    temp_setpoint_c REAL
 );
 CREATE INDEX IF NOT EXISTS runs_campaign ON runs(campaign);
 ";
@@ -65,6 +66,8 @@ pub struct CatalogRow {
     pub load_n: f64,
     /// Nominal temperature: the setpoint, else the measured one.
     pub temp_c: Option<f64>,
+    /// The heater's setpoint; `None`: the heater was off (the run is at whatever the plate read).
+    pub temp_setpoint_c: Option<f64>,
     pub firmware: Option<String>,
     pub serial: Option<String>,
     pub samples: u64,
@@ -139,6 +142,32 @@ pub fn is_day(s: &str) -> bool {
 }
 
 impl Filter {
+    /// Whether nothing but the status is asked: the only listings a damaged run folder (one the
+    /// catalog cannot hold, its campaign, rig, load, temperature and day unknown) belongs in.
+    pub fn selects_by_status_only(&self) -> bool {
+        let Filter {
+            campaign,
+            label,
+            status: _,
+            load_min,
+            load_max,
+            temp_min,
+            temp_max,
+            rig,
+            since,
+            until,
+        } = self;
+        campaign.is_none()
+            && label.is_none()
+            && load_min.is_none()
+            && load_max.is_none()
+            && temp_min.is_none()
+            && temp_max.is_none()
+            && rig.is_none()
+            && since.is_none()
+            && until.is_none()
+    }
+
     /// Checks the filter: a known status, finite ranges whose minimum is not above the maximum. A
     /// filter that can match nothing by construction is an error, not an empty list.
     pub fn check(&self) -> Result<()> {
@@ -263,21 +292,47 @@ impl Cell {
 /// A campaign table: `cells[r][c]` for `rows[r]` × `cols[c]`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Table {
-    pub rows: Vec<f64>,
-    pub cols: Vec<f64>,
+    pub rows: Vec<Bin>,
+    pub cols: Vec<Bin>,
     pub cells: Vec<Vec<Option<Cell>>>,
     pub row_axis: Axis,
     pub col_axis: Axis,
 }
 
-fn axis_label(a: Axis, v: f64) -> String {
-    match a {
-        Axis::Load => format!("{v:.3} N"),
-        Axis::Temp => format!("{v:.0} °C"),
-    }
-}
-
 impl Table {
+    /// The table of the cells `groups` (by row bin and column bin), rows and columns in bin order.
+    pub fn of_groups(groups: BTreeMap<(Bin, Bin), Cell>, row_axis: Axis, col_axis: Axis) -> Table {
+        let mut rows: Vec<Bin> = groups.keys().map(|k| k.0).collect();
+        let mut cols: Vec<Bin> = groups.keys().map(|k| k.1).collect();
+        rows.dedup();
+        cols.sort_unstable();
+        cols.dedup();
+        Table {
+            cells: rows
+                .iter()
+                .map(|a| {
+                    cols.iter()
+                        .map(|b| groups.get(&(*a, *b)).copied())
+                        .collect()
+                })
+                .collect(),
+            rows,
+            cols,
+            row_axis,
+            col_axis,
+        }
+    }
+
+    /// `rows`' values for JSON: N or °C, `null` for the heater off.
+    pub fn row_values(&self) -> Vec<Option<f64>> {
+        self.rows.iter().map(|b| b.value()).collect()
+    }
+
+    /// `cols`' values for JSON: N or °C, `null` for the heater off.
+    pub fn col_values(&self) -> Vec<Option<f64>> {
+        self.cols.iter().map(|b| b.value()).collect()
+    }
+
     /// Text rendering: `mean ± sd (n)` per cell, `—` where no run was made.
     pub fn render(&self) -> String {
         let head = match self.row_axis {
@@ -285,10 +340,10 @@ impl Table {
             Axis::Temp => "temp \\ load",
         };
         let mut grid: Vec<Vec<String>> = vec![std::iter::once(head.to_string())
-            .chain(self.cols.iter().map(|c| axis_label(self.col_axis, *c)))
+            .chain(self.cols.iter().map(|c| c.label()))
             .collect()];
         for (r, row) in self.rows.iter().zip(&self.cells) {
-            let mut line = vec![axis_label(self.row_axis, *r)];
+            let mut line = vec![r.label()];
             for cell in row {
                 line.push(match cell {
                     None => "—".into(),
@@ -331,16 +386,28 @@ pub trait RunCatalog {
     fn describe(&self) -> String;
     /// Campaign table of `value` over complete runs matching `f` ([`tabulate`]).
     fn table(&self, rows: Axis, cols: Axis, value: Value, f: &Filter) -> Result<Table> {
-        if rows == cols {
-            return Err(StoreError::new(
-                ErrorKind::Invalid,
-                "rows and columns must differ: use --rows temp --cols load",
-            ));
-        }
-        let mut f = f.clone();
-        f.status.get_or_insert_with(|| "complete".into());
-        Ok(tabulate(&self.runs(&f)?, rows, cols, value))
+        Ok(tabulate(
+            &self.runs(&table_filter(rows, cols, f)?)?,
+            rows,
+            cols,
+            value,
+        ))
     }
+}
+
+/// The runs a campaign table of `rows` × `cols` is made of: those of `f` that are complete (unless
+/// `f` asks for a status). Rows and columns must differ.
+pub fn table_filter(rows: Axis, cols: Axis, f: &Filter) -> Result<Filter> {
+    if rows == cols {
+        return Err(StoreError::new(
+            ErrorKind::Invalid,
+            "rows and columns must differ: use --rows temp --cols load",
+        ));
+    }
+    let mut f = f.clone();
+    f.status.get_or_insert_with(|| "complete".into());
+    f.check()?;
+    Ok(f)
 }
 
 impl RunCatalog for Catalog {
@@ -349,9 +416,6 @@ impl RunCatalog for Catalog {
     }
     fn describe(&self) -> String {
         self.root.join(CATALOG_FILE).display().to_string()
-    }
-    fn table(&self, rows: Axis, cols: Axis, value: Value, f: &Filter) -> Result<Table> {
-        Catalog::table(self, rows, cols, value, f)
     }
 }
 
@@ -421,6 +485,7 @@ impl Catalog {
             ("log_stamp", "TEXT NOT NULL DEFAULT ''"),
             ("host_mu0_se", "REAL"),
             ("host_mu1_se", "REAL"),
+            ("temp_setpoint_c", "REAL"),
         ] {
             let has: bool = conn
                 .query_row(
@@ -434,6 +499,13 @@ impl Catalog {
                 conn.execute_batch(&format!("ALTER TABLE runs ADD COLUMN {column} {decl}"))
                     .map_err(|e| db_err("schema", e))?;
             }
+        }
+        if version < 2 {
+            // Version 2 tells a heater-off run from one held at a setpoint: the rows of an earlier
+            // catalog do not know, so they are marked stale and rebuilt from the run folders by the
+            // next [`Catalog::refresh`].
+            conn.execute_batch("UPDATE runs SET log_stamp = ''")
+                .map_err(|e| db_err("schema", e))?;
         }
         if version < CATALOG_VERSION {
             conn.pragma_update(None, "user_version", CATALOG_VERSION)
@@ -460,8 +532,9 @@ impl Catalog {
             .execute(
                 "INSERT OR REPLACE INTO runs (id,path,created,status,label,sample,lubricant,campaign,repeat,\
                  load_n,temp_c,firmware,serial,samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,\
-                 host_mu0,host_mu1,host_gap,lost_samples,blocks,blocks_expected,completeness,log_stamp,host_mu0_se,host_mu1_se) \
-                 VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23,?24,?25,?26,?27,?28,?29)",
+                 host_mu0,host_mu1,host_gap,lost_samples,blocks,blocks_expected,completeness,log_stamp,host_mu0_se,host_mu1_se,\
+                 temp_setpoint_c) \
+                 VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20,?21,?22,?23,?24,?25,?26,?27,?28,?29,?30)",
                 params![
                     m.id,
                     run.dir().to_string_lossy(),
@@ -492,6 +565,7 @@ impl Catalog {
                     log_stamp(run.dir()),
                     host.map(|h| h.mu0_se).filter(|v| v.is_finite()),
                     host.map(|h| h.mu1_se).filter(|v| v.is_finite()),
+                    m.temp_setpoint_c,
                 ],
             )
             .map_err(|e| db_err("insert", e))?;
@@ -526,6 +600,25 @@ impl Catalog {
         Ok(out)
     }
 
+    /// Brings the catalog up to date with the run folders: rebuilt ([`Catalog::reindex`]) when
+    /// `force`, when it does not know a folder (a killed recorder, runs copied in), when a log
+    /// changed since it was catalogued (a pull completed it, a copy truncated it, [`Catalog::stale`])
+    /// or when its rows come from a tribo that did not record what this one reads. Returns what
+    /// the rebuild found, `None` when the catalog was already up to date. What every reader of a
+    /// store's catalog calls first.
+    pub fn refresh(&self, force: bool) -> Result<Option<Reindexed>> {
+        let folders = list_run_dirs(&self.root)?.len();
+        let rows = self.list(&Filter::default())?;
+        if force
+            || folders != rows.len()
+            || rows.iter().any(|r| r.completeness.is_empty())
+            || !self.stale()?.is_empty()
+        {
+            return self.reindex().map(Some);
+        }
+        Ok(None)
+    }
+
     /// Run folders whose frame log changed (size or time) since they were catalogued, or that the
     /// catalog does not know: its rows for them may say what the logs no longer hold.
     pub fn stale(&self) -> Result<Vec<PathBuf>> {
@@ -555,7 +648,7 @@ impl Catalog {
             .prepare(
                 "SELECT id,path,created,status,label,sample,lubricant,campaign,repeat,load_n,temp_c,firmware,serial,\
                  samples,missing_blocks,verdict,cycles,onboard_mu0,onboard_mu1,host_mu0,host_mu1,host_gap,lost_samples,\
-                 blocks,blocks_expected,completeness,host_mu0_se,host_mu1_se FROM runs \
+                 blocks,blocks_expected,completeness,host_mu0_se,host_mu1_se,temp_setpoint_c FROM runs \
                  WHERE (?1 IS NULL OR campaign = ?1) AND (?2 IS NULL OR instr(label, ?2) > 0) \
                  AND (?3 IS NULL OR status = ?3) AND (?4 IS NULL OR load_n >= ?4 - 1e-9) \
                  AND (?5 IS NULL OR load_n <= ?5 + 1e-9) AND (?6 IS NULL OR temp_c >= ?6 - 1e-9) \
@@ -589,6 +682,7 @@ impl Catalog {
                         repeat: r.get(8)?,
                         load_n: r.get(9)?,
                         temp_c: r.get(10)?,
+                        temp_setpoint_c: r.get(28)?,
                         firmware: r.get(11)?,
                         serial: r.get(12)?,
                         samples: r.get::<_, i64>(13)? as u64,
@@ -613,36 +707,79 @@ impl Catalog {
         rows.collect::<std::result::Result<Vec<_>, _>>()
             .map_err(|e| db_err("query", e))
     }
+}
 
-    /// Campaign table of `value` over complete runs matching `f`: mean ± sd over repetitions for
-    /// each (row, column) pair. Loads are grouped to the mN, temperatures to the °C.
-    pub fn table(&self, rows: Axis, cols: Axis, value: Value, f: &Filter) -> Result<Table> {
-        if rows == cols {
-            return Err(StoreError::new(
-                ErrorKind::Invalid,
-                "rows and columns must differ: use --rows temp --cols load",
-            ));
+/// Where a run sits on one axis of a campaign table or figure: the one binning rule that `tribo
+/// table`, the lab catalog's server-side table, `tribo campaign`'s summary, the front panel's grid
+/// and the campaign report's figures share.
+///
+/// Loads go to the mN, setpoints to the °C, both rounded half up (`floor(x + 0.5)`, which the lab
+/// catalog's SQL computes to the same integer). A run with the heater off is in one
+/// [`Bin::HeaterOff`] cell whatever its plate read: room temperature is not a setting, and a run at
+/// 22.4 °C and one at 38.8 °C (the plate warmed by the day, or read just after the knob moved) are
+/// repetitions of the same condition.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Bin {
+    /// A load, in mN.
+    LoadMn(i64),
+    /// The heater off (sorted before every setpoint).
+    HeaterOff,
+    /// A heater setpoint, in °C.
+    SetpointC(i64),
+}
+
+impl Bin {
+    /// The bin of `r` on axis `a`; `None` when the run has no finite value there.
+    pub fn of(a: Axis, r: &CatalogRow) -> Option<Bin> {
+        match a {
+            Axis::Load => Bin::load(r.load_n),
+            Axis::Temp => Bin::temp(r.temp_setpoint_c),
         }
-        let mut f = f.clone();
-        f.status.get_or_insert_with(|| "complete".into());
-        Ok(tabulate(&self.list(&f)?, rows, cols, value))
+    }
+
+    /// A load's bin (N in, mN bin).
+    pub fn load(load_n: f64) -> Option<Bin> {
+        half_up(load_n * 1000.0).map(Bin::LoadMn)
+    }
+
+    /// A run's temperature bin from its setpoint (`None`: the heater off).
+    pub fn temp(setpoint_c: Option<f64>) -> Option<Bin> {
+        match setpoint_c {
+            None => Some(Bin::HeaterOff),
+            Some(t) => half_up(t).map(Bin::SetpointC),
+        }
+    }
+
+    /// The bin's value: N for a load, °C for a setpoint, `None` for the heater off.
+    pub fn value(self) -> Option<f64> {
+        match self {
+            Bin::LoadMn(mn) => Some(mn as f64 * 1e-3),
+            Bin::SetpointC(c) => Some(c as f64),
+            Bin::HeaterOff => None,
+        }
+    }
+
+    /// How a table or a legend names it: `0.300 N`, `60 °C`, `heater off`.
+    pub fn label(self) -> String {
+        match self {
+            Bin::LoadMn(mn) => format!("{:.3} N", mn as f64 * 1e-3),
+            Bin::SetpointC(c) => format!("{c} °C"),
+            Bin::HeaterOff => "heater off".into(),
+        }
     }
 }
 
+/// `floor(x + 0.5)` as an integer, for a finite `x` within ±1e15.
+fn half_up(x: f64) -> Option<i64> {
+    (x.is_finite() && x.abs() < 1e15).then(|| (x + 0.5).floor() as i64)
+}
+
 /// The campaign table of `value` over `runs`: mean ± sd over repetitions for each (row, column)
-/// pair. Loads are grouped to the mN, temperatures to the °C.
+/// pair of [`Bin`]s.
 pub fn tabulate(runs: &[CatalogRow], rows: Axis, cols: Axis, value: Value) -> Table {
-    let key = |a: Axis, r: &CatalogRow| -> Option<i64> {
-        match a {
-            Axis::Load => Some((r.load_n * 1000.0).round() as i64),
-            Axis::Temp => r.temp_c.filter(|t| t.is_finite()).map(|t| t.round() as i64),
-        }
-    };
-    let scale = |a: Axis| if a == Axis::Load { 1e-3 } else { 1.0 };
-    let mut groups: BTreeMap<(i64, i64), Vec<f64>> = BTreeMap::new();
-    let (mut rk, mut ck) = (Vec::new(), Vec::new());
+    let mut groups: BTreeMap<(Bin, Bin), Vec<f64>> = BTreeMap::new();
     for r in runs {
-        let (Some(a), Some(b)) = (key(rows, r), key(cols, r)) else {
+        let (Some(a), Some(b)) = (Bin::of(rows, r), Bin::of(cols, r)) else {
             continue;
         };
         let v = match value {
@@ -655,26 +792,13 @@ pub fn tabulate(runs: &[CatalogRow], rows: Axis, cols: Axis, value: Value) -> Ta
             continue;
         };
         groups.entry((a, b)).or_default().push(v);
-        rk.push(a);
-        ck.push(b);
     }
-    rk.sort_unstable();
-    rk.dedup();
-    ck.sort_unstable();
-    ck.dedup();
-    let cells = rk
-        .iter()
-        .map(|a| {
-            ck.iter()
-                .map(|b| groups.get(&(*a, *b)).and_then(|v| Cell::of(v)))
-                .collect()
-        })
-        .collect();
-    Table {
-        rows: rk.iter().map(|&a| a as f64 * scale(rows)).collect(),
-        cols: ck.iter().map(|&b| b as f64 * scale(cols)).collect(),
-        cells,
-        row_axis: rows,
-        col_axis: cols,
-    }
+    Table::of_groups(
+        groups
+            .into_iter()
+            .filter_map(|(k, v)| Some((k, Cell::of(&v)?)))
+            .collect(),
+        rows,
+        cols,
+    )
 }

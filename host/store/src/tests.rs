@@ -1,6 +1,6 @@
 //! Round trips through a run folder and the catalog.
 
-use crate::catalog::{Axis, Value};
+use crate::catalog::{Axis, Bin, RunCatalog, Value, CATALOG_FILE};
 use crate::*;
 use tribo_wire::frame::{decode_one, encode_vec};
 use tribo_wire::*;
@@ -401,7 +401,10 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
             res.host = Some(host);
             run.save_results(res).unwrap();
             expected
-                .entry(((load * 1000.0).round() as i64, temp as i64))
+                .entry((
+                    Bin::load(load as f64).unwrap(),
+                    Bin::temp(Some(temp)).unwrap(),
+                ))
                 .or_insert_with(Vec::new)
                 .push(mu0 as f64);
         }
@@ -485,13 +488,13 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
             &Filter::default(),
         )
         .unwrap();
-    assert_eq!(t.rows, vec![25.0, 60.0]);
-    assert_eq!(t.cols, vec![0.2, 0.4]);
+    assert_eq!(t.rows, vec![Bin::SetpointC(25), Bin::SetpointC(60)]);
+    assert_eq!(t.cols, vec![Bin::LoadMn(200), Bin::LoadMn(400)]);
     assert!(t.cells[1][1].is_none(), "no run at 60 °C, 0.4 N");
     for (r, temp) in t.rows.iter().enumerate() {
         for (c, load) in t.cols.iter().enumerate() {
             let Some(cell) = t.cells[r][c] else { continue };
-            let v = &expected[&((load * 1000.0).round() as i64, *temp as i64)];
+            let v = &expected[&(*load, *temp)];
             let mean = v.iter().sum::<f64>() / 3.0;
             let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 2.0).sqrt();
             assert_eq!(cell.n, 3);
@@ -898,4 +901,50 @@ fn a_catalog_of_a_newer_tribo_is_refused_and_one_of_an_older_is_versioned() {
     drop(conn);
     let e = Catalog::open(d.path()).err().unwrap().to_string();
     assert!(e.contains("newer tribo") && e.contains("--reindex"), "{e}");
+}
+
+/// A catalog written before setpoints were catalogued (version 1) cannot tell a heater-off run
+/// from one at a setpoint: opening it marks every row stale, and the first refresh rebuilds it from
+/// the run folders, so the heater-off run lands in the "heater off" cell and the other at its
+/// setpoint (without the rebuild both read as heater off).
+#[test]
+fn a_catalog_from_before_setpoints_is_rebuilt_on_first_refresh() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    for sp in [None, Some(40.0)] {
+        record(d.path(), &cfg, &run_frames(&cfg, 2, 0.02), |m| {
+            m.temp_setpoint_c = sp;
+            m.temp_c = Some(23.5);
+            m.label = Some(format!("{sp:?}"));
+        });
+    }
+    let cat = Catalog::open(d.path()).unwrap();
+    assert!(
+        cat.refresh(false).unwrap().is_some(),
+        "new folders: rebuilt"
+    );
+    assert!(
+        cat.refresh(false).unwrap().is_none(),
+        "up to date: left alone"
+    );
+    drop(cat);
+    // What a version-1 tribo left: no setpoint column.
+    let conn = rusqlite::Connection::open(d.path().join(CATALOG_FILE)).unwrap();
+    conn.execute_batch("ALTER TABLE runs DROP COLUMN temp_setpoint_c; PRAGMA user_version = 1;")
+        .unwrap();
+    drop(conn);
+    let cat = Catalog::open(d.path()).unwrap();
+    assert!(
+        cat.list(&Filter::default())
+            .unwrap()
+            .iter()
+            .all(|r| r.temp_setpoint_c.is_none()),
+        "the migrated rows do not know their setpoints yet"
+    );
+    let r = cat.refresh(false).unwrap().expect("stale rows: rebuilt");
+    assert_eq!(r.indexed, 2);
+    let rows = cat.list(&Filter::default()).unwrap();
+    let bins: Vec<Option<Bin>> = rows.iter().map(|r| Bin::of(Axis::Temp, r)).collect();
+    assert!(bins.contains(&Some(Bin::HeaterOff)), "{bins:?}");
+    assert!(bins.contains(&Some(Bin::SetpointC(40))), "{bins:?}");
 }

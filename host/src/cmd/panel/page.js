@@ -115,9 +115,9 @@ function result(r) {
 function grid(g) {
   const el = $("grid");
   if (!g || !g.loads || g.loads.length === 0) { el.textContent = "no complete run in the store yet"; return; }
-  let h = "<table class='grid'><tr><th>load \\ temp</th>" + g.temps.map((t) => "<th>" + fmt(t, 0) + " °C</th>").join("") + "</tr>";
+  let h = "<table class='grid'><tr><th>load \\ temp</th>" + g.temps.map((t) => "<th>" + t + "</th>").join("") + "</tr>";
   g.loads.forEach((l, i) => {
-    h += "<tr><th>" + fmt(l, 3) + " N</th>" + g.cells[i].map((c) => "<td>" + (c ? fmt(c.mean, 5) + (c.sd !== null ? " ± " + fmt(c.sd, 5) : "") + " (" + c.n + ")" : "—") + "</td>").join("") + "</tr>";
+    h += "<tr><th>" + l + "</th>" + g.cells[i].map((c) => "<td>" + (c ? fmt(c.mean, 5) + (c.sd !== null ? " ± " + fmt(c.sd, 5) : "") + " (" + c.n + ")" : "—") + "</td>").join("") + "</tr>";
   });
   el.innerHTML = h + "</table>";
 }

@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use tribo_store::catalog::{Axis, Catalog, Filter, Value as CatValue};
+use tribo_store::catalog::{Axis, Catalog, Filter, RunCatalog, Value as CatValue};
 use tribo_store::Run;
 use tribo_wire::{limits, Channel, Control, Gap, RunHeader, SampleBlock, Status};
 
@@ -449,7 +449,8 @@ pub fn grid(store: &Path) -> Value {
                 .collect()
         })
         .collect();
-    json!({"loads": t.rows, "temps": t.cols, "cells": cells})
+    let labels = |b: &[tribo_store::catalog::Bin]| b.iter().map(|b| b.label()).collect::<Vec<_>>();
+    json!({"loads": labels(&t.rows), "temps": labels(&t.cols), "cells": cells})
 }
 
 /// Writes the run's HTML report (as `tribo report RUN -o RUN/report`) on a thread of its own, then
