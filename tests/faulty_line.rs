@@ -5,18 +5,19 @@
 //! [`Bench`] owns the virtual rig and serves it to one host session at a time through such a
 //! line; between sessions the rig is the test's (its clock stands still unless the test advances
 //! it, with the cable out), so a test can run it on, power-cycle it, and ask it for its own copy of
-//! the run over a clean line.
+//! the run over a clean line. [`Bench::lend`] serves it for a while to whoever connects, as
+//! `tribo rig --virtual` does ([`TcpRig`]: one host at a time), then takes it back.
 #![allow(dead_code)]
 
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
-use std::net::{Shutdown, TcpListener, TcpStream};
+use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tribo::link::Link;
 use tribo_physics::stats::Rng;
-use tribo_rig::{serve, ServeOptions, VirtualRig};
+use tribo_rig::{serve, HostEvent, ServeOptions, TcpRig, VirtualRig};
 use tribo_wire::frame::decode_one;
 use tribo_wire::{DeviceMsg, HostMsg, RigState};
 
@@ -332,6 +333,27 @@ impl Bench {
         (out, stats)
     }
 
+    /// Lends the rig to a [`TcpRig`] (served with [`Bench::opts`], over clean local TCP, one host
+    /// at a time, the next one waiting up to its hand-over time) while `f` runs with its address;
+    /// then stops it and takes the rig back. Returns what `f` returned and what the rig's console
+    /// heard of the hosts.
+    pub fn lend<T>(&mut self, f: impl FnOnce(SocketAddr) -> T) -> (T, Vec<HostEvent>) {
+        let rig = self.rig.take().expect("one session at a time");
+        let events = Arc::new(Mutex::new(Vec::new()));
+        let heard = events.clone();
+        let tcp = TcpRig::spawn(
+            rig,
+            TcpListener::bind("127.0.0.1:0").unwrap(),
+            self.opts,
+            move |e| heard.lock().unwrap().push(e),
+        )
+        .expect("serving the rig on TCP");
+        let out = f(tcp.addr());
+        self.rig = Some(tcp.stop());
+        let events = std::mem::take(&mut *events.lock().unwrap());
+        (out, events)
+    }
+
     /// Runs the rig on with nobody connected (the cable out) for `seconds` of its time, or until
     /// its run has ended.
     pub fn run_on(&mut self, seconds: f64) {
@@ -351,35 +373,44 @@ impl Bench {
     /// every run frame until the end (or, for a run without one, until the rig falls silent).
     pub fn rig_frames(&mut self, run_id: u32) -> Vec<Vec<u8>> {
         self.session(Faults::default(), |link| {
-            // A clean line: a late answer is a busy machine (CI runs tests side by side), not
-            // a fault under test.
+            // A clean line: a late answer is a busy machine, not a fault under test.
             link.timeouts.reply = Duration::from_secs(3);
             link.hello().expect("hello");
-            // A rig reconnected first sends the rest of its live stream (what the cable's absence
-            // held back): let it pass, then ask.
-            while link.drain(Duration::from_millis(200)).expect("clean line") > 0 {}
-            link.command(HostMsg::Pull {
-                run_id,
-                from_block: 0,
-            })
-            .expect("the rig holds the run");
-            let mut frames = vec![];
-            let mut last = Instant::now();
-            while last.elapsed() < Duration::from_millis(800) {
-                let Some(f) = link.next(Duration::from_millis(50)).expect("clean line") else {
-                    continue;
-                };
-                last = Instant::now();
-                if f.msg().is_run_frame() {
-                    let end = matches!(f.msg(), DeviceMsg::RunEnded(_));
-                    frames.push(f.raw);
-                    if end {
-                        break;
-                    }
-                }
-            }
-            frames
+            rig_copy(link, run_id)
         })
         .0
     }
+}
+
+/// The rig's own copy of its run `run_id`, byte for byte, over `link` (a clean line, hello said):
+/// a `Pull` from block 0, every run frame until the end (or, for a run without one, until the rig
+/// falls silent). Panics when the line fails or the rig no longer holds the run.
+pub fn rig_copy(link: &mut Link, run_id: u32) -> Vec<Vec<u8>> {
+    // A clean line: a late answer is a busy machine (CI runs tests side by side), not a fault
+    // under test.
+    link.timeouts.reply = Duration::from_secs(3);
+    // A rig reconnected first sends the rest of its live stream (what the cable's absence held
+    // back): let it pass, then ask.
+    while link.drain(Duration::from_millis(200)).expect("clean line") > 0 {}
+    link.command(HostMsg::Pull {
+        run_id,
+        from_block: 0,
+    })
+    .expect("the rig holds the run");
+    let mut frames = vec![];
+    let mut last = Instant::now();
+    while last.elapsed() < Duration::from_millis(800) {
+        let Some(f) = link.next(Duration::from_millis(50)).expect("clean line") else {
+            continue;
+        };
+        last = Instant::now();
+        if f.msg().is_run_frame() {
+            let end = matches!(f.msg(), DeviceMsg::RunEnded(_));
+            frames.push(f.raw);
+            if end {
+                break;
+            }
+        }
+    }
+    frames
 }

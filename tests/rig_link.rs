@@ -206,7 +206,7 @@ fn child_tribo_run() {
         ramp: 10.0,
         quiet: true,
     };
-    // Exit as `tribo` would: the status of the exit contract (130 when interrupted).
+    // Exit as `tribo` would: the status of the exit contract (130 when interrupted by Ctrl-C).
     if let Err(e) = tribo::cmd::run::run(args) {
         std::process::exit(tribo::exit::status_of(&e).code() as i32);
     }

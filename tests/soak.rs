@@ -2,13 +2,19 @@
 //! for each (seeded, so a failure replays): a clean line; a lossy line (0.5–5 % of the frames each
 //! way dropped or corrupted); the cable pulled mid-run (then, the run finished with nobody
 //! listening, a pull over a clean or a lossy line); the rig power-cycled before the run; the load
-//! knob turned between runs. After every run, against the rig's own copy (pulled over a clean
-//! line):
+//! knob turned between runs; two hosts racing for the rig (two PCs, each with its own store, both
+//! running `tribo run` on the rig served by [`tribo_rig::TcpRig`], as `tribo rig --virtual` serves
+//! it, at the same moment: one is served, the other waits for it to go and is turned away after the
+//! hand-over time, saying why and having recorded nothing, or is served next and records a run of
+//! its own; half of the races the first host keeps the rig longer than the hand-over, so both
+//! outcomes come up). After every run, against the rig's own copy (pulled over a clean line):
 //!
 //! - the stored run is bit-identical to the rig's (each frame once, in the rig's order), or it says
 //!   exactly which blocks are missing, and holds nothing the rig did not send for that run;
 //! - no stored run holds a frame of another run (every run frame carries its run's number, checked
-//!   against the header's; and the run numbers of one rig never repeat).
+//!   against the header's; and the run numbers of one rig never repeat);
+//! - of two racing hosts, either one recorded and the other was refused (its error says the rig
+//!   serves one host at a time, its store holds no run) or both recorded, under two run numbers.
 //!
 //! `cargo test -p tribo-tests --test soak` runs a short soak (`SOAK_RUNS`, default 30);
 //! `cargo xtask soak` runs 1000 and prints the figures.
@@ -16,25 +22,39 @@
 mod faulty_line;
 mod host_common;
 
-use faulty_line::{Bench, Faults};
+use faulty_line::{rig_copy, Bench, Faults};
 use host_common::plan;
 use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
 use std::sync::atomic::AtomicBool;
+use std::sync::Barrier;
+use std::time::{Duration, Instant};
 use tribo::link::session::{pull_run, record_run, Outcome};
+use tribo::link::{Address, Link, LinkErrorKind};
 use tribo_physics::stats::Rng;
-use tribo_rig::{VirtualRig, VirtualRigConfig};
+use tribo_rig::{HostEvent, VirtualRig, VirtualRigConfig, HANDOVER};
 use tribo_wire::frame::decode_one;
 use tribo_wire::DeviceMsg;
 
 /// What the soak saw.
 #[derive(Debug, Default)]
 struct Figures {
+    /// Runs drawn (a race is one, whatever it stored).
     runs: usize,
     faults: BTreeMap<&'static str, usize>,
+    /// Stored runs checked against the rig's copy.
+    stored: usize,
     intact: usize,
     honestly_incomplete: usize,
     mixed: usize,
     frames_checked: usize,
+    races: usize,
+    /// Races where the first host kept the rig past the hand-over time.
+    races_held: usize,
+    /// Races where one host recorded and the other was turned away.
+    races_one_refused: usize,
+    /// Races where both hosts recorded, one after the other.
+    races_both_recorded: usize,
 }
 
 /// The run number and block of a run frame.
@@ -143,6 +163,163 @@ fn check(o: &Outcome, truth: &[Vec<u8>], run_id: u32, f: &mut Figures) -> Result
     Ok(false)
 }
 
+/// A stored run and the rig's copy of it.
+type Stored = (Outcome, Vec<Vec<u8>>);
+
+/// What a racing host ended with.
+enum Racer {
+    /// It recorded a run; with the rig's copy of it, pulled over the same link right after (the
+    /// rig keeps its last run only, and the other host may take the next).
+    Recorded(Box<Outcome>, Vec<Vec<u8>>),
+    /// The rig closed the connection before answering its hello: the error, and how long after
+    /// the host knocked.
+    Refused(String, Duration),
+    /// Anything else.
+    Failed(String),
+}
+
+/// One racing host: `tribo run`'s steps (open the TCP address, hello, record the run into its own
+/// store), then the rig's copy of the run; then it keeps the rig for `linger`.
+fn racing_host(addr: &str, store: &Path, load: f32, linger: Duration) -> Racer {
+    let t0 = Instant::now();
+    let mut link = match Link::open(&Address::Tcp(addr.into())) {
+        Ok(l) => l,
+        Err(e) => return Racer::Failed(format!("cannot connect: {e}")),
+    };
+    let info = match link.hello() {
+        Ok(i) => i,
+        Err(e) if e.kind == LinkErrorKind::Closed => {
+            return Racer::Refused(e.to_string(), t0.elapsed())
+        }
+        Err(e) => return Racer::Failed(format!("hello: {e}")),
+    };
+    let mut p = plan();
+    p.config.rig.load_n = load;
+    let o = match record_run(
+        &mut link,
+        &info,
+        store,
+        &p,
+        &AtomicBool::new(false),
+        &mut |_| {},
+    ) {
+        Ok(o) => o,
+        Err(e) => return Racer::Failed(format!("the run failed: {e:#}")),
+    };
+    let Some(id) = o.run.header().map(|h| h.run_id) else {
+        return Racer::Failed("no header stored".into());
+    };
+    let truth = rig_copy(&mut link, id);
+    std::thread::sleep(linger);
+    Racer::Recorded(Box::new(o), truth)
+}
+
+/// Whether `store` holds a run folder.
+fn holds_a_run(store: &Path) -> bool {
+    std::fs::read_dir(store).is_ok_and(|d| d.flatten().any(|e| e.path().is_dir()))
+}
+
+/// Two hosts race for the rig, lent to a [`tribo_rig::TcpRig`]. Checks the race's outcome and
+/// returns the runs stored (with the rig's copy of each), oldest first.
+fn race(
+    bench: &mut Bench,
+    load: f32,
+    linger: Duration,
+    f: &mut Figures,
+) -> Result<Vec<Stored>, String> {
+    let stores = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
+    let start = Barrier::new(2);
+    let (racers, events) = bench.lend(|addr| {
+        let addr = addr.to_string();
+        std::thread::scope(|s| {
+            let hosts: Vec<_> = stores
+                .iter()
+                .map(|store| {
+                    let (addr, start) = (&addr, &start);
+                    s.spawn(move || {
+                        start.wait();
+                        racing_host(addr, store.path(), load, linger)
+                    })
+                })
+                .collect();
+            hosts
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or_else(|_| Racer::Failed("the host panicked".into()))
+                })
+                .collect::<Vec<_>>()
+        })
+    });
+    f.races += 1;
+    let connected = events
+        .iter()
+        .filter(|e| matches!(e, HostEvent::Connected(_)))
+        .count();
+    let refused = events
+        .iter()
+        .filter(|e| matches!(e, HostEvent::Refused(_)))
+        .count();
+    let mut runs = vec![];
+    let mut refusals = vec![];
+    for (racer, store) in racers.into_iter().zip(&stores) {
+        match racer {
+            Racer::Recorded(o, truth) => runs.push((*o, truth)),
+            Racer::Refused(why, after) => {
+                if !why.contains("one host at a time") {
+                    return Err(format!("a refused host is not told why: {why}"));
+                }
+                // It waited its turn: a host the rig serves for less than the hand-over time
+                // leaves the rig to the next.
+                if after < HANDOVER {
+                    return Err(format!(
+                        "a host was turned away after {after:?}, before the hand-over time \
+                         ({HANDOVER:?}): {why}"
+                    ));
+                }
+                if holds_a_run(store.path()) {
+                    return Err(format!("a refused host stored a run: {why}"));
+                }
+                refusals.push(why);
+            }
+            Racer::Failed(why) => return Err(format!("a racing host failed: {why}")),
+        }
+    }
+    match (runs.len(), refusals.len()) {
+        (1, 1) => {
+            if (connected, refused) != (1, 1) {
+                return Err(format!(
+                    "one host refused, but the rig's console heard {connected} connected and                      {refused} refused: {events:?}"
+                ));
+            }
+            f.races_one_refused += 1;
+        }
+        (2, 0) => {
+            if (connected, refused) != (2, 0) {
+                return Err(format!(
+                    "both hosts recorded, but the rig's console heard {connected} connected and                      {refused} refused: {events:?}"
+                ));
+            }
+            f.races_both_recorded += 1;
+        }
+        (r, n) => return Err(format!("{r} hosts recorded and {n} were refused")),
+    }
+    let id = |o: &Outcome| o.run.header().map(|h| h.run_id).unwrap_or(0);
+    runs.sort_by_key(|(o, _)| id(o));
+    if runs.len() == 2 && id(&runs[0].0) == id(&runs[1].0) {
+        return Err(format!("both hosts stored run {}", id(&runs[0].0)));
+    }
+    // The rig's copy taken by the last host is the rig's copy taken now, on the bench.
+    let (last, truth) = runs.last().expect("a run");
+    if bench.rig_frames(id(last)) != *truth {
+        return Err(format!(
+            "run {}: the rig's copy pulled by its host differs from the copy pulled after",
+            id(last)
+        ));
+    }
+    Ok(runs)
+}
+
 fn soak(runs: usize, seed: u64) -> Figures {
     let mut rng = Rng::new(seed);
     let mut bench = Bench::new(
@@ -158,7 +335,7 @@ fn soak(runs: usize, seed: u64) -> Figures {
     let mut ids = BTreeSet::new();
     let mut failures = Vec::new();
     for i in 0..runs {
-        let pick = rng.next_u64() % 6;
+        let pick = rng.next_u64() % 7;
         let load = [0.1f32, 0.2, 0.3, 0.5][(rng.next_u64() % 4) as usize];
         let line_seed = rng.next_u64();
         let kind = match pick {
@@ -167,7 +344,8 @@ fn soak(runs: usize, seed: u64) -> Figures {
             2 => "cable pulled, pulled back clean",
             3 => "cable pulled, pulled back lossy",
             4 => "rig power-cycled before the run",
-            _ => "load knob turned",
+            5 => "load knob turned",
+            _ => "two hosts racing for the rig",
         };
         *f.faults.entry(kind).or_default() += 1;
         if pick == 4 {
@@ -182,6 +360,37 @@ fn soak(runs: usize, seed: u64) -> Figures {
             },
             _ => Faults::default(),
         };
+        if pick == 6 {
+            // Half the races, the first host keeps the rig longer than its hand-over time.
+            let linger = Duration::from_millis(if line_seed.is_multiple_of(2) {
+                0
+            } else {
+                1_500
+            });
+            f.runs += 1;
+            f.races_held += usize::from(!linger.is_zero());
+            let stored = match race(&mut bench, load, linger, &mut f) {
+                Ok(s) => s,
+                Err(e) => {
+                    failures.push(format!("run {i} ({kind}): {e}"));
+                    continue;
+                }
+            };
+            for (o, truth) in stored {
+                let id = o.run.header().expect("checked by the host").run_id;
+                if !ids.insert(id) {
+                    f.mixed += 1;
+                    failures.push(format!("run {i} ({kind}): run number {id} used twice"));
+                }
+                f.stored += 1;
+                match check(&o, &truth, id, &mut f) {
+                    Ok(true) => f.intact += 1,
+                    Ok(false) => f.honestly_incomplete += 1,
+                    Err(e) => failures.push(format!("run {i} ({kind}, run {id}): {e}")),
+                }
+            }
+            continue;
+        }
         let mut o = record(&mut bench, faults, store.path(), load);
         if !o.is_complete() && (pick == 2 || pick == 3) {
             bench.run_on(30.0);
@@ -203,6 +412,7 @@ fn soak(runs: usize, seed: u64) -> Figures {
         }
         let truth = bench.rig_frames(id);
         f.runs += 1;
+        f.stored += 1;
         match check(&o, &truth, id, &mut f) {
             Ok(true) => f.intact += 1,
             Ok(false) => f.honestly_incomplete += 1,
@@ -226,16 +436,25 @@ fn soak_under_faults() {
     let t = std::time::Instant::now();
     let f = soak(runs, seed);
     eprintln!(
-        "soak (seed {seed}): {} runs in {:.0} s; faults {:?}; {} intact (bit-identical to the rig's \
-         copy), {} honestly incomplete (exactly the missing blocks said), {} mixed; {} frames checked",
+        "soak (seed {seed}): {} runs in {:.0} s; faults {:?}; {} runs stored: {} intact \
+         (bit-identical to the rig's copy), {} honestly incomplete (exactly the missing blocks \
+         said), {} mixed; {} frames checked; {} races ({} with the first host keeping the rig past \
+         the hand-over): {} with one host refused, {} with both recorded",
         f.runs,
         t.elapsed().as_secs_f64(),
         f.faults,
+        f.stored,
         f.intact,
         f.honestly_incomplete,
         f.mixed,
-        f.frames_checked
+        f.frames_checked,
+        f.races,
+        f.races_held,
+        f.races_one_refused,
+        f.races_both_recorded
     );
     assert_eq!(f.mixed, 0);
     assert_eq!(f.runs, runs);
+    assert_eq!(f.intact + f.honestly_incomplete, f.stored);
+    assert_eq!(f.races_one_refused + f.races_both_recorded, f.races);
 }

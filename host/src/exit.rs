@@ -6,26 +6,34 @@
 //! | 1 | error: nothing usable was produced (the message says what to do next) |
 //! | 2 | usage: the command line was wrong (clap's own status, or a value the rig would refuse) |
 //! | 3 | finished, but the data is incomplete or not analysable: the output says exactly what is missing |
-//! | 130 | interrupted (Ctrl-C, SIGTERM, SIGHUP): stopped cleanly, the rig made safe, what was received kept |
+//! | 130, 143, 129 | interrupted by Ctrl-C (SIGINT), SIGTERM or SIGHUP (128 + the signal's number): stopped cleanly, the rig made safe, what was received kept |
 //!
 //! A library function that finished with incomplete data returns [`Incomplete`] as its error (after
 //! printing or storing everything it has); `main` maps it to status 3. Any other error is status 1.
 
+use crate::signals::Signal;
 use std::fmt;
 
 /// The statuses `tribo` exits with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Status {
-    Ok = 0,
-    Error = 1,
-    Usage = 2,
-    Incomplete = 3,
-    Interrupted = 130,
+    Ok,
+    Error,
+    Usage,
+    Incomplete,
+    /// Stopped by this signal: 128 + its number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP).
+    Interrupted(Signal),
 }
 
 impl Status {
     pub const fn code(self) -> u8 {
-        self as u8
+        match self {
+            Status::Ok => 0,
+            Status::Error => 1,
+            Status::Usage => 2,
+            Status::Incomplete => 3,
+            Status::Interrupted(s) => s.status(),
+        }
     }
 }
 
@@ -43,7 +51,8 @@ impl fmt::Display for Incomplete {
 impl std::error::Error for Incomplete {}
 
 /// The command was interrupted (Ctrl-C, SIGTERM, SIGHUP) and stopped cleanly: the message says
-/// what was done before (how many runs were taken, what the interrupted one kept).
+/// what was done before (how many runs were taken, what the interrupted one kept). Its status
+/// names the signal received ([`crate::signals::received`]; Ctrl-C's when none was).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Interrupted(pub String);
 
@@ -71,7 +80,7 @@ impl std::error::Error for Usage {}
 /// The status an error from a command maps to.
 pub fn status_of(e: &anyhow::Error) -> Status {
     if e.chain().any(|c| c.downcast_ref::<Interrupted>().is_some()) {
-        Status::Interrupted
+        Status::Interrupted(crate::signals::received().unwrap_or(Signal::Interrupt))
     } else if e.chain().any(|c| c.downcast_ref::<Incomplete>().is_some()) {
         Status::Incomplete
     } else if e.chain().any(|c| c.downcast_ref::<Usage>().is_some()) {

@@ -9,6 +9,7 @@ pub mod exit;
 pub mod link;
 pub mod load;
 pub mod out;
+pub mod signals;
 
 pub use load::{load_for_fit, load_record, Holes, LONGEST_CLEAN_STRETCH_FLAG};
 

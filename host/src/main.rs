@@ -8,7 +8,8 @@ use clap::{Parser, Subcommand};
 ///
 /// Exit status: 0 done; 1 error (the message says what to do next); 2 usage (a wrong command
 /// line); 3 finished but incomplete (a record that cannot be analysed, a fit that did not converge,
-/// a run with missing data): everything usable was printed or kept.
+/// a run with missing data): everything usable was printed or kept; 130 interrupted by Ctrl-C, 143
+/// by SIGTERM, 129 by SIGHUP (128 + the signal's number): stopped cleanly, the rig made safe.
 #[derive(Parser)]
 #[command(name = "tribo", version, about, long_about)]
 struct Cli {
@@ -81,7 +82,7 @@ fn main() -> std::process::ExitCode {
             let status = tribo::exit::status_of(&e);
             let label = match status {
                 tribo::exit::Status::Incomplete => "incomplete",
-                tribo::exit::Status::Interrupted => "interrupted",
+                tribo::exit::Status::Interrupted(_) => "interrupted",
                 _ => "error",
             };
             eprintln!("{label}: {e}");

@@ -86,7 +86,7 @@ pub fn json_on_error(json: bool, record: &std::path::Path, e: anyhow::Error) -> 
         let status = crate::exit::status_of(&e);
         let verdict = match status {
             crate::exit::Status::Incomplete => "not-analysable",
-            crate::exit::Status::Interrupted => "interrupted",
+            crate::exit::Status::Interrupted(_) => "interrupted",
             _ => "error",
         };
         let message = e

@@ -151,7 +151,11 @@ fn sigterm_while_heating_stops_cleanly_and_makes_the_rig_safe() {
     );
     let mut err = String::new();
     std::io::Read::read_to_string(&mut host.stderr.take().unwrap(), &mut err).unwrap();
-    assert_eq!(status.code(), Some(130), "interrupted: status 130\n{err}");
+    assert_eq!(
+        status.code(),
+        Some(143),
+        "interrupted by SIGTERM: status 143 (128 + 15)\n{err}"
+    );
     assert!(err.contains("interrupted while heating"), "{err}");
     rig.drain(Duration::from_millis(200));
     assert!(!rig.console().contains("FAULT"), "{}", rig.console());

@@ -16,7 +16,7 @@ pub mod sim;
 
 pub use config::{AcquisitionFaults, EcrModel, Noise, ThermalModel, VirtualRigConfig};
 pub use error::RigError;
-pub use serve::{in_process, serve, HostEvent, ServeOptions, TcpRig};
+pub use serve::{in_process, serve, HostEvent, ServeOptions, TcpRig, HANDOVER};
 pub use sim::{ChannelFault, ConverterFault, HeaterStage, SimHardware};
 
 use std::io::{self, Write};

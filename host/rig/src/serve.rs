@@ -295,7 +295,7 @@ pub enum HostEvent {
 }
 
 /// How long a new host waits for the one being served to go before it is turned away.
-const HANDOVER: Duration = Duration::from_secs(1);
+pub const HANDOVER: Duration = Duration::from_secs(1);
 /// A host that takes no bytes for this long is disconnected (the rig does not wait for it).
 const WRITE_TIMEOUT: Duration = Duration::from_secs(2);
 /// Read timeout of a connection, so that its reader notices the rig letting go of it.
@@ -332,16 +332,17 @@ impl Conn {
     }
 }
 
-/// A virtual rig served on a TCP listener, on a thread of its own, until dropped.
+/// A virtual rig served on a TCP listener, on a thread of its own, until stopped ([`TcpRig::stop`],
+/// which hands the rig back) or dropped (the rig goes with it).
 pub struct TcpRig {
     addr: SocketAddr,
     stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    thread: Option<JoinHandle<VirtualRig>>,
 }
 
 impl TcpRig {
     /// Serves `rig` to the hosts that connect to `listener`, one at a time, until the returned
-    /// value is dropped. The rig runs between connections; `events` hears of each host (on the
+    /// value is stopped or dropped. The rig runs between connections; `events` hears of each host (on the
     /// rig's thread: keep it short).
     pub fn spawn(
         rig: VirtualRig,
@@ -377,6 +378,22 @@ impl TcpRig {
             let _ = t.join();
         }
     }
+
+    /// Stops serving and hands the rig back, as it is now: the host being served (if any) is
+    /// disconnected and one waiting is turned away, the rig's cable is out, its run and its clock
+    /// are as they were (a test can then take it on, or serve it again). A panic of the rig's
+    /// thread is passed on.
+    pub fn stop(mut self) -> VirtualRig {
+        self.stop.store(true, Ordering::Relaxed);
+        let t = self
+            .thread
+            .take()
+            .expect("the rig's thread is joined only once");
+        match t.join() {
+            Ok(rig) => rig,
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    }
 }
 
 impl Drop for TcpRig {
@@ -388,13 +405,34 @@ impl Drop for TcpRig {
     }
 }
 
+/// Serves the host that waits (if any) on a rig that serves none.
+fn admit(
+    bench: &mut Bench<'_>,
+    waiting: Option<(TcpStream, SocketAddr, Instant)>,
+    events: &mut impl FnMut(HostEvent),
+) -> Option<Conn> {
+    let (s, peer, _) = waiting?;
+    match Conn::open(s, peer) {
+        Ok(c) => {
+            bench.rig.set_connected(true);
+            bench.reset_link();
+            events(HostEvent::Connected(peer));
+            Some(c)
+        }
+        Err(e) => {
+            events(HostEvent::Disconnected(peer, e.to_string()));
+            None
+        }
+    }
+}
+
 fn serve_tcp(
     mut rig: VirtualRig,
     listener: TcpListener,
     opts: ServeOptions,
     stop: Arc<AtomicBool>,
     mut events: impl FnMut(HostEvent),
-) {
+) -> VirtualRig {
     let mut bench = Bench::new(&mut rig, opts);
     // No host yet: the cable is out.
     bench.rig.set_connected(false);
@@ -402,8 +440,13 @@ fn serve_tcp(
     // A host waiting for the one being served to go.
     let mut pending: Option<(TcpStream, SocketAddr, Instant)> = None;
     while !stop.load(Ordering::Relaxed) {
-        // Knocks at the door.
+        // Knocks at the door. A free rig takes the host that knocked first before the next knock
+        // is heard, so that two hosts knocking at once are one served and one waiting its turn
+        // (not one turned away at once).
         loop {
+            if conn.is_none() {
+                conn = admit(&mut bench, pending.take(), &mut events);
+            }
             match listener.accept() {
                 Ok((s, peer)) => {
                     if pending.is_none() {
@@ -420,17 +463,7 @@ fn serve_tcp(
             }
         }
         if conn.is_none() {
-            if let Some((s, peer, _)) = pending.take() {
-                match Conn::open(s, peer) {
-                    Ok(c) => {
-                        bench.rig.set_connected(true);
-                        bench.reset_link();
-                        events(HostEvent::Connected(peer));
-                        conn = Some(c);
-                    }
-                    Err(e) => events(HostEvent::Disconnected(peer, e.to_string())),
-                }
-            }
+            conn = admit(&mut bench, pending.take(), &mut events);
         } else if pending.as_ref().is_some_and(|p| p.2.elapsed() > HANDOVER) {
             let (s, peer, _) = pending.take().expect("checked");
             let _ = s.shutdown(Shutdown::Both);
@@ -470,6 +503,11 @@ fn serve_tcp(
     if let Some(c) = conn.take() {
         c.close();
     }
+    if let Some((s, _, _)) = pending.take() {
+        let _ = s.shutdown(Shutdown::Both);
+    }
+    bench.rig.set_connected(false);
+    rig
 }
 
 /// The host's end of an in-process rig: bytes from the rig. Reads block until the rig sends or

@@ -363,6 +363,61 @@ fn a_tcp_rig_serves_one_host_at_a_time_and_turns_a_second_away() {
 }
 
 #[test]
+fn two_hosts_knocking_at_once_are_served_in_turn_and_a_stopped_rig_is_handed_back() {
+    let rig = VirtualRig::new(VirtualRigConfig::default()).unwrap();
+    let (etx, erx) = mpsc::channel();
+    let tcp = TcpRig::spawn(
+        rig,
+        TcpListener::bind("127.0.0.1:0").unwrap(),
+        ServeOptions::default(),
+        move |e| {
+            let _ = etx.send(e);
+        },
+    )
+    .unwrap();
+    let addr = tcp.addr();
+    // Both knock before the rig looks (it looks every few milliseconds), each saying hello.
+    let mut hosts = vec![connect(&tcp), connect(&tcp)];
+    for h in &mut hosts {
+        h.write_all(&hello()).unwrap();
+    }
+    let said_hello =
+        |m: &[Frame<DeviceMsg>]| m.iter().any(|f| matches!(f.msg, DeviceMsg::Hello(_)));
+    let Ok(HostEvent::Connected(first)) = erx.recv_timeout(Duration::from_secs(10)) else {
+        panic!("nobody served")
+    };
+    let i = hosts
+        .iter()
+        .position(|h| h.local_addr().unwrap() == first)
+        .expect("one of the two");
+    let mut served = hosts.remove(i);
+    let mut waiting = hosts.pop().unwrap();
+    assert!(said_hello(
+        &read_frames(&mut served, said_hello)
+            .into_iter()
+            .map(|f| f.1)
+            .collect::<Vec<_>>()
+    ));
+    // The first goes well within the hand-over time: the second, waiting, is served next.
+    drop(served);
+    let got: Vec<Frame<DeviceMsg>> = read_frames(&mut waiting, said_hello)
+        .into_iter()
+        .map(|f| f.1)
+        .collect();
+    assert!(said_hello(&got), "the second host was turned away: {got:?}");
+    drop(waiting);
+    let rig = tcp.stop();
+    // Handed back, having run on; nobody serves it any more.
+    assert!(rig.now_us() > 0);
+    assert!(TcpStream::connect(addr).is_err(), "still listening");
+    let events: Vec<HostEvent> = erx.try_iter().collect();
+    assert!(
+        !events.iter().any(|e| matches!(e, HostEvent::Refused(_))),
+        "{events:?}"
+    );
+}
+
+#[test]
 fn an_in_process_rig_answers_and_stops_with_its_host() {
     let rig = VirtualRig::new(VirtualRigConfig::default()).unwrap();
     let (mut from_rig, mut to_rig, thread) = in_process(rig, ServeOptions::default()).unwrap();

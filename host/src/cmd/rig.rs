@@ -330,9 +330,11 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     if !args.virtual_rig {
         bail!("`tribo rig` starts the virtual rig: add --virtual (a real rig needs no command: plug it in and use --port)");
     }
-    ctrlc::set_handler(|| {
+    // Stopped by a signal, it exits with that signal's status (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP),
+    // as every command does.
+    crate::signals::set_handler(|signal| {
         eprintln!("\nvirtual rig stopped");
-        std::process::exit(0);
+        std::process::exit(signal.status().into());
     })
     .context("cannot install the Ctrl-C handler")?;
     if args.pty {

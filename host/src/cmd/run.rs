@@ -122,20 +122,21 @@ impl LinkArgs {
 }
 
 /// Set on Ctrl-C, SIGTERM or SIGHUP: the command stops cleanly and the rig is made safe. A second
-/// one exits at once, after sending `Safe` to every rig this process holds.
+/// one exits at once, after sending `Safe` to every rig this process holds. Either way the exit
+/// status names the signal (130, 143, 129: [`crate::exit`]).
 pub fn abort_flag() -> Arc<AtomicBool> {
     static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
     FLAG.get_or_init(|| {
         let f = Arc::new(AtomicBool::new(false));
         let g = f.clone();
-        let _ = ctrlc::set_handler(move || {
+        let _ = crate::signals::set_handler(move |signal| {
             if g.swap(true, Ordering::SeqCst) {
                 crate::link::hold::make_all_safe();
                 eprintln!(
                     "\ninterrupted twice: exiting now; heater and magnet were switched off (the run folder stays \
                      readable)"
                 );
-                std::process::exit(130);
+                std::process::exit(signal.status().into());
             }
             eprintln!("\ninterrupted: aborting the run cleanly (Ctrl-C again to quit at once)…");
         });
@@ -627,7 +628,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             String::new()
         };
         if o.aborted {
-            // Interrupted: status 130, whatever the interrupted run kept.
+            // Interrupted: status 130 (or 143, 129: the signal's), whatever the interrupted run kept.
             return Err(crate::exit::Interrupted(format!(
                 "interrupted during run {k}: what it received is kept as an aborted run{taken}"
             ))

@@ -106,6 +106,16 @@ impl RigProcess {
         let _ = self.child.wait();
     }
 
+    /// Sends the rig's process `signal` (`kill -SIGNAL`: `TERM`, `INT`…) and waits for it to end.
+    pub fn stop_with(&mut self, signal: &str) -> std::process::ExitStatus {
+        let sent = Command::new("kill")
+            .args([&format!("-{signal}"), &self.child.id().to_string()])
+            .status()
+            .expect("kill runs");
+        assert!(sent.success(), "kill -{signal}");
+        self.child.wait().expect("the rig's process ends")
+    }
+
     pub fn console(&self) -> String {
         self.seen
             .iter()

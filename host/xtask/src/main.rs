@@ -13,9 +13,10 @@
 //! * `cargo xtask windows [--no-smoke]`: cross-builds `tribo.exe` for `x86_64-pc-windows-gnu` and
 //!   runs its smoke test under Wine (see [`windows`]).
 //! * `cargo xtask soak [RUNS] [SEED]`: the soak (`tests/soak.rs`): RUNS runs (default 1000) against
-//!   one virtual rig through a faulty line, a fault drawn at random for each, every stored run
-//!   checked against the rig's own copy; prints the figures (runs, faults by kind, intact, honestly
-//!   incomplete, mixed). CI runs a short one with the other tests.
+//!   one virtual rig through a faulty line (or two hosts racing for it over TCP), a fault drawn at
+//!   random for each, every stored run checked against the rig's own copy; prints the figures
+//!   (runs, faults by kind, runs stored, intact, honestly incomplete, mixed, races and how they
+//!   ended). CI runs a short one with the other tests.
 //! * `cargo xtask fuzz [RUNS]`: each libFuzzer target of the wire crate (`firmware/wire/fuzz`:
 //!   the frame decoder, the codec) for RUNS executions (default 10 000 000), with cargo-fuzz
 //!   (installed from crates.io when missing) on the machine's toolchain (`RUSTC_BOOTSTRAP=1`);
