@@ -351,6 +351,13 @@ fn soak(runs: usize, seed: u64) -> Figures {
         if pick == 4 {
             bench.rig().power_cycle();
         }
+        if pick == 5 {
+            // Between runs, with the rig powered: its runs, their numbers and its clock go on.
+            bench
+                .rig()
+                .turn_load_knob(load as f64)
+                .expect("a load the rig takes");
+        }
         let lossy = || Faults::lossy(line_seed, 500 + (line_seed % 4_500) as u32);
         let faults = match pick {
             1 => lossy(),
