@@ -40,6 +40,9 @@ pub struct Faults {
     pub deaf_after_host_frames: Option<u64>,
     /// Rig-to-host bytes after which the line is cut (the cable pulled).
     pub cut_after_bytes: Option<u64>,
+    /// Rig-to-host bytes after which the rig loses its power (then comes back: a power cycle at
+    /// that instant of its clock); the line goes with it. Mid-run, the run is cut short.
+    pub power_cut_after_bytes: Option<u64>,
 }
 
 impl Faults {
@@ -125,6 +128,31 @@ impl Shared {
     fn cut(&self) {
         self.cut.store(true, Ordering::Relaxed);
         let _ = self.stream.shutdown(Shutdown::Both);
+    }
+}
+
+/// The rig's output, which fails (the power gone) once so many bytes went out: the rig's serving
+/// loop stops at that instant of the rig's clock.
+struct PowerCut {
+    inner: TcpStream,
+    left: Option<u64>,
+    cut: bool,
+}
+
+impl Write for PowerCut {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        if let Some(left) = self.left.as_mut() {
+            if (buf.len() as u64) >= *left {
+                self.cut = true;
+                let _ = self.inner.shutdown(Shutdown::Both);
+                return Err(io::Error::new(io::ErrorKind::BrokenPipe, "the power went"));
+            }
+            *left -= buf.len() as u64;
+        }
+        self.inner.write(buf)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.inner.flush()
     }
 }
 
@@ -289,8 +317,18 @@ impl Bench {
         let (rig_end, _) = l.accept().unwrap();
         host.set_nodelay(true).unwrap();
         let opts = self.opts;
+        let power_cut = faults.power_cut_after_bytes;
         let serving = std::thread::spawn(move || {
-            let _ = serve(&mut rig, rig_end.try_clone().unwrap(), rig_end, &opts);
+            let reader = rig_end.try_clone().unwrap();
+            let mut out = PowerCut {
+                inner: rig_end,
+                left: power_cut,
+                cut: false,
+            };
+            let _ = serve(&mut rig, reader, &mut out, &opts);
+            if out.cut {
+                rig.power_cycle();
+            }
             rig
         });
         let reader = host.try_clone().unwrap();

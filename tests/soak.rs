@@ -2,7 +2,9 @@
 //! for each (seeded, so a failure replays): a clean line; a lossy line (0.5–5 % of the frames each
 //! way dropped or corrupted); the cable pulled mid-run (then, the run finished with nobody
 //! listening, a pull over a clean or a lossy line); the rig power-cycled before the run; the load
-//! knob turned between runs; two hosts racing for the rig (two PCs, each with its own store, both
+//! knob turned between runs; the rig's power cut mid-stream (then what it kept in flash pulled
+//! over a clean line: a run cut short is incomplete or ends "aborted", and says so); two hosts
+//! racing for the rig (two PCs, each with its own store, both
 //! running `tribo run` on the rig served by [`tribo_rig::TcpRig`], as `tribo rig --virtual` serves
 //! it, at the same moment: one is served, the other waits for it to go and is turned away after the
 //! hand-over time, saying why and having recorded nothing, or is served next and records a run of
@@ -55,6 +57,14 @@ struct Figures {
     races_one_refused: usize,
     /// Races where both hosts recorded, one after the other.
     races_both_recorded: usize,
+    /// Runs the power cut short (the rig still running when it went).
+    power_cuts_mid_run: usize,
+    /// Power cuts before the run's header reached the host (the rig then offers its last run).
+    power_cuts_before_the_run: usize,
+    /// Runs cut short that the rig lost whole (the power went before the run reached its flash).
+    power_cuts_run_lost: usize,
+    /// Of those, stored whole as far as the flash kept them, their end saying "aborted".
+    power_cuts_stored_aborted: usize,
 }
 
 /// The run number and block of a run frame.
@@ -91,13 +101,22 @@ fn record(bench: &mut Bench, faults: Faults, store: &std::path::Path, load: f32)
 }
 
 fn pull(bench: &mut Bench, faults: Faults, store: &std::path::Path) -> Outcome {
+    pull_into(bench, faults, store, None).expect("the pull finishes")
+}
+
+/// `tribo pull [RUN]`: the rig's last run, or the stored run `target` completed.
+fn pull_into(
+    bench: &mut Bench,
+    faults: Faults,
+    store: &std::path::Path,
+    target: Option<&Path>,
+) -> anyhow::Result<Outcome> {
     bench
         .session(faults, |link| {
             let info = link.hello()?;
-            pull_run(link, &info, store, None, false, &mut |_| {})
+            pull_run(link, &info, store, target, false, &mut |_| {})
         })
         .0
-        .expect("the pull finishes")
 }
 
 /// Checks a stored run against the rig's own copy; returns whether it is whole.
@@ -134,12 +153,21 @@ fn check(o: &Outcome, truth: &[Vec<u8>], run_id: u32, f: &mut Figures) -> Result
         }
         return Ok(true);
     }
-    // Incomplete: what it holds is the rig's, and what it says is missing is exactly the rest.
+    // Incomplete: what it holds is the rig's, all that the rig still holds (the last pull asked
+    // for it), and what it says is missing is exactly the rest.
     let rig: BTreeSet<&[u8]> = truth.iter().map(|v| &v[..]).collect();
     if let Some(x) = stored.iter().find(|s| !rig.contains(*s)) {
         return Err(format!(
             "holds a frame the rig did not send for this run ({} bytes)",
             x.len()
+        ));
+    }
+    let held: BTreeSet<&[u8]> = stored.iter().copied().collect();
+    let left = truth.iter().filter(|t| !held.contains(&t[..])).count();
+    if left > 0 {
+        return Err(format!(
+            "incomplete ({}) but {left} frames the rig still holds were not fetched",
+            c.summary()
         ));
     }
     let held: BTreeSet<u32> = stored
@@ -335,7 +363,7 @@ fn soak(runs: usize, seed: u64) -> Figures {
     let mut ids = BTreeSet::new();
     let mut failures = Vec::new();
     for i in 0..runs {
-        let pick = rng.next_u64() % 7;
+        let pick = rng.next_u64() % 8;
         let load = [0.1f32, 0.2, 0.3, 0.5][(rng.next_u64() % 4) as usize];
         let line_seed = rng.next_u64();
         let kind = match pick {
@@ -345,7 +373,8 @@ fn soak(runs: usize, seed: u64) -> Figures {
             3 => "cable pulled, pulled back lossy",
             4 => "rig power-cycled before the run",
             5 => "load knob turned",
-            _ => "two hosts racing for the rig",
+            6 => "two hosts racing for the rig",
+            _ => "the rig's power cut mid-run, then pulled",
         };
         *f.faults.entry(kind).or_default() += 1;
         if pick == 4 {
@@ -363,6 +392,10 @@ fn soak(runs: usize, seed: u64) -> Figures {
             1 => lossy(),
             2 | 3 => Faults {
                 cut_after_bytes: Some(2_000 + line_seed % 20_000),
+                ..Faults::default()
+            },
+            7 => Faults {
+                power_cut_after_bytes: Some(2_000 + line_seed % 20_000),
                 ..Faults::default()
             },
             _ => Faults::default(),
@@ -399,6 +432,82 @@ fn soak(runs: usize, seed: u64) -> Figures {
             continue;
         }
         let mut o = record(&mut bench, faults, store.path(), load);
+        if pick == 7 {
+            // The power went mid-stream (the rig powered again at once): what it kept in flash is
+            // all there is; the pull must fetch all of it and say what is missing.
+            let ended = o.run.end().is_some();
+            let began = o.run.header().map(|h| h.run_id);
+            if let Some(id) = began {
+                // `tribo pull RUN`: the run this host was recording.
+                let dir = o.run.dir().to_owned();
+                match pull_into(&mut bench, Faults::default(), store.path(), Some(&dir)) {
+                    Ok(p) => o = p,
+                    Err(e) => {
+                        // The power went before the run reached the rig's flash: the rig lost it,
+                        // the pull says so, and the stored run (whatever it holds, all of run
+                        // `id`) stays incomplete.
+                        let e = format!("{e:#}");
+                        f.runs += 1;
+                        f.stored += 1;
+                        f.power_cuts_mid_run += 1;
+                        f.power_cuts_run_lost += 1;
+                        if !ids.insert(id) {
+                            failures.push(format!("run {i} ({kind}): run number {id} used twice"));
+                        }
+                        let run = tribo_store::Run::open(&dir).expect("the stored run opens");
+                        let frames = run.frames();
+                        f.frames_checked += frames.len();
+                        if !e.contains(&format!("lost run {id}")) {
+                            failures.push(format!("run {i} ({kind}): the pull failed: {e}"));
+                        } else if run.completeness().is_complete() {
+                            failures.push(format!(
+                                "run {i} ({kind}): a run the rig lost is called complete"
+                            ));
+                        } else if frames
+                            .iter()
+                            .any(|r| run_frame(r).is_none_or(|x| x.0 != id))
+                        {
+                            f.mixed += 1;
+                            failures.push(format!(
+                                "run {i} ({kind}): a frame of another run in run {id}"
+                            ));
+                        } else {
+                            f.honestly_incomplete += 1;
+                        }
+                        continue;
+                    }
+                }
+            } else {
+                o = pull(&mut bench, Faults::default(), store.path());
+            }
+            let offered = o.run.header().map(|h| h.run_id);
+            if began.is_none() && offered.is_some_and(|id| ids.contains(&id)) {
+                // The power went before this run's header reached the host: the rig offers its
+                // last run, one already held, and the pull must say so and store nothing new.
+                f.runs += 1;
+                f.power_cuts_before_the_run += 1;
+                if o.pulled_blocks != 0 || !o.is_complete() {
+                    failures.push(format!(
+                        "run {i} ({kind}): the rig's previous run, already held, pulled again \
+                         ({} blocks)",
+                        o.pulled_blocks
+                    ));
+                }
+                continue;
+            }
+            if !ended {
+                f.power_cuts_mid_run += 1;
+                // A run the power cut short never says it ended as a run ends (stopped, or
+                // its longest time): it is incomplete, or its end says it was aborted.
+                match o.run.end().map(|e| e.reason) {
+                    None => {}
+                    Some(tribo_wire::EndReason::Aborted) => f.power_cuts_stored_aborted += 1,
+                    Some(r) => failures.push(format!(
+                        "run {i} ({kind}): cut short by the power, stored as ended {r:?}"
+                    )),
+                }
+            }
+        }
         if !o.is_complete() && (pick == 2 || pick == 3) {
             bench.run_on(30.0);
             let line = if pick == 3 {
@@ -446,7 +555,10 @@ fn soak_under_faults() {
         "soak (seed {seed}): {} runs in {:.0} s; faults {:?}; {} runs stored: {} intact \
          (bit-identical to the rig's copy), {} honestly incomplete (exactly the missing blocks \
          said), {} mixed; {} frames checked; {} races ({} with the first host keeping the rig past \
-         the hand-over): {} with one host refused, {} with both recorded",
+         the hand-over): {} with one host refused, {} with both recorded; {} runs cut short by \
+         the power ({} stored to their recovered end, \"aborted\", {} lost by the rig and kept \
+         incomplete as the host had them), {} cut before the run's header reached the host (the \
+         rig's previous run offered, already held)",
         f.runs,
         t.elapsed().as_secs_f64(),
         f.faults,
@@ -458,7 +570,11 @@ fn soak_under_faults() {
         f.races,
         f.races_held,
         f.races_one_refused,
-        f.races_both_recorded
+        f.races_both_recorded,
+        f.power_cuts_mid_run,
+        f.power_cuts_stored_aborted,
+        f.power_cuts_run_lost,
+        f.power_cuts_before_the_run
     );
     assert_eq!(f.mixed, 0);
     assert_eq!(f.runs, runs);

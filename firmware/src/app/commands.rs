@@ -189,7 +189,12 @@ impl App<'_> {
         if let Some(p) = self.pipeline.as_mut().filter(|_| self.pipeline_ready) {
             p.release();
         }
-        self.run_id = self.run_id.wrapping_add(1).max(1);
+        let step = if core::mem::take(&mut self.skip_run_number) {
+            2
+        } else {
+            1
+        };
+        self.run_id = self.run_id.wrapping_add(step).max(1);
         self.run_start_us = now;
         self.run_overruns = 0;
         self.ecr.set_hold(false);

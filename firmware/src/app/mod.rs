@@ -184,6 +184,9 @@ pub struct App<'a> {
     out: [u8; MAX_FRAME],
     seq: u32,
     run_id: u32,
+    /// The number after `run_id` may have been spent before a reset (see [`App::start`]): the
+    /// next run skips it.
+    skip_run_number: bool,
     run_start_us: u64,
     /// Samples of this run lost by the acquisition.
     run_overruns: u32,
@@ -258,6 +261,7 @@ impl<'a> App<'a> {
             out: [0; MAX_FRAME],
             seq: 0,
             run_id: 0,
+            skip_run_number: false,
             run_start_us: 0,
             run_overruns: 0,
             clock: None,
@@ -542,6 +546,10 @@ impl<'a> App<'a> {
                 r.run_id, r.blocks, r.finished
             );
             self.run_id = r.run_id;
+            // A run released just before the reset may have sent its header to the host before
+            // the header reached flash: its number is spent, though flash does not show it. The
+            // next run skips it, so that no two runs of this rig share a number.
+            self.skip_run_number = true;
         }
     }
 

@@ -362,14 +362,21 @@ pub fn pull_run(
                 bail!("{} was taken on rig {} but this is rig {serial}: connect that rig, or run `tribo pull` without a folder to fetch this rig's last run", dir.display(), d.serial);
             }
         }
-        if m.device_run_id.is_some_and(|id| id != status.run_id) {
-            bail!(
-                "{} is the rig's run {}, but the rig now holds run {} (a newer run replaced it): that run cannot be \
+        match m.device_run_id {
+            Some(id) if id < status.run_id => bail!(
+                "{} is the rig's run {id}, but the rig now holds run {} (a newer run replaced it): that run cannot be \
                  completed; `tribo pull` without a folder fetches the newer one",
                 dir.display(),
-                m.device_run_id.unwrap_or(0),
                 status.run_id
-            );
+            ),
+            Some(id) if id > status.run_id => bail!(
+                "{} is the rig's run {id}, but the rig holds run {} only: it lost run {id} (its power went \
+                 before the run reached its flash): what the folder holds is all there is of that run, and \
+                 it stays incomplete",
+                dir.display(),
+                status.run_id
+            ),
+            _ => {}
         }
         writer = Some(w);
     }
