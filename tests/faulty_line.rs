@@ -29,9 +29,10 @@ pub struct Faults {
     pub drop_per_100k: u32,
     /// Frames with one byte changed (their CRC then fails), per 100 000, in each direction.
     pub corrupt_per_100k: u32,
-    /// Host frames that go through untouched before the faults start (the commands before the
-    /// release: a lost release is an error by design, never repeated blindly).
-    pub spare_host_frames: u64,
+    /// Nothing is damaged either way until the host's `Release` has passed (the commands before
+    /// it, `Arm` and `Release` above all, are never repeated blindly: a lost one is an error by
+    /// design).
+    pub spare_until_release: bool,
     /// Rig frames dropped once each, the first time one matching it passes.
     pub drop_once: Vec<fn(&DeviceMsg) -> bool>,
     /// Rig frames dropped every time.
@@ -52,7 +53,7 @@ impl Faults {
             seed,
             drop_per_100k: per_100k / 2,
             corrupt_per_100k: per_100k - per_100k / 2,
-            spare_host_frames: 6,
+            spare_until_release: true,
             ..Faults::default()
         }
     }
@@ -255,7 +256,12 @@ impl Write for Up {
                 continue;
             }
             let fate = s.fate();
-            if n >= s.faults.spare_host_frames {
+            if !s.live.load(Ordering::Relaxed)
+                && matches!(
+                    decode_one::<HostMsg>(&frame).map(|f| f.msg),
+                    Ok(HostMsg::Release)
+                )
+            {
                 s.live.store(true, Ordering::Relaxed);
             }
             match fate {
@@ -338,7 +344,7 @@ impl Bench {
         let stats = Arc::new(LineStats::default());
         let shared = Arc::new(Shared {
             rng: Mutex::new(Rng::new(faults.seed)),
-            live: AtomicBool::new(faults.spare_host_frames == 0),
+            live: AtomicBool::new(!faults.spare_until_release),
             dropped_once: Mutex::new(vec![false; faults.drop_once.len()]),
             faults,
             stats: stats.clone(),

@@ -19,7 +19,11 @@ use crate::wire::{limits, Control, FaultReason, HostMsg};
 pub fn renews(msg: &HostMsg) -> bool {
     !matches!(
         msg,
-        HostMsg::Hello { .. } | HostMsg::Status | HostMsg::Pull { .. } | HostMsg::PullBlocks { .. }
+        HostMsg::Hello { .. }
+            | HostMsg::Status
+            | HostMsg::Pull { .. }
+            | HostMsg::PullBlocks { .. }
+            | HostMsg::RunFloor { .. }
     )
 }
 

@@ -6,21 +6,39 @@ use tribo_store::{Catalog, HostFit, Results, Run, RunMeta};
 
 /// The stored run taken on rig `serial` as its run `run_id`, if any (newest first).
 pub fn find_run(store: &Path, serial: &str, run_id: u32) -> anyhow::Result<Option<PathBuf>> {
-    let mut dirs = tribo_store::run::list_run_dirs(store)?;
-    dirs.reverse();
-    for d in dirs {
-        let Ok(text) = std::fs::read_to_string(d.join(tribo_store::run::META_FILE)) else {
-            continue;
-        };
-        let Ok(m) = toml::from_str::<RunMeta>(&text) else {
-            continue;
-        };
-        if m.device_run_id == Some(run_id) && m.device.as_ref().is_some_and(|x| x.serial == serial)
-        {
-            return Ok(Some(d));
-        }
+    Ok(runs_of_rig(store, serial)?
+        .into_iter()
+        .rev()
+        .find(|r| r.1 == run_id)
+        .map(|r| r.0))
+}
+
+/// The highest run number of rig `serial` in the store (what [`HostMsg::RunFloor`] tells the
+/// rig), `None` when the store holds none of its runs.
+///
+/// [`HostMsg::RunFloor`]: tribo_wire::HostMsg::RunFloor
+pub fn highest_run(store: &Path, serial: &str) -> anyhow::Result<Option<u32>> {
+    Ok(runs_of_rig(store, serial)?.into_iter().map(|r| r.1).max())
+}
+
+/// The run folders of rig `serial` in the store with the rig's number of each, oldest first (a
+/// folder whose metadata cannot be read is left out).
+fn runs_of_rig(store: &Path, serial: &str) -> anyhow::Result<Vec<(PathBuf, u32)>> {
+    if !store.is_dir() {
+        return Ok(Vec::new());
     }
-    Ok(None)
+    Ok(tribo_store::run::list_run_dirs(store)?
+        .into_iter()
+        .filter_map(|d| {
+            let text = std::fs::read_to_string(d.join(tribo_store::run::META_FILE)).ok()?;
+            let m = toml::from_str::<RunMeta>(&text).ok()?;
+            let id = m.device_run_id?;
+            m.device
+                .as_ref()
+                .is_some_and(|x| x.serial == serial)
+                .then_some((d, id))
+        })
+        .collect())
 }
 
 /// Why the host did not fit a stored run.

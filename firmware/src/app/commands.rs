@@ -91,6 +91,10 @@ impl App<'_> {
             }
             HostMsg::Heartbeat => Ok(()),
             HostMsg::SelfTest(check) => self.start_selftest(hw, check),
+            HostMsg::RunFloor { run_id } => {
+                self.run_floor = self.run_floor.max(run_id);
+                Ok(())
+            }
             HostMsg::Safe => {
                 info!("safe (host)");
                 self.make_safe(hw);
@@ -194,7 +198,12 @@ impl App<'_> {
         } else {
             1
         };
-        self.run_id = self.run_id.wrapping_add(step).max(1);
+        // Above every number the host holds, and above the one a reset may have spent.
+        self.run_id = self
+            .run_id
+            .wrapping_add(step)
+            .max(self.run_floor.saturating_add(1))
+            .max(1);
         self.run_start_us = now;
         self.run_overruns = 0;
         self.ecr.set_hold(false);

@@ -187,6 +187,8 @@ pub struct App<'a> {
     /// The number after `run_id` may have been spent before a reset (see [`App::start`]): the
     /// next run skips it.
     skip_run_number: bool,
+    /// The highest run number of this rig a host holds ([`HostMsg::RunFloor`]).
+    run_floor: u32,
     run_start_us: u64,
     /// Samples of this run lost by the acquisition.
     run_overruns: u32,
@@ -262,6 +264,7 @@ impl<'a> App<'a> {
             seq: 0,
             run_id: 0,
             skip_run_number: false,
+            run_floor: 0,
             run_start_us: 0,
             run_overruns: 0,
             clock: None,

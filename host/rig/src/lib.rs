@@ -394,6 +394,7 @@ impl VirtualRig {
                 HostMsg::Abort => "host: abort".into(),
                 HostMsg::Safe => "host: safe (heater and magnet off)".into(),
                 HostMsg::SelfTest(check) => format!("host: self-test {check:?}"),
+                HostMsg::RunFloor { run_id } => format!("host: holds runs up to {run_id}"),
                 HostMsg::Status
                 | HostMsg::Heartbeat
                 | HostMsg::Pull { .. }

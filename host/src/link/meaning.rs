@@ -195,6 +195,7 @@ pub(super) fn command_name(m: &HostMsg) -> &'static str {
         HostMsg::Safe => "safe",
         HostMsg::PullBlocks { .. } => "pull-blocks",
         HostMsg::SelfTest(_) => "self-test",
+        HostMsg::RunFloor { .. } => "run-floor",
     }
 }
 

@@ -198,10 +198,7 @@ pub fn record_run(
         )
         .into());
     }
-    // Frames of the rig's previous run may still be on their way: the run taken here is numbered
-    // after it.
-    let previous_run = link.status()?.run_id;
-    link.command(HostMsg::Arm)?;
+    let previous_run = arm(link, info, store)?;
     if plan.button {
         obs(Progress::WaitingForButton);
     } else {
@@ -213,6 +210,26 @@ pub fn record_run(
 /// Releases the armed pin: `Release`, retried for up to 3 s while the rig is still starting
 /// ([`still_starting`]). Any other refusal disarms the rig and is returned: the rig's own rule, in
 /// words.
+/// Arms the rig for a run filed in `store`; returns the rig's run number before it (frames of
+/// that run still on their way are not the new run's). First the rig is told the highest run
+/// number of it the store holds ([`HostMsg::RunFloor`]): a rig whose power went after a release,
+/// before the run's header reached its flash, would give that number again. (A firmware older
+/// than `RunFloor` refuses it as malformed: it is armed all the same. A store that cannot be
+/// listed tells no floor: writing the run there fails later, and says why.)
+pub fn arm(link: &mut Link, info: &DeviceInfo, store: &Path) -> Result<u32, LinkError> {
+    let serial = format!("{:016x}", info.serial);
+    if let Some(run_id) = crate::archive::highest_run(store, &serial).ok().flatten() {
+        match link.command(HostMsg::RunFloor { run_id }) {
+            Ok(()) => {}
+            Err(e) if e.code == Some(ErrorCode::Malformed) => {}
+            Err(e) => return Err(e),
+        }
+    }
+    let previous_run = link.status()?.run_id;
+    link.command(HostMsg::Arm)?;
+    Ok(previous_run)
+}
+
 pub fn release(link: &mut Link) -> Result<(), LinkError> {
     let t0 = Instant::now();
     loop {

@@ -228,3 +228,42 @@ fn pull_blocks_sends_those_blocks_only_then_the_live_stream_goes_on() {
         Err(ErrorCode::NoRun)
     );
 }
+
+/// Two runs in a row lost to the power before their headers reached flash: the flash shows run 1
+/// after both, so the rig alone, skipping one number after each boot, gives 2, 3 and then 3 again.
+/// The host holds both headers and tells the rig (`RunFloor`): the next run is numbered above them.
+#[test]
+fn the_host_s_run_floor_keeps_numbers_the_rig_lost_from_being_given_again() {
+    let mut b = Bench::new();
+    full_run(&mut b);
+    settle_flash(&mut b);
+    let mut lost = vec![];
+    for _ in 0..2 {
+        b.ready();
+        b.take();
+        b.send(HostMsg::Release);
+        b.poll();
+        lost.extend(b.msgs().iter().filter_map(|m| match m {
+            DeviceMsg::RunStarted(h) => Some(h.run_id),
+            _ => None,
+        }));
+        b.hw.flash.power_cut();
+        b.app = App::new(AppConfig::new(42), store(256 * 1024));
+        b.poll();
+    }
+    assert_eq!(lost, [2, 3]);
+    b.send(HostMsg::RunFloor { run_id: 3 });
+    b.ready();
+    b.take();
+    b.send(HostMsg::Release);
+    b.run_for(20);
+    let next = b
+        .msgs()
+        .iter()
+        .find_map(|m| match m {
+            DeviceMsg::RunStarted(h) => Some(h.run_id),
+            _ => None,
+        })
+        .expect("a run started");
+    assert_eq!(next, 4);
+}

@@ -75,6 +75,11 @@ wire_type! {
         /// One check of the bring-up self-test (`tribo selftest`; see [`SelfTestCheck`]). A
         /// firmware older than the self-test answers `Error { Malformed }`.
         SelfTest(SelfTestCheck),
+        /// The highest run number of this rig the host holds (its run folders): the rig's next
+        /// run is numbered above it. A rig whose power went after a release, before the run's
+        /// header reached its flash, knows nothing of that run; its host does. Answered by an
+        /// `Ack`; a firmware older than it answers `Error { Malformed }`.
+        RunFloor { run_id: u32 },
     }
 }
 

@@ -150,7 +150,7 @@ impl RigThread {
             }
             match self.cmds.recv_timeout(Duration::from_millis(40)) {
                 Ok((cmd, reply)) => {
-                    let r = self.command(&mut link, cmd, &mut plan, &mut previous_run);
+                    let r = self.command(&mut link, &info, cmd, &mut plan, &mut previous_run);
                     match r {
                         Ok((text, released)) => {
                             let _ = reply.send(Ok(text));
@@ -186,6 +186,7 @@ impl RigThread {
     fn command(
         &self,
         link: &mut Link,
+        info: &tribo_wire::DeviceInfo,
         cmd: Cmd,
         plan: &mut Option<RunPlan>,
         previous_run: &mut Option<u32>,
@@ -237,8 +238,7 @@ impl RigThread {
                         "arm: configure the run first (load, rate, duration)".into(),
                     ));
                 }
-                let before = link.status()?.run_id;
-                link.command(HostMsg::Arm)?;
+                let before = crate::link::session::arm(link, info, &self.store)?;
                 *previous_run = Some(before);
                 Ok((
                     "armed: the magnet holds the pin; release when ready".into(),
