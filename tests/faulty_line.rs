@@ -68,6 +68,8 @@ pub struct LineStats {
     pub host_frames: AtomicU64,
     pub host_dropped: AtomicU64,
     pub host_corrupted: AtomicU64,
+    /// Every frame the rig sent, as it sent it (before the line's faults).
+    pub sent: Mutex<Vec<Vec<u8>>>,
 }
 
 impl LineStats {
@@ -192,6 +194,7 @@ impl Read for Down {
                 let mut frame = std::mem::take(&mut self.cur);
                 let s = &self.shared;
                 s.stats.rig_frames.fetch_add(1, Ordering::Relaxed);
+                s.stats.sent.lock().unwrap().push(frame.clone());
                 if let Ok(f) = decode_one::<DeviceMsg>(&frame) {
                     if s.faults.drop_always.is_some_and(|d| d(&f.msg)) {
                         s.stats.rig_dropped.fetch_add(1, Ordering::Relaxed);

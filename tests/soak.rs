@@ -87,30 +87,33 @@ fn run_frame(raw: &[u8]) -> Option<(u32, Option<u32>)> {
 }
 
 fn record(bench: &mut Bench, faults: Faults, store: &std::path::Path, load: f32) -> Outcome {
-    try_record(bench, faults, store, load).unwrap_or_else(|e| {
-        panic!(
-            "the run finishes (complete or not): {e:#}; the rig's last fault: {:?} at {} µs",
-            bench.rig().app().last_fault(),
-            bench.rig().now_us()
-        )
-    })
+    try_record(bench, faults, store, load)
+        .0
+        .unwrap_or_else(|e| {
+            panic!(
+                "the run finishes (complete or not): {e:#}; the rig's last fault: {:?} at {} µs",
+                bench.rig().app().last_fault(),
+                bench.rig().now_us()
+            )
+        })
 }
 
-/// `tribo run`: what it stored, or why it stored nothing.
+/// `tribo run`: what it stored, or why it stored nothing; and what the line saw.
 fn try_record(
     bench: &mut Bench,
     faults: Faults,
     store: &std::path::Path,
     load: f32,
-) -> anyhow::Result<Outcome> {
-    bench
-        .session(faults, |link| {
-            let info = link.hello()?;
-            let mut p = plan();
-            p.config.rig.load_n = load;
-            record_run(link, &info, store, &p, &AtomicBool::new(false), &mut |_| {})
-        })
-        .0
+) -> (
+    anyhow::Result<Outcome>,
+    std::sync::Arc<faulty_line::LineStats>,
+) {
+    bench.session(faults, |link| {
+        let info = link.hello()?;
+        let mut p = plan();
+        p.config.rig.load_n = load;
+        record_run(link, &info, store, &p, &AtomicBool::new(false), &mut |_| {})
+    })
 }
 
 fn pull(bench: &mut Bench, faults: Faults, store: &std::path::Path) -> Outcome {
@@ -133,7 +136,15 @@ fn pull_into(
 }
 
 /// Checks a stored run against the rig's own copy; returns whether it is whole.
-fn check(o: &Outcome, truth: &[Vec<u8>], run_id: u32, f: &mut Figures) -> Result<bool, String> {
+/// `sent`: frames the rig sent live that its copy may lack (the power went before they reached its
+/// flash): a stored run may hold them too.
+fn check(
+    o: &Outcome,
+    truth: &[Vec<u8>],
+    sent: &[Vec<u8>],
+    run_id: u32,
+    f: &mut Figures,
+) -> Result<bool, String> {
     let stored = o.run.frames();
     f.frames_checked += stored.len();
     // No frame of another run.
@@ -168,7 +179,7 @@ fn check(o: &Outcome, truth: &[Vec<u8>], run_id: u32, f: &mut Figures) -> Result
     }
     // Incomplete: what it holds is the rig's, all that the rig still holds (the last pull asked
     // for it), and what it says is missing is exactly the rest.
-    let rig: BTreeSet<&[u8]> = truth.iter().map(|v| &v[..]).collect();
+    let rig: BTreeSet<&[u8]> = truth.iter().chain(sent).map(|v| &v[..]).collect();
     if let Some(x) = stored.iter().find(|s| !rig.contains(*s)) {
         return Err(format!(
             "holds a frame the rig did not send for this run ({} bytes)",
@@ -410,7 +421,7 @@ fn soak(runs: usize, seed: u64) -> Figures {
                 ..Faults::default()
             },
             7 => Faults {
-                power_cut_after_bytes: Some(2_000 + line_seed % 20_000),
+                power_cut_after_bytes: Some(2_000 + line_seed % 60_000),
                 ..Faults::default()
             },
             _ => Faults::default(),
@@ -445,7 +456,7 @@ fn soak(runs: usize, seed: u64) -> Figures {
                     }
                 }
                 f.stored += 1;
-                match check(&o, &truth, id, &mut f) {
+                match check(&o, &truth, &[], id, &mut f) {
                     Ok(true) => f.intact += 1,
                     Ok(false) => f.honestly_incomplete += 1,
                     Err(e) => failures.push(format!("run {i} ({kind}, run {id}): {e}")),
@@ -453,9 +464,13 @@ fn soak(runs: usize, seed: u64) -> Figures {
             }
             continue;
         }
+        // What the rig sent live during a session its power cut short.
+        let mut sent: Vec<Vec<u8>> = Vec::new();
         let mut o = if pick == 7 {
             let folders = tribo_store::run::list_run_dirs(store.path()).unwrap().len();
-            match try_record(&mut bench, faults, store.path(), load) {
+            let (r, stats) = try_record(&mut bench, faults, store.path(), load);
+            sent = std::mem::take(&mut *stats.sent.lock().unwrap());
+            match r {
                 Ok(o) => o,
                 Err(e) => {
                     // The power went before the release: an error, and nothing recorded.
@@ -570,7 +585,7 @@ fn soak(runs: usize, seed: u64) -> Figures {
         let truth = bench.rig_frames(id);
         f.runs += 1;
         f.stored += 1;
-        match check(&o, &truth, id, &mut f) {
+        match check(&o, &truth, &sent, id, &mut f) {
             Ok(true) => f.intact += 1,
             Ok(false) => f.honestly_incomplete += 1,
             Err(e) => failures.push(format!("run {i} ({kind}, run {id}): {e}")),
