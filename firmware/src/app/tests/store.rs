@@ -156,24 +156,33 @@ fn a_run_number_the_power_took_before_it_reached_flash_is_not_given_again() {
             .any(|m| matches!(m, DeviceMsg::RunStarted(h) if h.run_id == 2)),
         "{sent:?}"
     );
+    power_cut(&mut b);
+    let held = b.app.status().run_id;
+    assert!(held <= 2, "the rig holds run {held}");
+    let next = release_and_number(&mut b);
+    assert!(next > 2, "run number {next} given again");
+}
+
+/// The power cut and back: a new application (its RAM gone), the flash as the cut left it.
+fn power_cut(b: &mut Bench) {
     b.hw.flash.power_cut();
     b.app = App::new(AppConfig::new(42), store(256 * 1024));
     b.poll();
-    let held = b.app.status().run_id;
-    assert!(held <= 2, "the rig holds run {held}");
+}
+
+/// Arms, releases, and returns the number of the run that started.
+fn release_and_number(b: &mut Bench) -> u32 {
     b.ready();
     b.take();
     b.send(HostMsg::Release);
     b.run_for(20);
-    let next = b
-        .msgs()
+    b.msgs()
         .iter()
         .find_map(|m| match m {
             DeviceMsg::RunStarted(h) => Some(h.run_id),
             _ => None,
         })
-        .expect("a run started");
-    assert!(next > 2, "run number {next} given again");
+        .expect("a run started")
 }
 
 #[test]
@@ -247,23 +256,9 @@ fn the_host_s_run_floor_keeps_numbers_the_rig_lost_from_being_given_again() {
             DeviceMsg::RunStarted(h) => Some(h.run_id),
             _ => None,
         }));
-        b.hw.flash.power_cut();
-        b.app = App::new(AppConfig::new(42), store(256 * 1024));
-        b.poll();
+        power_cut(&mut b);
     }
     assert_eq!(lost, [2, 3]);
     b.send(HostMsg::RunFloor { run_id: 3 });
-    b.ready();
-    b.take();
-    b.send(HostMsg::Release);
-    b.run_for(20);
-    let next = b
-        .msgs()
-        .iter()
-        .find_map(|m| match m {
-            DeviceMsg::RunStarted(h) => Some(h.run_id),
-            _ => None,
-        })
-        .expect("a run started");
-    assert_eq!(next, 4);
+    assert_eq!(release_and_number(&mut b), 4);
 }
