@@ -468,6 +468,7 @@ fn soak(runs: usize, seed: u64) -> Figures {
         let mut sent: Vec<Vec<u8>> = Vec::new();
         let mut o = if pick == 7 {
             let folders = tribo_store::run::list_run_dirs(store.path()).unwrap().len();
+            let resets = bench.rig().resets();
             let (r, stats) = try_record(&mut bench, faults, store.path(), load);
             sent = std::mem::take(&mut *stats.sent.lock().unwrap());
             match r {
@@ -476,7 +477,13 @@ fn soak(runs: usize, seed: u64) -> Figures {
                     // The power went before the release: an error, and nothing recorded.
                     f.runs += 1;
                     f.power_cuts_before_the_run += 1;
-                    if tribo_store::run::list_run_dirs(store.path()).unwrap().len() != folders {
+                    if bench.rig().resets() == resets {
+                        failures.push(format!(
+                            "run {i} ({kind}): failed with the rig still powered: {e:#}"
+                        ));
+                    } else if tribo_store::run::list_run_dirs(store.path()).unwrap().len()
+                        != folders
+                    {
                         failures.push(format!(
                             "run {i} ({kind}): failed ({e:#}) but left a run folder"
                         ));
