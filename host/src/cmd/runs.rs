@@ -278,14 +278,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
              completed by `tribo pull RUN` while the rig holds it"
         )?;
     }
-    if rows.iter().any(|r| r.temp_setpoint_c.is_none()) {
-        outln!("°C: the heater's setpoint; ~22.4: the heater off, the plate read 22.4 °C")?;
-    }
+    temp_note(rows.iter())?;
     if any_lost {
         outln!(
             "lost: samples the rig's acquisition lost (its gap frames); fits refuse to cross a gap: \
              `tribo fit --longest-clean-stretch RUN` fits the longest stretch without one"
         )?;
+    }
+    Ok(())
+}
+
+/// What `~` in the temperature column means, when a listed run has it.
+fn temp_note<'a>(mut rows: impl Iterator<Item = &'a CatalogRow>) -> anyhow::Result<()> {
+    if rows.any(|r| r.temp_setpoint_c.is_none()) {
+        outln!("°C: the heater's setpoint; ~22.4: the heater off, the plate read 22.4 °C")?;
     }
     Ok(())
 }
@@ -407,9 +413,7 @@ fn lab(args: Args, url: &tribo_catalog::LabUrl) -> anyhow::Result<()> {
             r.id,
         )?;
     }
-    if rows.iter().any(|l| l.run.row.temp_setpoint_c.is_none()) {
-        outln!("°C: the heater's setpoint; ~22.4: the heater off, the plate read 22.4 °C")?;
-    }
+    temp_note(rows.iter().map(|l| &l.run.row))?;
     outln!(
         "{} runs from the lab catalog at {}; `tribo pull --from-catalog SERIAL/RUN` fetches one's log from a shared folder",
         rows.len(),
