@@ -176,19 +176,9 @@ fn serve_refuses_options_under_which_the_rig_would_never_advance() {
 }
 
 /// Connects to a TCP rig with a read timeout.
-fn connect(rig: &TcpRig) -> TcpStream {
-    let s = TcpStream::connect(rig.addr()).unwrap();
-    s.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
-    s
-}
-
-#[test]
-fn a_tcp_rig_runs_on_between_hosts_and_the_next_host_pulls_the_whole_run() {
+/// A default virtual rig served on a free local port, and what happens to its connections.
+fn tcp_rig(opts: ServeOptions) -> (TcpRig, mpsc::Receiver<HostEvent>) {
     let rig = VirtualRig::new(VirtualRigConfig::default()).unwrap();
-    let opts = ServeOptions {
-        speed: 8.0,
-        ..Default::default()
-    };
     let (etx, erx) = mpsc::channel();
     let tcp = TcpRig::spawn(
         rig,
@@ -199,6 +189,21 @@ fn a_tcp_rig_runs_on_between_hosts_and_the_next_host_pulls_the_whole_run() {
         },
     )
     .unwrap();
+    (tcp, erx)
+}
+
+fn connect(rig: &TcpRig) -> TcpStream {
+    let s = TcpStream::connect(rig.addr()).unwrap();
+    s.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
+    s
+}
+
+#[test]
+fn a_tcp_rig_runs_on_between_hosts_and_the_next_host_pulls_the_whole_run() {
+    let (tcp, erx) = tcp_rig(ServeOptions {
+        speed: 8.0,
+        ..Default::default()
+    });
 
     // Host A: starts a run of at most 1 s (all of it fits the rig's memory), takes a few blocks
     // and goes.
@@ -304,17 +309,7 @@ fn a_tcp_rig_runs_on_between_hosts_and_the_next_host_pulls_the_whole_run() {
 
 #[test]
 fn a_tcp_rig_serves_one_host_at_a_time_and_turns_a_second_away() {
-    let rig = VirtualRig::new(VirtualRigConfig::default()).unwrap();
-    let (etx, erx) = mpsc::channel();
-    let tcp = TcpRig::spawn(
-        rig,
-        TcpListener::bind("127.0.0.1:0").unwrap(),
-        ServeOptions::default(),
-        move |e| {
-            let _ = etx.send(e);
-        },
-    )
-    .unwrap();
+    let (tcp, erx) = tcp_rig(ServeOptions::default());
     let hello_answered = |s: &mut TcpStream| {
         s.write_all(&hello()).unwrap();
         read_frames(s, |m| {
@@ -364,17 +359,7 @@ fn a_tcp_rig_serves_one_host_at_a_time_and_turns_a_second_away() {
 
 #[test]
 fn two_hosts_knocking_at_once_are_served_in_turn_and_a_stopped_rig_is_handed_back() {
-    let rig = VirtualRig::new(VirtualRigConfig::default()).unwrap();
-    let (etx, erx) = mpsc::channel();
-    let tcp = TcpRig::spawn(
-        rig,
-        TcpListener::bind("127.0.0.1:0").unwrap(),
-        ServeOptions::default(),
-        move |e| {
-            let _ = etx.send(e);
-        },
-    )
-    .unwrap();
+    let (tcp, erx) = tcp_rig(ServeOptions::default());
     let addr = tcp.addr();
     // Both knock before the rig looks (it looks every few milliseconds), each saying hello.
     let mut hosts = vec![connect(&tcp), connect(&tcp)];
