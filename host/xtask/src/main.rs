@@ -3,9 +3,9 @@
 //! * `cargo xtask firmware [--run | --clippy]`: builds the release firmware ELF for
 //!   `thumbv7em-none-eabihf` and prints its flash and RAM use (`--clippy`: lints the board binary and
 //!   the crates under it for the target instead, `-D warnings`; on the host the board is an empty
-//!   stub, so the workspace clippy does not see its code). Uses the rustup target when it is installed; otherwise Debian's
-//!   `rustc-web`/`cargo-web`/`rust-web-src`/`lld-22` with `RUSTC_BOOTSTRAP=1 -Z build-std=core`,
-//!   installing those packages first when they are missing and we may (root, apt-get present).
+//!   stub, so the workspace clippy does not see its code). Uses the rustup target when it is
+//!   installed; otherwise Debian's `rustc-web`/`cargo-web`/`rust-web-src`/`lld-22` with
+//!   `RUSTC_BOOTSTRAP=1 -Z build-std=core` (see [`toolchain`]).
 //! * `cargo xtask target-test [FILTER]`: the on-target tests (`firmware/target-tests`): generates
 //!   the record bundle on the host, builds the test binary for the Cortex-M7 with the firmware's
 //!   flags and profile, runs it under QEMU (`qemu-system-arm -machine mps2-an500 -icount shift=0`)
@@ -22,31 +22,32 @@
 //!   (installed from crates.io when missing) on the machine's toolchain (`RUSTC_BOOTSTRAP=1`);
 //!   prints each target's count and time. Not in CI (minutes per target).
 //! * `cargo xtask wheel [--release] [--test]`: the Python package's wheel (see [`python`]).
-//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the
-//!   firmware, the on-target tests, the Windows build and its smoke test.
+//! * `cargo xtask ci`: everything CI checks: rustfmt, clippy `-D warnings`, every test, the lab
+//!   catalog against a real PostgreSQL, the panel in headless chromium, the Python wheel and its
+//!   pytest suite, the firmware, the on-target tests, the Windows build and its smoke test.
+//!
+//! Every step installs what it needs and lacks (Debian's packages, as root; see [`apt`]), whatever
+//! the steps before it did or found, and says what it installs; `ci` lists it all at the end.
+//! Elsewhere a step that lacks something stops and names the command that brings it.
 
+mod apt;
 mod elf;
 mod memory;
 mod panel;
 mod postgres;
 mod python;
 mod qemu;
+mod toolchain;
 mod windows;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
+use toolchain::Toolchain;
 
-const TARGET: &str = "thumbv7em-none-eabihf";
+const TARGET: &str = toolchain::FIRMWARE.target;
 const BOARD: &str = "tribo-board";
 const TARGET_TESTS: &str = "tribo-target-tests";
 const PROFILE: &str = "firmware";
-const DEBIAN_PACKAGES: [&str; 5] = [
-    "rustc-web",
-    "cargo-web",
-    "rust-web-src",
-    "lld-22",
-    "rust-web-clippy",
-];
 /// Least stack the AXI SRAM must leave after the static data (the stack grows down from its end).
 const MIN_STACK: u64 = 32 * 1024;
 
@@ -218,75 +219,19 @@ fn ci() -> Result<(), String> {
     firmware(&["--clippy".to_string()])?;
     target_test(&[])?;
     windows::windows(&[])?;
+    let installed = apt::installed();
+    if installed.is_empty() {
+        eprintln!("xtask ci: passed; nothing was installed");
+    } else {
+        eprintln!(
+            "xtask ci: passed; installed on the way (Debian packages): {}",
+            installed.join(" ")
+        );
+    }
     Ok(())
 }
 
-/// How the firmware gets built on this machine.
-enum Toolchain {
-    /// `rustup target add thumbv7em-none-eabihf` was done: the normal way.
-    Rustup,
-    /// Debian's rustc/cargo with the standard library sources, building `core` ourselves.
-    Debian { cargo: PathBuf, rustc: PathBuf },
-}
-
-fn rustup_has_target(target: &str) -> bool {
-    let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
-    let out = Command::new(rustc).args(["--print", "sysroot"]).output();
-    match out {
-        Ok(o) if o.status.success() => {
-            let sysroot = String::from_utf8_lossy(&o.stdout).trim().to_owned();
-            Path::new(&sysroot)
-                .join("lib/rustlib")
-                .join(target)
-                .join("lib")
-                .is_dir()
-        }
-        _ => false,
-    }
-}
-
-fn debian_ready() -> bool {
-    Path::new("/usr/bin/cargo").exists()
-        && Path::new("/usr/bin/rustc").exists()
-        && Path::new("/usr/bin/cargo-clippy").exists()
-        && Path::new("/usr/lib/rustlib/src/rust/library/core").is_dir()
-        && (Path::new("/usr/bin/rust-lld").exists() || Path::new("/usr/bin/ld.lld-22").exists())
-}
-
-/// How to build the firmware here, installing Debian's toolchain when needed and allowed.
-fn pick_toolchain() -> Result<Toolchain, String> {
-    if rustup_has_target(TARGET) {
-        return Ok(Toolchain::Rustup);
-    }
-    if !debian_ready() {
-        let may_install = Path::new("/usr/bin/apt-get").exists() && is_root();
-        if !may_install {
-            return Err(format!(
-                "no toolchain for {TARGET}.\n  → either `rustup target add {TARGET}`\n  → or, on \
-                 Debian, `sudo apt-get install -y {}` and run this again",
-                DEBIAN_PACKAGES.join(" ")
-            ));
-        }
-        eprintln!("xtask: {TARGET} is not installed in rustup; installing Debian's toolchain");
-        run(Command::new("apt-get").arg("update").arg("-q"))?;
-        run(Command::new("apt-get")
-            .args(["install", "-y", "-q"])
-            .args(DEBIAN_PACKAGES))?;
-        if !debian_ready() {
-            return Err(
-                "Debian's rust packages installed but incomplete (need /usr/bin/cargo, \
-                        /usr/lib/rustlib/src/rust/library, rust-lld)"
-                    .into(),
-            );
-        }
-    }
-    Ok(Toolchain::Debian {
-        cargo: "/usr/bin/cargo".into(),
-        rustc: "/usr/bin/rustc".into(),
-    })
-}
-
-fn is_root() -> bool {
+pub(crate) fn is_root() -> bool {
     Command::new("id")
         .arg("-u")
         .output()
@@ -302,12 +247,12 @@ fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
             let dir = root.join("target");
             (cargo(), dir)
         }
-        Toolchain::Debian { cargo, rustc } => {
+        Toolchain::Debian => {
             // A target directory of its own: another compiler, another standard library.
             let dir = root.join("target/debian-build-std");
-            let mut c = Command::new(cargo);
+            let mut c = Command::new(toolchain::DEBIAN_CARGO);
             c.current_dir(&root)
-                .env("RUSTC", rustc)
+                .env("RUSTC", toolchain::DEBIAN_RUSTC)
                 .env("RUSTC_BOOTSTRAP", "1")
                 .env_remove("RUSTDOC")
                 .env_remove("RUSTC_WRAPPER")
@@ -336,7 +281,7 @@ fn debian_first_path() -> std::ffi::OsString {
 fn firmware(args: &[String]) -> Result<PathBuf, String> {
     let flash = args.iter().any(|a| a == "--run");
     let lint = args.iter().any(|a| a == "--clippy");
-    let toolchain = pick_toolchain()?;
+    let toolchain = toolchain::resolve(&toolchain::FIRMWARE)?;
     let (mut cmd, target_dir) = cross_cargo(&toolchain);
     let task = match (lint, flash) {
         (true, _) => "clippy",
@@ -361,7 +306,7 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         "toolchain:    {}",
         match toolchain {
             Toolchain::Rustup => "rustup target",
-            Toolchain::Debian { .. } => "Debian rustc-web + build-std=core",
+            Toolchain::Debian => "Debian rustc-web + build-std=core",
         }
     );
     println!(
@@ -429,18 +374,13 @@ fn target_test(args: &[String]) -> Result<(), String> {
         [f] if !f.starts_with('-') => f.as_str(),
         _ => return Err("usage: cargo xtask target-test [FILTER]".into()),
     };
-    let qemu = match qemu::find() {
-        Ok(q) => q,
-        // As for the firmware toolchain: installed when we may (root, apt-get present).
-        Err(e) if Path::new("/usr/bin/apt-get").exists() && is_root() => {
-            eprintln!("xtask: {} is not installed; installing it", qemu::QEMU);
-            run(Command::new("apt-get").arg("update").arg("-q"))?;
-            run(Command::new("apt-get").args(["install", "-y", "-q", "qemu-system-arm"]))
-                .map_err(|i| format!("{i}\n{e}"))?;
-            qemu::find()?
-        }
-        Err(e) => return Err(e),
-    };
+    apt::ensure(&apt::Need {
+        what: "the on-target tests",
+        packages: &["qemu-system-arm"],
+        present: &|| qemu::find().is_ok(),
+        otherwise: "",
+    })?;
+    let qemu = qemu::find()?;
     let started = std::time::Instant::now();
     let bytes = tribo_target_tests::generate::bundle()
         .map_err(|e| format!("generating the record bundle: {e}"))?;
@@ -457,7 +397,7 @@ fn target_test(args: &[String]) -> Result<(), String> {
         bytes.len() as f64 / 1024.0,
         started.elapsed().as_secs_f64()
     );
-    let toolchain = pick_toolchain()?;
+    let toolchain = toolchain::resolve(&toolchain::FIRMWARE)?;
     let (mut cmd, target_dir) = cross_cargo(&toolchain);
     cmd.env("TRIBO_TARGET_BUNDLE", &bundle).args([
         "build",

@@ -4,48 +4,19 @@
 //! installed when missing (root, apt-get), and the tests run: a missing browser is an error, never
 //! a skipped test.
 
-use crate::{cargo, is_root, run};
-use std::path::Path;
-use std::process::{Command, Stdio};
+use crate::{apt, cargo, run};
 
 /// What the browser tests need from Debian.
 const PACKAGES: [&str; 2] = ["chromium", "chromium-driver"];
 
-fn have(program: &str) -> bool {
-    Command::new(program)
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
 /// Installs chromium and chromedriver when they are missing and we may (root, apt-get).
 fn ensure_browser() -> Result<(), String> {
-    if have("chromium") && have("chromedriver") {
-        return Ok(());
-    }
-    if !(Path::new("/usr/bin/apt-get").exists() && is_root()) {
-        return Err(format!(
-            "the panel's browser tests need chromium and chromedriver.\n  → on Debian: `sudo apt-get \
-             install -y --no-install-recommends {}` and run this again",
-            PACKAGES.join(" ")
-        ));
-    }
-    eprintln!("xtask: installing {}", PACKAGES.join(" "));
-    run(Command::new("apt-get").args(["update", "-q"]))?;
-    run(Command::new("apt-get")
-        .args(["install", "-y", "-q", "--no-install-recommends"])
-        .args(PACKAGES)
-        .env("DEBIAN_FRONTEND", "noninteractive"))?;
-    if have("chromium") && have("chromedriver") {
-        Ok(())
-    } else {
-        Err(format!(
-            "{} installed, but chromium or chromedriver is still missing",
-            PACKAGES.join(" ")
-        ))
-    }
+    apt::ensure(&apt::Need {
+        what: "the panel's browser tests",
+        packages: &PACKAGES,
+        present: &|| apt::answers("chromium", true) && apt::answers("chromedriver", true),
+        otherwise: "",
+    })
 }
 
 /// Installs the browser when needed, then runs the panel's browser tests.

@@ -1,8 +1,8 @@
 //! The lab catalog's tests (`host/catalog/tests/lab.rs`, `host/tests/lab_catalog.rs`) start a
 //! real PostgreSQL server of their own; CI must have its binaries and must not skip them.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use crate::apt;
+use std::path::PathBuf;
 
 /// Debian's package of the PostgreSQL server (`initdb`, `pg_ctl`, `postgres`, `psql`).
 const PACKAGE: &str = "postgresql";
@@ -37,21 +37,11 @@ pub fn ensure() -> Result<(), String> {
         );
         return Ok(());
     }
-    if !(Path::new("/usr/bin/apt-get").exists() && super::is_root()) {
-        return Err(format!(
-            "PostgreSQL's server binaries (initdb, pg_ctl) are missing; the lab catalog's tests start a server of their own.\n  \
-             → `sudo apt-get install -y {PACKAGE}` (Debian/Ubuntu), or set TRIBO_PG_BIN to their folder\n  \
-             → or, on a developer's machine, TRIBO_SKIP_POSTGRES=1 skips those tests"
-        ));
-    }
-    eprintln!("xtask: installing {PACKAGE} for the lab catalog's tests");
-    super::run(Command::new("apt-get").arg("update").arg("-q"))?;
-    super::run(
-        Command::new("apt-get")
-            .env("DEBIAN_FRONTEND", "noninteractive")
-            .args(["install", "-y", "-q", "--no-install-recommends", PACKAGE]),
-    )?;
-    server_bin()
-        .map(|_| ())
-        .ok_or_else(|| format!("{PACKAGE} installed, but no /usr/lib/postgresql/*/bin/initdb"))
+    apt::ensure(&apt::Need {
+        what: "the lab catalog's tests (they start a PostgreSQL server of their own)",
+        packages: &[PACKAGE],
+        present: &|| server_bin().is_some(),
+        otherwise: "or set TRIBO_PG_BIN to the folder of initdb and pg_ctl; or, on a developer's \
+                    machine, TRIBO_SKIP_POSTGRES=1 skips those tests",
+    })
 }

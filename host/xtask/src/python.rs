@@ -58,8 +58,27 @@ fn venv(dir: &Path, fresh: bool, packages: &[&str]) -> Result<PathBuf, String> {
     Ok(py)
 }
 
+/// Python with its `venv` and `ensurepip` modules (Debian splits them into `python3-venv`).
+fn ensure_python() -> Result<(), String> {
+    let usable = || {
+        Command::new(python3())
+            .args(["-c", "import venv, ensurepip"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    crate::apt::ensure(&crate::apt::Need {
+        what: "the Python wheel and its tests (python3 with venv and pip)",
+        packages: &["python3", "python3-venv", "python3-pip"],
+        present: &usable,
+        otherwise: "or point $PYTHON at a Python 3.9+ that has its venv module",
+    })
+}
+
 /// Builds the wheel; returns its path.
 pub fn wheel(release: bool) -> Result<PathBuf, String> {
+    ensure_python()?;
     let target = target_dir();
     let build = venv(&target.join("py-build"), false, &[])?;
     let maturin = venv_bin(&target.join("py-build"), "maturin");

@@ -8,78 +8,52 @@
 //! its own. Either way the linker and C compiler (SQLite is compiled in) are Debian's
 //! `x86_64-w64-mingw32-gcc`.
 
-use crate::{cargo, is_root, run};
+use crate::toolchain::{self, Toolchain};
+use crate::{apt, cargo, run};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-const TARGET: &str = "x86_64-pc-windows-gnu";
+const TARGET: &str = toolchain::WINDOWS.target;
 const GCC: &str = "x86_64-w64-mingw32-gcc";
 /// What the build and the smoke test need from Debian.
 const PACKAGES: [&str; 3] = ["gcc-mingw-w64-x86-64", "wine", "wine64"];
 /// Longest a single `tribo.exe` command may take under Wine.
 const STEP_TIMEOUT: Duration = Duration::from_secs(240);
 
-fn have(program: &str) -> bool {
-    Command::new(program)
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok()
-}
-
-/// Installs the mingw compiler and Wine when they are missing and we may (root, apt-get).
+/// The mingw compiler (the linker, and the C compiler for the bundled SQLite) and Wine.
 fn ensure_packages() -> Result<(), String> {
-    if have(GCC) && have("wine") {
-        return Ok(());
-    }
-    if !(Path::new("/usr/bin/apt-get").exists() && is_root()) {
-        return Err(format!(
-            "the Windows build needs {GCC} and the smoke test needs wine.\n  → on Debian: \
-             `sudo apt-get install -y {}` and run this again",
-            PACKAGES.join(" ")
-        ));
-    }
-    eprintln!("xtask: installing {}", PACKAGES.join(" "));
-    run(Command::new("apt-get").args(["update", "-q"]))?;
-    run(Command::new("apt-get")
-        .args(["install", "-y", "-q", "--no-install-recommends"])
-        .args(PACKAGES)
-        .env("DEBIAN_FRONTEND", "noninteractive"))?;
-    if have(GCC) && have("wine") {
-        Ok(())
-    } else {
-        Err(format!(
-            "{} installed, but {GCC} or wine still missing",
-            PACKAGES.join(" ")
-        ))
-    }
+    apt::ensure(&apt::Need {
+        what: "the Windows build and its smoke test",
+        packages: &PACKAGES,
+        present: &|| apt::answers(GCC, false) && apt::answers("wine", false),
+        otherwise: "",
+    })
 }
 
 /// The build command and its target directory.
 fn build_command(root: &Path) -> Result<(Command, PathBuf, &'static str), String> {
-    if crate::rustup_has_target(TARGET) {
-        let dir = root.join("target");
-        return Ok((cargo(), dir, "rustup target"));
+    // Chosen for this target alone: the firmware's rustup target says nothing about Windows'.
+    match toolchain::resolve(&toolchain::WINDOWS)? {
+        Toolchain::Rustup => Ok((cargo(), root.join("target"), "rustup target")),
+        Toolchain::Debian => {
+            let mut c = Command::new(toolchain::DEBIAN_CARGO);
+            c.current_dir(root)
+                .env("RUSTC", toolchain::DEBIAN_RUSTC)
+                .env("RUSTC_BOOTSTRAP", "1")
+                .env_remove("RUSTDOC")
+                .env_remove("RUSTC_WRAPPER")
+                .env_remove("CARGO")
+                .args(["-Z", "build-std=std,panic_abort"]);
+            Ok((
+                c,
+                root.join("target/windows"),
+                "Debian rustc + build-std=std,panic_abort",
+            ))
+        }
     }
-    let std_src = Path::new("/usr/lib/rustlib/src/rust/library/std");
-    if !(Path::new("/usr/bin/cargo").exists() && std_src.is_dir()) {
-        // The same Debian packages as the firmware build.
-        crate::pick_toolchain()?;
-    }
-    let dir = root.join("target/windows");
-    let mut c = Command::new("/usr/bin/cargo");
-    c.current_dir(root)
-        .env("RUSTC", "/usr/bin/rustc")
-        .env("RUSTC_BOOTSTRAP", "1")
-        .env_remove("RUSTDOC")
-        .env_remove("RUSTC_WRAPPER")
-        .env_remove("CARGO")
-        .args(["-Z", "build-std=std,panic_abort"]);
-    Ok((c, dir, "Debian rustc + build-std=std,panic_abort"))
 }
 
 /// Builds `tribo.exe`; returns its path.
