@@ -240,7 +240,7 @@ pub(crate) fn is_root() -> bool {
 }
 
 /// A cargo command for the ARM target with `toolchain`, and the target directory it uses.
-fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
+fn cross_cargo(toolchain: &Toolchain) -> Result<(Command, PathBuf), String> {
     let root = root();
     let (mut cmd, target_dir) = match toolchain {
         Toolchain::Rustup => {
@@ -250,6 +250,7 @@ fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
         Toolchain::Debian => {
             // A target directory of its own: another compiler, another standard library.
             let dir = root.join("target/debian-build-std");
+            let linker = toolchain::debian_linker_dir(&dir)?;
             let mut c = Command::new(toolchain::DEBIAN_CARGO);
             c.current_dir(&root)
                 .env("RUSTC", toolchain::DEBIAN_RUSTC)
@@ -258,8 +259,9 @@ fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
                 .env_remove("RUSTC_WRAPPER")
                 .env_remove("CARGO")
                 // `cargo clippy` finds `cargo-clippy` on the PATH: Debian's, beside this cargo,
-                // not rustup's proxy (which would lint with a toolchain that has no ARM `core`).
-                .env("PATH", debian_first_path());
+                // not rustup's proxy (which would lint with a toolchain that has no ARM `core`);
+                // the target's linker, `rust-lld`, is LLVM's lld under that name.
+                .env("PATH", debian_first_path(&linker));
             // `-Z build-std=core` as configuration, so that it reaches the cargo that
             // `cargo clippy` runs too (a `-Z` before the subcommand would stay with the outer one).
             c.env("CARGO_UNSTABLE_BUILD_STD", "core");
@@ -267,13 +269,13 @@ fn cross_cargo(toolchain: &Toolchain) -> (Command, PathBuf) {
         }
     };
     cmd.env("CARGO_TARGET_DIR", &target_dir);
-    (cmd, target_dir)
+    Ok((cmd, target_dir))
 }
 
-/// `PATH` with `/usr/bin` first.
-fn debian_first_path() -> std::ffi::OsString {
+/// `PATH` with `linker` (the folder of `rust-lld`) and `/usr/bin` first.
+fn debian_first_path(linker: &Path) -> std::ffi::OsString {
     let rest = std::env::var_os("PATH").unwrap_or_default();
-    let mut dirs = vec![PathBuf::from("/usr/bin")];
+    let mut dirs = vec![linker.to_path_buf(), PathBuf::from("/usr/bin")];
     dirs.extend(std::env::split_paths(&rest));
     std::env::join_paths(dirs).unwrap_or(rest)
 }
@@ -282,7 +284,7 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
     let flash = args.iter().any(|a| a == "--run");
     let lint = args.iter().any(|a| a == "--clippy");
     let toolchain = toolchain::resolve(&toolchain::FIRMWARE)?;
-    let (mut cmd, target_dir) = cross_cargo(&toolchain);
+    let (mut cmd, target_dir) = cross_cargo(&toolchain)?;
     let task = match (lint, flash) {
         (true, _) => "clippy",
         (false, true) => "run",
@@ -398,7 +400,7 @@ fn target_test(args: &[String]) -> Result<(), String> {
         started.elapsed().as_secs_f64()
     );
     let toolchain = toolchain::resolve(&toolchain::FIRMWARE)?;
-    let (mut cmd, target_dir) = cross_cargo(&toolchain);
+    let (mut cmd, target_dir) = cross_cargo(&toolchain)?;
     cmd.env("TRIBO_TARGET_BUNDLE", &bundle).args([
         "build",
         "-p",

@@ -21,7 +21,7 @@ pub enum Part {
     /// The standard library's sources (`core` for the firmware, `std` for Windows).
     CoreSource,
     StdSource,
-    /// `rust-lld` (or `ld.lld-22`), the firmware's linker.
+    /// LLVM's `lld` (package `lld-22`), the firmware's linker under the name `rust-lld`.
     Lld,
     /// `cargo-clippy`, for linting the firmware for its target.
     Clippy,
@@ -118,6 +118,28 @@ pub enum Toolchain {
 pub const DEBIAN_CARGO: &str = "/usr/bin/cargo";
 pub const DEBIAN_RUSTC: &str = "/usr/bin/rustc";
 const DEBIAN_LIBRARY: &str = "/usr/lib/rustlib/src/rust/library";
+/// LLVM's multi-flavour linker from `lld-22`.
+pub const DEBIAN_LLD: &str = "/usr/lib/llvm-22/bin/lld";
+
+/// A folder (under `target_dir`) holding `rust-lld`, a link to Debian's lld.
+///
+/// The ARM targets name their linker `rust-lld`, which rustup ships inside its sysroot and Debian
+/// does not ship at all; lld under that name takes the `-flavor gnu` rustc passes to it.
+pub fn debian_linker_dir(target_dir: &Path) -> Result<PathBuf, String> {
+    let dir = target_dir.join("linker");
+    let link = dir.join("rust-lld");
+    if std::fs::read_link(&link).is_ok_and(|t| t == Path::new(DEBIAN_LLD)) {
+        return Ok(dir);
+    }
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let _ = std::fs::remove_file(&link);
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(DEBIAN_LLD, &link)
+        .map_err(|e| format!("cannot link {} to {DEBIAN_LLD}: {e}", link.display()))?;
+    #[cfg(not(unix))]
+    return Err("Debian's toolchain is for Debian".into());
+    Ok(dir)
+}
 
 /// Reads the machine.
 pub fn machine() -> Machine {
@@ -132,7 +154,7 @@ pub fn machine() -> Machine {
     if Path::new(DEBIAN_LIBRARY).join("std").is_dir() {
         debian.push(Part::StdSource);
     }
-    if has("/usr/bin/rust-lld") || has("/usr/bin/ld.lld-22") {
+    if has(DEBIAN_LLD) {
         debian.push(Part::Lld);
     }
     if has("/usr/bin/cargo-clippy") {
