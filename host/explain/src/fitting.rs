@@ -105,8 +105,13 @@ pub fn named_params(data: &Prepared, spec: &Spec, p: &[f64]) -> BTreeMap<String,
         m.insert(format!("mu{j}"), a);
         m.insert(format!("p{j}_si"), b);
     }
+    m.insert("start_scale".into(), spec.start_scale(p));
     if spec.apparatus {
         m.insert("apparatus_mu1".into(), spec.apparatus_mu1(p));
+    }
+    if let Some(tau_f) = spec.lowpass_tau(p) {
+        m.insert("force_lowpass_tau".into(), tau_f);
+        m.insert("force_lowpass_s".into(), rig.t_of_tau(tau_f));
     }
     for e in &spec.effects {
         m.extend(effect_params(data, spec, p, *e));
@@ -151,6 +156,11 @@ pub fn effect_params(data: &Prepared, spec: &Spec, p: &[f64], e: Effect) -> BTre
         Effect::SensorLag => {
             m.insert("delay_tau".into(), q[0]);
             m.insert("delay_s".into(), rig.t_of_tau(q[0]));
+        }
+        Effect::RunningIn => {
+            let span_s = rig.t_of_tau(data.tau.last().copied().unwrap_or(0.0).max(1e-12));
+            m.insert("dmu0_over_motion".into(), q[0]);
+            m.insert("dmu0_dt_per_s".into(), q[0] / span_s);
         }
     }
     m
@@ -200,6 +210,15 @@ pub(super) fn starts_for(
             }
         }
         Effect::ThermalDrift => vec![with(&[0.0])],
+        // A drift of either sign, from a level that stays the average one.
+        Effect::RunningIn => [0.0, 0.1, -0.1]
+            .into_iter()
+            .map(|f| {
+                let mut p = with(&[f * mu0]);
+                p[0] -= 0.5 * f * mu0;
+                p
+            })
+            .collect(),
         Effect::SensorLag => {
             let l = d.force_lag_s.unwrap_or(0.0).max(0.0);
             vec![with(&[data.rig.tau_of_t(l).max(0.2 * data.dtau)])]
