@@ -154,16 +154,18 @@ pub struct Explanation {
 pub struct ForceLowpass {
     /// `record`, `option` or `fitted`.
     pub source: String,
-    /// Cut-off (Hz); `null` for no filter (stated none, or a fitted time constant of 0).
+    /// Cut-off (Hz); `null` for no filter (stated none, or a fitted time constant at its bound:
+    /// below a quarter of the sample interval, a filter the samples cannot show).
     pub cutoff_hz: Option<f64>,
     /// Its standard error when fitted (delta method on the time constant; `null` otherwise).
     pub cutoff_hz_se: Option<f64>,
     /// Time constant `1/(2π f_c)` of the filter (s; 0 = no filter).
     pub time_constant_s: f64,
-    /// Its standard error when fitted.
+    /// Its standard error when fitted (`null` at the bound, where it is held for the others' ±).
     pub time_constant_s_se: Option<f64>,
-    /// When fitted: the lowest cut-off within 2σ (Hz; `1/(2π (T + 2σ))`): the filter is at least
-    /// that fast. `null` when stated.
+    /// When fitted: the lowest cut-off the record allows at 2σ (Hz): `1/(2π (T + 2σ))` for a
+    /// filter found; at the bound, from the force misfit's profile ([`lowpass_bound`]). `null`
+    /// when stated, or when the record rules out no filter up to the largest explored.
     pub cutoff_at_least_hz: Option<f64>,
 }
 
@@ -181,7 +183,13 @@ impl ForceLowpass {
                     .get("force_lowpass_s")
                     .copied()
                     .filter(|v| v.is_finite());
-                let cutoff = (tc > 0.0).then(|| 1.0 / (two_pi * tc));
+                let at_bound = lowpass_at_bound(data, &m.spec, &m.p);
+                let cutoff = (tc > 0.0 && !at_bound).then(|| 1.0 / (two_pi * tc));
+                let at_least = if at_bound {
+                    lowpass_bound(data, m).map(|t| 1.0 / (two_pi * t))
+                } else {
+                    se.map(|se| 1.0 / (two_pi * (tc + 2.0 * se)))
+                };
                 Some(ForceLowpass {
                     source: source.into(),
                     cutoff_hz: cutoff,
@@ -191,7 +199,7 @@ impl ForceLowpass {
                     },
                     time_constant_s: tc,
                     time_constant_s_se: se,
-                    cutoff_at_least_hz: se.map(|se| 1.0 / (two_pi * (tc + 2.0 * se))),
+                    cutoff_at_least_hz: at_least,
                 })
             }
             None => Some(ForceLowpass {
@@ -208,28 +216,22 @@ impl ForceLowpass {
     /// One line of text.
     pub fn text(&self) -> String {
         match (self.source.as_str(), self.cutoff_hz) {
-            ("fitted", fc) => {
-                let tc = self.time_constant_s;
-                let se = self.time_constant_s_se.unwrap_or(f64::NAN);
-                let resolved = se.is_finite() && tc > 2.0 * se;
-                match fc {
-                    Some(fc) if resolved => format!(
-                        "{fc:.0} ± {:.0} Hz (fitted: the record does not state it; time constant \
-                         {:.3} ± {:.3} ms)",
-                        self.cutoff_hz_se.unwrap_or(f64::NAN),
-                        1e3 * tc,
-                        1e3 * se
-                    ),
-                    _ => format!(
-                        "none found (fitted: the record does not state it; time constant {:.3} ± \
-                         {:.3} ms: a cut-off above {})",
-                        1e3 * tc,
-                        1e3 * se,
-                        self.cutoff_at_least_hz
-                            .map_or("?".into(), |f| format!("{f:.0} Hz"))
-                    ),
-                }
-            }
+            ("fitted", Some(fc)) => format!(
+                "{fc:.0} ± {:.0} Hz (fitted: the record does not state it; time constant {:.3} ± \
+                 {:.3} ms)",
+                self.cutoff_hz_se.unwrap_or(f64::NAN),
+                1e3 * self.time_constant_s,
+                1e3 * self.time_constant_s_se.unwrap_or(f64::NAN)
+            ),
+            ("fitted", None) => format!(
+                "none found (fitted: the record does not state it; time constant {:.4} ms, below a \
+                 quarter of a sample; {})",
+                1e3 * self.time_constant_s,
+                self.cutoff_at_least_hz.map_or(
+                    "no cut-off within the explored range is ruled out".into(),
+                    |f| format!("a cut-off below {f:.0} Hz is ruled out at 2σ")
+                )
+            ),
             (src, Some(fc)) => format!(
                 "{fc} Hz (stated by the {})",
                 if src == "option" {

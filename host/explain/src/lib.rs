@@ -26,8 +26,8 @@
 //!
 //! The best candidate is added and the search repeats. Once the model is at the noise floor, only
 //! an effect another channel points to is still tried: thermal drift, when the temperature column
-//! moves over the motion ([`diag::Diagnostics::temperature_moves`]), and running-in (a trend of
-//! μ0 over the whole motion hides below the 1.5 × floor rule). When nothing more qualifies
+//! moves over the motion ([`diag::Diagnostics::temperature_moves`]). (The first round tries every
+//! candidate, at the floor or not.) When nothing more qualifies
 //! and the misfit is still above 1.5 × the noise floor in some channel, the answer is
 //! "unexplained: N % of the gap remains; not one of the known effects" — never a name the
 //! evidence does not support.
@@ -51,7 +51,9 @@ pub use model::{Effect, ExplainError, Prepared, Spec};
 /// Re-exported so that users can read [`Explanation::to_json`] output with the same version.
 pub use serde_json;
 
-use model::{gap_of, residuals, rms, simulate_spec, weighted, RIG_FORCE_CUTOFF_HZ};
+use model::{
+    gap_of, lowpass, residuals, rms, simulate_spec, weighted, LOWPASS_TAU_MAX, RIG_FORCE_CUTOFF_HZ,
+};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use tribo_physics::identify::{
@@ -205,20 +207,17 @@ pub fn explain_with_progress(
     for round in 0..opts.max_steps {
         // Once the model is at the noise floor, the envelope and the force have nothing left to
         // point at: an effect is still tried only where another channel points to it (thermal
-        // drift when the temperature column moves over the motion) or where a misfit below the
-        // 1.5 × floor rule can still hide a trend (running-in: a Coulomb level drifting in time
-        // over the whole motion), and it must still pass the same tests. A second velocity term fitted to a misfit below the noise is not a finding.
+        // drift when the temperature column moves over the motion), and it must still pass the
+        // same tests. (Every candidate, running-in included, is tried in the first round, at
+        // the floor or not: a drift of μ0 over the whole motion can hide below the 1.5 × floor
+        // rule.) A second velocity term fitted to a misfit below the noise is not a finding.
         let settled = round > 0 && cur.adequate(&data);
         let todo: Vec<Effect> = opts
             .candidates
             .iter()
             .copied()
             .filter(|&e| cur.spec.can_add(e, data.has_force(), data.has_temp()))
-            .filter(|&e| {
-                !settled
-                    || (e == Effect::ThermalDrift && diagnostics.temperature_moves())
-                    || e == Effect::RunningIn
-            })
+            .filter(|&e| !settled || (e == Effect::ThermalDrift && diagnostics.temperature_moves()))
             // A Coulomb level that moves while the plate's temperature moves is read as thermal
             // drift first; running-in is what a drift in time leaves beside it.
             .filter(|&e| {

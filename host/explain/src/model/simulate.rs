@@ -11,6 +11,8 @@ pub struct Simulated {
     pub ydot: Vec<f64>,
     /// Force `F/N` as the force channel would read it (low-pass, delay), every sample.
     pub f_meas: Vec<f64>,
+    /// The contact's force `F/N` before the channel (no low-pass, no delay), every sample.
+    pub f_true: Vec<f64>,
 }
 
 /// Length of the τ segments over which a drifting Coulomb level is held constant (and the
@@ -133,7 +135,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
     let mut fm = match (spec.lowpass_tau(p), data.force_cutoff_hz) {
         (Some(tau_f), _) => lowpass(&f, tau_f, data.dtau),
         (None, Some(fc)) => butterworth2(&f, fc, data.rate_hz),
-        (None, None) => f,
+        (None, None) => f.clone(),
     };
     if let Some(d) = spec.effect_params(Effect::SensorLag, p) {
         fm = delay(&fm, d[0] / data.dtau);
@@ -142,6 +144,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
         y,
         ydot,
         f_meas: fm,
+        f_true: f,
     })
 }
 
