@@ -131,6 +131,10 @@ pub struct Explanation {
     /// Candidates that explained the remainder about equally well (no clear winner), if the
     /// search stopped for that reason.
     pub ambiguous: Vec<String>,
+    /// Where the final model still disagrees with the record, in words (each channel above its
+    /// floor: the time third and amplitude band where it misses most, and a force misfit that
+    /// differs between the sliding directions); empty when it is at the floor.
+    pub disagreement: Vec<String>,
     /// The force channel's low-pass of the final model (Hz; `null` = none, or no force channel).
     pub force_cutoff_hz: Option<f64>,
     /// Where it comes from: `record`, `option`, `fitted` (the record does not state it: a
@@ -362,14 +366,19 @@ impl Explanation {
         }
         let _ = writeln!(s, "final gap {:.3e}", self.gap_final);
         let _ = writeln!(s, "{}", self.answer());
+        if !self.disagreement.is_empty() {
+            let _ = writeln!(s, "where the model still disagrees:");
+            for d in &self.disagreement {
+                let _ = writeln!(s, "    - {d}");
+            }
+        }
         if matches!(
             self.conclusion,
             Conclusion::Unexplained | Conclusion::PartlyExplained
         ) {
             let _ = writeln!(
                 s,
-                "(known effects: {}; see the diagnostics in --json or --report for where the model \
-                 disagrees)",
+                "(known effects: {}; more diagnostics in --json or --report)",
                 Effect::ALL.map(|e| e.name()).join(", ")
             );
         }

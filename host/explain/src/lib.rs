@@ -338,6 +338,11 @@ pub fn explain_with_progress(
         noise_floor_envelope: data.env_floor(),
         noise_floor_force: data.has_force().then(|| data.force_floor()),
         unexplained_fraction,
+        disagreement: if conclusion == Conclusion::BaseAdequate {
+            Vec::new()
+        } else {
+            diag::locate(&data, &cur)
+        },
         steps,
         ambiguous,
         force_cutoff_hz: lowpass.as_ref().and_then(|l| l.cutoff_hz),

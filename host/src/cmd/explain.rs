@@ -52,7 +52,9 @@ unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_be
 `gap_after`, `evidence`, `params` and `params_se`), `gap_initial`, `gap_final`, `noise_floor`,
 `unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source` (`record`, `option`,
 `fitted`, `none`), `force_lowpass` (`source`, `cutoff_hz` and `cutoff_hz_se`, `time_constant_s` and
-`time_constant_s_se`, `cutoff_at_least_hz`), `base_fit` (the base law's
+`time_constant_s_se`, `cutoff_at_least_hz`), `disagreement` (where the final model still misses,
+in sentences: each channel above its floor, the time third and amplitude band where it misses
+most, a force misfit common to both sliding directions), `base_fit` (the base law's
 constants: `tribo fit`'s result on the same record, the one estimator of a law), `base_model` (the
 model of every channel the effects are added to) and `final_model`, `cross_check` (the on-board
 result beside the host's, `null` for other base laws than coulomb-viscous),
