@@ -24,6 +24,12 @@ fn dir(name: &str) -> PathBuf {
 /// The real rig (N = 0.3 N, x0 = 667 µm, 10 kHz, 16 bits, 300 Hz force low-pass), Coulomb–viscous
 /// friction, and a force channel that lags the vibrometer by `lag_s`.
 fn write_record(path: &Path, lag_s: f64) {
+    write_record_with(path, lag_s, Some(300.0));
+}
+
+/// [`write_record`] with the force channel's low-pass `cutoff` (`None`: no filter, and the record
+/// states none).
+fn write_record_with(path: &Path, lag_s: f64, cutoff: Option<f64>) {
     let spec = RecordSpec {
         rig: Rig::REAL,
         x0_m: 667e-6,
@@ -33,6 +39,7 @@ fn write_record(path: &Path, lag_s: f64) {
     };
     let sensor = SensorModel {
         force_lag_s: lag_s,
+        force_cutoff_hz: cutoff,
         seed: 5,
         ..SensorModel::default()
     };
@@ -83,6 +90,10 @@ fn json_contract_and_report() {
     assert!(g1 <= 0.5 * g0, "gap {g0} -> {g1}");
     let delay = s["params"]["delay_s"].as_f64().unwrap();
     assert!((delay - 3e-3).abs() < 2e-4, "delay {delay}");
+    // The stated low-pass, as stated.
+    assert_eq!(v["force_lowpass"]["source"], "record");
+    assert_eq!(v["force_lowpass"]["cutoff_hz"].as_f64(), Some(300.0));
+    assert!(v["force_lowpass"]["cutoff_hz_se"].is_null());
     for f in [
         "index.html",
         "envelope.svg",
@@ -103,6 +114,47 @@ fn json_contract_and_report() {
     }
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
     assert!(html.contains("src=\"envelope.svg\"") && html.contains("sensor-lag"));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A force channel without a filter, whose record states none: the low-pass is fitted, found
+/// absent and printed with its bound, in text and JSON; the 1 ms sensor delay is measured as such,
+/// with a ± that the filter's confusion with a delay at its bound does not inflate.
+#[test]
+fn an_unstated_lowpass_is_fitted_and_printed() {
+    let d = dir("nofilter");
+    let rec = d.join("rec.csv");
+    write_record_with(&rec, 1e-3, None);
+    assert!(!std::fs::read_to_string(&rec)
+        .unwrap()
+        .contains("force_cutoff_hz"));
+    let out = tribo(&["explain", rec.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(
+        text.contains("force channel low-pass: none found (fitted: the record does not state it"),
+        "{text}"
+    );
+    assert!(text.contains("start_scale = ") && text.contains("apparatus_mu1 = "));
+    let out = tribo(&["explain", rec.to_str().unwrap(), "--json"]);
+    let v: Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(v["force_cutoff_source"], "fitted");
+    assert_eq!(v["force_lowpass"]["source"], "fitted");
+    // At its bound (below a quarter of a sample): no cut-off, no linear ±, a profile bound.
+    assert!(v["force_lowpass"]["cutoff_hz"].is_null());
+    assert!(v["force_lowpass"]["time_constant_s_se"].is_null());
+    assert!(
+        v["force_lowpass"]["cutoff_at_least_hz"].as_f64().unwrap() > 1000.0,
+        "{}",
+        v["force_lowpass"]
+    );
+    assert_eq!(v["missing_effects"], serde_json::json!(["sensor-lag"]));
+    let delay = v["steps"][0]["params"]["delay_s"].as_f64().unwrap();
+    let se = v["steps"][0]["params_se"]["delay_s"].as_f64().unwrap();
+    assert!(
+        (delay - 1e-3).abs() < (3.0 * se).max(5e-5),
+        "delay {delay} ± {se}"
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 

@@ -9,6 +9,7 @@ use tribo_physics::envelope::peaks;
 use tribo_physics::identify::{windowed_fits, FitOptions, LawSpec};
 use tribo_physics::integrate::Method;
 use tribo_physics::sensor::delay;
+use tribo_physics::uncertainty::effective_count;
 
 /// Envelope residual statistics over a band.
 #[derive(Debug, Clone, Serialize)]
@@ -239,6 +240,142 @@ pub fn frequency_slope(data: &Prepared) -> Option<f64> {
         return None;
     }
     linreg(&a2, &w).map(|(s, _)| s)
+}
+
+/// Where a model still disagrees with the record, in words a person can act on: each channel whose
+/// misfit stands above [`tribo_physics::identify::ADEQUATE_RATIO`] × its noise floor, the part of
+/// the motion (time third, amplitude band) where it is largest, and — on the force channel — a
+/// misfit that differs between the two sliding directions. Empty when every channel is at its
+/// floor.
+pub fn locate(data: &Prepared, m: &FittedModel) -> Vec<String> {
+    use tribo_physics::identify::ADEQUATE_RATIO;
+    let mut out = Vec::new();
+    let t_end = data.tau.last().copied().unwrap_or(0.0).max(1e-12);
+    let secs = |tau: f64| data.rig.t_of_tau(tau);
+    // (name, residuals, their sample indices, floor)
+    let channels: [(&str, &[f64], &[usize], f64); 2] = [
+        ("envelope", &m.env_resid, &data.env_idx, data.env_floor()),
+        ("force", &m.force_resid, &data.f_idx, data.force_floor()),
+    ];
+    for (name, r, idx, floor) in channels {
+        if r.is_empty() || floor <= 0.0 {
+            continue;
+        }
+        let ratio = rms(r) / floor;
+        if ratio <= ADEQUATE_RATIO {
+            continue;
+        }
+        // By time thirds.
+        let third = |k: usize| -> f64 {
+            let v: Vec<f64> = r
+                .iter()
+                .zip(idx)
+                .filter(|(_, &i)| ((3.0 * data.tau[i] / t_end) as usize).min(2) == k)
+                .map(|(x, _)| *x)
+                .collect();
+            rms(&v) / floor
+        };
+        let by_time = [third(0), third(1), third(2)];
+        let (kmax, rmax) = by_time
+            .iter()
+            .copied()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap_or((0, ratio));
+        let what = if name == "envelope" {
+            "the envelope (displacement and velocity)"
+        } else {
+            "the friction force channel"
+        };
+        out.push(format!(
+            "{what} misses by {ratio:.2} × its noise floor, most in the {} third of the motion \
+             (t = {:.2}–{:.2} s: {rmax:.2} × the floor; {:.2}, {:.2}, {:.2} by thirds)",
+            ["first", "middle", "last"][kmax],
+            secs(kmax as f64 * t_end / 3.0),
+            secs((kmax + 1) as f64 * t_end / 3.0),
+            by_time[0],
+            by_time[1],
+            by_time[2]
+        ));
+        if name == "envelope" {
+            let edges = [1.01, 0.6, 0.3, 0.0];
+            let bands: Vec<(f64, f64, f64)> = edges
+                .windows(2)
+                .map(|w| {
+                    let v: Vec<f64> = r
+                        .iter()
+                        .zip(&data.a_meas)
+                        .filter(|(_, &a)| a / data.a0 <= w[0] && a / data.a0 > w[1])
+                        .map(|(x, _)| *x)
+                        .collect();
+                    (w[1], w[0].min(1.0), rms(&v) / floor)
+                })
+                .collect();
+            if let Some((lo, hi, b)) = bands.iter().copied().max_by(|a, b| a.2.total_cmp(&b.2)) {
+                out.push(format!(
+                    "the envelope's misfit is largest at amplitudes of {:.0}–{:.0} % of the \
+                     release ({b:.2} × the floor there)",
+                    100.0 * lo,
+                    100.0 * hi
+                ));
+            }
+        } else {
+            // The force misfit by sliding direction, away from the reversals.
+            let vmax = idx.iter().map(|&i| data.ydot[i].abs()).fold(0.0, f64::max);
+            let side = |sign: f64| -> Vec<f64> {
+                r.iter()
+                    .zip(idx)
+                    .filter(|(_, &i)| sign * data.ydot[i] > 0.3 * vmax)
+                    .map(|(x, _)| -*x)
+                    .collect()
+            };
+            let (fw, bw) = (side(1.0), side(-1.0));
+            if fw.len() >= 10 && bw.len() >= 10 {
+                let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+                let se = |v: &[f64]| {
+                    let mu = mean(v);
+                    let c: Vec<f64> = v.iter().map(|x| x - mu).collect();
+                    rms(&c) / effective_count(&c).max(1.0).sqrt()
+                };
+                let (mf, mb) = (mean(&fw), mean(&bw));
+                let s = se(&fw).hypot(se(&bw));
+                let newton = data.a0 * data.rig.load_n;
+                // Measured − model, in N: the same sign both ways is a constant force, i.e. a
+                // friction level that differs between the directions (forward μ0 + δ, backward
+                // μ0 − δ) or an offset of the channel's zero; opposite signs, a level that is
+                // too high or too low both ways.
+                let common = 0.5 * (mf + mb);
+                let level = 0.5 * (mf - mb);
+                if common.abs() > 4.0 * 0.5 * s {
+                    out.push(format!(
+                        "the measured friction force stands {:+.2e} N from the model in both \
+                         sliding directions (forward {:+.2e} N, backward {:+.2e} N; {:.0}σ): a \
+                         friction level that depends on the sliding direction (the {} one \
+                         higher by {:.2e} N, about {:.0} % of the mean level), or an offset of \
+                         the force channel's zero",
+                        common * newton,
+                        mf * newton,
+                        mb * newton,
+                        common.abs() / (0.5 * s),
+                        if common > 0.0 { "forward" } else { "backward" },
+                        2.0 * common.abs() * newton,
+                        100.0 * 2.0 * common.abs() * data.a0
+                            / m.spec.mu(&m.p).first().copied().unwrap_or(f64::NAN).abs()
+                    ));
+                }
+                if level.abs() > 4.0 * 0.5 * s {
+                    out.push(format!(
+                        "the measured friction level is {} than the model's by {:.2e} N in both \
+                         sliding directions ({:.0}σ)",
+                        if level > 0.0 { "higher" } else { "lower" },
+                        level.abs() * newton,
+                        level.abs() / (0.5 * s)
+                    ));
+                }
+            }
+        }
+    }
+    out
 }
 
 #[cfg(test)]

@@ -131,11 +131,18 @@ pub struct Explanation {
     /// Candidates that explained the remainder about equally well (no clear winner), if the
     /// search stopped for that reason.
     pub ambiguous: Vec<String>,
-    /// The force channel's low-pass used for the simulated force (Hz; `null` = none).
+    /// Where the final model still disagrees with the record, in words (each channel above its
+    /// floor: the time third and amplitude band where it misses most, and a force misfit that
+    /// differs between the sliding directions); empty when it is at the floor.
+    pub disagreement: Vec<String>,
+    /// The force channel's low-pass of the final model (Hz; `null` = none, or no force channel).
     pub force_cutoff_hz: Option<f64>,
-    /// How it was chosen: `record`, `option`, `assumed` (the record did not say: the better of
-    /// none and the rig's 300 Hz), or `none` (no force channel).
+    /// Where it comes from: `record`, `option`, `fitted` (the record does not state it: a
+    /// parameter of every model of the search), or `none` (no force channel).
     pub force_cutoff_source: String,
+    /// The force channel's low-pass in full, with its ± when fitted (`null` without a force
+    /// channel).
+    pub force_lowpass: Option<ForceLowpass>,
     /// Candidate scores per round.
     pub rounds: Vec<Vec<Candidate>>,
     /// The base model.
@@ -144,6 +151,109 @@ pub struct Explanation {
     pub final_model: FittedModel,
     /// Disagreement measures of the base model.
     pub diagnostics: diag::Diagnostics,
+}
+
+/// The force channel's low-pass: stated (by the record or the caller) or fitted.
+#[derive(Debug, Clone, Serialize)]
+pub struct ForceLowpass {
+    /// `record`, `option` or `fitted`.
+    pub source: String,
+    /// Cut-off (Hz); `null` for no filter (stated none, or a fitted time constant at its bound:
+    /// below a quarter of the sample interval, a filter the samples cannot show).
+    pub cutoff_hz: Option<f64>,
+    /// Its standard error when fitted (delta method on the time constant; `null` otherwise).
+    pub cutoff_hz_se: Option<f64>,
+    /// Time constant `1/(2π f_c)` of the filter (s; 0 = no filter).
+    pub time_constant_s: f64,
+    /// Its standard error when fitted (`null` at the bound, where it is held for the others' ±).
+    pub time_constant_s_se: Option<f64>,
+    /// When fitted: the lowest cut-off the record allows at 2σ (Hz): `1/(2π (T + 2σ))` for a
+    /// filter found; at the bound, from the force misfit's profile ([`lowpass_bound`]). `null`
+    /// when stated, or when the record rules out no filter up to the largest explored.
+    pub cutoff_at_least_hz: Option<f64>,
+}
+
+impl ForceLowpass {
+    /// The low-pass of the final model `m` (`None` without a force channel).
+    pub fn of(data: &Prepared, m: &FittedModel, source: &str) -> Option<ForceLowpass> {
+        if !data.has_force() {
+            return None;
+        }
+        let two_pi = 2.0 * std::f64::consts::PI;
+        match m.params.get("force_lowpass_s") {
+            Some(&tc) => {
+                let se = m
+                    .params_se
+                    .get("force_lowpass_s")
+                    .copied()
+                    .filter(|v| v.is_finite());
+                let at_bound = lowpass_at_bound(data, &m.spec, &m.p);
+                let cutoff = (tc > 0.0 && !at_bound).then(|| 1.0 / (two_pi * tc));
+                let at_least = if at_bound {
+                    lowpass_bound(data, m).map(|t| 1.0 / (two_pi * t))
+                } else {
+                    se.map(|se| 1.0 / (two_pi * (tc + 2.0 * se)))
+                };
+                Some(ForceLowpass {
+                    source: source.into(),
+                    cutoff_hz: cutoff,
+                    cutoff_hz_se: match (cutoff, se) {
+                        (Some(fc), Some(se)) => Some(fc * se / tc),
+                        _ => None,
+                    },
+                    time_constant_s: tc,
+                    time_constant_s_se: se,
+                    cutoff_at_least_hz: at_least,
+                })
+            }
+            None => Some(ForceLowpass {
+                source: source.into(),
+                cutoff_hz: data.force_cutoff_hz,
+                cutoff_hz_se: None,
+                time_constant_s: data.force_cutoff_hz.map_or(0.0, |f| 1.0 / (two_pi * f)),
+                time_constant_s_se: None,
+                cutoff_at_least_hz: None,
+            }),
+        }
+    }
+
+    /// One line of text.
+    pub fn text(&self) -> String {
+        match (self.source.as_str(), self.cutoff_hz) {
+            ("fitted", Some(fc)) => format!(
+                "{fc:.0} ± {:.0} Hz (fitted: the record does not state it; time constant {:.3} ± \
+                 {:.3} ms)",
+                self.cutoff_hz_se.unwrap_or(f64::NAN),
+                1e3 * self.time_constant_s,
+                1e3 * self.time_constant_s_se.unwrap_or(f64::NAN)
+            ),
+            ("fitted", None) => format!(
+                "none found (fitted: the record does not state it; time constant {:.4} ms, below a \
+                 quarter of a sample; {})",
+                1e3 * self.time_constant_s,
+                self.cutoff_at_least_hz.map_or(
+                    "no cut-off within the explored range is ruled out".into(),
+                    |f| format!("a cut-off below {f:.0} Hz is ruled out at 2σ")
+                )
+            ),
+            (src, Some(fc)) => format!(
+                "{fc} Hz (stated by the {})",
+                if src == "option" {
+                    "--force-cutoff-hz option"
+                } else {
+                    "record"
+                }
+            ),
+            (src, None) => format!(
+                "none (stated by the {})",
+                if src == "option" {
+                    "--force-cutoff-hz option"
+                } else {
+                    "record"
+                }
+            ),
+        }
+    }
 }
 
 pub(super) fn pm(v: f64, se: f64) -> String {
@@ -217,18 +327,26 @@ impl Explanation {
             f.verdict.name(),
             f.gap_ratio()
         );
-        if let Some(a) = self.base_model.params.get("apparatus_mu1") {
-            let se = self
-                .base_model
-                .params_se
-                .get("apparatus_mu1")
-                .copied()
-                .unwrap_or(f64::NAN);
+        // The nuisances of the measurement chain, as the final model has them.
+        let fm = &self.final_model;
+        let nse = |k: &str| fm.params_se.get(k).copied().unwrap_or(f64::NAN);
+        let _ = writeln!(s, "measurement chain (fitted with the final model):");
+        if let Some(a) = fm.params.get("start_scale") {
+            let _ = writeln!(
+                s,
+                "    start_scale = {} (correction of the release amplitude read from the first sample)",
+                pm(*a, nse("start_scale"))
+            );
+        }
+        if let Some(a) = fm.params.get("apparatus_mu1") {
             let _ = writeln!(
                 s,
                 "    apparatus_mu1 = {} (damping of the blades, which the force channel does not see)",
-                pm(*a, se)
+                pm(*a, nse("apparatus_mu1"))
             );
+        }
+        if let Some(l) = &self.force_lowpass {
+            let _ = writeln!(s, "    force channel low-pass: {}", l.text());
         }
         for st in &self.steps {
             let _ = writeln!(
@@ -246,25 +364,21 @@ impl Explanation {
                 let _ = writeln!(s, "    {k} = {}", pm(*v, se));
             }
         }
-        if self.force_cutoff_source == "assumed" {
-            let _ = writeln!(
-                s,
-                "force channel low-pass: {} (assumed: the record does not say; the better fit of \
-                 none and the rig's {RIG_FORCE_CUTOFF_HZ} Hz)",
-                self.force_cutoff_hz
-                    .map_or("none".into(), |f| format!("{f} Hz"))
-            );
-        }
         let _ = writeln!(s, "final gap {:.3e}", self.gap_final);
         let _ = writeln!(s, "{}", self.answer());
+        if !self.disagreement.is_empty() {
+            let _ = writeln!(s, "where the model still disagrees:");
+            for d in &self.disagreement {
+                let _ = writeln!(s, "    - {d}");
+            }
+        }
         if matches!(
             self.conclusion,
             Conclusion::Unexplained | Conclusion::PartlyExplained
         ) {
             let _ = writeln!(
                 s,
-                "(known effects: {}; see the diagnostics in --json or --report for where the model \
-                 disagrees)",
+                "(known effects: {}; more diagnostics in --json or --report)",
                 Effect::ALL.map(|e| e.name()).join(", ")
             );
         }

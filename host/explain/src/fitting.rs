@@ -66,25 +66,117 @@ pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> 
 /// Standard errors of a fitted model's parameter vector: the Jacobian of the weighted residuals at
 /// the optimum and the HAC sandwich with the envelope and force channels as independent blocks
 /// (each channel's own correlation accounted for). `NaN` where they cannot be determined.
+///
+/// A force low-pass at its bound ([`lowpass_at_bound`]: a time constant below a quarter of the
+/// sample interval, a filter the samples cannot show but as a delay) is held there: its first-order
+/// effect is a delay, which a sensor lag gives as well, and the linear covariance of a parameter
+/// at a bound would spread that confusion onto the lag's ±. Its own bound comes from
+/// [`lowpass_bound`]. Its standard error is `NaN`.
 pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
     let r = weighted(data, &m.env_resid, &m.force_resid);
     let ne = m.env_resid.len();
     let blocks = [0..ne, ne..r.len()];
-    let scales = m.spec.scales();
-    jacobian(
-        |p| {
-            let s = simulate_spec(data, &m.spec, p).ok()?;
+    let held = lowpass_at_bound(data, &m.spec, &m.p)
+        .then(|| m.spec.lowpass_index())
+        .flatten();
+    let free: Vec<usize> = (0..m.p.len()).filter(|&i| Some(i) != held).collect();
+    let full = |q: &[f64]| {
+        let mut p = m.p.clone();
+        for (&i, &v) in free.iter().zip(q) {
+            p[i] = v;
+        }
+        p
+    };
+    let q0: Vec<f64> = free.iter().map(|&i| m.p[i]).collect();
+    let all_scales = m.spec.scales();
+    let scales: Vec<f64> = free.iter().map(|&i| all_scales[i]).collect();
+    let se = jacobian(
+        |q| {
+            let s = simulate_spec(data, &m.spec, &full(q)).ok()?;
             let (e, f) = residuals(data, &s);
             Some(weighted(data, &e, &f))
         },
-        &m.p,
+        &q0,
         &r,
         1e-3,
         &scales,
     )
     .and_then(|j| hac_covariance_blocks(&j, &r, &blocks))
     .map(|c| standard_errors(&c))
-    .unwrap_or_else(|| vec![f64::NAN; m.p.len()])
+    .unwrap_or_else(|| vec![f64::NAN; q0.len()]);
+    let mut out = vec![f64::NAN; m.p.len()];
+    for (&i, v) in free.iter().zip(se) {
+        out[i] = v;
+    }
+    out
+}
+
+/// Whether a fitted force low-pass sits at its bound: a time constant below a quarter of the
+/// sample interval (a cut-off above 0.64 × the sampling rate, beyond what the samples resolve).
+pub fn lowpass_at_bound(data: &Prepared, spec: &Spec, p: &[f64]) -> bool {
+    spec.lowpass_tau(p).is_some_and(|t| t < 0.25 * data.dtau)
+}
+
+/// The fastest force low-pass the record rules out at 2σ, for a low-pass found at its bound: the
+/// smallest time constant (s) at which the force misfit grows by 4 in the units of the evidence
+/// (`Σ r² / (s² n / n_eff)`), with the delay of the channel (when a sensor lag is in the model)
+/// re-optimised for every trial value, the rest of the model held. `None` if none up to the
+/// largest time constant explored does.
+pub fn lowpass_bound(data: &Prepared, m: &FittedModel) -> Option<f64> {
+    let fm = data.f_meas.as_ref()?;
+    let sim = simulate_spec(data, &m.spec, &m.p).ok()?;
+    let n = data.f_idx.len();
+    if n == 0 {
+        return None;
+    }
+    let has_delay = m.spec.has(Effect::SensorLag);
+    let rss = |tau_f: f64, d: f64| -> f64 {
+        let mut f = lowpass(&sim.f_true, tau_f, data.dtau);
+        if d > 0.0 {
+            f = tribo_physics::sensor::delay(&f, d / data.dtau);
+        }
+        data.f_idx
+            .iter()
+            .map(|&i| (f[i] - fm[i]).powi(2))
+            .sum::<f64>()
+            / (data.a0 * data.a0)
+    };
+    // The best delay for a given low-pass: golden-section search around the fitted delay, which
+    // can shrink by the filter's group delay √2 τ_f.
+    let d_fit = m
+        .spec
+        .effect_params(Effect::SensorLag, &m.p)
+        .map_or(0.0, |q| q[0]);
+    let best = |tau_f: f64| -> f64 {
+        if !has_delay {
+            return rss(tau_f, 0.0);
+        }
+        let (mut lo, mut hi) = ((d_fit - 2.0 * tau_f).max(0.0), d_fit + 0.2 * data.dtau);
+        let g = 0.5 * (5f64.sqrt() - 1.0);
+        for _ in 0..40 {
+            let a = hi - g * (hi - lo);
+            let b = lo + g * (hi - lo);
+            if rss(tau_f, a) < rss(tau_f, b) {
+                hi = b;
+            } else {
+                lo = a;
+            }
+        }
+        rss(tau_f, 0.5 * (lo + hi))
+    };
+    let tau0 = m.spec.lowpass_tau(&m.p).unwrap_or(0.0);
+    let r0 = best(tau0);
+    let n_eff = effective_count(&m.force_resid).max(1.0);
+    let var = (r0 / n as f64).max(data.force_floor().powi(2));
+    let scale = var * n as f64 / n_eff;
+    let mut tau_f = 0.25 * data.dtau;
+    while tau_f <= LOWPASS_TAU_MAX {
+        if (best(tau_f) - r0) / scale >= 4.0 {
+            return Some(data.rig.t_of_tau(tau_f));
+        }
+        tau_f *= 1.25;
+    }
+    None
 }
 
 /// Fills `params_se` of a fitted model.
@@ -105,8 +197,13 @@ pub fn named_params(data: &Prepared, spec: &Spec, p: &[f64]) -> BTreeMap<String,
         m.insert(format!("mu{j}"), a);
         m.insert(format!("p{j}_si"), b);
     }
+    m.insert("start_scale".into(), spec.start_scale(p));
     if spec.apparatus {
         m.insert("apparatus_mu1".into(), spec.apparatus_mu1(p));
+    }
+    if let Some(tau_f) = spec.lowpass_tau(p) {
+        m.insert("force_lowpass_tau".into(), tau_f);
+        m.insert("force_lowpass_s".into(), rig.t_of_tau(tau_f));
     }
     for e in &spec.effects {
         m.extend(effect_params(data, spec, p, *e));
@@ -151,6 +248,11 @@ pub fn effect_params(data: &Prepared, spec: &Spec, p: &[f64], e: Effect) -> BTre
         Effect::SensorLag => {
             m.insert("delay_tau".into(), q[0]);
             m.insert("delay_s".into(), rig.t_of_tau(q[0]));
+        }
+        Effect::RunningIn => {
+            let span_s = rig.t_of_tau(data.tau.last().copied().unwrap_or(0.0).max(1e-12));
+            m.insert("dmu0_over_motion".into(), q[0]);
+            m.insert("dmu0_dt_per_s".into(), q[0] / span_s);
         }
     }
     m
@@ -200,6 +302,15 @@ pub(super) fn starts_for(
             }
         }
         Effect::ThermalDrift => vec![with(&[0.0])],
+        // A drift of either sign, from a level that stays the average one.
+        Effect::RunningIn => [0.0, 0.1, -0.1]
+            .into_iter()
+            .map(|f| {
+                let mut p = with(&[f * mu0]);
+                p[0] -= 0.5 * f * mu0;
+                p
+            })
+            .collect(),
         Effect::SensorLag => {
             let l = d.force_lag_s.unwrap_or(0.0).max(0.0);
             vec![with(&[data.rig.tau_of_t(l).max(0.2 * data.dtau)])]

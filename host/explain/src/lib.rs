@@ -20,9 +20,14 @@
 //!   noise floor, so that a systematic misfit from outside the vocabulary is not partly soaked up
 //!   by a wrong name; and beat the runner-up by a likelihood ratio of e⁵ (evidence margin 10).
 //!
+//! The force channel's low-pass, when the record does not state it, is a nuisance parameter of
+//! every model (its time constant, [`model::lowpass`]), fitted with the law and the effect being
+//! tried, never a guess; the result prints it with its ± ([`ForceLowpass`]).
+//!
 //! The best candidate is added and the search repeats. Once the model is at the noise floor, only
 //! an effect another channel points to is still tried: thermal drift, when the temperature column
-//! moves over the motion ([`diag::Diagnostics::temperature_moves`]). When nothing more qualifies
+//! moves over the motion ([`diag::Diagnostics::temperature_moves`]). (The first round tries every
+//! candidate, at the floor or not.) When nothing more qualifies
 //! and the misfit is still above 1.5 × the noise floor in some channel, the answer is
 //! "unexplained: N % of the gap remains; not one of the known effects" — never a name the
 //! evidence does not support.
@@ -46,7 +51,9 @@ pub use model::{Effect, ExplainError, Prepared, Spec};
 /// Re-exported so that users can read [`Explanation::to_json`] output with the same version.
 pub use serde_json;
 
-use model::{gap_of, residuals, rms, simulate_spec, weighted, RIG_FORCE_CUTOFF_HZ};
+use model::{
+    gap_of, lowpass, residuals, rms, simulate_spec, weighted, LOWPASS_TAU_MAX, RIG_FORCE_CUTOFF_HZ,
+};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use tribo_physics::identify::{
@@ -87,8 +94,8 @@ pub struct ExplainOptions {
     /// Levenberg–Marquardt iterations per fit.
     pub max_iter: usize,
     /// Low-pass of the force channel (Hz) applied to simulated force, overriding the record's
-    /// (`None`: the record's `# force_cutoff_hz`, or, if it says nothing, the better of no filter
-    /// and the rig's 300 Hz charge amplifier — and the result says which it took).
+    /// (`None`: the record's `# force_cutoff_hz`, or, if it says nothing, fitted: a parameter of
+    /// every model, estimated with its ± — [`Explanation::force_lowpass`]).
     pub force_cutoff_hz: Option<f64>,
 }
 
@@ -150,6 +157,19 @@ pub fn explain_with_progress(
     let powers = base_powers(opts.base)?;
     let mut spec = Spec::base(powers.clone());
     spec.apparatus = data.has_force();
+    // The force channel's low-pass, when neither the record nor the caller states it, is a
+    // parameter of every model of the search, fitted with the law and the effects it can be
+    // mistaken for (frictional lag, sensor lag): never a guess held fixed.
+    let source = if !data.has_force() {
+        "none"
+    } else if opts.force_cutoff_hz.is_some() {
+        "option"
+    } else if data.force_cutoff_known {
+        "record"
+    } else {
+        spec.lowpass = true;
+        "fitted"
+    };
     let spec = spec;
     progress("fitting the base law", 0, 1);
     // The base law is `tribo fit`'s answer: the one estimator of a law from a record, on the
@@ -163,33 +183,17 @@ pub fn explain_with_progress(
         };
     base_fit.p_si = data.rig.p_of_mu(&base_fit.mu);
     base_fit.p_si_se = data.rig.p_of_mu(&base_fit.mu_se);
-    let mut starts = vec![spec.start(&base_fit.params)];
-    starts.push(spec.start(&tribo_physics::identify::start_point(
-        &data.tau, &data.y, &data.ydot, opts.base,
-    )));
-    // The force channel's low-pass, if the record does not say: the better of none and the rig's.
-    let mut data = data.clone();
-    let source = if !data.has_force() {
-        "none"
-    } else if opts.force_cutoff_hz.is_some() {
-        "option"
-    } else if data.force_cutoff_known {
-        "record"
-    } else {
-        let mut best: Option<(f64, Option<f64>)> = None;
-        for fc in [None, Some(RIG_FORCE_CUTOFF_HZ)] {
-            data.force_cutoff_hz = fc;
-            if let Some(m) = starts.first().and_then(|p| evaluate(&data, &spec, p)) {
-                let g = m.gap_force.unwrap_or(f64::INFINITY);
-                if best.is_none_or(|b| g < b.0) {
-                    best = Some((g, fc));
-                }
-            }
-        }
-        data.force_cutoff_hz = best.and_then(|b| b.1);
-        "assumed"
-    };
-    let data = data;
+    // The low-pass starts from the rig's charge amplifier and from (nearly) none.
+    let tau_rig = data.rig.omega() / (2.0 * std::f64::consts::PI * RIG_FORCE_CUTOFF_HZ);
+    let law_start = tribo_physics::identify::start_point(&data.tau, &data.y, &data.ydot, opts.base);
+    let mut starts = vec![
+        spec.start_with(&base_fit.params, tau_rig),
+        spec.start_with(&law_start, tau_rig),
+    ];
+    if spec.lowpass {
+        starts.push(spec.start_with(&base_fit.params, 0.2 * data.dtau));
+    }
+    let data = data.clone();
     let base = fit_spec(&data, &spec, &starts, opts.max_iter).ok_or_else(|| {
         ExplainError::BaseLaw("the base law could not be fitted to the record".into())
     })?;
@@ -204,7 +208,9 @@ pub fn explain_with_progress(
         // Once the model is at the noise floor, the envelope and the force have nothing left to
         // point at: an effect is still tried only where another channel points to it (thermal
         // drift when the temperature column moves over the motion), and it must still pass the
-        // same tests. A second velocity term fitted to a misfit below the noise is not a finding.
+        // same tests. (Every candidate, running-in included, is tried in the first round, at
+        // the floor or not: a drift of μ0 over the whole motion can hide below the 1.5 × floor
+        // rule.) A second velocity term fitted to a misfit below the noise is not a finding.
         let settled = round > 0 && cur.adequate(&data);
         let todo: Vec<Effect> = opts
             .candidates
@@ -212,6 +218,13 @@ pub fn explain_with_progress(
             .copied()
             .filter(|&e| cur.spec.can_add(e, data.has_force(), data.has_temp()))
             .filter(|&e| !settled || (e == Effect::ThermalDrift && diagnostics.temperature_moves()))
+            // A Coulomb level that moves while the plate's temperature moves is read as thermal
+            // drift first; running-in is what a drift in time leaves beside it.
+            .filter(|&e| {
+                e != Effect::RunningIn
+                    || !diagnostics.temperature_moves()
+                    || cur.spec.has(Effect::ThermalDrift)
+            })
             .collect();
         if todo.is_empty() {
             break;
@@ -314,6 +327,7 @@ pub fn explain_with_progress(
         Conclusion::PartlyExplained
     };
     progress("done", 1, 1);
+    let lowpass = ForceLowpass::of(&data, &cur, source);
     let ex = Explanation {
         conclusion,
         base: opts.base,
@@ -324,10 +338,16 @@ pub fn explain_with_progress(
         noise_floor_envelope: data.env_floor(),
         noise_floor_force: data.has_force().then(|| data.force_floor()),
         unexplained_fraction,
+        disagreement: if conclusion == Conclusion::BaseAdequate {
+            Vec::new()
+        } else {
+            diag::locate(&data, &cur)
+        },
         steps,
         ambiguous,
-        force_cutoff_hz: data.force_cutoff_hz,
+        force_cutoff_hz: lowpass.as_ref().and_then(|l| l.cutoff_hz),
         force_cutoff_source: source.into(),
+        force_lowpass: lowpass,
         rounds,
         base_fit,
         base_model: base,

@@ -441,8 +441,9 @@ fn weaker_effects_are_missed_rather_than_misnamed() {
 }
 
 /// At every bench noise level (×1 to ×50 the simulator's default vibrometer noise): a clean record
-/// gets no name, an effect outside the vocabulary is "unexplained", and a 2 ms frictional lag and a
-/// 1 ms sensor lag (seen by the force channel, whatever the vibrometer's noise) are named alone.
+/// gets no name, an effect outside the vocabulary is "unexplained" and located (the force misfit
+/// differs between the sliding directions), and a 2 ms frictional lag and a 1 ms sensor lag (seen
+/// by the force channel, whatever the vibrometer's noise) are named alone.
 #[test]
 fn no_false_name_and_the_force_channel_effects_at_every_noise_level() {
     use tribo_physics::bench::NOISE_LEVELS;
@@ -501,6 +502,19 @@ fn no_false_name_and_the_force_channel_effects_at_every_noise_level() {
                 e.missing_effects.join("+")
             };
             eprintln!("{}: {name}: {got}", level.name);
+            // What stays unexplained is located: friction that differs between the sliding
+            // directions is said to.
+            if want == "unexplained"
+                && !e
+                    .disagreement
+                    .iter()
+                    .any(|d| d.contains("depends on the sliding direction"))
+            {
+                failures.push(format!(
+                    "{}: {name}: the direction is not named where it disagrees: {:?}",
+                    level.name, e.disagreement
+                ));
+            }
             if got != want {
                 failures.push(format!(
                     "{}: {name}: {got}, not {want}\n{}",

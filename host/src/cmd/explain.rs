@@ -38,7 +38,9 @@ pub const LONG_ABOUT: &str = "Explain the disagreement between a friction law an
 Fits the base law to every channel (envelope from displacement and velocity; friction force when
 `ft_n` exists; temperature when `temp_c` exists), measures where it disagrees, then tries each
 candidate effect — quadratic-velocity, stribeck, frictional-lag, cubic-stiffness, thermal-drift,
-sensor-lag. An effect is named only if adding it shrinks the misfit by more than chance would,
+sensor-lag, running-in (μ0 drifting in time at constant temperature). The force channel's
+low-pass is the record's (`# force_cutoff_hz=`) or `--force-cutoff-hz`; when neither states it, it
+is fitted with everything else in every model and printed with its ±. An effect is named only if adding it shrinks the misfit by more than chance would,
 judged with a noise model of the residuals that includes their correlation (an effective sample
 count per channel), and removes a material part of the misfit above the noise floor. The best one
 is added, the model refitted, and the search repeats. If a misfit well above the noise floor
@@ -48,7 +50,11 @@ never a guess.
 `--json` prints one object: `conclusion` (base-adequate, explained, partly-explained,
 unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_before`,
 `gap_after`, `evidence`, `params` and `params_se`), `gap_initial`, `gap_final`, `noise_floor`,
-`unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source`, `base_fit` (the base law's
+`unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source` (`record`, `option`,
+`fitted`, `none`), `force_lowpass` (`source`, `cutoff_hz` and `cutoff_hz_se`, `time_constant_s` and
+`time_constant_s_se`, `cutoff_at_least_hz`), `disagreement` (where the final model still misses,
+in sentences: each channel above its floor, the time third and amplitude band where it misses
+most, a force misfit common to both sliding directions), `base_fit` (the base law's
 constants: `tribo fit`'s result on the same record, the one estimator of a law), `base_model` (the
 model of every channel the effects are added to) and `final_model`, `cross_check` (the on-board
 result beside the host's, `null` for other base laws than coulomb-viscous),
@@ -81,7 +87,7 @@ pub struct Args {
     #[arg(long, default_value_t = 3)]
     pub max_steps: usize,
     /// Low-pass of the force channel (Hz), if the record does not state it (`# force_cutoff_hz=`);
-    /// without either, the better of none and the rig's 300 Hz is taken, and the output says so.
+    /// without either, it is fitted (with its ±) in every model of the search.
     #[arg(long)]
     pub force_cutoff_hz: Option<f64>,
     /// No progress messages: set by `tribo -q`/`--quiet`.

@@ -16,8 +16,10 @@ use tribo_physics::sensor::{butterworth2, delay};
 use tribo_physics::uncertainty::noise_sigma;
 use tribo_physics::InvalidParameter;
 
+mod lowpass;
 mod simulate;
 mod spec;
+pub use lowpass::lowpass;
 pub use simulate::*;
 pub use spec::*;
 

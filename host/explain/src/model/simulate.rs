@@ -11,6 +11,8 @@ pub struct Simulated {
     pub ydot: Vec<f64>,
     /// Force `F/N` as the force channel would read it (low-pass, delay), every sample.
     pub f_meas: Vec<f64>,
+    /// The contact's force `F/N` before the channel (no low-pass, no delay), every sample.
+    pub f_true: Vec<f64>,
 }
 
 /// Length of the τ segments over which a drifting Coulomb level is held constant (and the
@@ -58,14 +60,47 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
         y0 * (1.0 + spec.start_scale(p)),
         v0 * (1.0 + spec.start_scale(p)),
     );
-    let (y, ydot, f) = match (
+    // A Coulomb level that moves during the motion (thermal drift, running-in) is held constant
+    // over segments of THERMAL_SEGMENT of τ.
+    let thermal = match (
         spec.effect_params(Effect::ThermalDrift, p),
         data.temp_seg.as_deref(),
     ) {
-        (Some(g), Some(tseg)) => {
-            let gamma = g[0];
-            let t0 = tseg[0];
-            let dmu = |k: usize| gamma * (tseg[k.min(tseg.len() - 1)] - t0);
+        (Some(g), Some(tseg)) if !tseg.is_empty() => Some((g[0], tseg)),
+        _ => None,
+    };
+    let running = spec.effect_params(Effect::RunningIn, p).map(|d| d[0]);
+    let span_end = span.max(THERMAL_SEGMENT);
+    let (y, ydot, f) = match (thermal, running) {
+        (None, None) => {
+            let model = model_at(0.0);
+            model.validate()?;
+            let mut sim = Simulator::new(model, y0, v0, data.method);
+            let n = data.tau.len();
+            let (mut y, mut yd, mut f) = (
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+            );
+            for &t in &data.tau {
+                let s = sim.step_to(t)?;
+                steps_used_check(&sim, sim.steps(), budget)?;
+                y.push(s.y);
+                yd.push(s.ydot);
+                f.push(s.f);
+            }
+            (y, yd, f)
+        }
+        (thermal, running) => {
+            let dmu = |k: usize| {
+                let th = thermal.map_or(0.0, |(gamma, tseg)| {
+                    gamma * (tseg[k.min(tseg.len() - 1)] - tseg[0])
+                });
+                let run = running.map_or(0.0, |d| {
+                    d * ((k as f64 + 0.5) * THERMAL_SEGMENT).min(span_end) / span_end
+                });
+                th + run
+            };
             let model = model_at(dmu(0));
             model.validate()?;
             let mut sim = Simulator::new(model, y0, v0, data.method);
@@ -96,29 +131,11 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
             }
             (y, yd, f)
         }
-        _ => {
-            let model = model_at(0.0);
-            model.validate()?;
-            let mut sim = Simulator::new(model, y0, v0, data.method);
-            let n = data.tau.len();
-            let (mut y, mut yd, mut f) = (
-                Vec::with_capacity(n),
-                Vec::with_capacity(n),
-                Vec::with_capacity(n),
-            );
-            for &t in &data.tau {
-                let s = sim.step_to(t)?;
-                steps_used_check(&sim, sim.steps(), budget)?;
-                y.push(s.y);
-                yd.push(s.ydot);
-                f.push(s.f);
-            }
-            (y, yd, f)
-        }
     };
-    let mut fm = match data.force_cutoff_hz {
-        Some(fc) => butterworth2(&f, fc, data.rate_hz),
-        None => f,
+    let mut fm = match (spec.lowpass_tau(p), data.force_cutoff_hz) {
+        (Some(tau_f), _) => lowpass(&f, tau_f, data.dtau),
+        (None, Some(fc)) => butterworth2(&f, fc, data.rate_hz),
+        (None, None) => f.clone(),
     };
     if let Some(d) = spec.effect_params(Effect::SensorLag, p) {
         fm = delay(&fm, d[0] / data.dtau);
@@ -127,6 +144,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
         y,
         ydot,
         f_meas: fm,
+        f_true: f,
     })
 }
 

@@ -18,17 +18,21 @@ pub enum Effect {
     ThermalDrift,
     /// Force channel delayed by `τ_d` relative to the vibrometer.
     SensorLag,
+    /// Running-in: the Coulomb level drifting in time at constant temperature, `μ0 + Δ τ/τ_end`
+    /// (`Δ` the change over the compared motion, `τ_end` its length).
+    RunningIn,
 }
 
 impl Effect {
     /// Every effect of the vocabulary.
-    pub const ALL: [Effect; 6] = [
+    pub const ALL: [Effect; 7] = [
         Effect::QuadraticVelocity,
         Effect::Stribeck,
         Effect::FrictionalLag,
         Effect::CubicStiffness,
         Effect::ThermalDrift,
         Effect::SensorLag,
+        Effect::RunningIn,
     ];
 
     /// JSON name.
@@ -40,6 +44,7 @@ impl Effect {
             Effect::CubicStiffness => "cubic-stiffness",
             Effect::ThermalDrift => "thermal-drift",
             Effect::SensorLag => "sensor-lag",
+            Effect::RunningIn => "running-in",
         }
     }
 
@@ -65,9 +70,14 @@ impl Effect {
             Effect::CubicStiffness => &["kappa"],
             Effect::ThermalDrift => &["dmu0_dT_per_c"],
             Effect::SensorLag => &["delay_tau"],
+            Effect::RunningIn => &["dmu0_over_motion"],
         }
     }
 }
+
+/// Largest force low-pass time constant explored (τ units: a cut-off at the rig's own
+/// oscillation frequency; a charge amplifier filters far above it).
+pub const LOWPASS_TAU_MAX: f64 = 1.0;
 
 /// Model structure: base polynomial powers plus effects.
 #[derive(Debug, Clone, PartialEq)]
@@ -78,6 +88,10 @@ pub struct Spec {
     pub effects: Vec<Effect>,
     /// Whether the apparatus damping `μ_a` is a parameter (records with a force channel).
     pub apparatus: bool,
+    /// Whether the force channel's low-pass is a parameter (a force channel whose filter the
+    /// record does not state): its time constant `τ_f` (τ units, [`super::lowpass`]), fitted with
+    /// everything else, in every model of the search.
+    pub lowpass: bool,
 }
 
 impl Spec {
@@ -87,15 +101,30 @@ impl Spec {
             powers,
             effects: Vec::new(),
             apparatus: false,
+            lowpass: false,
         }
+    }
+
+    /// Parameters before the effects': the law's constants, the start correction and the
+    /// nuisances of the measurement chain (apparatus damping, force low-pass).
+    pub fn n_lead(&self) -> usize {
+        self.powers.len() + 1 + usize::from(self.apparatus) + usize::from(self.lowpass)
+    }
+
+    /// Index of the force low-pass time constant in `p`, when it is a parameter.
+    pub fn lowpass_index(&self) -> Option<usize> {
+        self.lowpass
+            .then(|| self.powers.len() + 1 + usize::from(self.apparatus))
+    }
+
+    /// The force low-pass time constant `τ_f ≥ 0` (τ units) in `p`, when it is a parameter.
+    pub fn lowpass_tau(&self, p: &[f64]) -> Option<f64> {
+        self.lowpass_index().and_then(|i| p.get(i)).map(|v| v.abs())
     }
 
     /// Number of parameters.
     pub fn n_params(&self) -> usize {
-        self.powers.len()
-            + 1
-            + usize::from(self.apparatus)
-            + self.effects.iter().map(|e| e.n_params()).sum::<usize>()
+        self.n_lead() + self.effects.iter().map(|e| e.n_params()).sum::<usize>()
     }
 
     /// Highest polynomial power of the law (base plus any quadratic-velocity terms).
@@ -124,6 +153,7 @@ impl Spec {
             Effect::CubicStiffness => !self.has(e),
             Effect::ThermalDrift => !self.has(e) && has_temp && coulomb,
             Effect::SensorLag => !self.has(e) && has_force,
+            Effect::RunningIn => !self.has(e) && coulomb,
         }
     }
 
@@ -136,9 +166,7 @@ impl Spec {
 
     /// Offset of the first parameter of the `i`-th effect.
     pub fn offset(&self, i: usize) -> usize {
-        self.powers.len()
-            + 1
-            + usize::from(self.apparatus)
+        self.n_lead()
             + self.effects[..i]
                 .iter()
                 .map(|e| e.n_params())
@@ -182,11 +210,12 @@ impl Spec {
                 Effect::FrictionalLag => (0.01..=3.0).contains(&q[0]),
                 Effect::CubicStiffness => q[0].abs() <= 0.05,
                 Effect::SensorLag => (0.0..=3.0).contains(&q[0]),
-                Effect::QuadraticVelocity | Effect::ThermalDrift => true,
+                Effect::QuadraticVelocity | Effect::ThermalDrift | Effect::RunningIn => true,
             }
         }) && self.mu(p).iter().all(|m| m.abs() < 1.0)
             && self.start_scale(p).abs() < 0.1
             && (-0.01..=0.1).contains(&self.apparatus_mu1(p))
+            && self.lowpass_tau(p).is_none_or(|t| t <= LOWPASS_TAU_MAX)
     }
 
     /// The initial amplitude's relative correction `s` in `p`.
@@ -206,10 +235,18 @@ impl Spec {
     /// `p` of the law's constants followed by a zero initial correction and apparatus damping (a
     /// start for a fit).
     pub fn start(&self, law_params: &[f64]) -> Vec<f64> {
+        self.start_with(law_params, 0.0)
+    }
+
+    /// [`Spec::start`] with the force low-pass time constant `tau_f` (when it is a parameter).
+    pub fn start_with(&self, law_params: &[f64], tau_f: f64) -> Vec<f64> {
         let mut p = law_params.to_vec();
         p.push(0.0);
         if self.apparatus {
             p.push(0.0);
+        }
+        if self.lowpass {
+            p.push(tau_f);
         }
         p
     }
@@ -217,6 +254,9 @@ impl Spec {
     /// Typical magnitude of every parameter (finite-difference steps near 0).
     pub fn scales(&self) -> Vec<f64> {
         let mut s = vec![1e-3; self.powers.len() + 1 + usize::from(self.apparatus)];
+        if self.lowpass {
+            s.push(0.01);
+        }
         for e in &self.effects {
             s.extend_from_slice(match e {
                 Effect::QuadraticVelocity => &[1e-3][..],
@@ -225,6 +265,7 @@ impl Spec {
                 Effect::CubicStiffness => &[1e-4][..],
                 Effect::ThermalDrift => &[1e-5][..],
                 Effect::SensorLag => &[0.01][..],
+                Effect::RunningIn => &[1e-2][..],
             });
         }
         s
@@ -236,6 +277,9 @@ impl Spec {
         names.push("start_scale".into());
         if self.apparatus {
             names.push("apparatus_mu1".into());
+        }
+        if self.lowpass {
+            names.push("force_lowpass_tau".into());
         }
         let mut next = self.powers.iter().copied().max().unwrap_or(0);
         for e in &self.effects {

@@ -7,7 +7,8 @@
 //! `F_ss(v, t) = sgn(v) N [μ0(t) + μ2 (v/V)² + (μs − μ0) e^{−(v/vs)²}] + N μ1 v / V` (V = NΩ/k, the
 //! velocity unit of the dimensionless law) either at once or with a memory time T
 //! (`T dF/dt = F_ss − F`); μ0 may depend on the plane temperature `T(t) = T0 + ΔT (1 − e^{−t/τ_h})`
-//! and may differ between the two sliding directions.
+//! and may differ between the two sliding directions, and may drift in time (running-in,
+//! `μ0 + r t`).
 #![allow(dead_code)]
 
 use tribo_physics::record::{Record, Units};
@@ -32,6 +33,8 @@ pub struct Contact {
     /// Coulomb level when sliding towards negative x, if it differs from μ0 (direction-dependent
     /// friction, outside the explain vocabulary).
     pub mu0_backward: Option<f64>,
+    /// Running-in: dμ0/dt (per second) at constant temperature, μ0(t) = μ0 + rate · t.
+    pub running_in_per_s: f64,
 }
 
 impl Contact {
@@ -45,6 +48,7 @@ impl Contact {
             k3: 0.0,
             thermal: None,
             mu0_backward: None,
+            running_in_per_s: 0.0,
         }
     }
 }
@@ -70,6 +74,7 @@ pub fn record(c: &Contact, load_n: f64, duration_s: f64, chain: Option<&SensorMo
             (true, Some(b)) => b,
             _ => c.mu0,
         };
+        let base = base + c.running_in_per_s * t;
         match c.thermal {
             Some((g, _, _)) => base + g * (temp_at(t) - 40.0),
             None => base,
