@@ -173,7 +173,7 @@ fn failure(e: anyhow::Error, path: Option<&Path>) -> Failure {
     if let Some(le) = e.downcast_ref::<LoadError>() {
         match le {
             LoadError::Record(r) => return record_failure(r),
-            LoadError::Holes { path, .. } => {
+            LoadError::Holes { path, .. } | LoadError::Incomplete { path, .. } => {
                 let missing = tribo_store::Run::open(path)
                     .map(|r| r.missing_blocks())
                     .unwrap_or_default();
@@ -581,6 +581,7 @@ fn fit_json(src: Source, a: FitArgs) -> Res<String> {
     let (mut rec, path, defaults) = src.load(a.holes)?;
     let anyhow_f = |e: anyhow::Error| failure(e, Some(&path));
     let json_f = |e: serde_json::Error| Failure::Tribo(e.to_string());
+    tribo::load::plausible_apparatus_mu1(a.apparatus_mu1).map_err(anyhow_f)?;
     let rig = tribo::load::apply_rig_flags(&mut rec, a.flags, &defaults).map_err(anyhow_f)?;
     let opts = FitOptions {
         apparatus_mu1: a.apparatus_mu1,

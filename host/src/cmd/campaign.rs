@@ -99,13 +99,26 @@ impl Plan {
     pub fn load(path: &Path) -> anyhow::Result<Plan> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read the plan {}", path.display()))?;
-        let p: Plan = toml::from_str(&text)
-            .with_context(|| format!("the campaign plan {}", path.display()))?;
-        p.check().with_context(|| format!("{}", path.display()))?;
+        // A plan that cannot be right is a usage error (status 2), as a wrong command line is.
+        let p: Plan = toml::from_str(&text).map_err(|e| {
+            crate::exit::Usage(format!("the campaign plan {}: {e}", path.display()))
+        })?;
+        p.check()
+            .map_err(|e| crate::exit::Usage(format!("{}: {e:#}", path.display())))?;
         Ok(p)
     }
 
     fn check(&self) -> anyhow::Result<()> {
+        super::run::check_settle(self.settle_tol_c, self.settle_s, self.settle_timeout_s).map_err(
+            |why| {
+                anyhow::anyhow!(
+                    "settle_tol_c = {}, settle_s = {}, settle_timeout_s = {}: {why}",
+                    self.settle_tol_c,
+                    self.settle_s,
+                    self.settle_timeout_s
+                )
+            },
+        )?;
         if self.name.trim().is_empty() {
             bail!("`name` must not be empty (it identifies the campaign's runs when resuming)");
         }
@@ -312,13 +325,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             && !args.no_prompt
             && std::io::stdin().is_terminal()
         {
-            eprintln!("set the load knob to {} N, then press Enter", p.load_n);
+            crate::errln!("set the load knob to {} N, then press Enter", p.load_n);
             let mut s = String::new();
             std::io::stdin().read_line(&mut s)?;
         }
         last_load = Some(p.load_n);
         if !args.quiet {
-            eprintln!(
+            crate::errln!(
                 "[{}/{}] load {} N, {}, repetition {}/{}",
                 i + 1,
                 todo.len(),
@@ -412,7 +425,7 @@ fn print_table(
             };
             let synced = tribo_catalog::sync(store, &url, &opts, &mut |_, _| {}).and_then(|r| {
                 if !quiet {
-                    eprintln!(
+                    crate::errln!(
                         "synced to {}: {} new, {} updated, {} already there",
                         url.shown(),
                         r.pushed.inserted,

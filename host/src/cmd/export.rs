@@ -80,6 +80,8 @@ pub enum Format {
 
 /// Runs `tribo export`.
 pub fn run(a: Args) -> Result<()> {
+    // The run exported is not whole: what it holds is written all the same, and status 3 says so.
+    let mut incomplete = None;
     let rows = if a.catalog {
         let store = a
             .store
@@ -99,6 +101,17 @@ pub fn run(a: Args) -> Result<()> {
         };
         let t = Table::of_path(src)?;
         let n = t.rows();
+        if src.is_dir() {
+            if let Ok(run) = tribo_store::Run::open(src) {
+                if !run.is_complete() {
+                    incomplete = Some(crate::exit::Incomplete(format!(
+                        "{}: wrote the {n} samples it holds, and {}",
+                        src.display(),
+                        crate::load::incomplete_run(&run, src)
+                    )));
+                }
+            }
+        }
         match a.format {
             Format::Parquet => t.write_parquet(&a.output)?,
             Format::Json => write(&a.output, t.to_json().to_string())?,
@@ -110,9 +123,12 @@ pub fn run(a: Args) -> Result<()> {
         n
     };
     if !a.quiet {
-        eprintln!("wrote {rows} rows to {}", a.output.display());
+        crate::errln!("wrote {rows} rows to {}", a.output.display());
     }
-    Ok(())
+    match incomplete {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
 }
 
 fn write(path: &Path, text: String) -> Result<()> {

@@ -110,6 +110,7 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 fn run_inner(a: Args) -> Result<()> {
+    crate::load::plausible_apparatus_mu1(a.apparatus_mu1)?;
     let spec = a.law;
     let holes = if a.longest_clean_stretch {
         crate::Holes::LongestCleanStretch
@@ -133,7 +134,7 @@ fn run_inner(a: Args) -> Result<()> {
     // The apparatus alone (load 0): no friction law, only the blades' damping μ_a (viscous).
     let fitted = tribo_physics::identify::law_for(&rec, spec);
     if fitted != spec && spec != LawSpec::CoulombViscous {
-        eprintln!(
+        crate::errln!(
             "note: {} is the apparatus alone (load 0): it has no friction law; its damping is \
              fitted ({fitted}) instead of {spec}",
             a.record.display()

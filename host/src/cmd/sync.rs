@@ -103,7 +103,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let quiet = args.quiet || args.json;
     if !quiet {
-        eprintln!(
+        crate::errln!(
             "syncing {} to {} as PC {:?}",
             store.display(),
             url.shown(),
@@ -113,7 +113,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut last = std::time::Instant::now();
     let r = tribo_catalog::sync(&store, &url, &opts, &mut |done, todo| {
         if !quiet && (done == todo || last.elapsed() > Duration::from_secs(1)) {
-            eprintln!("  {done} of {todo} runs sent");
+            crate::errln!("  {done} of {todo} runs sent");
             last = std::time::Instant::now();
         }
     })?;

@@ -333,6 +333,22 @@ impl Shared {
         self.settled_since.map(|t| t.elapsed().as_secs_f64())
     }
 
+    /// While the plate is still settling (a setpoint set, the plate not yet within the tolerance
+    /// for the settling time, as `tribo run` waits for it): where it is.
+    pub fn settling(&self) -> Option<String> {
+        let st = self.status.as_ref()?;
+        let sp = st.heater_setpoint_c?;
+        let for_s = self.settled().unwrap_or(0.0);
+        (for_s < limits::SETTLE_S).then(|| {
+            format!(
+                "the plate is still settling ({:.1} °C → {sp:.1} °C; within ±{} °C for {for_s:.0} of {} s)",
+                st.temp_c,
+                limits::SETTLE_TOL_C,
+                limits::SETTLE_S
+            )
+        })
+    }
+
     pub fn finish_run(
         &mut self,
         run: &Run,
@@ -605,7 +621,7 @@ mod tests {
         }
         let json = t.blocks_json(0);
         let took = t0.elapsed();
-        eprintln!(
+        crate::errln!(
             "one second at 20 kS/s × 5 channels: {} blocks filed and sent ({} kB of JSON) in {took:?}",
             blocks.len(),
             json.len() / 1000
