@@ -220,7 +220,9 @@ pub fn load_for_analysis(path: &Path) -> anyhow::Result<Record> {
             .into());
         }
     }
-    analysable(load_record(path))
+    let rec = analysable(load_record(path))?;
+    plausible_record(&rec).map_err(|e| e.context(path.display().to_string()))?;
+    Ok(rec)
 }
 
 /// What a run that is not whole lacks and how to get it: `the run is incomplete: 79 of ? blocks
@@ -412,14 +414,43 @@ pub fn apply_rig_flags(
     })
 }
 
+/// A limit of `tribo_wire::limits` (an `f32`) as the number a person wrote: 0.7, not
+/// 0.699999988079071.
+fn shown(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(x as f64)
+}
+
+/// `v` to four significant digits, as a person reads it (`0.667`, `1.2e-5`).
+fn sig4(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor() as i32;
+    if (-3..5).contains(&mag) {
+        let digits = (3 - mag).max(0) as usize;
+        let t = format!("{v:.digits$}");
+        if t.contains('.') {
+            t.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            t
+        }
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
 /// A value out of the rig's range, and the unit mistake that would explain it: the value read
 /// in a unit 1000 or 10⁶ times too small (millimetres as metres, mN as N, grams as kg), when that
 /// brings it into the range.
-fn unit_hint(v: f64, lo: f64, hi: f64, units: [(&str, f64); 2]) -> String {
+fn unit_hint(v: f64, lo: f64, hi: f64, si: &str, units: [(&str, f64); 2]) -> String {
     for (unit, f) in units {
         let w = v / f;
-        if v > hi && (lo..=hi).contains(&w) && w > 0.0 {
-            return format!(" — {unit}? ({v} {unit} is {w:.6})");
+        if !(lo..=hi).contains(&v) && (lo..=hi).contains(&w) && w > 0.0 {
+            return format!(
+                " — a value in {unit}? ({} {unit} is {} {si})",
+                sig4(v),
+                sig4(w)
+            );
         }
     }
     String::new()
@@ -431,7 +462,7 @@ fn unit_hint(v: f64, lo: f64, hi: f64, units: [(&str, f64); 2]) -> String {
 /// names the unit mistake that would explain it (`# load_n=300`: mN written as N).
 fn plausible_constants(rec: &Record, got: [(f64, Source); 3]) -> anyhow::Result<()> {
     use tribo_wire::limits as l;
-    let range = |r: &std::ops::RangeInclusive<f32>| (*r.start() as f64, *r.end() as f64);
+    let range = |r: &std::ops::RangeInclusive<f32>| (shown(*r.start()), shown(*r.end()));
     let checks = [
         (
             "--mass-kg",
@@ -445,7 +476,7 @@ fn plausible_constants(rec: &Record, got: [(f64, Source); 3]) -> anyhow::Result<
             "stiffness_n_per_m",
             "N/m",
             range(&l::STIFFNESS_N_PER_M),
-            [("N/mm written as N/m", 1e3), ("N/µm written as N/m", 1e6)],
+            [("N/mm", 1e-3), ("N/µm", 1e-6)],
         ),
         (
             "--load-n",
@@ -465,25 +496,48 @@ fn plausible_constants(rec: &Record, got: [(f64, Source); 3]) -> anyhow::Result<
         if v.is_finite() && lo_ok && v <= hi {
             continue;
         }
-        let hint = unit_hint(v, lo, hi, units);
+        let hint = unit_hint(v, lo, hi, unit, units);
         let span = format!(
             "the rig's range is {}{lo} to {hi} {unit}",
             if key == "load_n" { "above " } else { "" }
         );
         match from {
             Source::Flag => {
-                return Err(crate::exit::Usage(format!("{flag} {v}: {span}{hint}")).into())
+                return Err(crate::exit::Usage(format!("{flag} {}: {span}{hint}", sig4(v))).into())
             }
             _ => {
                 return Err(crate::exit::Incomplete(format!(
-                    "not analysable as written: `# {key}={v}` {unit}: {span}{hint}; correct the \
-                     record's header or override it with {flag}"
+                    "not analysable as written: `# {key}={}` {unit}: {span}{hint}; correct the \
+                     record's header (`tribo fit` also takes {flag})",
+                    sig4(v)
                 ))
                 .into())
             }
         }
     }
     Ok(())
+}
+
+/// A record as loaded, before any flag: its motion ([`plausible_motion`]) and the rig constants
+/// its header gives ([`plausible_constants`]), for the commands that take no rig flag (`explain`,
+/// `onboard`, `report`). Status 3 naming the likely unit mistake.
+pub fn plausible_record(rec: &Record) -> anyhow::Result<()> {
+    plausible_motion(rec)?;
+    if rec.units != Units::Si {
+        return Ok(());
+    }
+    let given: [Option<f64>; 3] = match rec.rig {
+        Some(r) => [Some(r.mass_kg), Some(r.stiffness_n_per_m), Some(r.load_n)],
+        None => rec.rig_partial,
+    };
+    // Only what the header gives is checked here (a constant it lacks is another error).
+    let real = [
+        Rig::REAL.mass_kg,
+        Rig::REAL.stiffness_n_per_m,
+        Rig::REAL.load_n,
+    ];
+    let got = [0, 1, 2].map(|i| (given[i].unwrap_or(real[i]), Source::Record));
+    plausible_constants(rec, got)
 }
 
 /// The displacement and velocity of an SI record against what the rig can measure: the pin is
@@ -498,7 +552,7 @@ fn plausible_motion(rec: &Record) -> anyhow::Result<()> {
     let cal = tribo_wire::Configure::real_rig(0.3).calibration;
     let full = |c: tribo_wire::Channel| {
         let g = cal[c.index()];
-        (g.gain as f64 * 32768.0).abs()
+        shown((g.gain * 32768.0).abs())
     };
     let peak = |c: &[f64]| c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let checks = [
@@ -526,14 +580,16 @@ fn plausible_motion(rec: &Record) -> anyhow::Result<()> {
             .find(|(_, f)| p / f <= fs)
             .map(|(u, f)| {
                 format!(
-                    ": a record in {u} under a header in {unit}? ({p} {u} is {:.6} {unit})",
-                    p / f
+                    ": a record in {u} under a header in {unit}? ({} {u} is {} {unit})",
+                    sig4(p),
+                    sig4(p / f)
                 )
             })
             .unwrap_or_default();
         return Err(crate::exit::Incomplete(format!(
-            "not analysable as written: column {col} reaches {p} {unit}, beyond the rig's \
-             ±{fs} {unit} channel{hint}; write the column in {unit}"
+            "not analysable as written: column {col} reaches {} {unit}, beyond the rig's \
+             ±{fs} {unit} channel{hint}; write the column in {unit}",
+            sig4(p)
         ))
         .into());
     }

@@ -223,12 +223,16 @@ impl Plan {
 /// The points of `plan` already done: a complete run of this campaign in `store` with the same
 /// load, temperature setpoint and repetition.
 pub fn finished(plan: &Plan, store: &Path) -> anyhow::Result<Vec<Point>> {
+    // What the metadata claims, checked against the frame log: a run whose log was damaged or
+    // cut since it was taken is not done (it is taken again; `tribo table` names it).
     let metas: Vec<RunMeta> = list_run_dirs(store)?
         .iter()
-        .filter_map(|d| std::fs::read_to_string(d.join(META_FILE)).ok())
-        .filter_map(|t| toml::from_str::<RunMeta>(&t).ok())
-        .filter(|m| {
-            m.status == RunStatus::Complete && m.campaign.as_deref() == Some(plan.name.as_str())
+        .filter_map(|d| {
+            let m = toml::from_str::<RunMeta>(&std::fs::read_to_string(d.join(META_FILE)).ok()?)
+                .ok()?;
+            let ours = m.status == RunStatus::Complete
+                && m.campaign.as_deref() == Some(plan.name.as_str());
+            (ours && tribo_store::Run::open(d).is_ok_and(|r| r.is_complete())).then_some(m)
         })
         .collect();
     Ok(plan
@@ -304,6 +308,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 p.temp_c.map_or("heater off".into(), |t| format!("{t} °C")),
                 p.repeat
             );
+        }
+        // The campaign's runs that are stored but not whole: taken again, and said why.
+        let left = crate::archive::left_out(
+            &store,
+            &Filter {
+                campaign: Some(plan.name.clone()),
+                ..Default::default()
+            },
+        )?;
+        for l in &left {
+            println!("  not done (to take again): {}: {}", l.dir.display(), l.why);
         }
         if todo.is_empty() {
             print_table(&plan, &store, args.catalog.as_deref(), args.quiet)?;

@@ -503,10 +503,10 @@ pub struct Args {
     #[command(flatten)]
     pub link: LinkArgs,
     /// Normal load set on the rig's knob, N (0–0.7).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub load: f32,
     /// Heat the plate to this temperature first, °C (15–100; default: heater off).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub temp: Option<f32>,
     /// Runs to take in a row (at least 1).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
