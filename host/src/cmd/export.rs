@@ -116,7 +116,14 @@ pub fn run(a: Args) -> Result<()> {
             Format::Parquet => t.write_parquet(&a.output)?,
             Format::Json => write(&a.output, t.to_json().to_string())?,
             Format::Csv => {
-                let rec = crate::load::load_record(src)?;
+                // A run's samples without an ECR reading stay empty, as in JSON and Parquet.
+                let rec = if src.is_dir() {
+                    tribo_store::Run::open(src)
+                        .with_context(|| format!("cannot read the run {}", src.display()))?
+                        .record_with(false)?
+                } else {
+                    crate::load::load_record(src)?
+                };
                 write(&a.output, rec.to_csv_string())?
             }
         }
