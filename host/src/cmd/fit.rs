@@ -83,16 +83,16 @@ pub struct Args {
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Override the record's mass (kg).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub mass_kg: Option<f64>,
     /// Override the record's stiffness (N/m).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub stiffness: Option<f64>,
     /// Override the record's normal load (N).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub load_n: Option<f64>,
     /// Known apparatus damping μ_a kept fixed (0 = fit the total damping).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub apparatus_mu1: f64,
     /// Also fit on N amplitude windows (0 = off).
     #[arg(long, default_value_t = 0)]

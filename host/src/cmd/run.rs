@@ -527,28 +527,28 @@ pub struct Args {
     #[arg(long, default_value_t = 10_000)]
     pub rate: u32,
     /// Longest run, s (it ends earlier when the pin stops).
-    #[arg(long, default_value_t = 40.0)]
+    #[arg(long, default_value_t = 40.0, allow_negative_numbers = true)]
     pub max_duration: f32,
     /// Moving mass, kg.
-    #[arg(long, default_value_t = 0.04)]
+    #[arg(long, default_value_t = 0.04, allow_negative_numbers = true)]
     pub mass: f32,
     /// Blade stiffness, N/m.
-    #[arg(long, default_value_t = 1150.0)]
+    #[arg(long, default_value_t = 1150.0, allow_negative_numbers = true)]
     pub stiffness: f32,
     /// Initial displacement held by the magnet, m.
-    #[arg(long, default_value_t = 667e-6)]
+    #[arg(long, default_value_t = 667e-6, allow_negative_numbers = true)]
     pub x0: f32,
     /// Heater: settled when within this many °C…
-    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TOL_C)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TOL_C, allow_negative_numbers = true)]
     pub settle_tol: f32,
     /// …for this many seconds.
-    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_S)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_S, allow_negative_numbers = true)]
     pub settle_secs: f64,
     /// Give up heating after this many seconds.
-    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TIMEOUT_S)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TIMEOUT_S, allow_negative_numbers = true)]
     pub settle_timeout: f64,
     /// Heater ramp, °C/min.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
     pub ramp: f32,
     /// No progress bar or messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]

@@ -505,4 +505,3 @@ pub fn list_run_dirs(store: &Path) -> Result<Vec<PathBuf>> {
 pub fn clean(x: f32) -> f64 {
     x.to_string().parse().unwrap_or(x as f64)
 }
-
