@@ -361,6 +361,10 @@ fn lock(s: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
 fn handle(mut req: Request, ctx: &Ctx) {
     // Only requests addressed to this panel, from its own page: before anything else.
     if let Err(why) = ctx.origin.check(&req) {
+        {
+            let mut s = lock(&ctx.shared);
+            s.refused = (s.refused.0 + 1, Some(why.clone()));
+        }
         let _ = req.respond(
             Response::from_string(format!(
                 "refused: {why}. The panel answers only to its own address (open the address \

@@ -223,6 +223,9 @@ pub struct Shared {
     /// The page that controls the rig: its id and when its event stream was last alive.
     pub controller: Option<(String, Instant)>,
     pub store: PathBuf,
+    /// Requests refused because they were not addressed to this panel (another `Host` or
+    /// `Origin`): how many, and why the last one was.
+    pub refused: (u64, Option<String>),
 }
 
 impl Shared {
@@ -249,6 +252,7 @@ impl Shared {
             grid,
             controller: None,
             store,
+            refused: (0, None),
         }
     }
 
@@ -440,6 +444,7 @@ impl Shared {
             "result": self.result,
             "grid": self.grid,
             "control": control,
+            "refused": {"count": self.refused.0, "last": self.refused.1},
         })
     }
 }
