@@ -137,9 +137,7 @@ impl Origin {
         let ip = self.addr.ip();
         match name.parse::<std::net::IpAddr>() {
             Ok(a) => a == ip || ip.is_unspecified() || (ip.is_loopback() && a.is_loopback()),
-            Err(_) => {
-                (ip.is_loopback() && name == "localhost") || self.names.iter().any(|n| *n == name)
-            }
+            Err(_) => (ip.is_loopback() && name == "localhost") || self.names.contains(&name),
         }
     }
 
