@@ -73,6 +73,9 @@ pub const LONGEST_CLEAN_STRETCH_FLAG: &str = "--longest-clean-stretch";
 /// constants), anything else is a CSV file in the physics formats. Samples keep their times, so a
 /// run with holes gives a time axis with jumps (see [`load_for_fit`]).
 pub fn load_record(path: &Path) -> Result<Record, LoadError> {
+    if path == Path::new("-") {
+        return stdin_record();
+    }
     if path.is_dir() {
         let run = open_run(path)?;
         let rec = run.record().map_err(run_error(path))?;
@@ -80,6 +83,20 @@ pub fn load_record(path: &Path) -> Result<Record, LoadError> {
         return Ok(rec);
     }
     Ok(Record::load(path)?)
+}
+
+/// A CSV record read from standard input (the path `-`, as `tribo sim -o -` writes one).
+fn stdin_record() -> Result<Record, LoadError> {
+    use std::io::Read;
+    let mut text = String::new();
+    std::io::stdin()
+        .read_to_string(&mut text)
+        .map_err(|source| RecordError::Io {
+            verb: "read",
+            path: PathBuf::from("-"),
+            source,
+        })?;
+    Ok(Record::from_csv_str(&text).map_err(|e| e.in_file(Path::new("standard input")))?)
 }
 
 /// What to do with a record that has holes.
@@ -122,7 +139,11 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
         let described = describe_run_holes(&run);
         (rec, stretches, described)
     } else {
-        let rec = Record::load(path)?;
+        let rec = if path == Path::new("-") {
+            stdin_record()?
+        } else {
+            Record::load(path)?
+        };
         let stretches = time_axis_stretches(&rec.t);
         let described = describe_time_holes(&rec.t, &stretches);
         (rec, stretches, described)

@@ -682,3 +682,55 @@ fn samples_without_an_ecr_reading_are_empty_in_every_export() {
     let o = tribo_in(d, &["fit", "w.csv"]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
 }
+
+/// One name for a flag across commands, the old ones kept (`run --load`/`--mass`, `fit
+/// --load-n`/`--mass-kg`), and `-` for standard input wherever a record is read (`tribo sim -o -`
+/// wrote standard output, `tribo fit -` could not read it).
+#[test]
+fn flags_have_one_name_across_commands_and_a_record_can_come_from_stdin() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = tribo_in(d, &["sim", "-q", "-o", "good.csv"]);
+    assert!(o.status.success());
+    for args in [
+        vec!["fit", "good.csv", "--load", "0.3", "--mass", "0.04"],
+        vec!["fit", "good.csv", "--load-n", "0.3", "--mass-kg", "0.04"],
+    ] {
+        let o = tribo_in(d, &args);
+        assert!(o.status.success(), "{args:?}: {}", text(&o.stderr));
+    }
+    // `run` takes `--load-n` and `--mass-kg` too (refused by range here: parsed, status 2).
+    let o = tribo_in(
+        d,
+        &[
+            "run",
+            "--load-n",
+            "5",
+            "--mass-kg",
+            "0.04",
+            "--port",
+            "tcp://127.0.0.1:1",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--load"), "{}", text(&o.stderr));
+    let cmd = format!("'{TRIBO}' sim -q -o - | '{TRIBO}' fit - --json");
+    let o = Command::new("bash")
+        .current_dir(d)
+        .args(["-c", &cmd])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["verdict"], "adequate", "{v}");
+    assert_eq!(v["record"], "-", "{v}");
+    for cmd in ["explain", "onboard"] {
+        let c = format!("'{TRIBO}' sim -q --noise -o - | '{TRIBO}' {cmd} -");
+        let o = Command::new("bash")
+            .current_dir(d)
+            .args(["-c", &c])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{cmd} -: {}", text(&o.stderr));
+    }
+}

@@ -252,6 +252,22 @@ pub fn finished(plan: &Plan, store: &Path) -> anyhow::Result<Vec<Point>> {
         .collect())
 }
 
+/// `tribo campaign PLAN` with the `--store` and `--port` this command was given: what takes the
+/// campaign up where it stopped (without them, another store's runs would count, or none).
+fn resume_command(args: &Args) -> String {
+    let mut c = format!("tribo campaign {}", args.plan.display());
+    if let Some(s) = &args.link.store {
+        c.push_str(&format!(" --store {}", s.display()));
+    }
+    if let Some(p) = &args.link.port {
+        c.push_str(&format!(" --port {p}"));
+    }
+    if args.no_prompt {
+        c.push_str(" --no-prompt");
+    }
+    c
+}
+
 /// Arguments of `tribo campaign`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -326,6 +342,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let abort = abort_flag();
+    // How to take the campaign up again: the same plan, store and port as this command line.
+    let again = resume_command(&args);
     args.link.writable_store()?;
     let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // Heartbeats while the campaign runs (prompts included); every exit leaves the rig safe.
@@ -376,42 +394,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ui.finish();
         let o = o.with_context(|| {
             format!(
-                "campaign {:?} stopped; run `tribo campaign {}` again to resume",
-                plan.name,
-                args.plan.display()
+                "campaign {:?} stopped; run `{again}` again to resume",
+                plan.name
             )
         })?;
         print_outcome(&o)?;
         if let Some(e) = o.incomplete() {
             // A run of the campaign is not stored whole: stop, say how to resume, exit status 3.
             return Err(anyhow::Error::new(e).context(format!(
-                "campaign interrupted: run `tribo campaign {}` again to resume where it stopped (an \
-                 incomplete run is taken again)",
-                args.plan.display()
+                "campaign interrupted: run `{again}` again to resume where it stopped (an \
+                 incomplete run is taken again)"
             )));
         }
         if o.aborted || abort.load(Ordering::Relaxed) {
             return Err(crate::exit::Interrupted(format!(
-                "campaign interrupted after {} of {} runs: run `tribo campaign {}` again to resume where it stopped",
+                "campaign interrupted after {} of {} runs: run `{again}` again to resume where it stopped",
                 i + usize::from(!o.aborted),
-                todo.len(),
-                args.plan.display()
+                todo.len()
             ))
             .into());
         }
         if o.link_lost.is_some() {
-            println!(
-                "campaign interrupted: run `tribo campaign {}` again to resume where it stopped",
-                args.plan.display()
-            );
+            println!("campaign interrupted: run `{again}` again to resume where it stopped");
             return Ok(());
         }
     }
     let _ = link.command(HostMsg::HeaterOff);
     if abort.load(Ordering::Relaxed) {
         return Err(crate::exit::Interrupted(format!(
-            "campaign interrupted: run `tribo campaign {}` again to resume",
-            args.plan.display()
+            "campaign interrupted: run `{again}` again to resume"
         ))
         .into());
     }

@@ -71,7 +71,8 @@ stretch of consecutive samples instead (and says which on stderr).";
 ///  Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
 #[derive(Parser, Debug)]
 pub struct Args {
-    /// The record (CSV, or a run folder).
+    /// The record (CSV, or a run folder; `-` reads a CSV from standard input, as `tribo sim -o -`
+    /// writes one).
     pub record: PathBuf,
     /// Law: coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre.
     #[arg(long, default_value = "coulomb-viscous")]
@@ -83,13 +84,13 @@ pub struct Args {
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Override the record's mass (kg).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, visible_alias = "mass", allow_negative_numbers = true)]
     pub mass_kg: Option<f64>,
     /// Override the record's stiffness (N/m).
     #[arg(long, allow_negative_numbers = true)]
     pub stiffness: Option<f64>,
     /// Override the record's normal load (N).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, visible_alias = "load", allow_negative_numbers = true)]
     pub load_n: Option<f64>,
     /// Known apparatus damping μ_a kept fixed (0 = fit the total damping).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]

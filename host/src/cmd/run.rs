@@ -503,7 +503,7 @@ pub struct Args {
     #[command(flatten)]
     pub link: LinkArgs,
     /// Normal load set on the rig's knob, N (0–0.7).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, visible_alias = "load-n", allow_negative_numbers = true)]
     pub load: f32,
     /// Heat the plate to this temperature first, °C (15–100; default: heater off).
     #[arg(long, allow_negative_numbers = true)]
@@ -530,7 +530,12 @@ pub struct Args {
     #[arg(long, default_value_t = 40.0, allow_negative_numbers = true)]
     pub max_duration: f32,
     /// Moving mass, kg.
-    #[arg(long, default_value_t = 0.04, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        visible_alias = "mass-kg",
+        default_value_t = 0.04,
+        allow_negative_numbers = true
+    )]
     pub mass: f32,
     /// Blade stiffness, N/m.
     #[arg(long, default_value_t = 1150.0, allow_negative_numbers = true)]
