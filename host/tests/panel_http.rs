@@ -360,3 +360,54 @@ fn a_release_while_the_plate_settles_needs_a_confirmation() {
     assert!(v.get("confirm").is_none(), "{v}");
     let _ = post("safe", "{}");
 }
+
+/// A damaged run of the store is not dropped from the panel's campaign grid without a word: the
+/// grid names it and how to repair it (as `tribo table` does).
+#[test]
+fn the_grid_names_a_damaged_run_it_leaves_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("runs");
+    let rig = support::RigProcess::start(f64::INFINITY);
+    for _ in 0..2 {
+        let o = Command::new(TRIBO)
+            .args(["run", "-q", "--load", "0.3", "--port", &rig.addr, "--store"])
+            .arg(&store)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let mut runs: Vec<std::path::PathBuf> = std::fs::read_dir(&store)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("meta.toml").is_file())
+        .collect();
+    runs.sort();
+    let log = runs[0].join("frames.log");
+    let mut b = std::fs::read(&log).unwrap();
+    let at = b.len() / 3;
+    b[at] ^= 0x40;
+    std::fs::write(&log, b).unwrap();
+    let p = panel(&["--port", "tcp://127.0.0.1:1"], &store);
+    let (base, token) = p.1.split_once("/?token=").unwrap();
+    let v: serde_json::Value = agent()
+        .get(format!("{base}/api/state"))
+        .header("X-Panel-Token", token)
+        .call()
+        .unwrap()
+        .body_mut()
+        .read_json()
+        .unwrap();
+    let grid = &v["grid"];
+    assert_eq!(grid["cells"][0][0]["n"], 1, "{grid}");
+    let left = grid["left_out"].as_array().unwrap();
+    assert_eq!(left.len(), 1, "{grid}");
+    let name = runs[0].file_name().unwrap().to_str().unwrap();
+    assert_eq!(left[0]["run"], name, "{grid}");
+    assert!(
+        left[0]["why"]
+            .as_str()
+            .unwrap()
+            .contains("tribo pull --salvage"),
+        "{grid}"
+    );
+}

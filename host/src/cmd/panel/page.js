@@ -120,12 +120,24 @@ function result(r) {
 
 function grid(g) {
   const el = $("grid");
-  if (!g || !g.loads || g.loads.length === 0) { el.textContent = "no complete run in the store yet"; return; }
+  // Runs the grid cannot hold (damaged, incomplete): named, with how to repair each.
+  const left = (g && g.left_out) || [];
+  const leftOut = () => {
+    if (!left.length) return;
+    const d = document.createElement("div");
+    d.id = "grid-left-out";
+    d.className = "bad";
+    d.textContent = left.length + " run" + (left.length === 1 ? "" : "s") + " left out of the grid: " +
+      left.map((l) => l.run + " (" + l.why + ")").join("; ");
+    el.appendChild(d);
+  };
+  if (!g || !g.loads || g.loads.length === 0) { el.textContent = "no complete run in the store yet"; leftOut(); return; }
   let h = "<table class='grid'><tr><th>load \\ temp</th>" + g.temps.map((t) => "<th>" + t + "</th>").join("") + "</tr>";
   g.loads.forEach((l, i) => {
     h += "<tr><th>" + l + "</th>" + g.cells[i].map((c) => "<td>" + (c ? fmt(c.mean, 5) + (c.sd !== null ? " ± " + fmt(c.sd, 5) : "") + " (" + c.n + ")" : "—") + "</td>").join("") + "</tr>";
   });
   el.innerHTML = h + "</table>";
+  leftOut();
 }
 
 function onTrace(t) {

@@ -455,6 +455,9 @@ pub fn grid(store: &Path) -> Value {
     let Ok(cat) = Catalog::open(store) else {
         return json!(null);
     };
+    // Up to date with the folders first (a log damaged or cut since it was catalogued), as every
+    // other reader of the catalog.
+    let _ = cat.refresh(false);
     let Ok(t) = cat.table(Axis::Load, Axis::Temp, CatValue::Mu0, &Filter::default()) else {
         return json!(null);
     };
@@ -471,7 +474,19 @@ pub fn grid(store: &Path) -> Value {
         })
         .collect();
     let labels = |b: &[tribo_store::catalog::Bin]| b.iter().map(|b| b.label()).collect::<Vec<_>>();
-    json!({"loads": labels(&t.rows), "temps": labels(&t.cols), "cells": cells})
+    // The runs the grid cannot hold (damaged, incomplete), each with how to repair it: never
+    // dropped from it without a word (as `tribo table` says them).
+    let left: Vec<Value> = crate::archive::left_out(store, &Filter::default())
+        .unwrap_or_default()
+        .into_iter()
+        .map(|l| {
+            json!({
+                "run": l.dir.file_name().map(|n| n.to_string_lossy().into_owned()),
+                "why": l.why,
+            })
+        })
+        .collect();
+    json!({"loads": labels(&t.rows), "temps": labels(&t.cols), "cells": cells, "left_out": left})
 }
 
 /// Writes the run's HTML report (as `tribo report RUN -o RUN/report`) on a thread of its own, then
