@@ -612,7 +612,7 @@ fn a_campaign_on_two_rigs_ends_with_the_lab_s_table() {
 /// to put it), and a role that may only read is not told it "needs INSERT and UPDATE" to read.
 /// (Both read "the lab catalog … answered with an error" and a writer's rights.)
 #[test]
-fn a_missing_password_and_a_read_only_role_are_told_what_to_do() {
+fn a_missing_password_a_read_only_role_and_a_damaged_run_are_told_what_to_do() {
     if PgServer::skip() {
         return;
     }
@@ -672,6 +672,47 @@ fn a_missing_password_and_a_read_only_role_are_told_what_to_do() {
     assert!(err.contains("0644") && err.contains("chmod 600"), "{err}");
     let (status, err) = runs(Some(0o600));
     assert_eq!(status, Some(0), "{err}");
+    // A damaged run of this PC is not synced, said with how to repair it, and the sync is not
+    // whole: status 3 (it was 0).
+    let pc = tempfile::tempdir().unwrap();
+    store_of(pc.path(), "00000000000000d4", 2);
+    let mut runs: Vec<_> = std::fs::read_dir(pc.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("frames.log").is_file())
+        .collect();
+    runs.sort();
+    let log = runs[0].join("frames.log");
+    let mut b = std::fs::read(&log).unwrap();
+    let at = b.len() / 2;
+    b[at] ^= 0x40;
+    std::fs::write(&log, b).unwrap();
+    let o = tribo(
+        &[
+            "sync",
+            "--store",
+            &pc.path().to_string_lossy(),
+            "--catalog",
+            &pg.url(ADMIN, "lab"),
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap();
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert_eq!(o.status.code(), Some(3), "{out}{err}");
+    let name = runs[0].file_name().unwrap().to_string_lossy().into_owned();
+    assert!(
+        out.contains("not synced") && out.contains(&name) && out.contains("--salvage"),
+        "{out}"
+    );
+    assert!(
+        err.contains("incomplete:") && err.contains("1 run of this PC not synced"),
+        "{err}"
+    );
     // A role that may not read tribo_runs, reading: told it needs SELECT, not a writer's rights.
     let o = tribo(&["runs", "--catalog", &pg.url("nosy", "lab")], "npw")
         .output()
