@@ -713,6 +713,55 @@ fn a_missing_password_a_read_only_role_and_a_damaged_run_are_told_what_to_do() {
         err.contains("incomplete:") && err.contains("1 run of this PC not synced"),
         "{err}"
     );
+    // `tribo export --catalog URL`: the lab catalog as one table, as `--catalog URL` reads it
+    // everywhere else (it was a switch for this PC's store only); `--catalog` alone: this PC's,
+    // the damaged run named and the export not whole (3).
+    let out = pc.path().join("lab.json");
+    let o = tribo(
+        &[
+            "export",
+            "--catalog",
+            &pg.url(ADMIN, "lab"),
+            "--format",
+            "json",
+            "-o",
+            &out.to_string_lossy(),
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(v["runs"].as_array().unwrap().len(), count(&pg), "{v}");
+    assert_eq!(count(&pg), 1);
+    let o = tribo(
+        &[
+            "export",
+            "--catalog",
+            "--store",
+            &pc.path().to_string_lossy(),
+            "--format",
+            "json",
+            "-o",
+            &out.to_string_lossy(),
+        ],
+        "",
+    )
+    .output()
+    .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains(&name) && err.contains("--salvage"), "{err}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(v["runs"].as_array().unwrap().len(), 1, "{v}");
     // A role that may not read tribo_runs, reading: told it needs SELECT, not a writer's rights.
     let o = tribo(&["runs", "--catalog", &pg.url("nosy", "lab")], "npw")
         .output()

@@ -59,9 +59,11 @@ pub struct Args {
     /// Output file.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Export the catalog of runs (one row per run) instead of one run's samples.
-    #[arg(long)]
-    pub catalog: bool,
+    /// Export the catalog of runs (one row per run) instead of one run's samples: with no URL
+    /// this PC's store (or $TRIBO_CATALOG when set), with a PostgreSQL URL the lab catalog, as
+    /// every other `--catalog` takes it.
+    #[arg(long, value_name = "URL", num_args = 0..=1, default_missing_value = "")]
+    pub catalog: Option<String>,
     /// Run store directory for --catalog (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
     pub store: Option<PathBuf>,
@@ -82,12 +84,31 @@ pub enum Format {
 pub fn run(a: Args) -> Result<()> {
     // The run exported is not whole: what it holds is written all the same, and status 3 says so.
     let mut incomplete = None;
-    let rows = if a.catalog {
+    let rows = if let Some(url) = &a.catalog {
         let store = a
             .store
             .clone()
             .unwrap_or_else(tribo_store::default_store_dir);
-        let (rows, _) = catalog_rows(&store, &Filter::default(), false)?;
+        let lab = tribo_catalog::lab_url(Some(url.as_str()).filter(|u| !u.is_empty()));
+        let rows = match lab {
+            Some(lab) => super::sync::open_catalog(Some(&lab), &store)?.runs(&Filter::default())?,
+            None => {
+                let (rows, damaged) = catalog_rows(&store, &Filter::default(), false)?;
+                // The runs the table cannot hold are named, never dropped without a word.
+                let left: Vec<crate::archive::LeftOut> = damaged
+                    .into_iter()
+                    .map(|(dir, why)| crate::archive::LeftOut {
+                        why: format!(
+                            "damaged ({why}); `tribo pull --salvage {}` keeps every intact record",
+                            dir.display()
+                        ),
+                        dir,
+                    })
+                    .collect();
+                incomplete = crate::archive::report_left_out("export", &left);
+                rows
+            }
+        };
         let n = rows.len();
         match a.format {
             Format::Parquet => catalog_parquet(&rows, &a.output)?,
