@@ -41,7 +41,10 @@ SOURCE is a run folder of the store or a record (CSV). The formats:
 With `--catalog` (no SOURCE): the runs of the store (`--store`, else $TRIBO_STORE, else ./runs),
 one row per run, the columns of `tribo runs --json` plus the run's sample, lubricant, firmware,
 samples, missing blocks, on-board verdict, cycles and host gap (nullable where a run has none).
-Runs whose log is damaged are not in the catalog: `tribo runs` lists them.
+Runs whose log is damaged are not in the catalog: they are named on stderr with how to repair
+them, and the export ends with status 3. `--catalog URL` (a PostgreSQL URL, as every other
+`--catalog` takes) exports the lab catalog's runs instead; `--catalog` alone takes $TRIBO_CATALOG
+when it is set.
 
 Read it back: `pandas.read_parquet(F)`, `polars.read_parquet(F)`,
 `duckdb.sql(\"select * from 'F'\")`, R `arrow::read_parquet(F)`, MATLAB `parquetread(F)`; the
