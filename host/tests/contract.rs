@@ -734,3 +734,45 @@ fn flags_have_one_name_across_commands_and_a_record_can_come_from_stdin() {
         assert!(o.status.success(), "{cmd} -: {}", text(&o.stderr));
     }
 }
+
+/// A dimensionless record (`tau,y,ydot`) is labelled in its own units: no `s`, `s/m`, `m` or `Hz`
+/// on what `fit` and `onboard` print of it (they were).
+#[test]
+fn a_dimensionless_record_is_labelled_in_its_own_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = tribo_in(d, &["sim", "-q", "--noise", "-o", "si.csv"]);
+    assert!(o.status.success());
+    let (m, k, n) = (0.04f64, 1150.0f64, 0.3f64);
+    let (w, l) = ((k / m).sqrt(), n / k);
+    let mut csv = String::from("tau,y,ydot\n");
+    for line in std::fs::read_to_string(d.join("si.csv")).unwrap().lines() {
+        let f: Vec<f64> = match line.split(',').map(|x| x.parse::<f64>()).collect() {
+            Ok(f) => f,
+            Err(_) => continue,
+        };
+        csv.push_str(&format!("{},{},{}\n", f[0] * w, f[1] / l, f[2] / (l * w)));
+    }
+    std::fs::write(d.join("dimless.csv"), csv).unwrap();
+    let o = tribo_in(d, &["fit", "dimless.csv"]);
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let compared = out.lines().find(|l| l.starts_with("compared")).unwrap();
+    assert!(
+        compared.contains("τ = ") && compared.contains("y′"),
+        "{compared}"
+    );
+    assert!(
+        !compared.contains(" s ") && !compared.contains(" s)"),
+        "{compared}"
+    );
+    assert!(!out.contains("s/m"), "{out}");
+    let o = tribo_in(d, &["onboard", "dimless.csv"]);
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let cycles = out.lines().find(|l| l.starts_with("cycles")).unwrap();
+    assert!(
+        !cycles.contains("Hz") && !cycles.contains(" m ") && cycles.contains("per unit τ"),
+        "{cycles}"
+    );
+}

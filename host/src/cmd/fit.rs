@@ -303,8 +303,15 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
         }
         _ => format!("{y:.1e}"),
     };
+    // A dimensionless record's time is τ, its channels y and y′: no unit.
+    let dimensionless = rec.units == tribo_physics::record::Units::Dimensionless;
+    let (tn, tu, xn, vn) = if dimensionless {
+        ("τ", "", "y", "y′")
+    } else {
+        ("t", " s", "x", "v")
+    };
     let mut s = format!(
-        "t = {:.4} s (the release{}) to {:.4} s",
+        "{tn} = {:.4}{tu} (the release{}) to {:.4}{tu}",
         t(sp.start),
         if sp.held() > 0 {
             format!(", after {} samples held", sp.held())
@@ -316,7 +323,7 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
     if sp.at_rest() > 0 {
         let _ = write!(
             s,
-            " (then |v| < {}: {} samples at rest or in the noise, not compared)",
+            " (then |{vn}| < {}: {} samples at rest or in the noise, not compared)",
             si(sp.rest_level, true),
             sp.at_rest()
         );
@@ -337,7 +344,7 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
     }
     let _ = write!(
         s,
-        "; noise read from the record: x {}, v {}",
+        "; noise read from the record: {xn} {}, {vn} {}",
         si(sp.noise_y, false),
         si(sp.noise_ydot, true)
     );
@@ -381,6 +388,8 @@ fn table(record: &str, rig: &RigUsed, r: &FitResult, rec: &Record) -> String {
     }
     let _ = writeln!(s, "rig        {}", rig.describe());
     let _ = writeln!(s, "law        {}", r.law);
+    // SI coefficients of μ(v) for an SI record; a dimensionless one has none (μ_j is all).
+    let dimensionless = rec.units == tribo_physics::record::Units::Dimensionless;
     let unit = |j: usize| match j {
         0 => String::new(),
         1 => " s/m".to_string(),
@@ -389,6 +398,10 @@ fn table(record: &str, rig: &RigUsed, r: &FitResult, rec: &Record) -> String {
     let fitted = |j: usize| r.law == LawSpec::LuGre || r.law.powers().contains(&j);
     for (j, (m, p)) in r.mu.iter().zip(&r.p_si).enumerate() {
         if !fitted(j) {
+            continue;
+        }
+        if dimensionless {
+            let _ = writeln!(s, "mu{j:<8} {}", pm(*m, r.mu_se[j]));
             continue;
         }
         let _ = writeln!(
