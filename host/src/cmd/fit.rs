@@ -34,8 +34,9 @@ between measured and fitted envelopes. Both are relative to the initial amplitud
   adequate       converged, gap ≤ 1.5 × noise floor: the law describes the record
   inadequate     converged, gap above that: the law misses something (try `tribo explain`)
   not-converged  the iteration limit came first: the constants are not trustworthy (status 3)
-  not-analysable no oscillation, too few half cycles, a saturated channel or a non-finite
-                 sample: nothing is fitted, no constant printed (status 3)
+  not-analysable no oscillation (a pin that never moves is named so), too few half cycles, a
+                 saturated or stuck channel or a non-finite sample: nothing is fitted, no
+                 constant printed (status 3)
 
 `--json` prints one object: `law`, `verdict`, `mu` and `mu_se` (dimensionless constants of seed
 eq. 10–13 in order of j and their standard errors), `gap`, `noise_floor`, `p_si`, `p_si_se` (SI
