@@ -30,8 +30,9 @@ create_exception!(
     _tribo,
     NotAnalysable,
     TriboError,
-    "The record cannot be analysed (no oscillation, too few half cycles, a saturated channel, a \
-     non-finite sample): nothing is fitted. `reason` names why (or is None)."
+    "The record cannot be analysed (no oscillation, too few half cycles, a saturated or stuck \
+     channel, a non-finite sample, or not plausible as written: another unit than its header \
+     says): nothing is fitted. `reason` names why (or is None)."
 );
 create_exception!(
     _tribo,
