@@ -56,7 +56,8 @@ const CONTROL_STALE: Duration = Duration::from_secs(3);
   tribo panel --port tcp://127.0.0.1:7411 --listen 127.0.0.1:0
       a virtual rig (`tribo rig --virtual` in another terminal); the page on a free port
   tribo panel --listen 0.0.0.0:7420 --token S
-      served to the lab network: open http://THIS-PC:7420/?token=S
+      served to the lab network: open http://IP-OF-THIS-PC:7420/?token=S (the panel answers
+      to its IP addresses; to open it by a name, listen on that name: --listen NAME:7420)
 
 The page shows the rig (connected, serial, state, lease, last fault and reset), the plate's
 temperature against its setpoint (\"settled\" within the settling tolerance for the settling
@@ -225,7 +226,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !listen.ip().is_loopback() && token.is_none() {
         return Err(crate::exit::Usage(format!(
             "--listen {} serves the panel beyond this PC: give an access token too (--token SECRET or \
-             $TRIBO_PANEL_TOKEN), then open http://THIS-PC:{}/?token=SECRET; or keep the default \
+             $TRIBO_PANEL_TOKEN), then open http://IP-OF-THIS-PC:{}/?token=SECRET; or keep the default \
              loopback address",
             args.listen,
             listen.port()
@@ -281,7 +282,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let shown = match &name {
         Some(n) => format!("{n}:{}", addr.port()),
-        None if addr.ip().is_unspecified() => format!("THIS-PC:{}", addr.port()),
+        None if addr.ip().is_unspecified() => format!("IP-OF-THIS-PC:{}", addr.port()),
         None => addr.to_string(),
     };
     crate::cmd::run::out(&format!("front panel on http://{shown}/?token={token}\n"))?;
