@@ -411,3 +411,59 @@ fn the_grid_names_a_damaged_run_it_leaves_out() {
         "{grid}"
     );
 }
+
+/// `--listen NAME:PORT`: the panel listens where the name resolves and answers to that name (and
+/// its address); another name is refused.
+#[test]
+fn a_name_given_with_listen_is_answered_to() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = Command::new(TRIBO)
+        .args([
+            "panel",
+            "--quiet",
+            "--listen",
+            "localhost:0",
+            "--port",
+            "tcp://127.0.0.1:1",
+        ])
+        .arg("--store")
+        .arg(dir.path().join("runs"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let p = Panel(child, line);
+    let url =
+        p.1.split("front panel on ")
+            .nth(1)
+            .unwrap()
+            .trim()
+            .to_string();
+    assert!(url.starts_with("http://localhost:"), "{url}");
+    let (base, token) = url.split_once("/?token=").unwrap();
+    let port = base.rsplit_once(':').unwrap().1;
+    let addr = format!("127.0.0.1:{port}");
+    let named = format!("localhost:{port}");
+    let other = format!("other.example:{port}");
+    let cookie = format!("tribo_panel={token}");
+    let (status, body) = raw(
+        &addr,
+        "GET",
+        "/api/state",
+        &[("Host", &named), ("Cookie", &cookie)],
+        "",
+    );
+    assert_eq!(status, 200, "{body}");
+    let (status, _) = raw(
+        &addr,
+        "GET",
+        "/api/state",
+        &[("Host", &other), ("Cookie", &cookie)],
+        "",
+    );
+    assert_eq!(status, 403);
+}

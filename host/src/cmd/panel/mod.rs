@@ -690,3 +690,52 @@ fn report_file(req: Request, store: &Path, path: &str) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Origin;
+
+    #[test]
+    fn a_host_is_answered_to_only_when_it_names_the_panel() {
+        let named = Origin {
+            addr: "10.0.0.5:7420".parse().unwrap(),
+            names: vec!["lab-pc".into()],
+        };
+        for ok in ["lab-pc:7420", "LAB-PC:7420", "10.0.0.5:7420"] {
+            assert!(named.allows(ok), "{ok}");
+        }
+        for bad in [
+            "lab-pc:80",
+            "lab-pc",
+            "other:7420",
+            "localhost:7420",
+            "127.0.0.1:7420",
+            "[::1]:7420",
+            "10.0.0.6:7420",
+            ":7420",
+            "lab-pc:7420:1",
+        ] {
+            assert!(!named.allows(bad), "{bad}");
+        }
+        let any = Origin {
+            addr: "0.0.0.0:7420".parse().unwrap(),
+            names: vec![],
+        };
+        assert!(any.allows("192.168.1.9:7420"));
+        assert!(!any.allows("lab-pc:7420"), "a name not given with --listen");
+        assert!(!any.allows("192.168.1.9:7421"));
+        let local = Origin {
+            addr: "127.0.0.1:7420".parse().unwrap(),
+            names: vec![],
+        };
+        for ok in [
+            "127.0.0.1:7420",
+            "localhost:7420",
+            "[::1]:7420",
+            "127.0.0.2:7420",
+        ] {
+            assert!(local.allows(ok), "{ok}");
+        }
+        assert!(!local.allows("attacker.example:7420"));
+    }
+}
