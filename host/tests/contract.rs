@@ -53,11 +53,15 @@ fn copy_run(from: &Path, to: &Path) {
     }
 }
 
-/// Flips one bit in the payload of the log record at the middle of `log` (damage, not a torn end).
+/// Flips one bit in the middle of the payload of a log record a third of the way into `log`:
+/// damage (not a torn end) to a wire frame, whose own CRC then fails too, so that no salvage can
+/// rescue it (a bit in a record's length or checksum leaves the frame whole: rescued).
 fn damage(log: &Path) {
     let mut b = std::fs::read(log).unwrap();
-    let at = b.len() / 3;
-    b[at] ^= 0x40;
+    let r = records(&b);
+    let at = r[r.len() / 3];
+    let len = u32::from_le_bytes(b[at..at + 4].try_into().unwrap()) as usize;
+    b[at + 8 + len / 2] ^= 0x40;
     std::fs::write(log, b).unwrap();
 }
 
