@@ -127,3 +127,101 @@ pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
     Catalog::open(store)?.upsert(run)?;
     Ok(())
 }
+
+/// A run of the store that a table or a campaign report leaves out (its log is damaged, or it is
+/// not stored whole), with why and how to repair it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LeftOut {
+    pub dir: PathBuf,
+    /// `damaged: …; `tribo pull --salvage DIR` keeps …` or `incomplete: …; `tribo pull DIR` …`.
+    pub why: String,
+}
+
+/// The runs of `store` matching `filter` (its campaign, label and rig; a damaged run by its
+/// metadata) that are not whole: a frame log that cannot be read (damaged), or a run not stored
+/// whole (incomplete, aborted runs aside). Read from the store's catalog (brought up to date) and,
+/// for the folders it cannot index, from their metadata: no run is left out without a word.
+pub fn left_out(store: &Path, filter: &tribo_store::Filter) -> anyhow::Result<Vec<LeftOut>> {
+    use tribo_store::run::{list_run_dirs, META_FILE};
+    if !store.is_dir() {
+        return Ok(Vec::new());
+    }
+    let cat = Catalog::open(store)?;
+    cat.refresh(false)?;
+    let mut out = Vec::new();
+    for r in cat.list(filter)? {
+        if r.status == "incomplete" || r.status == "recording" {
+            out.push(LeftOut {
+                why: format!(
+                    "{}: {}; `tribo pull {}` fetches the rest while the rig holds it",
+                    r.status,
+                    r.completeness,
+                    r.path.display()
+                ),
+                dir: r.path,
+            });
+        }
+    }
+    let known: std::collections::BTreeSet<String> = cat
+        .list(&tribo_store::Filter::default())?
+        .into_iter()
+        .map(|r| r.id)
+        .collect();
+    let matches = |m: &RunMeta| {
+        filter
+            .campaign
+            .as_ref()
+            .is_none_or(|c| m.campaign.as_ref() == Some(c))
+            && filter
+                .label
+                .as_ref()
+                .is_none_or(|l| m.label.as_ref().is_some_and(|x| x.contains(l.as_str())))
+            && filter
+                .rig
+                .as_ref()
+                .is_none_or(|s| m.device.as_ref().is_some_and(|d| d.serial == *s))
+    };
+    for d in list_run_dirs(store)? {
+        let id = d
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if known.contains(&id) {
+            continue;
+        }
+        let meta = std::fs::read_to_string(d.join(META_FILE))
+            .ok()
+            .and_then(|t| toml::from_str::<RunMeta>(&t).ok());
+        if meta.as_ref().is_some_and(|m| !matches(m)) {
+            continue;
+        }
+        let why = match tribo_store::Run::open(&d) {
+            Err(e) => format!(
+                "damaged, its frame log cannot be read ({}); `tribo pull --salvage {}` keeps every \
+                 intact record and fetches the rest while the rig holds it",
+                e.msg,
+                d.display()
+            ),
+            Ok(run) => format!("not in the catalog ({})", run.completeness().summary()),
+        };
+        out.push(LeftOut { dir: d, why });
+    }
+    Ok(out)
+}
+
+/// Says on standard error which runs a table or report left out, and returns the status-3 error
+/// that ends the command (`None` when none was).
+pub fn report_left_out(what: &str, left: &[LeftOut]) -> Option<crate::exit::Incomplete> {
+    if left.is_empty() {
+        return None;
+    }
+    for l in left {
+        crate::errln!("left out of the {what}: {}: {}", l.dir.display(), l.why);
+    }
+    Some(crate::exit::Incomplete(format!(
+        "the {what} leaves out {} run{} that {} not whole (listed above, each with how to repair it)",
+        left.len(),
+        if left.len() == 1 { "" } else { "s" },
+        if left.len() == 1 { "is" } else { "are" }
+    )))
+}

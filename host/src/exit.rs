@@ -81,9 +81,17 @@ impl std::error::Error for Usage {}
 pub fn status_of(e: &anyhow::Error) -> Status {
     if e.chain().any(|c| c.downcast_ref::<Interrupted>().is_some()) {
         Status::Interrupted(crate::signals::received().unwrap_or(Signal::Interrupt))
-    } else if e.chain().any(|c| c.downcast_ref::<Incomplete>().is_some()) {
+    } else if e.chain().any(|c| {
+        c.downcast_ref::<Incomplete>().is_some()
+            || c.downcast_ref::<crate::load::LoadError>()
+                .is_some_and(|l| l.is_incomplete())
+    }) {
         Status::Incomplete
-    } else if e.chain().any(|c| c.downcast_ref::<Usage>().is_some()) {
+    } else if e.chain().any(|c| {
+        c.downcast_ref::<Usage>().is_some()
+            || c.downcast_ref::<tribo_store::StoreError>()
+                .is_some_and(|s| s.kind == tribo_store::ErrorKind::Usage)
+    }) {
         Status::Usage
     } else {
         Status::Error

@@ -30,10 +30,29 @@ pub enum LoadError {
     /// A record with holes, refused for a fit ([`Holes::Refuse`]); the message says where the
     /// holes are and what to do.
     #[error("{}: {message}", path.display())]
-    Holes { path: PathBuf, message: String },
+    Holes {
+        path: PathBuf,
+        message: String,
+        /// A run folder's holes (blocks not received, samples the rig lost): its data is
+        /// incomplete (status 3); a CSV whose time axis jumps is a file to fix (status 1).
+        run: bool,
+    },
+    /// A run folder that is not whole (a torn or cut frame log, blocks or the end not received),
+    /// refused for analysis: status 3, as for any incomplete run. The message says what is
+    /// missing and how to get it, or how to analyse what is held.
+    #[error("{}: {message}", path.display())]
+    Incomplete { path: PathBuf, message: String },
 }
 
 impl LoadError {
+    /// A run whose data is not whole (exit status 3, `IncompleteRun` in Python).
+    pub fn is_incomplete(&self) -> bool {
+        matches!(
+            self,
+            LoadError::Holes { run: true, .. } | LoadError::Incomplete { .. }
+        )
+    }
+
     /// A readable record with a NaN or infinite sample: it cannot be analysed.
     pub fn is_non_finite(&self) -> bool {
         matches!(self, LoadError::Record(e) if e.kind() == RecordErrorKind::NonFinite)
@@ -54,6 +73,9 @@ pub const LONGEST_CLEAN_STRETCH_FLAG: &str = "--longest-clean-stretch";
 /// constants), anything else is a CSV file in the physics formats. Samples keep their times, so a
 /// run with holes gives a time axis with jumps (see [`load_for_fit`]).
 pub fn load_record(path: &Path) -> Result<Record, LoadError> {
+    if path == Path::new("-") {
+        return stdin_record();
+    }
     if path.is_dir() {
         let run = open_run(path)?;
         let rec = run.record().map_err(run_error(path))?;
@@ -61,6 +83,20 @@ pub fn load_record(path: &Path) -> Result<Record, LoadError> {
         return Ok(rec);
     }
     Ok(Record::load(path)?)
+}
+
+/// A CSV record read from standard input (the path `-`, as `tribo sim -o -` writes one).
+fn stdin_record() -> Result<Record, LoadError> {
+    use std::io::Read;
+    let mut text = String::new();
+    std::io::stdin()
+        .read_to_string(&mut text)
+        .map_err(|source| RecordError::Io {
+            verb: "read",
+            path: PathBuf::from("-"),
+            source,
+        })?;
+    Ok(Record::from_csv_str(&text).map_err(|e| e.in_file(Path::new("standard input")))?)
 }
 
 /// What to do with a record that has holes.
@@ -78,12 +114,36 @@ pub enum Holes {
 pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
     let (rec, stretches, described) = if path.is_dir() {
         let run = open_run(path)?;
+        if !run.is_complete() && run.missing_blocks().is_empty() {
+            // Not whole, yet no hole inside: the log's end is cut (or the end never came). What
+            // it holds is analysed only when asked for.
+            match holes {
+                Holes::Refuse => {
+                    return Err(LoadError::Incomplete {
+                        path: path.to_path_buf(),
+                        message: format!(
+                            "{}. Pass {LONGEST_CLEAN_STRETCH_FLAG} to analyse what it holds",
+                            incomplete_run(&run, path)
+                        ),
+                    })
+                }
+                Holes::LongestCleanStretch => crate::errln!(
+                    "note: {}: {}; analysing what it holds",
+                    path.display(),
+                    run.completeness().summary()
+                ),
+            }
+        }
         let rec = run.record().map_err(run_error(path))?;
         let stretches = positions_of(&run)?;
         let described = describe_run_holes(&run);
         (rec, stretches, described)
     } else {
-        let rec = Record::load(path)?;
+        let rec = if path == Path::new("-") {
+            stdin_record()?
+        } else {
+            Record::load(path)?
+        };
         let stretches = time_axis_stretches(&rec.t);
         let described = describe_time_holes(&rec.t, &stretches);
         (rec, stretches, described)
@@ -105,6 +165,7 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
     };
     match holes {
         Holes::Refuse => Err(LoadError::Holes {
+            run: path.is_dir(),
             path: path.to_path_buf(),
             message: format!(
                 "{described}. A fit across a hole would treat the samples after it as if they \
@@ -122,7 +183,7 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
             ),
         }),
         Holes::LongestCleanStretch => {
-            eprintln!(
+            crate::errln!(
                 "note: {}: {described}; fitting the longest clean stretch ({}) of the {} stretches",
                 path.display(),
                 span(&longest),
@@ -138,11 +199,11 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
 fn open_run(path: &Path) -> Result<tribo_store::Run, LoadError> {
     let run = tribo_store::Run::open(path).map_err(run_error(path))?;
     if let Some(r) = &run.recovery {
-        eprintln!("warning: {}: {r}", path.display());
+        crate::errln!("warning: {}: {r}", path.display());
     }
     let missing = run.missing_blocks();
     if !missing.is_empty() {
-        eprintln!(
+        crate::errln!(
             "warning: {}: {} sample blocks are missing (first: {}); `tribo pull {}` fetches them if the rig \
              still holds the run",
             path.display(),
@@ -167,9 +228,36 @@ fn analysable(r: Result<Record, LoadError>) -> anyhow::Result<Record> {
     })
 }
 
-/// [`load_record`] for the analysis commands (a non-finite sample is status 3).
+/// [`load_record`] for the analysis commands (a non-finite sample is status 3; so is a run folder
+/// that is not whole, refused: [`LoadError::Incomplete`]).
 pub fn load_for_analysis(path: &Path) -> anyhow::Result<Record> {
-    analysable(load_record(path))
+    if path.is_dir() {
+        let run = open_run(path)?;
+        if !run.is_complete() {
+            return Err(LoadError::Incomplete {
+                path: path.to_path_buf(),
+                message: incomplete_run(&run, path),
+            }
+            .into());
+        }
+    }
+    let rec = analysable(load_record(path))?;
+    plausible_record(&rec).map_err(|e| e.context(path.display().to_string()))?;
+    Ok(rec)
+}
+
+/// What a run that is not whole lacks and how to get it: `the run is incomplete: 79 of ? blocks
+/// (no end); its frame log was cut: … ; `tribo pull DIR` fetches the rest while the rig holds it`.
+pub fn incomplete_run(run: &tribo_store::Run, path: &Path) -> String {
+    let mut s = format!("the run is {}", run.completeness().summary());
+    if let Some(r) = &run.recovery {
+        s.push_str(&format!(" (its frame log: {r})"));
+    }
+    s.push_str(&format!(
+        "; `tribo pull {}` fetches the rest while the rig holds it",
+        path.display()
+    ));
+    s
 }
 
 /// [`load_for_fit`] for the analysis commands (a non-finite sample is status 3).
@@ -334,6 +422,8 @@ pub fn apply_rig_flags(
         "stiffness_n_per_m",
     );
     let (n, nf) = pick(flags.load_n, given[2], Rig::REAL.load_n, "load_n");
+    plausible_constants(rec, [(m, mf), (k, kf), (n, nf)])?;
+    plausible_motion(rec)?;
     rec.rig = Some(Rig::new(m, k, n)?);
     Ok(RigUsed {
         mass_kg: m,
@@ -343,6 +433,211 @@ pub fn apply_rig_flags(
         stiffness_n_per_m_from: kf,
         load_n_from: nf,
     })
+}
+
+/// A limit of `tribo_wire::limits` (an `f32`) as the number a person wrote: 0.7, not
+/// 0.699999988079071.
+fn shown(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(x as f64)
+}
+
+/// `v` to four significant digits, as a person reads it (`0.667`, `1.2e-5`).
+fn sig4(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor() as i32;
+    if (-3..5).contains(&mag) {
+        let digits = (3 - mag).max(0) as usize;
+        let t = format!("{v:.digits$}");
+        if t.contains('.') {
+            t.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            t
+        }
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// A value out of the rig's range, and the unit mistake that would explain it: the value read
+/// in a unit 1000 or 10⁶ times too small (millimetres as metres, mN as N, grams as kg), when that
+/// brings it into the range.
+fn unit_hint(v: f64, lo: f64, hi: f64, si: &str, units: [(&str, f64); 2]) -> String {
+    for (unit, f) in units {
+        let w = v / f;
+        if !(lo..=hi).contains(&v) && (lo..=hi).contains(&w) && w > 0.0 {
+            return format!(
+                " — a value in {unit}? ({} {unit} is {} {si})",
+                sig4(v),
+                sig4(w)
+            );
+        }
+    }
+    String::new()
+}
+
+/// The rig's constants against the rig's ranges (`tribo_wire::limits`: the mass, blade stiffness
+/// and micrometric knob the rig can have). A flag out of range is a usage error (status 2); a
+/// record's header out of range is a record that cannot be analysed as written (status 3). Each
+/// names the unit mistake that would explain it (`# load_n=300`: mN written as N).
+fn plausible_constants(rec: &Record, got: [(f64, Source); 3]) -> anyhow::Result<()> {
+    use tribo_wire::limits as l;
+    let range = |r: &std::ops::RangeInclusive<f32>| (shown(*r.start()), shown(*r.end()));
+    let checks = [
+        (
+            "--mass-kg",
+            "mass_kg",
+            "kg",
+            range(&l::MASS_KG),
+            [("g", 1e3), ("mg", 1e6)],
+        ),
+        (
+            "--stiffness",
+            "stiffness_n_per_m",
+            "N/m",
+            range(&l::STIFFNESS_N_PER_M),
+            [("N/mm", 1e-3), ("N/µm", 1e-6)],
+        ),
+        (
+            "--load-n",
+            "load_n",
+            "N",
+            range(&l::LOAD_N),
+            [("mN", 1e3), ("µN", 1e6)],
+        ),
+    ];
+    for ((flag, key, unit, (lo, hi), units), (v, from)) in checks.into_iter().zip(got) {
+        // The apparatus alone (`# load_n=0`) is a record of the blades without a contact.
+        if key == "load_n" && rec.apparatus && from != Source::Flag {
+            continue;
+        }
+        // A load must press the pin (0 is the apparatus run, recorded as such, not a fit's flag).
+        let lo_ok = if key == "load_n" { v > lo } else { v >= lo };
+        if v.is_finite() && lo_ok && v <= hi {
+            continue;
+        }
+        let hint = unit_hint(v, lo, hi, unit, units);
+        let span = format!(
+            "the rig's range is {}{lo} to {hi} {unit}",
+            if key == "load_n" { "above " } else { "" }
+        );
+        match from {
+            Source::Flag => {
+                return Err(crate::exit::Usage(format!("{flag} {}: {span}{hint}", sig4(v))).into())
+            }
+            _ => {
+                return Err(crate::exit::Incomplete(format!(
+                    "not analysable as written: `# {key}={}` {unit}: {span}{hint}; correct the \
+                     record's header (`tribo fit` also takes {flag})",
+                    sig4(v)
+                ))
+                .into())
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A record as loaded, before any flag: its motion ([`plausible_motion`]) and the rig constants
+/// its header gives ([`plausible_constants`]), for the commands that take no rig flag (`explain`,
+/// `onboard`, `report`). Status 3 naming the likely unit mistake.
+pub fn plausible_record(rec: &Record) -> anyhow::Result<()> {
+    plausible_motion(rec)?;
+    if rec.units != Units::Si {
+        return Ok(());
+    }
+    let given: [Option<f64>; 3] = match rec.rig {
+        Some(r) => [Some(r.mass_kg), Some(r.stiffness_n_per_m), Some(r.load_n)],
+        None => rec.rig_partial,
+    };
+    // Only what the header gives is checked here (a constant it lacks is another error).
+    let real = [
+        Rig::REAL.mass_kg,
+        Rig::REAL.stiffness_n_per_m,
+        Rig::REAL.load_n,
+    ];
+    let got = [0, 1, 2].map(|i| (given[i].unwrap_or(real[i]), Source::Record));
+    plausible_constants(rec, got)
+}
+
+/// The displacement and velocity of an SI record against what the rig can measure: the pin is
+/// held at most 1 mm out of its rest (`tribo_wire::limits::INITIAL_AMPLITUDE_M`), inside the
+/// displacement channel's ±2 mm, and the velocity channel spans ±0.25 m/s (the real rig's front
+/// ends, `Configure::real_rig`). A record beyond them was written in another unit than its
+/// header says (millimetres under `x_m`): status 3, naming it.
+fn plausible_motion(rec: &Record) -> anyhow::Result<()> {
+    if rec.units != Units::Si {
+        return Ok(());
+    }
+    let cal = tribo_wire::Configure::real_rig(0.3).calibration;
+    let full = |c: tribo_wire::Channel| {
+        let g = cal[c.index()];
+        shown((g.gain * 32768.0).abs())
+    };
+    let peak = |c: &[f64]| c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let checks = [
+        (
+            "x_m",
+            "m",
+            peak(&rec.x),
+            full(tribo_wire::Channel::Displacement),
+            [("millimetres", 1e3), ("micrometres", 1e6)],
+        ),
+        (
+            "v_m_s",
+            "m/s",
+            peak(&rec.v),
+            full(tribo_wire::Channel::Velocity),
+            [("mm/s", 1e3), ("µm/s", 1e6)],
+        ),
+    ];
+    for (col, unit, p, fs, units) in checks {
+        if p <= fs {
+            continue;
+        }
+        let hint = units
+            .iter()
+            .find(|(_, f)| p / f <= fs)
+            .map(|(u, f)| {
+                format!(
+                    ": a record in {u} under a header in {unit}? ({} {u} is {} {unit})",
+                    sig4(p),
+                    sig4(p / f)
+                )
+            })
+            .unwrap_or_default();
+        return Err(crate::exit::Incomplete(format!(
+            "not analysable as written: column {col} reaches {} {unit}, beyond the rig's \
+             ±{fs} {unit} channel{hint}; write the column in {unit}",
+            sig4(p)
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// The largest apparatus damping μ_a blades can have and still ring: a damping ratio μ_a/2 of
+/// 5 %. The rig's blades have about 1.1e-3 (the virtual rig's 0.0011).
+pub const MAX_APPARATUS_MU1: f64 = 0.1;
+
+/// `--apparatus-mu1` against what blades can have (0 to [`MAX_APPARATUS_MU1`]): a usage error
+/// (status 2) otherwise, naming the likely slip (1.1 for 1.1e-3).
+pub fn plausible_apparatus_mu1(mu_a: f64) -> anyhow::Result<()> {
+    if mu_a.is_finite() && (0.0..=MAX_APPARATUS_MU1).contains(&mu_a) {
+        return Ok(());
+    }
+    let hint = if mu_a.is_finite() && mu_a > MAX_APPARATUS_MU1 && mu_a * 1e-3 <= MAX_APPARATUS_MU1 {
+        format!(" (did you mean {mu_a}e-3? the rig's blades have about 1.1e-3)")
+    } else {
+        String::new()
+    };
+    Err(crate::exit::Usage(format!(
+        "--apparatus-mu1 {mu_a}: blades have a dimensionless damping μ_a from 0 to \
+         {MAX_APPARATUS_MU1} (a damping ratio μ_a/2 of at most 5 %; measure it with a `tribo run \
+         --load 0` and `tribo fit`){hint}"
+    ))
+    .into())
 }
 
 /// The run's clean stretches as positions in its record (whose samples are the run's, in index

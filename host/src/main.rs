@@ -85,9 +85,9 @@ fn main() -> std::process::ExitCode {
                 tribo::exit::Status::Interrupted(_) => "interrupted",
                 _ => "error",
             };
-            eprintln!("{label}: {e}");
+            tribo::errln!("{label}: {e}");
             for cause in e.chain().skip(1) {
-                eprintln!("  caused by: {cause}");
+                tribo::errln!("  caused by: {cause}");
             }
             std::process::ExitCode::from(status.code())
         }

@@ -23,6 +23,17 @@ macro_rules! outln {
     }};
 }
 
+/// `eprintln!` that never panics: a closed standard error (`tribo run … 2>&1 | head -2`) loses the
+/// message, never the run (`eprintln!` panics on `EPIPE`, which left a released run to the rig).
+/// Every message of `tribo` to standard error goes through it.
+#[macro_export]
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr().lock(), $($arg)*);
+    }};
+}
+
 /// `write!` to standard output (then flushed), returning `std::io::Result<()>`.
 #[macro_export]
 macro_rules! out {

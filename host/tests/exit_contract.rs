@@ -101,3 +101,47 @@ fn ctrl_c_stops_the_virtual_rig_with_status_130() {
 fn sighup_stops_the_virtual_rig_with_status_129() {
     stop_the_virtual_rig("HUP", 129);
 }
+
+/// A campaign interrupted by Ctrl-C says how to take it up again with the store and port it was
+/// given (the hint dropped `--store`: run as written, it took the campaign up in another store).
+#[test]
+fn an_interrupted_campaign_says_how_to_resume_it_with_its_own_store() {
+    let rig = RigProcess::start(1.0);
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan.toml");
+    std::fs::write(&plan, "name = \"resume\"\nloads_n = [0.1]\nrepeats = 2\n").unwrap();
+    let store = dir.path().join("elsewhere");
+    let mut child = Command::new(TRIBO)
+        .arg("campaign")
+        .arg(&plan)
+        .args(["--no-prompt", "--port", &rig.addr, "--store"])
+        .arg(&store)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    let mut seen = String::new();
+    loop {
+        let mut line = String::new();
+        if err.read_line(&mut line).unwrap() == 0 {
+            panic!("tribo ended before recording: {seen}");
+        }
+        seen.push_str(&line);
+        if line.contains("recording run") {
+            break;
+        }
+    }
+    send("INT", child.id());
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut err, &mut rest).unwrap();
+    let got = child.wait().unwrap();
+    assert_eq!(got.code(), Some(130), "{seen}{rest}");
+    let again = format!(
+        "tribo campaign {} --store {} --port {} --no-prompt",
+        plan.display(),
+        store.display(),
+        rig.addr
+    );
+    assert!(rest.contains(&again), "no `{again}` in: {rest}");
+}

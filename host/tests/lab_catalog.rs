@@ -65,7 +65,8 @@ fn pcs_sync_at_once_one_is_killed_and_the_lab_reads_across_rigs() {
     .output()
     .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{err}");
+    // A URL that cannot be right is a usage error (status 2), as any wrong command line.
+    assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(
         err.contains("PGPASSWORD") && !err.contains("hunter2"),
         "{err}"
@@ -602,6 +603,173 @@ fn a_campaign_on_two_rigs_ends_with_the_lab_s_table() {
     );
     assert!(
         err.contains("tribo sync") && err.contains("stored"),
+        "{err}"
+    );
+}
+
+/// What a PC is told when it cannot use the lab catalog says why and what to do: no password
+/// found (a password file readable by others is named with `chmod 600`; none at all names where
+/// to put it), and a role that may only read is not told it "needs INSERT and UPDATE" to read.
+/// (Both read "the lab catalog … answered with an error" and a writer's rights.)
+#[test]
+fn a_missing_password_a_read_only_role_and_a_damaged_run_are_told_what_to_do() {
+    if PgServer::skip() {
+        return;
+    }
+    let pg = PgServer::start();
+    let empty = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(empty.path().join("runs")).unwrap();
+    let store = empty.path().join("runs").to_string_lossy().into_owned();
+    ok(tribo(
+        &[
+            "sync",
+            "--store",
+            &store,
+            "--catalog",
+            &pg.url(ADMIN, "lab"),
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap());
+    pg.psql(
+        "lab",
+        "CREATE ROLE nosy LOGIN PASSWORD 'npw'; CREATE ROLE reader LOGIN PASSWORD 'rpw'; \
+         GRANT SELECT ON tribo_schema TO reader, nosy; GRANT SELECT ON tribo_runs TO reader",
+    );
+    // No password anywhere; then one in a password file the group may read.
+    let home = tempfile::tempdir().unwrap();
+    let runs = |pgpass: Option<u32>| {
+        if let Some(mode) = pgpass {
+            use std::os::unix::fs::PermissionsExt;
+            let f = home.path().join(".pgpass");
+            std::fs::write(&f, "*:*:*:reader:rpw\n").unwrap();
+            std::fs::set_permissions(&f, std::fs::Permissions::from_mode(mode)).unwrap();
+        }
+        let o = Command::new(TRIBO)
+            .args(["runs", "--catalog", &pg.url("reader", "lab")])
+            .env_remove("PGPASSWORD")
+            .env_remove("PGPASSFILE")
+            .env_remove("TRIBO_CATALOG")
+            .env("HOME", home.path())
+            .stdin(Stdio::null())
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (status, err) = runs(None);
+    assert_eq!(status, Some(1), "{err}");
+    assert!(
+        err.contains("none was found") && err.contains("PGPASSWORD") && err.contains("chmod 600"),
+        "{err}"
+    );
+    assert!(!err.contains("answered with an error"), "{err}");
+    let (status, err) = runs(Some(0o644));
+    assert_eq!(status, Some(1), "{err}");
+    assert!(err.contains("0644") && err.contains("chmod 600"), "{err}");
+    let (status, err) = runs(Some(0o600));
+    assert_eq!(status, Some(0), "{err}");
+    // A damaged run of this PC is not synced, said with how to repair it, and the sync is not
+    // whole: status 3 (it was 0).
+    let pc = tempfile::tempdir().unwrap();
+    store_of(pc.path(), "00000000000000d4", 2);
+    let mut runs: Vec<_> = std::fs::read_dir(pc.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("frames.log").is_file())
+        .collect();
+    runs.sort();
+    let log = runs[0].join("frames.log");
+    let mut b = std::fs::read(&log).unwrap();
+    let at = b.len() / 2;
+    b[at] ^= 0x40;
+    std::fs::write(&log, b).unwrap();
+    let o = tribo(
+        &[
+            "sync",
+            "--store",
+            &pc.path().to_string_lossy(),
+            "--catalog",
+            &pg.url(ADMIN, "lab"),
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap();
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert_eq!(o.status.code(), Some(3), "{out}{err}");
+    let name = runs[0].file_name().unwrap().to_string_lossy().into_owned();
+    assert!(
+        out.contains("not synced") && out.contains(&name) && out.contains("--salvage"),
+        "{out}"
+    );
+    assert!(
+        err.contains("incomplete:") && err.contains("1 run of this PC not synced"),
+        "{err}"
+    );
+    // `tribo export --catalog URL`: the lab catalog as one table, as `--catalog URL` reads it
+    // everywhere else (it was a switch for this PC's store only); `--catalog` alone: this PC's,
+    // the damaged run named and the export not whole (3).
+    let out = pc.path().join("lab.json");
+    let o = tribo(
+        &[
+            "export",
+            "--catalog",
+            &pg.url(ADMIN, "lab"),
+            "--format",
+            "json",
+            "-o",
+            &out.to_string_lossy(),
+        ],
+        ADMIN_PASSWORD,
+    )
+    .output()
+    .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(v["runs"].as_array().unwrap().len(), count(&pg), "{v}");
+    assert_eq!(count(&pg), 1);
+    let o = tribo(
+        &[
+            "export",
+            "--catalog",
+            "--store",
+            &pc.path().to_string_lossy(),
+            "--format",
+            "json",
+            "-o",
+            &out.to_string_lossy(),
+        ],
+        "",
+    )
+    .output()
+    .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains(&name) && err.contains("--salvage"), "{err}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(v["runs"].as_array().unwrap().len(), 1, "{v}");
+    // A role that may not read tribo_runs, reading: told it needs SELECT, not a writer's rights.
+    let o = tribo(&["runs", "--catalog", &pg.url("nosy", "lab")], "npw")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("SELECT") && !err.contains("INSERT and UPDATE"),
         "{err}"
     );
 }

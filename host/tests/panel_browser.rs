@@ -8,6 +8,9 @@
 //!   are disabled, and a command it forces is refused); the rig killed: "disconnected" within 2 s
 //!   and the controls disabled; the panel killed (`kill -9`) while heating: the rig goes safe
 //!   within its lease.
+//! * The panel answers only to itself: a page under another name that resolves to 127.0.0.1 (DNS
+//!   rebinding) is refused, page and commands, and a page of another origin that posts a command
+//!   is refused; the rig hears neither. A release while the plate settles asks first.
 //!
 //! They need `chromium` and `chromedriver` (Debian: `apt-get install chromium chromium-driver`),
 //! so they are `#[ignore]`d in a plain `cargo test`; `cargo xtask ci` installs both when missing
@@ -108,6 +111,19 @@ impl Browser {
     }
 
     fn session(&self) -> Session<'_> {
+        self.session_with(&[])
+    }
+
+    /// A session whose chromium gets these flags too.
+    fn session_with(&self, extra: &[&str]) -> Session<'_> {
+        let mut args = vec![
+            "--headless=new",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-dev-shm-usage",
+            "--window-size=1400,1050",
+        ];
+        args.extend_from_slice(extra);
         let chromium = std::env::var_os("CHROMIUM")
             .map(PathBuf::from)
             .or_else(|| which("chromium"))
@@ -120,8 +136,7 @@ impl Browser {
                 "browserName": "chrome",
                 "goog:chromeOptions": {
                     "binary": chromium,
-                    "args": ["--headless=new", "--no-sandbox", "--disable-gpu",
-                             "--disable-dev-shm-usage", "--window-size=1400,1050"]
+                    "args": args
                 }
             }}})),
         );
@@ -380,6 +395,18 @@ fn a_run_from_the_page_gives_what_the_cli_gives_and_faults_show() {
     page.click("arm");
     page.wait_text("state", "armed", Duration::from_secs(5));
     page.click("release");
+    // The plate set to 30 °C moments ago is still settling: the page asks first; accepted.
+    let asked = page.wait("the confirmation", Duration::from_secs(5), |p| {
+        let mut r =
+            p.b.agent
+                .get(format!("{}/session/{}/alert/text", p.b.base, p.id))
+                .call()
+                .ok()?;
+        let v: Value = r.body_mut().read_json().ok()?;
+        v["value"].as_str().map(str::to_string)
+    });
+    assert!(asked.contains("still settling"), "{asked}");
+    page.post("/alert/accept", json!({}));
     // The trace grows while the rig streams.
     let blocks = |p: &Session| -> Option<(u64, bool)> {
         let t = p.text("trace-info");
@@ -404,6 +431,36 @@ fn a_run_from_the_page_gives_what_the_cli_gives_and_faults_show() {
             .map(str::to_string)
     });
     page.screenshot(&figures_dir().join("panel-after-run.png"));
+    // Every axis ticks at round numbers (a step of 1, 2 or 5 × 10^k, each tick a multiple of it),
+    // not at the data's extremes (734, 367, −0.0916).
+    let ticks = page.js("return panelTicks");
+    let ticks = ticks.as_object().expect("the ticks drawn");
+    for unit in ["µm", "mm/s", "°C"] {
+        let t: Vec<f64> = ticks[unit]
+            .as_array()
+            .unwrap_or_else(|| panic!("no {unit} axis: {ticks:?}"))
+            .iter()
+            .map(|v| v.as_str().unwrap().parse().unwrap())
+            .collect();
+        assert!(t.len() >= 2, "{unit}: {t:?}");
+        let step = t[1] - t[0];
+        let p = 10f64.powf(step.log10().floor());
+        let m = (step / p * 1e6).round() / 1e6;
+        assert!([1.0, 2.0, 5.0].contains(&m), "{unit}: step {step} in {t:?}");
+        for w in t.windows(2) {
+            assert!(
+                ((w[1] - w[0]) - step).abs() < 1e-9 * step.abs().max(1.0),
+                "{unit}: {t:?}"
+            );
+        }
+        for v in &t {
+            let k = v / step;
+            assert!(
+                (k - k.round()).abs() < 1e-6,
+                "{unit}: {v} is not a multiple of {step}"
+            );
+        }
+    }
     let out = Command::new(TRIBO)
         .args(["runs", "--json", "--store"])
         .arg(&store)
@@ -513,4 +570,131 @@ fn the_panel_killed_while_heating_leaves_the_rig_safe_within_its_lease() {
     let s = rig.status();
     assert_eq!(s.heater_setpoint_c, None);
     assert!(!s.magnet_on);
+}
+
+/// Serves `html` to every request on a port of its own (an attacker's site), until the test ends.
+fn serve_page(html: String) -> String {
+    use std::io::{Read, Write};
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap();
+    std::thread::spawn(move || {
+        for s in l.incoming() {
+            let Ok(mut s) = s else { return };
+            let mut buf = [0u8; 4096];
+            let _ = s.read(&mut buf);
+            let _ = write!(
+                s,
+                "HTTP/1.1 200 OK\r\nContent-Type: text/html\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{html}",
+                html.len()
+            );
+        }
+    });
+    format!("http://{addr}/")
+}
+
+/// The panel answers only to itself, in a real browser: a name rebound to 127.0.0.1
+/// (`attacker.example`, mapped by chromium's resolver rules) gets neither the page nor a command
+/// through (the panel served both, and obeyed: DNS rebinding made the attacker's page
+/// same-origin), and a page of another origin that posts a command with the panel's cookie is
+/// refused for its `Origin`. The rig hears no command; the panel counts the refusals. Then, from
+/// the panel's own page, a release while the plate settles asks first.
+#[test]
+#[ignore = "needs chromium and chromedriver: cargo test -p tribo --test panel_browser -- --ignored"]
+fn a_page_of_another_name_or_origin_cannot_drive_the_panel() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = RigProcess::start(1.0);
+    let (_panel, url) = start_panel(&rig, &dir.path().join("runs"));
+    let (base, token) = url.split_once("/?token=").unwrap();
+    let port = base.rsplit_once(':').unwrap().1.to_string();
+    let heat = r#"{"setpoint_c":35,"ramp_c_per_min":10}"#;
+    let attacker = serve_page(format!(
+        "<html><body><script>fetch('{base}/api/heater', {{method: 'POST', mode: 'no-cors', \
+         credentials: 'include', body: '{heat}'}}).then(() => document.title = 'sent', \
+         () => document.title = 'failed');</script></body></html>"
+    ));
+    let browser = Browser::start();
+    let page = browser.session_with(&["--host-resolver-rules=MAP attacker.example 127.0.0.1"]);
+    // The panel's own page first: the browser holds its cookie, as a technician's would.
+    page.goto(&url);
+    page.wait_text("link", "connected", Duration::from_secs(10));
+
+    // A rebound name: the page is refused, and so is a command sent from it.
+    page.goto(&format!("http://attacker.example:{port}/"));
+    let body = page
+        .js("return document.body ? document.body.innerText : ''")
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    assert!(body.contains("refused"), "{body}");
+    let forced = page.js(&format!(
+        "return (async () => {{ const r = await fetch('/api/heater', {{method: 'POST', headers: \
+         {{'X-Panel-Client': 'x'}}, body: '{heat}'}}); return r.status; }})();"
+    ));
+    assert_eq!(forced, 403, "a command from the rebound name");
+
+    // Another origin: its page posts a command, the panel's cookie along.
+    page.goto(&attacker);
+    page.wait("the attacker's post", Duration::from_secs(10), |p| {
+        let t = p.js("return document.title");
+        matches!(t.as_str(), Some("sent") | Some("failed")).then_some(())
+    });
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .build()
+        .into();
+    let state: Value = agent
+        .get(format!("{base}/api/state"))
+        .header("X-Panel-Token", token)
+        .call()
+        .unwrap()
+        .body_mut()
+        .read_json()
+        .unwrap();
+    let refused = &state["refused"];
+    assert!(refused["count"].as_u64().unwrap() >= 3, "{refused}");
+    let origin = attacker.trim_end_matches('/');
+    assert!(
+        refused["last"].as_str().unwrap().contains(origin),
+        "the last refusal names the attacker's origin {origin}: {refused}"
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(
+        !rig.console().contains("heater to 35"),
+        "the rig heard a command: {}",
+        rig.console()
+    );
+
+    // From the panel's own page: heating, then a release asks first (dismissed: nothing sent).
+    page.goto(&url);
+    page.wait_text(
+        "control",
+        "this page controls the rig",
+        Duration::from_secs(10),
+    );
+    page.fill("setpoint", "40");
+    page.click("heater-set");
+    page.wait_text("message", "heating to 40.0 °C", Duration::from_secs(5));
+    page.fill("load", "0.3");
+    page.click("configure");
+    page.wait_text("message", "configured", Duration::from_secs(5));
+    page.click("arm");
+    page.wait_text("state", "armed", Duration::from_secs(5));
+    page.click("release");
+    let asked = page.wait("the confirmation", Duration::from_secs(5), |p| {
+        let mut r =
+            p.b.agent
+                .get(format!("{}/session/{}/alert/text", p.b.base, p.id))
+                .call()
+                .ok()?;
+        let v: Value = r.body_mut().read_json().ok()?;
+        v["value"].as_str().map(str::to_string)
+    });
+    assert!(asked.contains("still settling"), "{asked}");
+    page.post("/alert/dismiss", json!({}));
+    page.wait_text("message", "not sent", Duration::from_secs(5));
+    assert!(
+        !rig.console().contains("host: release"),
+        "{}",
+        rig.console()
+    );
 }

@@ -30,8 +30,9 @@ create_exception!(
     _tribo,
     NotAnalysable,
     TriboError,
-    "The record cannot be analysed (no oscillation, too few half cycles, a saturated channel, a \
-     non-finite sample): nothing is fitted. `reason` names why (or is None)."
+    "The record cannot be analysed (no oscillation, too few half cycles, a saturated or stuck \
+     channel, a non-finite sample, or not plausible as written: another unit than its header \
+     says): nothing is fitted. `reason` names why (or is None)."
 );
 create_exception!(
     _tribo,
@@ -173,7 +174,7 @@ fn failure(e: anyhow::Error, path: Option<&Path>) -> Failure {
     if let Some(le) = e.downcast_ref::<LoadError>() {
         match le {
             LoadError::Record(r) => return record_failure(r),
-            LoadError::Holes { path, .. } => {
+            LoadError::Holes { path, .. } | LoadError::Incomplete { path, .. } => {
                 let missing = tribo_store::Run::open(path)
                     .map(|r| r.missing_blocks())
                     .unwrap_or_default();
@@ -581,6 +582,7 @@ fn fit_json(src: Source, a: FitArgs) -> Res<String> {
     let (mut rec, path, defaults) = src.load(a.holes)?;
     let anyhow_f = |e: anyhow::Error| failure(e, Some(&path));
     let json_f = |e: serde_json::Error| Failure::Tribo(e.to_string());
+    tribo::load::plausible_apparatus_mu1(a.apparatus_mu1).map_err(anyhow_f)?;
     let rig = tribo::load::apply_rig_flags(&mut rec, a.flags, &defaults).map_err(anyhow_f)?;
     let opts = FitOptions {
         apparatus_mu1: a.apparatus_mu1,

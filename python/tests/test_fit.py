@@ -83,6 +83,18 @@ def test_a_bad_law_is_a_value_error(run_dir):
         tribo.fit(run_dir, law="cubic-spline")
     with pytest.raises(ValueError):
         tribo.explain(run_dir, only=["no-such-effect"])
+    # And a TriboError, as every error of the package (it was a bare ValueError).
+    with pytest.raises(tribo.TriboError):
+        tribo.fit(run_dir, law="bogus")
+    with pytest.raises(tribo.UsageError):
+        tribo.explain(run_dir, only=["no-such-effect"])
+
+
+def test_an_implausible_apparatus_damping_is_refused(run_dir):
+    # 1.1 for 1.1e-3: refused, the likely slip named (it fitted μ1 = −1.09, "adequate").
+    with pytest.raises(tribo.TriboError) as e:
+        tribo.fit(run_dir, apparatus_mu1=1.1)
+    assert "1.1e-3" in str(e.value)
 
 
 def test_a_long_fit_releases_the_gil():

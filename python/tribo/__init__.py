@@ -13,7 +13,8 @@ command's ``--json`` object, to the last digit.
 Errors are exceptions a script can catch, all subclasses of :class:`TriboError`:
 :class:`NotAnalysable` (nothing to fit), :class:`IncompleteRun` (a run with holes; its
 ``missing_blocks``), :class:`RecordError` (a record that cannot be read; its ``file``, ``line``,
-``column``).
+``column``), :class:`UsageError` (a wrong argument: an unknown law or effect, a value out of
+range; a ``ValueError`` too).
 """
 
 from __future__ import annotations
@@ -25,8 +26,30 @@ from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+import functools
+
 from . import _tribo
 from ._tribo import IncompleteRun, NotAnalysable, RecordError, TriboError
+
+
+class UsageError(TriboError, ValueError):
+    """A wrong argument (an unknown law or effect, a value out of range): a :class:`TriboError`
+    like every error of the package, and a ``ValueError`` as Python's own are."""
+
+
+def _usage(f):
+    """Raises the ``ValueError`` of a wrong argument as :class:`UsageError`."""
+
+    @functools.wraps(f)
+    def wrapped(*args, **kwargs):
+        try:
+            return f(*args, **kwargs)
+        except TriboError:
+            raise
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+
+    return wrapped
 
 __version__: str = _tribo.__version__
 
@@ -48,6 +71,7 @@ __all__ = [
     "NotAnalysable",
     "IncompleteRun",
     "RecordError",
+    "UsageError",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -359,6 +383,7 @@ def _range(v: Any, tol: float) -> Optional[Tuple[float, float]]:
     return float(lo), float(hi)
 
 
+@_usage
 def open_run(path: PathLike, allow_incomplete: bool = False) -> Run:
     """Opens a run folder of the store: its samples as numpy arrays, metadata and results.
 
@@ -370,6 +395,7 @@ def open_run(path: PathLike, allow_incomplete: bool = False) -> Run:
     return Run(_tribo.open_run(os.fspath(path), allow_incomplete=allow_incomplete))
 
 
+@_usage
 def read_record(path: PathLike) -> Record:
     """Reads a CSV record (``t_s,x_m,v_m_s[,ft_n,temp_c,ecr_ohm]`` with ``# mass_kg=…`` lines,
     or ``tau,y,ydot``). A malformed file raises :class:`RecordError` with ``file``, ``line``
@@ -377,6 +403,7 @@ def read_record(path: PathLike) -> Record:
     return Record(_tribo.read_record(os.fspath(path)))
 
 
+@_usage
 def simulate(**flags: Any) -> Record:
     """A simulated record, made by ``tribo sim`` with these flags (Python names, e.g.
     ``law="quadratic", mu=[0.02, 0.01, 0.005], noise=True, duration_s=2, held_s=0.5``).
@@ -407,6 +434,7 @@ def _source(src: Source) -> Dict[str, Any]:
     return {"path": os.fspath(src)}
 
 
+@_usage
 def fit(
     record: Source,
     law: str = "coulomb-viscous",
@@ -440,6 +468,7 @@ def fit(
     )
 
 
+@_usage
 def explain(
     record: Source,
     base: str = "coulomb-viscous",

@@ -132,6 +132,12 @@ pub(crate) fn explain(url: &LabUrl, what: &str, e: postgres::Error) -> StoreErro
     let at = url.shown();
     let user = url.user();
     let msg = match e.code() {
+        // Reading (`tribo runs`, `table`, `report` with --catalog) needs SELECT; only a sync writes.
+        Some(c) if *c == SqlState::INSUFFICIENT_PRIVILEGE && !what.starts_with("writing") && !what.starts_with("creating") => format!(
+            "{what}: the role {user:?} may not read the lab catalog at {at}: a PC that reads it needs \
+             a role with SELECT on tribo_runs and tribo_schema (README, \"A catalog for the whole \
+             lab\"); ask the catalog's owner for one"
+        ),
         Some(c) if *c == SqlState::INSUFFICIENT_PRIVILEGE => format!(
             "{what}: the role {user:?} may not do this in the lab catalog at {at} (nothing was \
              written): a PC that syncs needs a role with INSERT and UPDATE on tribo_runs (README, \
@@ -160,6 +166,18 @@ pub(crate) fn explain(url: &LabUrl, what: &str, e: postgres::Error) -> StoreErro
             "{what}: the lab catalog at {at} cannot be reached or was lost (server down, restarting, \
              or the network cut): check the server and this PC's network; nothing is half-written, \
              run the command again when it is back"
+        ),
+        // The server asks a password and this PC has none to give (said by the client, before the
+        // server could answer): why none was found.
+        _ if !url.has_password() && crate::chain(&e).contains("password missing") => format!(
+            "{what}: the server at {at} asks a password for the role {user:?} and none was found: {}",
+            match url.pgpass_ignored() {
+                Some(why) => why.to_string(),
+                None => "put it in PGPASSWORD or in the password file (~/.pgpass: \
+                         HOST:PORT:DATABASE:USER:PASSWORD, mode 0600, `chmod 600 ~/.pgpass`; on \
+                         Windows %APPDATA%\\postgresql\\pgpass.conf)"
+                    .to_string(),
+            }
         ),
         _ => format!("{what}: the lab catalog at {at} answered with an error"),
     };

@@ -35,6 +35,20 @@ pub(crate) fn err(msg: impl Into<String>) -> StoreError {
     StoreError::new(ErrorKind::Catalog, msg)
 }
 
+/// A catalog URL that cannot be right, as given on the command line or in $TRIBO_CATALOG
+/// (status 2, as for any usage error).
+pub(crate) fn usage(msg: impl Into<String>) -> StoreError {
+    StoreError::new(ErrorKind::Usage, msg)
+}
+
+/// [`usage`] caused by `e`.
+pub(crate) fn caused_usage(
+    msg: impl Into<String>,
+    e: impl std::error::Error + Send + Sync + 'static,
+) -> StoreError {
+    StoreError::caused(ErrorKind::Usage, msg, e)
+}
+
 /// A catalog error caused by `e`.
 pub(crate) fn caused(
     msg: impl Into<String>,

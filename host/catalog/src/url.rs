@@ -106,16 +106,18 @@ impl LabUrl {
         let usage = "write postgres://USER@HOST[:PORT]/DATABASE[?sslmode=require], the password in \
                      PGPASSWORD or ~/.pgpass (or leave --catalog and TRIBO_CATALOG unset for this PC's own catalog)";
         if url.chars().any(|c| c.is_control() || c.is_whitespace()) {
-            return Err(err(format!(
+            return Err(crate::usage(format!(
                 "the catalog URL {:?} holds a space or a control character: {usage}",
                 shown.escape_default().to_string()
             )));
         }
         let Some((scheme, rest)) = url.split_once("://") else {
-            return Err(err(format!("{shown:?} is not a PostgreSQL URL: {usage}")));
+            return Err(crate::usage(format!(
+                "{shown:?} is not a PostgreSQL URL: {usage}"
+            )));
         };
         if scheme != "postgres" && scheme != "postgresql" {
-            return Err(err(format!(
+            return Err(crate::usage(format!(
                 "{shown:?} is not a PostgreSQL URL (scheme {scheme:?}): {usage}"
             )));
         }
@@ -126,7 +128,7 @@ impl LabUrl {
         let auth = head.split('/').next().unwrap_or("");
         if let Some((user, _)) = auth.rsplit_once('@') {
             if user.contains(':') {
-                return Err(err(format!(
+                return Err(crate::usage(format!(
                     "the catalog URL {shown} holds a password: a command line is seen by every user \
                      of the PC and kept in shell histories. Remove it from the URL and put it in \
                      PGPASSWORD or in ~/.pgpass (HOST:PORT:DATABASE:USER:PASSWORD, mode 0600; on \
@@ -143,14 +145,14 @@ impl LabUrl {
             let (k, v) = kv.split_once('=').unwrap_or((kv, ""));
             match k {
                 "password" => {
-                    return Err(err(format!(
+                    return Err(crate::usage(format!(
                         "the catalog URL {shown} holds a password: remove it and put it in \
                          PGPASSWORD or in ~/.pgpass"
                     )))
                 }
                 "sslmode" => {
                     if !["disable", "prefer", "require", "verify-ca", "verify-full"].contains(&v) {
-                        return Err(err(format!(
+                        return Err(crate::usage(format!(
                             "sslmode={v:?} in {shown}: use disable, prefer, require, verify-ca or \
                              verify-full (tribo verifies the server's certificate whenever it uses TLS)"
                         )));
@@ -164,7 +166,7 @@ impl LabUrl {
                     kept.push(kv.to_string());
                 }
                 _ => {
-                    return Err(err(format!(
+                    return Err(crate::usage(format!(
                         "unknown parameter {k:?} in the catalog URL {shown}: tribo takes {}",
                         KEYS.join(", ")
                     )))
@@ -197,13 +199,13 @@ impl LabUrl {
         kept.push(format!("sslmode={mode}"));
         let rebuilt = format!("postgresql://{head}?{}", kept.join("&"));
         let mut config: postgres::Config = rebuilt.parse().map_err(|e| {
-            crate::caused(
+            crate::caused_usage(
                 format!("the catalog URL {shown} cannot be read: {usage}"),
                 e,
             )
         })?;
         if config.get_hosts().is_empty() {
-            return Err(err(format!(
+            return Err(crate::usage(format!(
                 "the catalog URL {shown} names no server: {usage}"
             )));
         }

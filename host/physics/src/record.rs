@@ -317,7 +317,9 @@ impl Record {
         }
     }
 
-    /// Parses CSV text (SI or dimensionless). A leading byte-order mark is skipped. Strict: every
+    /// Parses CSV text (SI or dimensionless). A leading byte-order mark is skipped. An empty
+    /// `ecr_ohm` field is a sample without an ECR reading: for analysis it takes the nearest
+    /// reading ([`fill_missing`], as a stored run's record does), a column without any is dropped. Strict: every
     /// field must be a number, every row as long as the header, a header key (`# key=value`)
     /// and a column name may appear once; errors give the line and column. Values that parse but
     /// are not finite (`inf`, `NaN`, `1e999`) are [`RecordErrorKind::NonFinite`] errors.
@@ -419,6 +421,12 @@ impl Record {
                     let mut col = indent + 1;
                     for (i, f) in fields.iter().enumerate() {
                         let fcol = col + f.chars().take_while(|c| c.is_whitespace()).count();
+                        // An empty ECR field: the rig had no reading for that sample.
+                        if f.trim().is_empty() && h[i] == "ecr_ohm" {
+                            cols[i].push(f64::NAN);
+                            col += f.chars().count() + 1;
+                            continue;
+                        }
                         let v: f64 = f.trim().parse().or_else(|_| {
                             at(
                                 line_no,
@@ -472,7 +480,7 @@ impl Record {
                 v: take(Some(iv), &mut cols).unwrap_or_default(),
                 ft: take(ift, &mut cols),
                 temp: take(itemp, &mut cols),
-                ecr: take(iecr, &mut cols),
+                ecr: take(iecr, &mut cols).and_then(|mut e| fill_missing(&mut e).then_some(e)),
                 rig,
                 units: Units::Si,
                 force_cutoff_hz,
@@ -501,7 +509,9 @@ impl Record {
         Ok(rec)
     }
 
-    /// Writes CSV text (with rig comment lines for SI records).
+    /// Writes CSV text (with rig comment lines for SI records). An ECR value that is not finite
+    /// (the rig had no reading for that sample) is written as an empty field; [`Record::from_csv_str`]
+    /// reads it back as missing.
     pub fn to_csv_string(&self) -> String {
         let mut s = String::with_capacity(self.len() * 60);
         match self.units {
@@ -537,8 +547,13 @@ impl Record {
                 s.push('\n');
                 for i in 0..self.len() {
                     let _ = write!(s, "{:e},{:e},{:e}", self.t[i], self.x[i], self.v[i]);
-                    for (_, c) in &extra {
-                        let _ = write!(s, ",{:e}", c[i]);
+                    for (name, c) in &extra {
+                        if *name == "ecr_ohm" && !c[i].is_finite() {
+                            // Not measured: left empty, never a number the rig did not give.
+                            s.push(',');
+                        } else {
+                            let _ = write!(s, ",{:e}", c[i]);
+                        }
                     }
                     s.push('\n');
                 }
@@ -565,4 +580,22 @@ impl Record {
             self.v.iter().map(|&v| rig.ydot_of_v(v)).collect(),
         ))
     }
+}
+
+/// Replaces non-finite values (samples without a reading) by the previous finite one, the first
+/// finite one for those before it: how a record's ECR column is completed for analysis (a stored
+/// run's and a CSV's alike; the exports keep them empty). `false` when there is no finite value.
+pub fn fill_missing(v: &mut [f64]) -> bool {
+    let Some(first) = v.iter().copied().find(|x| x.is_finite()) else {
+        return false;
+    };
+    let mut last = first;
+    for x in v.iter_mut() {
+        if x.is_finite() {
+            last = *x;
+        } else {
+            *x = last;
+        }
+    }
+    true
 }

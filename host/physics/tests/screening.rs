@@ -139,3 +139,60 @@ fn leaving_clipped_peaks_out_does_not_excuse_a_channel_stuck_at_its_rail() {
         );
     }
 }
+
+/// A pin that never moves (held by friction above the blades' pull) reads noise about where it was
+/// released, quantised by the converters: that is "the pin never moves", not a saturated channel
+/// (its noise sits on the extreme codes for long runs). A velocity input stuck at one code while
+/// the displacement swings is a stuck channel, not "the pin never moves" — and so is a
+/// displacement stuck while the velocity swings.
+#[test]
+fn a_still_pin_and_a_stuck_channel_are_told_apart_from_a_saturated_one() {
+    let good = record(0.3, FrictionLaw::coulomb_viscous(0.02, 0.01), 7, 2e-5);
+    let mut rng = tribo_physics::sensor::Rng::new(11);
+    // The rig's converters: 16 bits over ±2 mm and ±0.25 m/s.
+    let q = |v: f64, fs: f64| {
+        let lsb = 2.0 * fs / 65536.0;
+        (v / lsb).round() * lsb
+    };
+    let mut still = good.clone();
+    still
+        .x
+        .iter_mut()
+        .for_each(|x| *x = q(667e-6 + 2e-8 * rng.normal(), 2e-3));
+    still
+        .v
+        .iter_mut()
+        .for_each(|v| *v = q(2e-5 * rng.normal(), 0.25));
+    match screened(&still) {
+        Err(NotAnalysable::NoOscillation { reason }) => {
+            assert!(reason.contains("the pin never moves"), "{reason}")
+        }
+        other => panic!("{other:?}"),
+    }
+    let mut stuck_v = good.clone();
+    stuck_v.v.iter_mut().for_each(|v| *v = q(0.0, 0.25));
+    assert!(
+        matches!(
+            screened(&stuck_v),
+            Err(NotAnalysable::Stuck {
+                channel: "velocity",
+                ..
+            })
+        ),
+        "{:?}",
+        screened(&stuck_v)
+    );
+    let mut stuck_x = good.clone();
+    stuck_x.x.iter_mut().for_each(|x| *x = q(1e-4, 2e-3));
+    assert!(
+        matches!(
+            screened(&stuck_x),
+            Err(NotAnalysable::Stuck {
+                channel: "displacement",
+                ..
+            })
+        ),
+        "{:?}",
+        screened(&stuck_x)
+    );
+}

@@ -99,13 +99,26 @@ impl Plan {
     pub fn load(path: &Path) -> anyhow::Result<Plan> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read the plan {}", path.display()))?;
-        let p: Plan = toml::from_str(&text)
-            .with_context(|| format!("the campaign plan {}", path.display()))?;
-        p.check().with_context(|| format!("{}", path.display()))?;
+        // A plan that cannot be right is a usage error (status 2), as a wrong command line is.
+        let p: Plan = toml::from_str(&text).map_err(|e| {
+            crate::exit::Usage(format!("the campaign plan {}: {e}", path.display()))
+        })?;
+        p.check()
+            .map_err(|e| crate::exit::Usage(format!("{}: {e:#}", path.display())))?;
         Ok(p)
     }
 
     fn check(&self) -> anyhow::Result<()> {
+        super::run::check_settle(self.settle_tol_c, self.settle_s, self.settle_timeout_s).map_err(
+            |why| {
+                anyhow::anyhow!(
+                    "settle_tol_c = {}, settle_s = {}, settle_timeout_s = {}: {why}",
+                    self.settle_tol_c,
+                    self.settle_s,
+                    self.settle_timeout_s
+                )
+            },
+        )?;
         if self.name.trim().is_empty() {
             bail!("`name` must not be empty (it identifies the campaign's runs when resuming)");
         }
@@ -210,12 +223,16 @@ impl Plan {
 /// The points of `plan` already done: a complete run of this campaign in `store` with the same
 /// load, temperature setpoint and repetition.
 pub fn finished(plan: &Plan, store: &Path) -> anyhow::Result<Vec<Point>> {
+    // What the metadata claims, checked against the frame log: a run whose log was damaged or
+    // cut since it was taken is not done (it is taken again; `tribo table` names it).
     let metas: Vec<RunMeta> = list_run_dirs(store)?
         .iter()
-        .filter_map(|d| std::fs::read_to_string(d.join(META_FILE)).ok())
-        .filter_map(|t| toml::from_str::<RunMeta>(&t).ok())
-        .filter(|m| {
-            m.status == RunStatus::Complete && m.campaign.as_deref() == Some(plan.name.as_str())
+        .filter_map(|d| {
+            let m = toml::from_str::<RunMeta>(&std::fs::read_to_string(d.join(META_FILE)).ok()?)
+                .ok()?;
+            let ours = m.status == RunStatus::Complete
+                && m.campaign.as_deref() == Some(plan.name.as_str());
+            (ours && tribo_store::Run::open(d).is_ok_and(|r| r.is_complete())).then_some(m)
         })
         .collect();
     Ok(plan
@@ -233,6 +250,22 @@ pub fn finished(plan: &Plan, store: &Path) -> anyhow::Result<Vec<Point>> {
             })
         })
         .collect())
+}
+
+/// `tribo campaign PLAN` with the `--store` and `--port` this command was given: what takes the
+/// campaign up where it stopped (without them, another store's runs would count, or none).
+fn resume_command(args: &Args) -> String {
+    let mut c = format!("tribo campaign {}", args.plan.display());
+    if let Some(s) = &args.link.store {
+        c.push_str(&format!(" --store {}", s.display()));
+    }
+    if let Some(p) = &args.link.port {
+        c.push_str(&format!(" --port {p}"));
+    }
+    if args.no_prompt {
+        c.push_str(" --no-prompt");
+    }
+    c
 }
 
 /// Arguments of `tribo campaign`.
@@ -292,12 +325,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 p.repeat
             );
         }
+        // The campaign's runs that are stored but not whole: taken again, and said why.
+        let left = crate::archive::left_out(
+            &store,
+            &Filter {
+                campaign: Some(plan.name.clone()),
+                ..Default::default()
+            },
+        )?;
+        for l in &left {
+            println!("  not done (to take again): {}: {}", l.dir.display(), l.why);
+        }
         if todo.is_empty() {
             print_table(&plan, &store, args.catalog.as_deref(), args.quiet)?;
         }
         return Ok(());
     }
     let abort = abort_flag();
+    // How to take the campaign up again: the same plan, store and port as this command line.
+    let again = resume_command(&args);
     args.link.writable_store()?;
     let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // Heartbeats while the campaign runs (prompts included); every exit leaves the rig safe.
@@ -312,13 +358,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             && !args.no_prompt
             && std::io::stdin().is_terminal()
         {
-            eprintln!("set the load knob to {} N, then press Enter", p.load_n);
+            crate::errln!("set the load knob to {} N, then press Enter", p.load_n);
             let mut s = String::new();
             std::io::stdin().read_line(&mut s)?;
         }
         last_load = Some(p.load_n);
         if !args.quiet {
-            eprintln!(
+            crate::errln!(
                 "[{}/{}] load {} N, {}, repetition {}/{}",
                 i + 1,
                 todo.len(),
@@ -348,42 +394,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ui.finish();
         let o = o.with_context(|| {
             format!(
-                "campaign {:?} stopped; run `tribo campaign {}` again to resume",
-                plan.name,
-                args.plan.display()
+                "campaign {:?} stopped; run `{again}` again to resume",
+                plan.name
             )
         })?;
         print_outcome(&o)?;
         if let Some(e) = o.incomplete() {
             // A run of the campaign is not stored whole: stop, say how to resume, exit status 3.
             return Err(anyhow::Error::new(e).context(format!(
-                "campaign interrupted: run `tribo campaign {}` again to resume where it stopped (an \
-                 incomplete run is taken again)",
-                args.plan.display()
+                "campaign interrupted: run `{again}` again to resume where it stopped (an \
+                 incomplete run is taken again)"
             )));
         }
         if o.aborted || abort.load(Ordering::Relaxed) {
             return Err(crate::exit::Interrupted(format!(
-                "campaign interrupted after {} of {} runs: run `tribo campaign {}` again to resume where it stopped",
+                "campaign interrupted after {} of {} runs: run `{again}` again to resume where it stopped",
                 i + usize::from(!o.aborted),
-                todo.len(),
-                args.plan.display()
+                todo.len()
             ))
             .into());
         }
         if o.link_lost.is_some() {
-            println!(
-                "campaign interrupted: run `tribo campaign {}` again to resume where it stopped",
-                args.plan.display()
-            );
+            println!("campaign interrupted: run `{again}` again to resume where it stopped");
             return Ok(());
         }
     }
     let _ = link.command(HostMsg::HeaterOff);
     if abort.load(Ordering::Relaxed) {
         return Err(crate::exit::Interrupted(format!(
-            "campaign interrupted: run `tribo campaign {}` again to resume",
-            args.plan.display()
+            "campaign interrupted: run `{again}` again to resume"
         ))
         .into());
     }
@@ -412,7 +451,7 @@ fn print_table(
             };
             let synced = tribo_catalog::sync(store, &url, &opts, &mut |_, _| {}).and_then(|r| {
                 if !quiet {
-                    eprintln!(
+                    crate::errln!(
                         "synced to {}: {} new, {} updated, {} already there",
                         url.shown(),
                         r.pushed.inserted,

@@ -47,7 +47,7 @@ pub fn demo(args: &Args) -> anyhow::Result<crate::link::session::Outcome> {
     let (mut link, cfg) = args.rig.in_process()?;
     let say = |m: String| {
         if !args.quiet {
-            eprintln!("{m}")
+            crate::errln!("{m}")
         }
     };
     say(format!(

@@ -122,6 +122,8 @@ fn run_inner(args: Args) -> Result<()> {
         crate::Holes::Refuse
     };
     let record = load_analysable_for_fit(&args.record, holes)?;
+    crate::load::plausible_record(&record)
+        .map_err(|e| e.context(args.record.display().to_string()))?;
     let not_analysable = |e: tribo_explain::ExplainError| -> anyhow::Error {
         if e.is_not_analysable() {
             Incomplete(format!(

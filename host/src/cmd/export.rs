@@ -41,7 +41,10 @@ SOURCE is a run folder of the store or a record (CSV). The formats:
 With `--catalog` (no SOURCE): the runs of the store (`--store`, else $TRIBO_STORE, else ./runs),
 one row per run, the columns of `tribo runs --json` plus the run's sample, lubricant, firmware,
 samples, missing blocks, on-board verdict, cycles and host gap (nullable where a run has none).
-Runs whose log is damaged are not in the catalog: `tribo runs` lists them.
+Runs whose log is damaged are not in the catalog: they are named on stderr with how to repair
+them, and the export ends with status 3. `--catalog URL` (a PostgreSQL URL, as every other
+`--catalog` takes) exports the lab catalog's runs instead; `--catalog` alone takes $TRIBO_CATALOG
+when it is set.
 
 Read it back: `pandas.read_parquet(F)`, `polars.read_parquet(F)`,
 `duckdb.sql(\"select * from 'F'\")`, R `arrow::read_parquet(F)`, MATLAB `parquetread(F)`; the
@@ -59,9 +62,11 @@ pub struct Args {
     /// Output file.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Export the catalog of runs (one row per run) instead of one run's samples.
-    #[arg(long)]
-    pub catalog: bool,
+    /// Export the catalog of runs (one row per run) instead of one run's samples: with no URL
+    /// this PC's store (or $TRIBO_CATALOG when set), with a PostgreSQL URL the lab catalog, as
+    /// every other `--catalog` takes it.
+    #[arg(long, value_name = "URL", num_args = 0..=1, default_missing_value = "")]
+    pub catalog: Option<String>,
     /// Run store directory for --catalog (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
     pub store: Option<PathBuf>,
@@ -80,12 +85,33 @@ pub enum Format {
 
 /// Runs `tribo export`.
 pub fn run(a: Args) -> Result<()> {
-    let rows = if a.catalog {
+    // The run exported is not whole: what it holds is written all the same, and status 3 says so.
+    let mut incomplete = None;
+    let rows = if let Some(url) = &a.catalog {
         let store = a
             .store
             .clone()
             .unwrap_or_else(tribo_store::default_store_dir);
-        let (rows, _) = catalog_rows(&store, &Filter::default(), false)?;
+        let lab = tribo_catalog::lab_url(Some(url.as_str()).filter(|u| !u.is_empty()));
+        let rows = match lab {
+            Some(lab) => super::sync::open_catalog(Some(&lab), &store)?.runs(&Filter::default())?,
+            None => {
+                let (rows, damaged) = catalog_rows(&store, &Filter::default(), false)?;
+                // The runs the table cannot hold are named, never dropped without a word.
+                let left: Vec<crate::archive::LeftOut> = damaged
+                    .into_iter()
+                    .map(|(dir, why)| crate::archive::LeftOut {
+                        why: format!(
+                            "damaged ({why}); `tribo pull --salvage {}` keeps every intact record",
+                            dir.display()
+                        ),
+                        dir,
+                    })
+                    .collect();
+                incomplete = crate::archive::report_left_out("export", &left);
+                rows
+            }
+        };
         let n = rows.len();
         match a.format {
             Format::Parquet => catalog_parquet(&rows, &a.output)?,
@@ -99,20 +125,41 @@ pub fn run(a: Args) -> Result<()> {
         };
         let t = Table::of_path(src)?;
         let n = t.rows();
+        if src.is_dir() {
+            if let Ok(run) = tribo_store::Run::open(src) {
+                if !run.is_complete() {
+                    incomplete = Some(crate::exit::Incomplete(format!(
+                        "{}: wrote the {n} samples it holds, and {}",
+                        src.display(),
+                        crate::load::incomplete_run(&run, src)
+                    )));
+                }
+            }
+        }
         match a.format {
             Format::Parquet => t.write_parquet(&a.output)?,
             Format::Json => write(&a.output, t.to_json().to_string())?,
             Format::Csv => {
-                let rec = crate::load::load_record(src)?;
+                // A run's samples without an ECR reading stay empty, as in JSON and Parquet.
+                let rec = if src.is_dir() {
+                    tribo_store::Run::open(src)
+                        .with_context(|| format!("cannot read the run {}", src.display()))?
+                        .record_with(false)?
+                } else {
+                    crate::load::load_record(src)?
+                };
                 write(&a.output, rec.to_csv_string())?
             }
         }
         n
     };
     if !a.quiet {
-        eprintln!("wrote {rows} rows to {}", a.output.display());
+        crate::errln!("wrote {rows} rows to {}", a.output.display());
     }
-    Ok(())
+    match incomplete {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
 }
 
 fn write(path: &Path, text: String) -> Result<()> {

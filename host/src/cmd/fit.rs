@@ -34,8 +34,9 @@ between measured and fitted envelopes. Both are relative to the initial amplitud
   adequate       converged, gap ≤ 1.5 × noise floor: the law describes the record
   inadequate     converged, gap above that: the law misses something (try `tribo explain`)
   not-converged  the iteration limit came first: the constants are not trustworthy (status 3)
-  not-analysable no oscillation, too few half cycles, a saturated channel or a non-finite
-                 sample: nothing is fitted, no constant printed (status 3)
+  not-analysable no oscillation (a pin that never moves is named so), too few half cycles, a
+                 saturated or stuck channel or a non-finite sample: nothing is fitted, no
+                 constant printed (status 3)
 
 `--json` prints one object: `law`, `verdict`, `mu` and `mu_se` (dimensionless constants of seed
 eq. 10–13 in order of j and their standard errors), `gap`, `noise_floor`, `p_si`, `p_si_se` (SI
@@ -71,7 +72,8 @@ stretch of consecutive samples instead (and says which on stderr).";
 ///  Fit a friction law to a record by Levenberg–Marquardt on the Mark & Crandall envelope.
 #[derive(Parser, Debug)]
 pub struct Args {
-    /// The record (CSV, or a run folder).
+    /// The record (CSV, or a run folder; `-` reads a CSV from standard input, as `tribo sim -o -`
+    /// writes one).
     pub record: PathBuf,
     /// Law: coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre.
     #[arg(long, default_value = "coulomb-viscous")]
@@ -83,16 +85,16 @@ pub struct Args {
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Override the record's mass (kg).
-    #[arg(long)]
+    #[arg(long, visible_alias = "mass", allow_negative_numbers = true)]
     pub mass_kg: Option<f64>,
     /// Override the record's stiffness (N/m).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub stiffness: Option<f64>,
     /// Override the record's normal load (N).
-    #[arg(long)]
+    #[arg(long, visible_alias = "load", allow_negative_numbers = true)]
     pub load_n: Option<f64>,
     /// Known apparatus damping μ_a kept fixed (0 = fit the total damping).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub apparatus_mu1: f64,
     /// Also fit on N amplitude windows (0 = off).
     #[arg(long, default_value_t = 0)]
@@ -110,6 +112,7 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 fn run_inner(a: Args) -> Result<()> {
+    crate::load::plausible_apparatus_mu1(a.apparatus_mu1)?;
     let spec = a.law;
     let holes = if a.longest_clean_stretch {
         crate::Holes::LongestCleanStretch
@@ -133,7 +136,7 @@ fn run_inner(a: Args) -> Result<()> {
     // The apparatus alone (load 0): no friction law, only the blades' damping μ_a (viscous).
     let fitted = tribo_physics::identify::law_for(&rec, spec);
     if fitted != spec && spec != LawSpec::CoulombViscous {
-        eprintln!(
+        crate::errln!(
             "note: {} is the apparatus alone (load 0): it has no friction law; its damping is \
              fitted ({fitted}) instead of {spec}",
             a.record.display()
@@ -301,8 +304,15 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
         }
         _ => format!("{y:.1e}"),
     };
+    // A dimensionless record's time is τ, its channels y and y′: no unit.
+    let dimensionless = rec.units == tribo_physics::record::Units::Dimensionless;
+    let (tn, tu, xn, vn) = if dimensionless {
+        ("τ", "", "y", "y′")
+    } else {
+        ("t", " s", "x", "v")
+    };
     let mut s = format!(
-        "t = {:.4} s (the release{}) to {:.4} s",
+        "{tn} = {:.4}{tu} (the release{}) to {:.4}{tu}",
         t(sp.start),
         if sp.held() > 0 {
             format!(", after {} samples held", sp.held())
@@ -314,7 +324,7 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
     if sp.at_rest() > 0 {
         let _ = write!(
             s,
-            " (then |v| < {}: {} samples at rest or in the noise, not compared)",
+            " (then |{vn}| < {}: {} samples at rest or in the noise, not compared)",
             si(sp.rest_level, true),
             sp.at_rest()
         );
@@ -335,7 +345,7 @@ pub fn span_text(rec: &Record, r: &FitResult) -> String {
     }
     let _ = write!(
         s,
-        "; noise read from the record: x {}, v {}",
+        "; noise read from the record: {xn} {}, {vn} {}",
         si(sp.noise_y, false),
         si(sp.noise_ydot, true)
     );
@@ -379,6 +389,8 @@ fn table(record: &str, rig: &RigUsed, r: &FitResult, rec: &Record) -> String {
     }
     let _ = writeln!(s, "rig        {}", rig.describe());
     let _ = writeln!(s, "law        {}", r.law);
+    // SI coefficients of μ(v) for an SI record; a dimensionless one has none (μ_j is all).
+    let dimensionless = rec.units == tribo_physics::record::Units::Dimensionless;
     let unit = |j: usize| match j {
         0 => String::new(),
         1 => " s/m".to_string(),
@@ -387,6 +399,10 @@ fn table(record: &str, rig: &RigUsed, r: &FitResult, rec: &Record) -> String {
     let fitted = |j: usize| r.law == LawSpec::LuGre || r.law.powers().contains(&j);
     for (j, (m, p)) in r.mu.iter().zip(&r.p_si).enumerate() {
         if !fitted(j) {
+            continue;
+        }
+        if dimensionless {
+            let _ = writeln!(s, "mu{j:<8} {}", pm(*m, r.mu_se[j]));
             continue;
         }
         let _ = writeln!(

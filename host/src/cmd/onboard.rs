@@ -56,7 +56,8 @@ fn run_inner(args: Args) -> anyhow::Result<()> {
     if args.json {
         crate::out::print_json(to_json(&result))?;
     } else if usable {
-        crate::out!("{}", to_text(&result))?;
+        let dimensionless = record.units == tribo_physics::record::Units::Dimensionless;
+        crate::out!("{}", to_text(&result, dimensionless))?;
     }
     if !usable {
         return Err(crate::exit::Incomplete(format!(
@@ -223,7 +224,9 @@ pub fn to_json(r: &OnboardResult) -> String {
 }
 
 /// The result as a short table for the terminal.
-pub fn to_text(r: &OnboardResult) -> String {
+/// The on-board result as text; a dimensionless record's (`dimensionless`) frequency, amplitude
+/// and duration are in its own units (per unit τ, y, τ), not Hz, m and s.
+pub fn to_text(r: &OnboardResult, dimensionless: bool) -> String {
     let mut s = String::new();
     let row = |s: &mut String, name: &str, e: &Estimate| {
         let _ = writeln!(
@@ -246,9 +249,14 @@ pub fn to_text(r: &OnboardResult) -> String {
             ""
         }
     );
+    let (hz, m, sec) = if dimensionless {
+        (" per unit τ", " (y)", " (τ)")
+    } else {
+        (" Hz", " m", " s")
+    };
     let _ = writeln!(
         s,
-        "cycles     {}   frequency {} Hz   x0 {} m   duration {} s",
+        "cycles     {}   frequency {}{hz}   x0 {}{m}   duration {}{sec}",
         r.cycles,
         num(r.frequency_hz),
         num(r.initial_amplitude_m),

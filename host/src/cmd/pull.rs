@@ -5,7 +5,7 @@
 //! it, or stopped answering), saying exactly what is missing and why.
 
 use super::run::{print_outcome, LinkArgs, Ui};
-use crate::link::session::pull_run;
+use crate::link::session::{pull_run, RunNotHeld};
 use std::path::PathBuf;
 
 /// Arguments of `tribo pull`.
@@ -52,7 +52,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &mut |p| ui.on(p),
     );
     ui.finish();
-    let o = o?;
+    let o = match (o, &args.run) {
+        (Ok(o), _) => o,
+        // The rig has moved on: the folder (repaired, with --salvage) is all there is of the run.
+        (Err(e), Some(dir)) if e.downcast_ref::<RunNotHeld>().is_some() => {
+            return settle_folder(dir, &e)
+        }
+        (Err(e), _) => return Err(e),
+    };
     print_outcome(&o)?;
     match o.incomplete() {
         // Finished, but the run is not stored whole: exit status 3.
@@ -69,7 +76,7 @@ fn salvage_offline(dir: &std::path::Path, why: anyhow::Error) -> anyhow::Result<
         .map_err(|e| anyhow::anyhow!("cannot salvage {}: {e}", dir.display()))?;
     drop(w);
     if let Some(r) = recovery {
-        eprintln!("{}: {r}", dir.display());
+        crate::errln!("{}: {r}", dir.display());
     }
     let run = tribo_store::Run::open(dir)?;
     let summary = run.completeness().summary();
@@ -79,6 +86,10 @@ fn salvage_offline(dir: &std::path::Path, why: anyhow::Error) -> anyhow::Result<
         }
     }
     crate::outln!("{}: salvaged offline: {summary}", dir.display())?;
+    if run.is_complete() {
+        // Every record of the run survived the damage: it is whole, nothing to fetch.
+        return Ok(());
+    }
     Err(crate::exit::Incomplete(format!(
         "{}: salvaged, but no rig could be reached to fetch what is missing ({}); `tribo pull {}` \
          fetches it while the rig holds the run",
@@ -87,4 +98,23 @@ fn salvage_offline(dir: &std::path::Path, why: anyhow::Error) -> anyhow::Result<
         dir.display()
     ))
     .into())
+}
+
+/// The rig no longer holds the run of folder `dir` (`why`): what the folder holds (resumed, and
+/// repaired with `--salvage`) is all there is. Status 0 when that is the whole run, else 3 saying
+/// what is missing for good.
+fn settle_folder(dir: &std::path::Path, why: &anyhow::Error) -> anyhow::Result<()> {
+    let run = tribo_store::Run::open(dir)?;
+    if let Some(store) = dir.parent() {
+        if let Ok(cat) = tribo_store::Catalog::open(store) {
+            let _ = cat.upsert(&run);
+        }
+    }
+    let summary = run.completeness().summary();
+    crate::outln!("{}: {summary}", dir.display())?;
+    if run.is_complete() {
+        crate::errln!("note: {why}; the folder holds the whole run");
+        return Ok(());
+    }
+    Err(crate::exit::Incomplete(format!("{why}; the folder stays {summary}")).into())
 }

@@ -221,7 +221,7 @@ pub fn envelope_vs_simulation(
 pub fn run(args: Args) -> anyhow::Result<()> {
     let run = Run::open(&args.run)?;
     if let Some(r) = &run.recovery {
-        eprintln!("warning: {r}");
+        crate::errln!("warning: {r}");
     }
     let c = run.completeness();
     // An incomplete run is replayed as far as it goes, said so, and ends with exit status 3.

@@ -113,7 +113,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             path.display()
         );
     } else {
-        campaign(&args, &out_for(&args.target))?
+        let (files, left) = campaign(&args, &out_for(&args.target))?;
+        incomplete = crate::archive::report_left_out("report", &left);
+        files
     };
     print_files(&files)?;
     if let Some(e) = incomplete {
@@ -130,7 +132,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
+/// A campaign's (or a label's) report, and the runs of this PC's store it had to leave out.
+fn campaign(
+    args: &Args,
+    out: &Path,
+) -> anyhow::Result<(ReportFiles, Vec<crate::archive::LeftOut>)> {
     args.period.check()?;
     let store = args
         .store
@@ -160,7 +166,12 @@ fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
         }
     });
     let rows = cat.runs(&filter)?;
-    if rows.is_empty() {
+    let left = if lab {
+        Vec::new()
+    } else {
+        crate::archive::left_out(&store, &filter)?
+    };
+    if rows.is_empty() && left.is_empty() {
         bail!(
             "no run of {} {:?} in {} (see `tribo runs`; `tribo runs --reindex` rebuilds a PC's own catalog)",
             if args.label { "label" } else { "campaign" },
@@ -181,7 +192,10 @@ fn campaign(args: &Args, out: &Path) -> anyhow::Result<ReportFiles> {
         title,
         png: !args.no_png,
     };
-    Ok(tribo_report::write_campaign_report(&points, &inputs, out)?)
+    Ok((
+        tribo_report::write_campaign_report(&points, &inputs, out)?,
+        left,
+    ))
 }
 
 fn print_files(files: &ReportFiles) -> std::io::Result<()> {

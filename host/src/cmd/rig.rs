@@ -188,7 +188,11 @@ impl VirtualArgs {
         }
         c.validate().context("virtual rig")?;
         if self.speed.is_nan() || self.speed <= 0.0 {
-            bail!("--speed must be a positive number (1 = real time, inf = as fast as possible)");
+            return Err(crate::exit::Usage(format!(
+                "--speed {}: must be a positive number (1 = real time, inf = as fast as possible)",
+                self.speed
+            ))
+            .into());
         }
         Ok(c)
     }
@@ -328,12 +332,15 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     // The rig's console (commands, faults, resets) follows on standard output.
     args.rig.log_events = true;
     if !args.virtual_rig {
-        bail!("`tribo rig` starts the virtual rig: add --virtual (a real rig needs no command: plug it in and use --port)");
+        return Err(crate::exit::Usage(
+            "`tribo rig` starts the virtual rig: add --virtual (a real rig needs no command: plug it in and use --port)".into(),
+        )
+        .into());
     }
     // Stopped by a signal, it exits with that signal's status (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP),
     // as every command does.
     crate::signals::set_handler(|signal| {
-        eprintln!("\nvirtual rig stopped");
+        crate::errln!("\nvirtual rig stopped");
         std::process::exit(signal.status().into());
     })
     .context("cannot install the Ctrl-C handler")?;
@@ -345,10 +352,11 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
         .strip_prefix("tcp://")
         .unwrap_or(&args.listen)
         .to_string();
+    check_listen(&listen)?;
     let (tcp, cfg) = args.rig.listen(&listen, |e| match e {
-        HostEvent::Connected(a) => eprintln!("host {a} connected"),
-        HostEvent::Disconnected(a, why) => eprintln!("host {a} gone: {why}"),
-        HostEvent::Refused(a) => eprintln!(
+        HostEvent::Connected(a) => crate::errln!("host {a} connected"),
+        HostEvent::Disconnected(a, why) => crate::errln!("host {a} gone: {why}"),
+        HostEvent::Refused(a) => crate::errln!(
             "host {a} turned away: another host is connected (the rig serves one at a time)"
         ),
     })?;
@@ -360,6 +368,29 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
     println!("  Ctrl-C stops it; the rig's console follows (commands, faults, resets)");
     tcp.wait();
     Ok(())
+}
+
+/// `--listen HOST:PORT` as a person can get it wrong: no port, or a port that is not 0–65535
+/// (`127.0.0.1:80000`): a usage error (status 2) before anything is bound.
+fn check_listen(listen: &str) -> anyhow::Result<()> {
+    let bad = |why: &str| -> anyhow::Result<()> {
+        Err(crate::exit::Usage(format!(
+            "--listen {listen}: {why}; write HOST:PORT, e.g. 127.0.0.1:7411 (port 0: any free one)"
+        ))
+        .into())
+    };
+    let Some((host, port)) = listen.rsplit_once(':') else {
+        return bad("no port");
+    };
+    if host.is_empty() {
+        return bad("no host");
+    }
+    match port.parse::<u16>() {
+        Ok(_) => Ok(()),
+        Err(_) => bad(&format!(
+            "the port {port:?} is not a number from 0 to 65535"
+        )),
+    }
 }
 
 #[cfg(unix)]

@@ -109,7 +109,7 @@ impl LinkArgs {
     ) -> anyhow::Result<(Link, tribo_wire::DeviceInfo)> {
         let (link, info) = self.connect()?;
         if !quiet {
-            eprintln!(
+            crate::errln!(
                 "rig on {}: firmware {}, serial {:016x}",
                 link.name(),
                 firmware_version(&info),
@@ -132,13 +132,13 @@ pub fn abort_flag() -> Arc<AtomicBool> {
         let _ = crate::signals::set_handler(move |signal| {
             if g.swap(true, Ordering::SeqCst) {
                 crate::link::hold::make_all_safe();
-                eprintln!(
+                crate::errln!(
                     "\ninterrupted twice: exiting now; heater and magnet were switched off (the run folder stays \
                      readable)"
                 );
                 std::process::exit(signal.status().into());
             }
-            eprintln!("\ninterrupted: aborting the run cleanly (Ctrl-C again to quit at once)…");
+            crate::errln!("\ninterrupted: aborting the run cleanly (Ctrl-C again to quit at once)…");
         });
         f
     })
@@ -223,7 +223,7 @@ impl Ui {
         }
         match &self.bar {
             Some(b) if !b.is_hidden() => b.println(s),
-            _ => eprintln!("{s}"),
+            _ => crate::errln!("{s}"),
         }
     }
 
@@ -378,12 +378,16 @@ pub fn result_table(run: &Run) -> String {
     s.push_str(&format!("{:<10}{:<26}{}\n", "μ0", o0, h0));
     s.push_str(&format!("{:<10}{:<26}{}\n", "μ1", o1, h1));
     if let Some(r) = ob {
+        let hz = if r.frequency_hz.is_finite() {
+            format!("{:.2} Hz", r.frequency_hz)
+        } else {
+            "no frequency".into()
+        };
         s.push_str(&format!(
-            "{:<10}{}, {} cycles, {:.2} Hz, envelope {}\n",
+            "{:<10}{}, {} cycles, {hz}, envelope {}\n",
             "rig",
             r.verdict.name(),
             r.cycles,
-            r.frequency_hz,
             r.shape.name()
         ));
     }
@@ -483,7 +487,7 @@ pub fn warn_about_reset(link: &Link) {
             b.cause,
             ResetCause::Watchdog | ResetCause::Panic | ResetCause::CpuFault | ResetCause::Brownout
         ) {
-            eprintln!(
+            crate::errln!(
                 "warning: the rig reset by itself since a host last spoke to it: {}{}{} (see `tribo status`)",
                 crate::link::reset_cause_text(b.cause),
                 if b.message.is_empty() { "" } else { ": " },
@@ -499,10 +503,10 @@ pub struct Args {
     #[command(flatten)]
     pub link: LinkArgs,
     /// Normal load set on the rig's knob, N (0–0.7).
-    #[arg(long)]
+    #[arg(long, visible_alias = "load-n", allow_negative_numbers = true)]
     pub load: f32,
     /// Heat the plate to this temperature first, °C (15–100; default: heater off).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub temp: Option<f32>,
     /// Runs to take in a row (at least 1).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
@@ -523,28 +527,33 @@ pub struct Args {
     #[arg(long, default_value_t = 10_000)]
     pub rate: u32,
     /// Longest run, s (it ends earlier when the pin stops).
-    #[arg(long, default_value_t = 40.0)]
+    #[arg(long, default_value_t = 40.0, allow_negative_numbers = true)]
     pub max_duration: f32,
     /// Moving mass, kg.
-    #[arg(long, default_value_t = 0.04)]
+    #[arg(
+        long,
+        visible_alias = "mass-kg",
+        default_value_t = 0.04,
+        allow_negative_numbers = true
+    )]
     pub mass: f32,
     /// Blade stiffness, N/m.
-    #[arg(long, default_value_t = 1150.0)]
+    #[arg(long, default_value_t = 1150.0, allow_negative_numbers = true)]
     pub stiffness: f32,
     /// Initial displacement held by the magnet, m.
-    #[arg(long, default_value_t = 667e-6)]
+    #[arg(long, default_value_t = 667e-6, allow_negative_numbers = true)]
     pub x0: f32,
     /// Heater: settled when within this many °C…
-    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TOL_C)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TOL_C, allow_negative_numbers = true)]
     pub settle_tol: f32,
     /// …for this many seconds.
-    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_S)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_S, allow_negative_numbers = true)]
     pub settle_secs: f64,
     /// Give up heating after this many seconds.
-    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TIMEOUT_S)]
+    #[arg(long, default_value_t = tribo_wire::limits::SETTLE_TIMEOUT_S, allow_negative_numbers = true)]
     pub settle_timeout: f64,
     /// Heater ramp, °C/min.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
     pub ramp: f32,
     /// No progress bar or messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]
@@ -603,18 +612,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .into());
         }
     }
+    check_settle(args.settle_tol, args.settle_secs, args.settle_timeout).map_err(|why| {
+        crate::exit::Usage(format!(
+            "--settle-tol {} °C, --settle-secs {} s, --settle-timeout {} s: {why}",
+            args.settle_tol, args.settle_secs, args.settle_timeout
+        ))
+    })?;
     let abort = abort_flag();
     let store = args.link.writable_store()?;
     let (mut link, info) = args.link.connect_and_announce(args.quiet)?;
     // From here on every exit leaves the rig safe (see `link::hold`).
     let _hold = link.hold();
+    // Runs stored whole of which no constant could be printed (status 3 once the runs are taken).
+    let mut unanalysed: Vec<String> = Vec::new();
     for k in 1..=args.repeat.max(1) {
         let mut plan = plan.clone();
         if args.repeat > 1 {
             plan.repeat = Some(k);
             plan.keep_heater = k < args.repeat;
             if !args.quiet {
-                eprintln!("repetition {k}/{}", args.repeat);
+                crate::errln!("repetition {k}/{}", args.repeat);
             }
         }
         let mut ui = Ui::new(args.quiet);
@@ -638,6 +655,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             // Finished, but the run is not stored whole: exit status 3.
             return Err(anyhow::Error::new(e).context(format!("run {k}{taken}")));
         }
+        if let Some(why) = no_constant(&o.run) {
+            unanalysed.push(format!("run {k} ({}): {why}", o.run.dir().display()));
+        }
         if o.link_lost.is_some() {
             break;
         }
@@ -648,6 +668,76 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ))
             .into());
         }
+    }
+    if !unanalysed.is_empty() {
+        // Stored whole, but nothing to print for it: as `tribo fit` on the same run, status 3.
+        return Err(crate::exit::Incomplete(format!(
+            "no constant could be printed for {} of {} run{}: {}; the run is stored whole (`tribo \
+             report` shows its motion)",
+            unanalysed.len(),
+            args.repeat.max(1),
+            if args.repeat > 1 { "s" } else { "" },
+            unanalysed.join("; ")
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// Why no friction constant of a stored run could be printed: the host could not fit it (the
+/// record is not analysable: the pin never moved, a channel stuck…), or its fit did not converge
+/// (its constants are not trustworthy: `tribo fit` exits 3 on it too). `None` when the host's
+/// constants are printed.
+pub fn no_constant(run: &Run) -> Option<String> {
+    if run.block_count() == 0 {
+        return Some("the run holds no samples".into());
+    }
+    match run.host_fit() {
+        Some(h) if !h.converged => Some(
+            "the host's fit did not converge: its constants are not trustworthy (`tribo fit` \
+             says more)"
+                .into(),
+        ),
+        Some(h) if !(h.mu0.is_finite() || h.mu1.is_finite()) => {
+            Some("the host's fit gave no finite constant".into())
+        }
+        Some(_) => None,
+        None => Some(format!(
+            "the host fitted nothing: {}",
+            run.results
+                .host_error
+                .as_deref()
+                .unwrap_or("the run was not analysed")
+        )),
+    }
+}
+
+/// The heater's settling rule (`tribo run --settle-tol/--settle-secs/--settle-timeout`, a
+/// campaign's `settle_tol_c`, `settle_s`, `settle_timeout_s`) as a plate can meet it: a tolerance
+/// above 0 (a reading never equals its setpoint: 0 waits the whole timeout) and inside the
+/// heater's band (±[`limits::HEATER_BAND_C`], where the plate counts as at its setpoint), a time
+/// of 0 s or more, and a timeout longer than that time.
+///
+/// [`limits::HEATER_BAND_C`]: tribo_wire::limits::HEATER_BAND_C
+pub fn check_settle(tol_c: f32, settle_s: f64, timeout_s: f64) -> Result<(), String> {
+    let band = tribo_wire::limits::HEATER_BAND_C;
+    if !(tol_c.is_finite() && tol_c > 0.0 && tol_c < band) {
+        return Err(format!(
+            "the settle tolerance must be above 0 and below {band} °C (the heater's band; default {} °C)",
+            tribo_wire::limits::SETTLE_TOL_C
+        ));
+    }
+    if !(settle_s.is_finite() && settle_s >= 0.0) {
+        return Err(format!(
+            "the settle time must be 0 s or more (default {} s)",
+            tribo_wire::limits::SETTLE_S
+        ));
+    }
+    if !(timeout_s.is_finite() && timeout_s > settle_s) {
+        return Err(format!(
+            "the settle timeout must be longer than the settle time (default {} s)",
+            tribo_wire::limits::SETTLE_TIMEOUT_S
+        ));
     }
     Ok(())
 }

@@ -158,7 +158,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let cat = Catalog::open(&store)?;
     if let Some(r) = cat.refresh(args.reindex)? {
         if !args.quiet {
-            eprintln!(
+            crate::errln!(
                 "catalog rebuilt from the run folders: {} runs, {} of them incomplete",
                 r.indexed,
                 r.incomplete.len()
@@ -166,10 +166,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         // What is incomplete is said even when quiet: it is a finding, not progress.
         for (d, why) in &r.incomplete {
-            eprintln!("{}: {why}", d.display());
+            crate::errln!("{}: {why}", d.display());
         }
         for (d, e) in &r.unreadable {
-            eprintln!("skipped {}: {e}", d.display());
+            crate::errln!("skipped {}: {e}", d.display());
         }
     }
     // Folders the catalog cannot hold (their log is damaged): never hidden.

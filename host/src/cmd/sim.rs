@@ -215,7 +215,7 @@ pub fn run(a: Args) -> Result<()> {
             .with_context(|| format!("writing {}", a.output.display()))?;
     }
     if !a.quiet {
-        eprintln!(
+        crate::errln!(
             "wrote {} samples ({} law, μ = {:?}) to {}",
             rec.len(),
             model.law.name(),

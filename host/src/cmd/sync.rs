@@ -103,7 +103,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let quiet = args.quiet || args.json;
     if !quiet {
-        eprintln!(
+        crate::errln!(
             "syncing {} to {} as PC {:?}",
             store.display(),
             url.shown(),
@@ -113,7 +113,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut last = std::time::Instant::now();
     let r = tribo_catalog::sync(&store, &url, &opts, &mut |done, todo| {
         if !quiet && (done == todo || last.elapsed() > Duration::from_secs(1)) {
-            eprintln!("  {done} of {todo} runs sent");
+            crate::errln!("  {done} of {todo} runs sent");
             last = std::time::Instant::now();
         }
     })?;
@@ -129,7 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "unchanged": r.unchanged, "fuller_elsewhere": r.fuller_elsewhere,
             "reconnects": r.reconnects, "skipped": skipped,
         }))?;
-        return Ok(());
+        return not_synced(&r.skipped);
     }
     outln!(
         "{} local runs: {} new in the lab catalog, {} updated, {} already there as here{}",
@@ -153,7 +153,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (p, why) in &r.skipped {
         outln!("not synced: {}: {why}", p.display())?;
     }
-    Ok(())
+    not_synced(&r.skipped)
+}
+
+/// A sync that left runs of this PC out (a damaged log, a run of no known rig) finished but is
+/// not whole: status 3, the runs having been named each with why.
+fn not_synced(skipped: &[(std::path::PathBuf, String)]) -> anyhow::Result<()> {
+    if skipped.is_empty() {
+        return Ok(());
+    }
+    Err(crate::exit::Incomplete(format!(
+        "{} run{} of this PC not synced (listed with why): repair {} (a damaged log: `tribo pull \
+         --salvage RUN`) and run `tribo sync` again",
+        skipped.len(),
+        if skipped.len() == 1 { "" } else { "s" },
+        if skipped.len() == 1 { "it" } else { "them" }
+    ))
+    .into())
 }
 
 /// `tribo pull --from-catalog ID`: copies the run the lab catalog names (a run folder's name, or

@@ -55,16 +55,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let cols: Axis = args.cols.parse()?;
     let value: Value = args.value.parse()?;
     let cat = super::sync::open_catalog(args.catalog.as_deref(), &store)?;
-    let t = cat.table(
-        rows,
-        cols,
-        value,
-        &args.period.apply(Filter {
-            campaign: args.campaign.clone(),
-            rig: args.rig.clone(),
-            ..Default::default()
-        }),
-    )?;
+    let filter = args.period.apply(Filter {
+        campaign: args.campaign.clone(),
+        rig: args.rig.clone(),
+        ..Default::default()
+    });
+    let t = cat.table(rows, cols, value, &filter)?;
+    // The runs of this PC's store the table cannot hold (damaged, incomplete): said, status 3.
+    let left = if lab {
+        Vec::new()
+    } else {
+        crate::archive::left_out(&store, &filter)?
+    };
+    let left_out = || match crate::archive::report_left_out("table", &left) {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    };
     if args.json {
         let axis = |a: Axis| match a {
             Axis::Load => "load_n",
@@ -91,8 +97,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "row_labels": t.rows.iter().map(|b| b.label()).collect::<Vec<_>>(),
             "col_labels": t.cols.iter().map(|b| b.label()).collect::<Vec<_>>(),
             "cells": cells,
+            "left_out": left
+                .iter()
+                .map(|l| serde_json::json!({"run": l.dir.display().to_string(), "why": l.why}))
+                .collect::<Vec<_>>(),
         }))?;
-        return Ok(());
+        return left_out();
     }
     if t.rows.is_empty() {
         outln!(
@@ -100,9 +110,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.value,
             cat.describe()
         )?;
-        return Ok(());
+        return left_out();
     }
     outln!("{} (mean ± sd over repetitions, (n) runs)", args.value)?;
     crate::out!("{}", t.render())?;
-    Ok(())
+    left_out()
 }

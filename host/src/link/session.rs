@@ -346,6 +346,20 @@ pub fn stream_run(
 
 /// Fetches the rig's last run (or completes `target`, a run folder), resuming after the last block
 /// already stored. With `salvage`, a corrupt log is cut after its intact prefix first.
+/// The rig no longer holds the run a folder is a copy of (a newer run replaced it, or it was
+/// lost): nothing of it can be fetched. The folder (resumed, and repaired if salvaging) is what
+/// there is of it; whether that is the whole run the folder says.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunNotHeld(pub String);
+
+impl std::fmt::Display for RunNotHeld {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for RunNotHeld {}
+
 pub fn pull_run(
     link: &mut Link,
     info: &DeviceInfo,
@@ -380,19 +394,24 @@ pub fn pull_run(
             }
         }
         match m.device_run_id {
-            Some(id) if id < status.run_id => bail!(
-                "{} is the rig's run {id}, but the rig now holds run {} (a newer run replaced it): that run cannot be \
-                 completed; `tribo pull` without a folder fetches the newer one",
-                dir.display(),
-                status.run_id
-            ),
-            Some(id) if id > status.run_id => bail!(
-                "{} is the rig's run {id}, but the rig holds run {} only: it lost run {id} (its power went \
-                 before the run reached its flash): what the folder holds is all there is of that run, and \
-                 it stays incomplete",
-                dir.display(),
-                status.run_id
-            ),
+            Some(id) if id < status.run_id => {
+                return Err(RunNotHeld(format!(
+                    "{} is the rig's run {id}, but the rig now holds run {} (a newer run replaced it): \
+                     nothing more of that run can be fetched; `tribo pull` without a folder fetches the newer one",
+                    dir.display(),
+                    status.run_id
+                ))
+                .into())
+            }
+            Some(id) if id > status.run_id => {
+                return Err(RunNotHeld(format!(
+                    "{} is the rig's run {id}, but the rig holds run {} only: it lost run {id} (its power \
+                     went before the run reached its flash): what the folder holds is all there is of that run",
+                    dir.display(),
+                    status.run_id
+                ))
+                .into())
+            }
             _ => {}
         }
         writer = Some(w);

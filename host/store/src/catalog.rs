@@ -351,7 +351,7 @@ impl Table {
                         mean,
                         sd: Some(sd),
                         n,
-                    }) => format!("{mean:.5} ± {sd:.5} ({n})"),
+                    }) => format!("{mean:.5} ± {} ({n})", spread(*sd)),
                     Some(Cell { mean, sd: None, n }) => format!("{mean:.5} ({n})"),
                 });
             }
@@ -801,4 +801,27 @@ pub fn tabulate(runs: &[CatalogRow], rows: Axis, cols: Axis, value: Value) -> Ta
         rows,
         cols,
     )
+}
+
+/// A spread as a table shows it: five decimals, as the means, unless that rounds a spread that is
+/// there to nothing (`± 0.00000` hid spreads of 5e-7): then two significant digits.
+fn spread(sd: f64) -> String {
+    if sd != 0.0 && sd.abs() < 5e-6 {
+        format!("{sd:.1e}")
+    } else {
+        format!("{sd:.5}")
+    }
+}
+
+#[cfg(test)]
+mod spread_tests {
+    use super::spread;
+
+    #[test]
+    fn a_spread_below_the_fifth_decimal_is_not_shown_as_zero() {
+        assert_eq!(spread(5e-7), "5.0e-7");
+        assert_eq!(spread(0.0), "0.00000");
+        assert_eq!(spread(1.2e-4), "0.00012");
+        assert_eq!(spread(5e-6), "0.00001");
+    }
 }

@@ -63,6 +63,9 @@ pub enum ErrorKind {
     /// A caller's mistake (bad filter, bad value).
     Invalid,
     Catalog,
+    /// A value given on the command line that cannot be right (a catalog URL with an unknown
+    /// parameter, no scheme, a password in it): the CLI exits with its usage status (2).
+    Usage,
 }
 
 impl StoreError {

@@ -95,6 +95,13 @@ pub fn wheel(release: bool) -> Result<PathBuf, String> {
         }
     }
     let t0 = std::time::Instant::now();
+    // maturin says nothing while cargo compiles the extension (a minute or two): say what runs.
+    eprintln!(
+        "xtask: building the wheel with maturin ({} profile) into {}; compiling the extension takes \
+         a minute or two, maturin reports when it is done",
+        if release { "release" } else { "dev" },
+        out.display()
+    );
     let mut cmd = Command::new(&maturin);
     cmd.current_dir(root())
         .env("CARGO_TARGET_DIR", &target)

@@ -32,16 +32,28 @@ pub enum NotAnalysable {
         /// Length of the run (samples).
         samples: usize,
     },
+    /// A channel reads one value for every sample: its input is stuck or dead (a converter fault,
+    /// not a saturation: nothing moves it).
+    Stuck {
+        /// `displacement` or `velocity`.
+        channel: &'static str,
+        /// The value it reads (dimensionless, as screened).
+        value: f64,
+        /// Samples read.
+        samples: usize,
+    },
 }
 
 impl NotAnalysable {
-    /// Short kebab-case name (`non-finite`, `no-oscillation`, `too-few-half-cycles`, `saturated`).
+    /// Short kebab-case name (`non-finite`, `no-oscillation`, `too-few-half-cycles`, `saturated`,
+    /// `stuck`).
     pub fn name(&self) -> &'static str {
         match self {
             NotAnalysable::NonFinite { .. } => "non-finite",
             NotAnalysable::NoOscillation { .. } => "no-oscillation",
             NotAnalysable::TooFewHalfCycles { .. } => "too-few-half-cycles",
             NotAnalysable::Saturated { .. } => "saturated",
+            NotAnalysable::Stuck { .. } => "stuck",
         }
     }
 }
@@ -63,6 +75,15 @@ impl std::fmt::Display for NotAnalysable {
                 f,
                 "the {channel} channel is saturated: it stays at its extreme value for {samples} \
                  samples from sample {sample} while the pin moves (widen the converter's range)"
+            ),
+            NotAnalysable::Stuck {
+                channel,
+                value,
+                samples,
+            } => write!(
+                f,
+                "the {channel} channel reads one value ({value:.4e}) for all {samples} samples: its \
+                 input is stuck or dead (`tribo selftest` checks the converter's inputs)"
             ),
         }
     }
@@ -115,6 +136,15 @@ pub(super) fn saturated(runs: &[(usize, usize)], long: usize) -> Option<(usize, 
     let repeated = runs.iter().filter(|r| r.1 >= SATURATION_RUN).count() >= 2;
     (first.1 >= long || repeated).then_some(first)
 }
+
+/// A displacement whose whole range is at most this fraction of its largest value never moved: a
+/// released pin swings from one side of its rest to the other, a range of about twice its
+/// largest value.
+pub const STILL_FRACTION: f64 = 0.05;
+
+/// A velocity whose largest value is at most this many times its noise is noise only: the pin
+/// does not move.
+pub const STILL_SIGMAS: f64 = 20.0;
 
 /// Shortest flat run at a channel's extreme that counts, when it recurs.
 pub(super) const SATURATION_RUN: usize = 3;
@@ -183,6 +213,52 @@ pub fn screen_with(
         });
     }
     let (tau, y, ydot) = (&tau[..n], &y[..n], &ydot[..n]);
+    // Before anything reads the motion from the channels: a channel stuck at one value (a
+    // converter input stuck or dead), or a pin that never moves (friction above the blades' pull
+    // at the release, a magnet that never let go), whose noise sits at the converter's extreme
+    // codes for long runs — no saturation either way.
+    let constant = |c: &[f64]| c.iter().all(|v| *v == c[0]);
+    let (ylo, yhi) = y
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
+    let yabs = ylo.abs().max(yhi.abs());
+    // A released pin swings from one side of its rest to the other: the displacement's range is
+    // about twice its largest value. A still one stays where it started, give or take its noise.
+    let still = yhi - ylo <= STILL_FRACTION * yabs;
+    let v_noise = noise_sigma(ydot).unwrap_or(0.0);
+    let v_peak = ydot.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let v_moves = !constant(ydot) && v_peak > STILL_SIGMAS * v_noise;
+    if constant(y) && v_moves {
+        return Err(NotAnalysable::Stuck {
+            channel: "displacement",
+            value: y[0],
+            samples: n,
+        });
+    }
+    if constant(ydot) && !still {
+        return Err(NotAnalysable::Stuck {
+            channel: "velocity",
+            value: ydot[0],
+            samples: n,
+        });
+    }
+    if still && !v_moves {
+        return Err(NotAnalysable::NoOscillation {
+            reason: format!(
+                "the pin never moves: the displacement stays within {:.2} % of its value ({:.4} \
+                 in units of N/k) over all {n} samples and the velocity is noise only (friction \
+                 above the blades' pull at the release, or the magnet never let go)",
+                if yabs > 0.0 {
+                    100.0 * (yhi - ylo) / yabs
+                } else {
+                    0.0
+                },
+                y[0]
+            ),
+        });
+    }
     let vmax = ydot.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     // A displacement flat at its extreme while the velocity says the pin moves fast (not the
     // magnet's hold before the release, when both are still).

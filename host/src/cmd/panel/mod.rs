@@ -9,10 +9,19 @@
 //!
 //! * One page controls the rig at a time: the first page opened, or the one that takes control
 //!   when none does; the others view. `Safe` works from every page, at any time, even during a run.
+//! * The panel answers only to itself: every request's `Host` (and `Origin`, when a browser sends
+//!   one) must name the address it listens on (or a name given with `--listen NAME:PORT`,
+//!   `localhost` on loopback), so a page of another site — one whose name was rebound to
+//!   127.0.0.1 included — is refused (403) before anything else.
+//! * Every request but the page and its script carries the access token (a cookie the page gets,
+//!   an `X-Panel-Token` header, or `?token=`), on loopback too: `--token`, else one made at start.
+//!   On loopback without `--token` the page itself is served without it (and sets the cookie).
 //! * Every command is a POST with the page's id in an `X-Panel-Client` header (a custom header: a
 //!   web site in another tab cannot send it without a CORS pre-flight, which the panel never grants).
 //! * The page is served on a loopback address unless `--listen` names another and `--token`
 //!   gives the access token the page must then carry (`/?token=…`, kept as a cookie).
+//! * A release while the plate is still settling (a setpoint set, not yet within the tolerance for
+//!   the settling time) is refused until the page confirms it (`tribo run` waits instead).
 //! * The page's HTML, CSS and JavaScript are built into the program: nothing is fetched from the
 //!   network.
 
@@ -47,7 +56,8 @@ const CONTROL_STALE: Duration = Duration::from_secs(3);
   tribo panel --port tcp://127.0.0.1:7411 --listen 127.0.0.1:0
       a virtual rig (`tribo rig --virtual` in another terminal); the page on a free port
   tribo panel --listen 0.0.0.0:7420 --token S
-      served to the lab network: open http://THIS-PC:7420/?token=S
+      served to the lab network: open http://IP-OF-THIS-PC:7420/?token=S (the panel answers
+      to its IP addresses; to open it by a name, listen on that name: --listen NAME:7420)
 
 The page shows the rig (connected, serial, state, lease, last fault and reset), the plate's
 temperature against its setpoint (\"settled\" within the settling tolerance for the settling
@@ -63,9 +73,11 @@ rig's lease, which expires within 3 s.")]
 pub struct Args {
     #[command(flatten)]
     pub link: LinkArgs,
-    /// Address the page is served on (127.0.0.1:0 picks a free port; the address is printed).
-    #[arg(long, default_value = "127.0.0.1:7420")]
-    pub listen: SocketAddr,
+    /// Address the page is served on, IP:PORT or NAME:PORT (127.0.0.1:0 picks a free port; the
+    /// address is printed). The panel answers only to requests addressed to it: this address,
+    /// the name given here, or `localhost` on loopback.
+    #[arg(long, default_value = "127.0.0.1:7420", value_name = "HOST:PORT")]
+    pub listen: String,
     /// Access token the page must carry (`http://HOST:PORT/?token=…`); required when --listen is
     /// not a loopback address. Default: $TRIBO_PANEL_TOKEN.
     #[arg(long)]
@@ -83,8 +95,124 @@ struct Ctx {
     safe: Arc<Mutex<Option<crate::link::hold::SafeHandle>>>,
     abort: Arc<AtomicBool>,
     quit: Arc<AtomicBool>,
-    token: Option<String>,
+    /// The access token every request but the page carries (given, or made at start).
+    token: String,
+    /// The page itself needs the token too (it was given: `--token`, `$TRIBO_PANEL_TOKEN`).
+    page_needs_token: bool,
+    /// Where the panel listens and the names it answers to.
+    origin: Origin,
     store: PathBuf,
+}
+
+/// The address the panel is served on and the names a request may call it by: `Host` and
+/// `Origin` must name it, or the request comes from a page of another site (a DNS name rebound
+/// to this address included) and is refused.
+#[derive(Clone, Debug)]
+struct Origin {
+    addr: SocketAddr,
+    names: Vec<String>,
+}
+
+impl Origin {
+    /// Whether `host` (a `Host` header's value: `NAME[:PORT]`, `[V6][:PORT]`) names this panel.
+    fn allows(&self, host: &str) -> bool {
+        let host = host.trim().to_ascii_lowercase();
+        let (name, port) = if let Some(rest) = host.strip_prefix('[') {
+            match rest.split_once(']') {
+                Some((v6, tail)) => (v6.to_string(), tail.strip_prefix(':').map(str::to_string)),
+                None => return false,
+            }
+        } else {
+            match host.rsplit_once(':') {
+                Some((n, p)) => (n.to_string(), Some(p.to_string())),
+                None => (host.clone(), None),
+            }
+        };
+        let port_ok = match port {
+            Some(p) => p.parse::<u16>().is_ok_and(|p| p == self.addr.port()),
+            None => self.addr.port() == 80,
+        };
+        if !port_ok || name.is_empty() {
+            return false;
+        }
+        let ip = self.addr.ip();
+        match name.parse::<std::net::IpAddr>() {
+            Ok(a) => a == ip || ip.is_unspecified() || (ip.is_loopback() && a.is_loopback()),
+            Err(_) => (ip.is_loopback() && name == "localhost") || self.names.contains(&name),
+        }
+    }
+
+    /// Whether the request's `Host` and `Origin` (when there is one) name this panel.
+    fn check(&self, req: &Request) -> Result<(), String> {
+        let Some(host) = header_value(req, "Host") else {
+            return Err("no Host header".into());
+        };
+        if !self.allows(host) {
+            return Err(format!("Host {host:?} is not this panel's address"));
+        }
+        if let Some(origin) = header_value(req, "Origin") {
+            let ok = origin
+                .strip_prefix("http://")
+                .is_some_and(|h| !h.contains('/') && self.allows(h));
+            if !ok {
+                return Err(format!(
+                    "a page of another origin ({origin}) may not use this panel"
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `--listen`: `IP:PORT`, or `NAME:PORT` resolved here (the name is then one the panel answers
+/// to). A usage error (status 2) when it is neither.
+fn parse_listen(listen: &str) -> anyhow::Result<(SocketAddr, Option<String>)> {
+    if let Ok(a) = listen.parse::<SocketAddr>() {
+        return Ok((a, None));
+    }
+    let usage = |why: String| -> anyhow::Error {
+        crate::exit::Usage(format!(
+            "--listen {listen}: {why}; write IP:PORT or NAME:PORT (127.0.0.1:0 picks a free port)"
+        ))
+        .into()
+    };
+    let Some((name, port)) = listen.rsplit_once(':') else {
+        return Err(usage("no port".into()));
+    };
+    if port.parse::<u16>().is_err() {
+        return Err(usage(format!(
+            "the port {port:?} is not a number from 0 to 65535"
+        )));
+    }
+    use std::net::ToSocketAddrs;
+    let addrs: Vec<SocketAddr> = listen
+        .to_socket_addrs()
+        .map_err(|e| usage(format!("the name {name:?} does not resolve ({e})")))?
+        .collect();
+    let a = addrs
+        .iter()
+        .find(|a| a.is_ipv4())
+        .or(addrs.first())
+        .copied()
+        .ok_or_else(|| usage(format!("the name {name:?} has no address")))?;
+    Ok((a, Some(name.to_ascii_lowercase())))
+}
+
+/// A token made at start when none is given: 128 bits from the standard library's per-process
+/// random hash keys (no other source is needed for a token that lives as long as the panel).
+fn fresh_token() -> String {
+    use std::hash::{BuildHasher, Hasher};
+    let part = |salt: u64| {
+        let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+        h.write_u64(salt);
+        h.write_u128(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos()),
+        );
+        h.finish()
+    };
+    format!("{:016x}{:016x}", part(1), part(std::process::id() as u64))
 }
 
 /// Runs the subcommand.
@@ -94,18 +222,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .clone()
         .or_else(|| std::env::var("TRIBO_PANEL_TOKEN").ok())
         .filter(|t| !t.is_empty());
-    if !args.listen.ip().is_loopback() && token.is_none() {
+    let (listen, name) = parse_listen(&args.listen)?;
+    if !listen.ip().is_loopback() && token.is_none() {
         return Err(crate::exit::Usage(format!(
             "--listen {} serves the panel beyond this PC: give an access token too (--token SECRET or \
-             $TRIBO_PANEL_TOKEN), then open http://THIS-PC:{}/?token=SECRET; or keep the default \
+             $TRIBO_PANEL_TOKEN), then open http://IP-OF-THIS-PC:{}/?token=SECRET; or keep the default \
              loopback address",
             args.listen,
-            args.listen.port()
+            listen.port()
         ))
         .into());
     }
     let store = args.link.writable_store()?;
-    let server = tiny_http::Server::http(args.listen).map_err(|e| {
+    let server = tiny_http::Server::http(listen).map_err(|e| {
         anyhow::anyhow!(
             "cannot serve the panel on {}: {e}; is another panel running? Choose another address with \
              --listen (127.0.0.1:0 picks a free port)",
@@ -135,6 +264,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .name("tribo-panel-rig".into())
         .spawn(move || rig.run())
         .context("starting the panel's rig thread")?;
+    let page_needs_token = token.is_some();
+    let token = token.unwrap_or_else(fresh_token);
     let ctx = Ctx {
         shared,
         cmds: tx,
@@ -142,21 +273,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         abort: run_abort.clone(),
         quit: quit.clone(),
         token: token.clone(),
+        page_needs_token,
+        origin: Origin {
+            addr,
+            names: name.clone().into_iter().collect(),
+        },
         store,
     };
-    let shown = if addr.ip().is_unspecified() {
-        format!("THIS-PC:{}", addr.port())
-    } else {
-        addr.to_string()
+    let shown = match &name {
+        Some(n) => format!("{n}:{}", addr.port()),
+        None if addr.ip().is_unspecified() => format!("IP-OF-THIS-PC:{}", addr.port()),
+        None => addr.to_string(),
     };
-    crate::cmd::run::out(&format!(
-        "front panel on http://{shown}/{}\n",
-        token
-            .as_ref()
-            .map_or(String::new(), |t| format!("?token={t}"))
-    ))?;
+    crate::cmd::run::out(&format!("front panel on http://{shown}/?token={token}\n"))?;
     if !args.quiet {
-        eprintln!("open it in a browser; Ctrl-C closes the panel (the rig is made safe)");
+        crate::errln!("open it in a browser; Ctrl-C closes the panel (the rig is made safe)");
     }
     while !abort.load(Ordering::Relaxed) {
         match server.recv_timeout(Duration::from_millis(200)) {
@@ -200,12 +331,9 @@ fn header_value<'a>(req: &'a Request, name: &'static str) -> Option<&'a str> {
         .map(|h| h.value.as_str())
 }
 
-/// Whether the request carries the access token (when there is one).
-fn authorised(req: &Request, token: &Option<String>) -> bool {
-    let Some(t) = token else { return true };
-    if query(req.url(), "token") == Some(t.as_str())
-        || header_value(req, "X-Panel-Token") == Some(t)
-    {
+/// Whether the request carries the access token.
+fn authorised(req: &Request, t: &str) -> bool {
+    if query(req.url(), "token") == Some(t) || header_value(req, "X-Panel-Token") == Some(t) {
         return true;
     }
     header_value(req, "Cookie").is_some_and(|c| {
@@ -230,7 +358,27 @@ fn lock(s: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
 }
 
 fn handle(mut req: Request, ctx: &Ctx) {
-    if !authorised(&req, &ctx.token) {
+    // Only requests addressed to this panel, from its own page: before anything else.
+    if let Err(why) = ctx.origin.check(&req) {
+        {
+            let mut s = lock(&ctx.shared);
+            s.refused = (s.refused.0 + 1, Some(why.clone()));
+        }
+        let _ = req.respond(
+            Response::from_string(format!(
+                "refused: {why}. The panel answers only to its own address (open the address \
+                 `tribo panel` printed)\n"
+            ))
+            .with_status_code(403),
+        );
+        return;
+    }
+    let open = {
+        let path = req.url().split('?').next().unwrap_or("/");
+        *req.method() == Method::Get
+            && (path == "/panel.js" || (path == "/" && !ctx.page_needs_token))
+    };
+    if !open && !authorised(&req, &ctx.token) {
         let _ = req.respond(
             Response::from_string(
                 "this panel needs its access token: open the address `tribo panel` printed, \
@@ -248,12 +396,13 @@ fn handle(mut req: Request, ctx: &Ctx) {
             let mut r = Response::from_string(PAGE)
                 .with_header(header("Content-Type", "text/html; charset=utf-8"))
                 .with_header(header("Cache-Control", "no-store"));
-            if let Some(t) = &ctx.token {
-                r = r.with_header(header(
-                    "Set-Cookie",
-                    &format!("tribo_panel={t}; Path=/; HttpOnly; SameSite=Strict"),
-                ));
-            }
+            r = r.with_header(header(
+                "Set-Cookie",
+                &format!(
+                    "tribo_panel={}; Path=/; HttpOnly; SameSite=Strict",
+                    ctx.token
+                ),
+            ));
             let _ = req.respond(r);
         }
         (Method::Get, "/panel.js") => {
@@ -381,7 +530,24 @@ fn post(ctx: &Ctx, name: &str, client: Option<&str>, body: &str) -> (u16, Value)
             ),
         },
         "arm" => Cmd::Arm,
-        "release" => Cmd::Release,
+        "release" => {
+            let confirmed = args.get("confirm").and_then(Value::as_bool) == Some(true);
+            if let (false, Some(why)) = (confirmed, lock(&ctx.shared).settling()) {
+                // `tribo run` waits for the plate; a page asks its user first.
+                return (
+                    409,
+                    json!({
+                        "ok": false,
+                        "confirm": true,
+                        "text": format!(
+                            "release: {why}; a run released now is not at the temperature set \
+                             (`tribo run` would wait). Release anyway?"
+                        ),
+                    }),
+                );
+            }
+            Cmd::Release
+        }
         _ => {
             return answer(
                 404,
@@ -522,5 +688,54 @@ fn report_file(req: Request, store: &Path, path: &str) {
                     .with_status_code(404),
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Origin;
+
+    #[test]
+    fn a_host_is_answered_to_only_when_it_names_the_panel() {
+        let named = Origin {
+            addr: "10.0.0.5:7420".parse().unwrap(),
+            names: vec!["lab-pc".into()],
+        };
+        for ok in ["lab-pc:7420", "LAB-PC:7420", "10.0.0.5:7420"] {
+            assert!(named.allows(ok), "{ok}");
+        }
+        for bad in [
+            "lab-pc:80",
+            "lab-pc",
+            "other:7420",
+            "localhost:7420",
+            "127.0.0.1:7420",
+            "[::1]:7420",
+            "10.0.0.6:7420",
+            ":7420",
+            "lab-pc:7420:1",
+        ] {
+            assert!(!named.allows(bad), "{bad}");
+        }
+        let any = Origin {
+            addr: "0.0.0.0:7420".parse().unwrap(),
+            names: vec![],
+        };
+        assert!(any.allows("192.168.1.9:7420"));
+        assert!(!any.allows("lab-pc:7420"), "a name not given with --listen");
+        assert!(!any.allows("192.168.1.9:7421"));
+        let local = Origin {
+            addr: "127.0.0.1:7420".parse().unwrap(),
+            names: vec![],
+        };
+        for ok in [
+            "127.0.0.1:7420",
+            "localhost:7420",
+            "[::1]:7420",
+            "127.0.0.2:7420",
+        ] {
+            assert!(local.allows(ok), "{ok}");
+        }
+        assert!(!local.allows("attacker.example:7420"));
     }
 }

@@ -17,6 +17,12 @@ async function send(name, body) {
       body: JSON.stringify(body || {}),
     });
     const a = await r.json();
+    // A release while the plate is still settling: the panel asks first (`tribo run` waits).
+    if (!a.ok && a.confirm) {
+      if (window.confirm(a.text)) return send(name, Object.assign({}, body || {}, { confirm: true }));
+      say(false, name + ": not sent (the plate is still settling)");
+      return a;
+    }
     say(a.ok, a.text);
     return a;
   } catch (e) {
@@ -114,12 +120,24 @@ function result(r) {
 
 function grid(g) {
   const el = $("grid");
-  if (!g || !g.loads || g.loads.length === 0) { el.textContent = "no complete run in the store yet"; return; }
+  // Runs the grid cannot hold (damaged, incomplete): named, with how to repair each.
+  const left = (g && g.left_out) || [];
+  const leftOut = () => {
+    if (!left.length) return;
+    const d = document.createElement("div");
+    d.id = "grid-left-out";
+    d.className = "bad";
+    d.textContent = left.length + " run" + (left.length === 1 ? "" : "s") + " left out of the grid: " +
+      left.map((l) => l.run + " (" + l.why + ")").join("; ");
+    el.appendChild(d);
+  };
+  if (!g || !g.loads || g.loads.length === 0) { el.textContent = "no complete run in the store yet"; leftOut(); return; }
   let h = "<table class='grid'><tr><th>load \\ temp</th>" + g.temps.map((t) => "<th>" + t + "</th>").join("") + "</tr>";
   g.loads.forEach((l, i) => {
     h += "<tr><th>" + l + "</th>" + g.cells[i].map((c) => "<td>" + (c ? fmt(c.mean, 5) + (c.sd !== null ? " ± " + fmt(c.sd, 5) : "") + " (" + c.n + ")" : "—") + "</td>").join("") + "</tr>";
   });
   el.innerHTML = h + "</table>";
+  leftOut();
 }
 
 function onTrace(t) {
@@ -141,20 +159,41 @@ function canvas(id) {
   return { ctx, w, h: c.height };
 }
 
+// Round ticks inside [lo, hi]: about n of them, a step of 1, 2 or 5 × 10^k, each a multiple of
+// the step, with the digits the step needs ({values, digits}).
+function niceTicks(lo, hi, n) {
+  if (!(isFinite(lo) && isFinite(hi)) || hi <= lo) return { values: [lo], digits: 0 };
+  const raw = (hi - lo) / Math.max(1, n);
+  const p = Math.pow(10, Math.floor(Math.log10(raw)));
+  const m = raw / p;
+  const step = (m < 1.5 ? 1 : m < 3 ? 2 : m < 7 ? 5 : 10) * p;
+  const digits = Math.max(0, -Math.floor(Math.log10(step) + 1e-9));
+  const values = [];
+  for (let k = Math.ceil(lo / step - 1e-9); k * step <= hi + step * 1e-9; k++) {
+    values.push(Number((k * step).toFixed(digits)));
+  }
+  return { values, digits };
+}
+window.niceTicks = niceTicks;
+
 function axes(g, x0, x1, y0, y1, unit) {
   const { ctx, w, h } = g, L = 48, B = 16, T = 14;
   const X = (x) => L + (x - x0) / (x1 - x0 || 1) * (w - L - 6);
   const Y = (y) => h - B - (y - y0) / (y1 - y0 || 1) * (h - B - T);
   ctx.strokeStyle = "#ccc"; ctx.fillStyle = "#6b7280"; ctx.font = "10px system-ui"; ctx.lineWidth = 1;
-  for (let k = 0; k <= 4; k++) {
-    const y = y0 + (y1 - y0) * k / 4;
+  const ys = niceTicks(y0, y1, 4);
+  for (const y of ys.values) {
     ctx.beginPath(); ctx.moveTo(L, Y(y)); ctx.lineTo(w - 6, Y(y)); ctx.stroke();
-    ctx.fillText(y.toPrecision(3), 2, Y(y) + 3);
+    ctx.fillText(y.toFixed(ys.digits), 2, Y(y) + 3);
   }
   ctx.fillText(unit, L, 10);
-  for (let k = 0; k <= 5; k++) { const x = x0 + (x1 - x0) * k / 5; ctx.fillText(x.toFixed(1) + " s", X(x) - 10, h - 3); }
+  const xs = niceTicks(x0, x1, 5);
+  for (const x of xs.values) ctx.fillText(x.toFixed(xs.digits) + " s", X(x) - 10, h - 3);
+  window.panelTicks[unit] = ys.values.map((v) => v.toFixed(ys.digits));
   return { X, Y };
 }
+// The ticks last drawn, per unit (read by the browser tests).
+window.panelTicks = {};
 
 function drawPlate() {
   const g = canvas("c-plate");

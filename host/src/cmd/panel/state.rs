@@ -223,6 +223,9 @@ pub struct Shared {
     /// The page that controls the rig: its id and when its event stream was last alive.
     pub controller: Option<(String, Instant)>,
     pub store: PathBuf,
+    /// Requests refused because they were not addressed to this panel (another `Host` or
+    /// `Origin`): how many, and why the last one was.
+    pub refused: (u64, Option<String>),
 }
 
 impl Shared {
@@ -249,6 +252,7 @@ impl Shared {
             grid,
             controller: None,
             store,
+            refused: (0, None),
         }
     }
 
@@ -331,6 +335,22 @@ impl Shared {
 
     fn settled(&self) -> Option<f64> {
         self.settled_since.map(|t| t.elapsed().as_secs_f64())
+    }
+
+    /// While the plate is still settling (a setpoint set, the plate not yet within the tolerance
+    /// for the settling time, as `tribo run` waits for it): where it is.
+    pub fn settling(&self) -> Option<String> {
+        let st = self.status.as_ref()?;
+        let sp = st.heater_setpoint_c?;
+        let for_s = self.settled().unwrap_or(0.0);
+        (for_s < limits::SETTLE_S).then(|| {
+            format!(
+                "the plate is still settling ({:.1} °C → {sp:.1} °C; within ±{} °C for {for_s:.0} of {} s)",
+                st.temp_c,
+                limits::SETTLE_TOL_C,
+                limits::SETTLE_S
+            )
+        })
     }
 
     pub fn finish_run(
@@ -424,6 +444,7 @@ impl Shared {
             "result": self.result,
             "grid": self.grid,
             "control": control,
+            "refused": {"count": self.refused.0, "last": self.refused.1},
         })
     }
 }
@@ -434,6 +455,9 @@ pub fn grid(store: &Path) -> Value {
     let Ok(cat) = Catalog::open(store) else {
         return json!(null);
     };
+    // Up to date with the folders first (a log damaged or cut since it was catalogued), as every
+    // other reader of the catalog.
+    let _ = cat.refresh(false);
     let Ok(t) = cat.table(Axis::Load, Axis::Temp, CatValue::Mu0, &Filter::default()) else {
         return json!(null);
     };
@@ -450,7 +474,19 @@ pub fn grid(store: &Path) -> Value {
         })
         .collect();
     let labels = |b: &[tribo_store::catalog::Bin]| b.iter().map(|b| b.label()).collect::<Vec<_>>();
-    json!({"loads": labels(&t.rows), "temps": labels(&t.cols), "cells": cells})
+    // The runs the grid cannot hold (damaged, incomplete), each with how to repair it: never
+    // dropped from it without a word (as `tribo table` says them).
+    let left: Vec<Value> = crate::archive::left_out(store, &Filter::default())
+        .unwrap_or_default()
+        .into_iter()
+        .map(|l| {
+            json!({
+                "run": l.dir.file_name().map(|n| n.to_string_lossy().into_owned()),
+                "why": l.why,
+            })
+        })
+        .collect();
+    json!({"loads": labels(&t.rows), "temps": labels(&t.cols), "cells": cells, "left_out": left})
 }
 
 /// Writes the run's HTML report (as `tribo report RUN -o RUN/report`) on a thread of its own, then
@@ -605,7 +641,7 @@ mod tests {
         }
         let json = t.blocks_json(0);
         let took = t0.elapsed();
-        eprintln!(
+        crate::errln!(
             "one second at 20 kS/s × 5 channels: {} blocks filed and sent ({} kB of JSON) in {took:?}",
             blocks.len(),
             json.len() / 1000

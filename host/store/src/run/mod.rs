@@ -423,9 +423,15 @@ impl Run {
     /// A record's columns must be finite, so blocks without an ECR reading (see [`Samples::ecr_ohm`])
     /// take the nearest reading: the previous one, or the first one for the blocks before it.
     pub fn record(&self) -> Result<Record> {
+        self.record_with(true)
+    }
+
+    /// [`Run::record`], with the samples that have no ECR reading left NaN unless `fill_ecr`
+    /// (what the exports write: nothing the rig did not measure).
+    pub fn record_with(&self, fill_ecr: bool) -> Result<Record> {
         let mut s = self.samples_si()?;
-        if let Some(e) = &mut s.ecr_ohm {
-            fill_gaps(e);
+        if let (true, Some(e)) = (fill_ecr, &mut s.ecr_ohm) {
+            tribo_physics::record::fill_missing(e);
         }
         let cfg = self.config();
         // The apparatus alone (load 0): a token load, so that the record has a dimensionless form
@@ -458,7 +464,7 @@ impl Run {
 
     /// Writes the samples as CSV in the physics format (`# mass_kg=…` lines, `t_s,x_m,v_m_s,…`).
     pub fn export_csv(&self, path: &Path) -> Result<()> {
-        let rec = self.record()?;
+        let rec = self.record_with(false)?;
         write_atomic(path, rec.to_csv_string().as_bytes())
     }
 
@@ -498,19 +504,4 @@ pub fn list_run_dirs(store: &Path) -> Result<Vec<PathBuf>> {
 /// An `f32` setting as the `f64` a person typed (0.3, not 0.30000001192092896).
 pub fn clean(x: f32) -> f64 {
     x.to_string().parse().unwrap_or(x as f64)
-}
-
-/// Replaces non-finite values by the previous finite one (the first finite one at the start).
-fn fill_gaps(v: &mut [f64]) {
-    let Some(first) = v.iter().copied().find(|x| x.is_finite()) else {
-        return;
-    };
-    let mut last = first;
-    for x in v.iter_mut() {
-        if x.is_finite() {
-            last = *x;
-        } else {
-            *x = last;
-        }
-    }
 }
