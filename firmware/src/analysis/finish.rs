@@ -59,7 +59,7 @@ impl Pipeline {
     /// is complete. Run to the end, the steps compute exactly what [`Pipeline::finish`] does.
     ///
     /// What is computed, in order: the frequency from the reversal times (weighted least squares, 3
-    /// passes); the decrement fit on the peaks (3 passes); the averaging fit: the mean displacement
+    /// passes) and the spread of the half periods about it (1 pass); the decrement fit on the peaks (3 passes); the averaging fit: the mean displacement
     /// (1 pass), then 4 iterations of the linear fit (3 passes), the quadratic fit (3 passes) and the
     /// range of amplitudes (1 pass). Then the verdict.
     pub fn finish_step(&self, job: &mut Finish, rows: u32) -> Option<OnboardResult> {
@@ -91,14 +91,58 @@ impl Pipeline {
                         Pass::Done(Some(freq)) => freq,
                     };
                     let half_period_s = freq.coef[0];
-                    let omega_cfg = fit::sqrt(self.st.stiffness / self.st.mass);
                     let omega_d = PI / half_period_s;
-                    let plausible = omega_d > 0.5 * omega_cfg
-                        && omega_d < 2.0 * omega_cfg
-                        && fit::sqrt(freq.sigma2) < 0.05 * half_period_s;
+                    let plausible = omega_d > 0.5 * omega_c && omega_d < 2.0 * omega_c;
                     if !plausible {
                         return Some(job.done());
                     }
+                    job.stage = Stage::Spread {
+                        half_period_s,
+                        sw: 0.0,
+                        swd: 0.0,
+                    };
+                    job.i = 1;
+                }
+                Stage::Spread {
+                    half_period_s,
+                    sw,
+                    swd,
+                } => {
+                    // The half periods one by one about their mean, weighted as above: a spring
+                    // whose stiffness depends on the amplitude (a cubic term of a few % of k)
+                    // shortens or lengthens them slowly over the run, which a straight line
+                    // through the reversal times cannot follow (its residuals grew to several %
+                    // of a half period over 50 cycles and the record was called "no
+                    // oscillation"); reversals counted from noise scatter them by their own size.
+                    let omega_c = fit::sqrt(self.st.stiffness / self.st.mass);
+                    let weight = |m: &HalfCycleMoments| {
+                        m.var_x as f64 + m.mean_v2 as f64 / (omega_c * omega_c)
+                    };
+                    while job.i < n {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        let (a, b) = (&recs[job.i - 1], &recs[job.i]);
+                        let w = weight(&a.moments).min(weight(&b.moments));
+                        let d = (b.t as f64 - a.t as f64) / *half_period_s - 1.0;
+                        if w.is_finite() && w > 0.0 {
+                            *sw += w;
+                            *swd += w * d * d;
+                        }
+                        job.i += 1;
+                    }
+                    job.i = 0;
+                    let spread = if *sw > 0.0 {
+                        fit::sqrt(*swd / *sw)
+                    } else {
+                        f64::INFINITY
+                    };
+                    let regular = spread < MAX_HALF_PERIOD_SPREAD;
+                    if !regular {
+                        return Some(job.done());
+                    }
+                    let omega_d = PI / *half_period_s;
                     job.out.frequency_hz = (omega_d / (2.0 * PI)) as f32;
                     if job.out.cycles < MIN_CYCLES {
                         job.out.verdict = Verdict::TooFewCycles;
@@ -348,6 +392,10 @@ pub(super) const NAN_ESTIMATE: Estimate = Estimate {
     mu1_se: f32::NAN,
 };
 
+/// Largest weighted RMS deviation of the half periods from their mean, relative, for the
+/// reversals to be taken as an oscillation's.
+pub(super) const MAX_HALF_PERIOD_SPREAD: f64 = 0.05;
+
 /// Iterations of the averaging fit (each refines the centres and Ω with the previous μ0, μ1).
 pub(super) const AVERAGING_ITERATIONS: u8 = 4;
 
@@ -380,6 +428,11 @@ impl Finish {
 #[derive(Clone, Debug)]
 pub(super) enum Stage {
     Frequency(OlsPasses<1>),
+    Spread {
+        half_period_s: f64,
+        sw: f64,
+        swd: f64,
+    },
     Decrement(OlsPasses<2>),
     Offset {
         sum: f64,

@@ -72,6 +72,8 @@ pub const MU0_PRECISION: f64 = 0.001;
 pub const MU1_PRECISION: f64 = 0.0002;
 /// Number of noise standard deviations the velocity must exceed to arm the reversal detector.
 const ARM_SIGMAS: f64 = 8.0;
+/// Fraction of the release speed ω·x0 the velocity must reach before the first reversal is armed.
+const START_FRACTION: f64 = 0.25;
 /// Noise floor (counts) assumed when no hold sample was captured, and minimum noise used.
 const MIN_NOISE_COUNTS: f64 = 1.0;
 
@@ -467,7 +469,16 @@ impl Pipeline {
         };
         self.st.noise_var = (var(xi, xc.gain), var(vi, vc.gain));
         self.st.sv_hold = sv;
-        self.st.detector = ReversalDetector::new((ARM_SIGMAS * sv * (vc.gain as f64).abs()) as f32);
+        // Until the first reversal the noise of the motion is not known, and the hold may be short,
+        // quiet or missing (a record fed from its release): the pin leaves at rest, so the first
+        // arming waits for a quarter of the release speed ω·x0 as well. Armed within a few noise
+        // σ, the detector took the noise around the release for a reversal, of either sign: one
+        // of the wrong sign hid the real first reversal and the run ended `AtRest` before the
+        // second ("no oscillation").
+        let omega = fit::sqrt(self.st.stiffness / self.st.mass);
+        let start = START_FRACTION * omega * self.st.x0;
+        self.st.detector =
+            ReversalDetector::new((ARM_SIGMAS * sv * (vc.gain as f64).abs()).max(start) as f32);
         self.st.x_ref = (xc.zero as f64).clamp(0.0, ADC_MAX as f64) as i32;
         self.st.v_ref = (vc.zero as f64).clamp(0.0, ADC_MAX as f64) as i32;
         self.st.phase = Phase::Running;
@@ -577,18 +588,18 @@ impl Pipeline {
     fn update_noise(&mut self) {
         self.st.vsq_sum = self.st.vsq_sum.wrapping_add(self.st.moments.sum_sq_v());
         self.st.vsq_n = self.st.vsq_n.wrapping_add(self.st.moments.len());
-        if self.st.d2_n == 0 || self.st.vsq_n == 0 {
-            return;
+        if self.st.d2_n > 0 && self.st.vsq_n > 0 {
+            let step = PI / self.st.half_period;
+            let s2 = step * step;
+            let d2 = self.st.d2_sum as f64 / self.st.d2_n as f64;
+            let vsq = self.st.vsq_sum as f64 / self.st.vsq_n as f64;
+            let var = (d2 - s2 * s2 * vsq) / 6.0;
+            if var.is_finite() && var > 0.0 {
+                self.st.sv_motion = fit::sqrt(var);
+            }
         }
-        let step = PI / self.st.half_period;
-        let s2 = step * step;
-        let d2 = self.st.d2_sum as f64 / self.st.d2_n as f64;
-        let vsq = self.st.vsq_sum as f64 / self.st.vsq_n as f64;
-        let var = (d2 - s2 * s2 * vsq) / 6.0;
-        if !(var.is_finite() && var > 0.0) {
-            return;
-        }
-        self.st.sv_motion = fit::sqrt(var);
+        // From the first reversal on, the noise alone sets the arming level (the release's is
+        // dropped even when the motion's noise cannot be read, as on a noiseless record).
         let sv = self.st.sv_hold.max(self.st.sv_motion);
         let gain = self.st.cal[Channel::Velocity as usize].gain as f64;
         self.st
