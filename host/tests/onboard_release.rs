@@ -26,6 +26,7 @@ struct Case {
     after_s: f64,
     noise: usize,
     seed: u64,
+    dropouts_per_s: f64,
 }
 
 impl Case {
@@ -45,6 +46,7 @@ impl Case {
             },
             bench: Bench {
                 held_s: self.held_s,
+                dropouts_per_s: self.dropouts_per_s,
                 ..Bench::default()
             },
         }
@@ -54,13 +56,14 @@ impl Case {
 
     fn name(&self) -> String {
         format!(
-            "ω {:.0} rad/s, μ {:?}, k3 {:e}, {} S/s, held {} s, noise {}",
+            "ω {:.0} rad/s, μ {:?}, k3 {:e}, {} S/s, held {} s, noise {}, {} dropouts/s",
             self.rig.omega(),
             self.mu,
             self.k3,
             self.rate,
             self.held_s,
-            NOISE_LEVELS[self.noise].name
+            NOISE_LEVELS[self.noise].name,
+            self.dropouts_per_s
         )
     }
 }
@@ -98,6 +101,14 @@ fn check(c: &Case) {
         );
         if c.k3 == 0.0 {
             assert_eq!(r.verdict, Verdict::Ok, "{name}, release {path}: {r:?}");
+            // and its ± means something: within 4 of its σ (a dropout let into the hold's noise
+            // or a half cycle's mean square put μ0 10 σ off)
+            let z0 = (r.best.mu0 as f64 - c.mu.0) / r.best.mu0_se as f64;
+            let z1 = (r.best.mu1 as f64 - c.mu.1) / r.best.mu1_se as f64;
+            assert!(
+                z0.abs() <= 4.0 && z1.abs() <= 4.0,
+                "{name}, release {path}: z = {z0:.1}, {z1:.1}: {r:?}"
+            );
             let (d0, d1) = (
                 (r.best.mu0 as f64 - c.mu.0).abs(),
                 (r.best.mu1 as f64 - c.mu.1).abs(),
@@ -137,6 +148,7 @@ fn holds_at_every_rate_on_the_slow_rig() {
                 after_s: 6.5,
                 noise,
                 seed,
+                dropouts_per_s: 0.0,
             });
         }
     }
@@ -159,6 +171,7 @@ fn holds_at_every_rate_on_the_fast_rig() {
                 after_s: 1.5,
                 noise,
                 seed,
+                dropouts_per_s: 0.0,
             });
         }
     }
@@ -183,6 +196,32 @@ fn amplitude_dependent_frequency() {
                 after_s,
                 noise: 1,
                 seed,
+                dropouts_per_s: 0.0,
+            });
+        }
+    }
+}
+
+/// Speckle dropouts (spikes of up to the velocity channel's full scale, 3 and 10 a second, in the
+/// hold and in the motion), with and without a hold, at the ends of the rate range. Before: the
+/// spikes in the hold raised its noise (the run ended cycles early), and those under the stand-in
+/// threshold in the motion entered the half cycles' mean square velocity: μ0 up to 10 σ off.
+#[test]
+fn speckle_dropouts_in_the_hold_and_the_motion() {
+    let mut seed = 400;
+    for rate in [2_000.0, 20_000.0] {
+        for (held_s, dropouts_per_s, noise) in [(0.0, 10.0, 0), (0.5, 10.0, 0), (5.0, 3.0, 3)] {
+            seed += 1;
+            check(&Case {
+                rig: Rig::new(0.04, 1150.0, 0.3).unwrap(),
+                mu: (0.02, 0.01),
+                k3: 0.0,
+                rate,
+                held_s,
+                after_s: 1.5,
+                noise,
+                seed,
+                dropouts_per_s,
             });
         }
     }
