@@ -233,8 +233,10 @@ struct State {
     /// The last velocity count captured while held, and how many spikes in a row stood in for.
     hold_v: Option<u16>,
     hold_spikes: u8,
-    /// Velocity samples in a row the line through the previous two stood in for.
+    /// Velocity samples in a row the line through the previous two stood in for, and how far
+    /// (counts) a sample may leave that line (set at the release and at every reversal).
     stand_ins: u8,
+    line_limit: i32,
     /// Σ (second difference of the velocity counts)² and its number of terms.
     d2_sum: i64,
     d2_n: u32,
@@ -359,6 +361,7 @@ impl Pipeline {
             hold_v: None,
             hold_spikes: 0,
             stand_ins: 0,
+            line_limit: i32::MAX,
             d2_sum: 0,
             d2_n: 0,
             vsq_sum: 0,
@@ -562,9 +565,7 @@ impl Pipeline {
         let moving = !self.records.is_empty() || self.st.pending.is_some();
         let cv = if moving && self.st.n >= self.st.d2_from {
             let pred = 2 * v1 - v2;
-            let sv = self.st.sv_hold.max(self.st.sv_motion);
-            let limit = (SPIKE_SIGMAS * sv).max((self.st.spike_counts / 6) as f64);
-            if ((cv as i32 - pred) as f64).abs() <= limit {
+            if (cv as i32 - pred).abs() <= self.st.line_limit {
                 self.st.stand_ins = 0;
                 cv
             } else if self.st.stand_ins < 2 {
@@ -672,6 +673,9 @@ impl Pipeline {
         // From the first reversal on, the noise alone sets the arming level (the release's is
         // dropped even when the motion's noise cannot be read, as on a noiseless record).
         let sv = self.st.sv_hold.max(self.st.sv_motion);
+        self.st.line_limit = (SPIKE_SIGMAS * sv)
+            .max((self.st.spike_counts / 6) as f64)
+            .min(i32::MAX as f64) as i32;
         let gain = self.st.cal[Channel::Velocity as usize].gain as f64;
         self.st
             .detector
