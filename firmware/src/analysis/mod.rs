@@ -45,9 +45,9 @@
 //! `TooFewCycles` and every estimate is `NaN`. Saturated displacement or velocity samples after release
 //! give the verdict `Saturated` (the numbers are still filled in, to be read with care).
 //!
-//! Cost: per sample, integer sums and one `f32` calibration (≈ 160 host instructions, see
-//! `examples/pipeline_bench.rs`); per half-cycle, one peak fit over ±1 rad; the regressions run once,
-//! in `f64`, in [`Pipeline::finish`].
+//! Cost: per sample, integer sums and one `f32` calibration (175 host instructions, 158 before the
+//! dropout stand-ins: callgrind over `examples/pipeline_bench.rs`); per half-cycle, one peak fit
+//! over ±1 rad; the regressions run once, in `f64`, in [`Pipeline::finish`].
 //!
 //! The technician is shown the averaging estimator's result ([`OnboardResult::best`]: one
 //! estimator per quantity). Its ± accounts for the correlation of its regression's residuals (each
