@@ -117,6 +117,39 @@ pub struct Ols<const P: usize> {
     inv: [[f64; P]; P],
     /// Residual variance `RSS / (n − P − 1)`.
     pub sigma2: f64,
+    /// Serial structure of the centred regressors (rows in the order fed, unit weights):
+    /// `Σ d_i d_i'`, `Σ d_i d_{i+1}'`, `Σ d_i d_{i+2}'`, `d_0 + d_{n−1}` and `d_1 + d_{n−2}`.
+    serial: Serial<P>,
+}
+
+/// Sums of the centred regressors that the covariance of a fit with serially correlated
+/// residuals needs ([`Ols::var_of_correlated`]).
+#[derive(Clone, Copy, Debug)]
+struct Serial<const P: usize> {
+    s0: [[f64; P]; P],
+    s1: [[f64; P]; P],
+    s2: [[f64; P]; P],
+    e1: [f64; P],
+    e2: [f64; P],
+    /// Σ r_i², Σ r_i r_{i+1}, Σ r_i r_{i+2} of the residuals.
+    r0: f64,
+    r1: f64,
+    r2: f64,
+}
+
+impl<const P: usize> Serial<P> {
+    const fn new() -> Self {
+        Serial {
+            s0: [[0.0; P]; P],
+            s1: [[0.0; P]; P],
+            s2: [[0.0; P]; P],
+            e1: [0.0; P],
+            e2: [0.0; P],
+            r0: 0.0,
+            r1: 0.0,
+            r2: 0.0,
+        }
+    }
 }
 
 impl<const P: usize> Ols<P> {
@@ -175,6 +208,63 @@ impl<const P: usize> Ols<P> {
         c * self.sigma2
     }
 
+    /// Variance of the linear combination `Σ g_i p_i` of the parameters (0 = intercept) when the
+    /// residuals of neighbouring rows are correlated: `rho[0]` between rows one apart, `rho[1]`
+    /// two apart, none further (rows in the order fed, unit weights). The sandwich
+    /// `σ² (X'X)⁻¹ X'ΩX (X'X)⁻¹`; with `rho = [0, 0]` it is [`Ols::var_of`].
+    ///
+    /// A regression whose rows share a measurement — the decrement's (each peak in two rows: the
+    /// residual `ε_{n+1} − D ε_n`, `ρ1 = −D/(1+D²)`), the averaging's (each amplitude in the
+    /// central differences of two rows, `ρ2 ≈ −½`) — has residuals that nearly cancel along the
+    /// run, and the textbook ± ([`Ols::var_of`]) overstated its error 1.5 to 10 times.
+    pub fn var_of_correlated(&self, grad: &[f64], rho: [f64; 2]) -> f64 {
+        let n = self.n as f64;
+        let ser = &self.serial;
+        let g = |i: usize| grad.get(i).copied().unwrap_or(0.0);
+        // In the centred parameters (m = the mean of y, c): b = m − c·x̄.
+        let gm = g(0);
+        let mut gc = [0.0f64; P];
+        for (k, v) in gc.iter_mut().enumerate() {
+            *v = g(k + 1) - gm * self.mean_x.get(k).copied().unwrap_or(0.0);
+        }
+        // u = (Σ d d')⁻¹ g_c, a = g_m / n
+        let mut u = [0.0f64; P];
+        for (ui, row) in u.iter_mut().zip(self.inv.iter()) {
+            *ui = row.iter().zip(gc.iter()).map(|(a, b)| a * b).sum();
+        }
+        let a = gm / n;
+        let m00 = n + 2.0 * rho[0] * (n - 1.0).max(0.0) + 2.0 * rho[1] * (n - 2.0).max(0.0);
+        let mut um0 = 0.0;
+        let mut umu = 0.0;
+        for i in 0..P {
+            let ui = u[i];
+            let e1 = ser.e1.get(i).copied().unwrap_or(0.0);
+            let e2 = ser.e2.get(i).copied().unwrap_or(0.0);
+            um0 += ui * (-rho[0] * e1 - rho[1] * (e1 + e2));
+            for j in 0..P {
+                let at = |m: &[[f64; P]; P], r: usize, c: usize| {
+                    m.get(r).and_then(|x| x.get(c)).copied().unwrap_or(0.0)
+                };
+                let mij = at(&ser.s0, i, j)
+                    + rho[0] * (at(&ser.s1, i, j) + at(&ser.s1, j, i))
+                    + rho[1] * (at(&ser.s2, i, j) + at(&ser.s2, j, i));
+                umu += ui * mij * u.get(j).copied().unwrap_or(0.0);
+            }
+        }
+        self.sigma2 * (a * a * m00 + 2.0 * a * um0 + umu)
+    }
+
+    /// The residuals' correlation between rows one and two apart, as measured (`[0, 0]` when
+    /// the residuals are all zero).
+    pub fn residual_correlation(&self) -> [f64; 2] {
+        let s = &self.serial;
+        if s.r0 > 0.0 && s.r0.is_finite() {
+            [s.r1 / s.r0, s.r2 / s.r0]
+        } else {
+            [0.0, 0.0]
+        }
+    }
+
     /// Variance of the linear combination `Σ g_i p_i` of the parameters (0 = intercept).
     pub fn var_of(&self, grad: &[f64]) -> f64 {
         let mut v = 0.0;
@@ -214,6 +304,15 @@ pub struct OlsPasses<const P: usize> {
     coef: [f64; P],
     intercept: f64,
     rss: f64,
+    serial: Serial<P>,
+    /// Centred regressors of the two previous rows of pass 1 (newest first) and the first two.
+    prev: [[f64; P]; 2],
+    first: [[f64; P]; 2],
+    /// Rows of pass 1 so far.
+    k: usize,
+    /// The two previous residuals of pass 2 (newest first) and the rows of pass 2 so far.
+    res_prev: [f64; 2],
+    k2: usize,
 }
 
 impl<const P: usize> Default for OlsPasses<P> {
@@ -237,6 +336,12 @@ impl<const P: usize> OlsPasses<P> {
             coef: [0.0; P],
             intercept: 0.0,
             rss: 0.0,
+            serial: Serial::new(),
+            prev: [[0.0; P]; 2],
+            first: [[0.0; P]; 2],
+            k: 0,
+            res_prev: [0.0; 2],
+            k2: 0,
         }
     }
 
@@ -275,6 +380,36 @@ impl<const P: usize> OlsPasses<P> {
                         *s += di * dy;
                     }
                 }
+                // The serial structure, unweighted (see `Ols::var_of_correlated`).
+                let [p1, p2] = self.prev;
+                let ser = &mut self.serial;
+                for i in 0..P {
+                    let di = d.get(i).copied().unwrap_or(0.0);
+                    let (a1, a2) = (
+                        p1.get(i).copied().unwrap_or(0.0),
+                        p2.get(i).copied().unwrap_or(0.0),
+                    );
+                    for (j, &dj) in d.iter().enumerate() {
+                        if let Some(v) = ser.s0.get_mut(i).and_then(|r| r.get_mut(j)) {
+                            *v += di * dj;
+                        }
+                        if self.k >= 1 {
+                            if let Some(v) = ser.s1.get_mut(i).and_then(|r| r.get_mut(j)) {
+                                *v += a1 * dj;
+                            }
+                        }
+                        if self.k >= 2 {
+                            if let Some(v) = ser.s2.get_mut(i).and_then(|r| r.get_mut(j)) {
+                                *v += a2 * dj;
+                            }
+                        }
+                    }
+                }
+                if let Some(f) = self.first.get_mut(self.k) {
+                    *f = d;
+                }
+                self.prev = [d, p1];
+                self.k += 1;
             }
             2 => {
                 let pred = self.intercept
@@ -284,7 +419,19 @@ impl<const P: usize> OlsPasses<P> {
                         .zip(x.iter())
                         .map(|(c, xi)| c * xi)
                         .sum::<f64>();
-                self.rss += w * self.wn * (y - pred) * (y - pred);
+                let r = y - pred;
+                self.rss += w * self.wn * r * r;
+                // the residuals' own serial correlation (unweighted), rows one and two apart
+                let [r1, r2] = self.res_prev;
+                if self.k2 >= 1 {
+                    self.serial.r1 += r * r1;
+                }
+                if self.k2 >= 2 {
+                    self.serial.r2 += r * r2;
+                }
+                self.serial.r0 += r * r;
+                self.res_prev = [r, r1];
+                self.k2 += 1;
             }
             _ => {}
         }
@@ -307,6 +454,18 @@ impl<const P: usize> OlsPasses<P> {
                 Pass::Again
             }
             2 => {
+                // the ends: d_0 + d_{n−1} and d_1 + d_{n−2}
+                let [last, before] = self.prev;
+                let [f0, f1] = self.first;
+                for i in 0..P {
+                    let g = |a: &[f64; P]| a.get(i).copied().unwrap_or(0.0);
+                    if let Some(e) = self.serial.e1.get_mut(i) {
+                        *e = g(&f0) + g(&last);
+                    }
+                    if let Some(e) = self.serial.e2.get_mut(i) {
+                        *e = g(&f1) + g(&before);
+                    }
+                }
                 let Some(inv) = invert(self.sxx) else {
                     return self.fail();
                 };
@@ -332,6 +491,7 @@ impl<const P: usize> OlsPasses<P> {
                     mean_x: self.mx,
                     inv: self.inv,
                     sigma2,
+                    serial: self.serial,
                 };
                 let finite = fit.intercept.is_finite()
                     && sigma2.is_finite()
@@ -448,6 +608,66 @@ mod tests {
             let p = i as f64 * 0.1;
             assert!((cos(p) - p.cos()).abs() < 1e-15, "cos {p}");
             assert!((sin(p) - p.sin()).abs() < 1e-15, "sin {p}");
+        }
+    }
+
+    /// The sandwich variance for serially correlated residuals against the truth over many
+    /// repeats: a straight line through points whose errors are first differences of white noise
+    /// (`e_i = η_{i+1} − η_i`: ρ1 = −½) and central differences (`e_i = η_{i+1} − η_{i−1}`:
+    /// ρ2 = −½); the textbook variance overstates both slope and intercept there.
+    #[test]
+    fn correlated_residuals_get_their_own_variance() {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut gauss = || {
+            let mut u = || {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                (seed >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (a, b) = (u().max(1e-300), u());
+            sqrt(-2.0 * ln(a)) * cos(2.0 * core::f64::consts::PI * b - core::f64::consts::PI)
+        };
+        for (lag, rho) in [(1usize, [-0.5, 0.0]), (2, [0.0, -0.5])] {
+            let n = 60;
+            let reps = 2000;
+            let (mut sq, mut var_c, mut var_t) = ([0.0f64; 2], [0.0f64; 2], [0.0f64; 2]);
+            for _ in 0..reps {
+                let eta: [f64; 64] = core::array::from_fn(|_| gauss());
+                let rows = (0..n).map(|i| {
+                    let x = i as f64 * 0.1 + 3.0;
+                    ([x], 1.0 + 2.0 * x + eta[i + lag] - eta[i])
+                });
+                let f = Ols::<1>::fit(rows).unwrap();
+                for (j, (g, truth)) in [([1.0, 0.0], 1.0), ([0.0, 1.0], 2.0)].iter().enumerate() {
+                    let est = if j == 0 { f.intercept } else { f.coef[0] };
+                    sq[j] += (est - truth) * (est - truth);
+                    var_c[j] += f.var_of_correlated(g, rho);
+                    var_t[j] += f.var_of(g);
+                }
+            }
+            for j in 0..2 {
+                let (actual, said, textbook) = (
+                    sq[j] / reps as f64,
+                    var_c[j] / reps as f64,
+                    var_t[j] / reps as f64,
+                );
+                let ratio = said / actual;
+                assert!(
+                    (0.8..1.25).contains(&ratio),
+                    "lag {lag}, parameter {j}: said {said:e}, actual {actual:e}"
+                );
+                assert!(
+                    textbook > 2.0 * actual,
+                    "lag {lag}, parameter {j}: textbook {textbook:e}"
+                );
+            }
+            let plain = Ols::<1>::fit((0..n).map(|i| ([i as f64], (i * i % 7) as f64))).unwrap();
+            let g = [0.3, 1.7];
+            assert!(
+                (plain.var_of_correlated(&g, [0.0, 0.0]) - plain.var_of(&g)).abs()
+                    <= 1e-12 * plain.var_of(&g)
+            );
         }
     }
 

@@ -224,6 +224,74 @@ fn without_a_hold_the_velocity_noise_is_measured_from_the_motion() {
     }
 }
 
+/// The first reversal when the noise is not known yet: no hold, or a hold of a few samples, and
+/// the pin still at rest for a few samples after the release instant (a record's release read from
+/// the data is a sample or two early or late). The detector armed at 8 × one count then took the
+/// noise around the release for a reversal, of either sign; one of the wrong sign hid the real
+/// first reversal and the run ended `AtRest` before the second: "no oscillation (0 cycles)" on
+/// records held 0.3 s at 20 kS/s and 0.5 s at 5 kS/s.
+#[test]
+fn the_first_reversal_is_found_whatever_the_noise_at_the_release() {
+    let mut failures = Vec::new();
+    for seed in 1..=24u64 {
+        let noise_lsb = [2.0, 5.0, 10.0, 20.0][(seed % 4) as usize];
+        let (hold, lead) = [(0, 0), (0, 3), (3, 2), (1, 6)][(seed / 4 % 4) as usize];
+        let (load, mu0, mu1) = (0.05, 0.012, 0.004);
+        let cfg = configure(load, 40.0);
+        let mut p = Pipeline::new(&cfg).unwrap();
+        let mut truth = Exact::new(K, M, load, mu0, mu1, X0);
+        let mut noise = Noise(seed);
+        let cal = cfg.calibration;
+        let count = |cal: ChannelCal, si: f64, n: &mut Noise| {
+            calib::to_count(cal, si + noise_lsb * cal.gain as f64 * n.gauss()).unwrap()
+        };
+        for _ in 0..hold {
+            p.capture(&[
+                count(cal[0], X0, &mut noise),
+                count(cal[1], 0.0, &mut noise),
+                count(cal[2], 0.0, &mut noise),
+            ]);
+        }
+        p.release();
+        for _ in 0..lead {
+            p.push(&[
+                count(cal[0], X0, &mut noise),
+                count(cal[1], 0.0, &mut noise),
+                count(cal[2], 0.0, &mut noise),
+            ]);
+        }
+        let mut i = 0u64;
+        while !p.is_finished() {
+            let (x, v) = truth.at(i as f64 / RATE as f64);
+            p.push(&[
+                count(cal[0], x, &mut noise),
+                count(cal[1], v, &mut noise),
+                count(cal[2], 0.0, &mut noise),
+            ]);
+            i += 1;
+        }
+        let seen = p.half_cycles().len() as i64;
+        let first = p.half_cycles().first().map(|h| h.peak);
+        let r = p.finish(1);
+        let ok = r.verdict == Verdict::Ok
+            && (seen - truth.half_cycles as i64).abs() <= 1
+            // the first reversal is the first minimum, half a period after the release
+            && first.is_some_and(|x| x < 0.0)
+            && (r.best.mu0 as f64 - mu0).abs() <= 0.001
+            && (r.best.mu1 as f64 - mu1).abs() <= 0.0002;
+        if !ok {
+            failures.push(format!(
+                "noise {noise_lsb} LSB, hold {hold}, lead {lead}: {seen} half cycles (true {}), \
+                 first peak {first:?}, {} ({} cycles)",
+                truth.half_cycles,
+                r.verdict.name(),
+                r.cycles
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
 /// The issue's acceptance grid on the real rig: N 0.05–0.7 N, μ0 0.005–0.2, μ1 0.0011–0.03,
 /// 16-bit noisy records. Runs with at least 6 true cycles must give μ0 within ±0.001 and μ1 within
 /// ±0.0002 (best and both estimators); runs below 5 cycles must be refused.
@@ -453,9 +521,9 @@ fn finish_in_steps_equals_finish_in_one_call() {
                 bits(&one),
                 "{rows} rows per step: {stepped:?}"
             );
-            // 35 passes over the half-cycles at most, so the steps are bounded accordingly
+            // 36 passes over the half-cycles at most, so the steps are bounded accordingly
             let half_cycles = p.half_cycles().len() as u32;
-            assert!(steps <= 35 * (half_cycles + 1) / rows + 36, "{steps} steps");
+            assert!(steps <= 36 * (half_cycles + 1) / rows + 37, "{steps} steps");
         }
     }
     let quiet = Pipeline::new(&configure(0.2, 1.0)).unwrap();

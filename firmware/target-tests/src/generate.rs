@@ -39,6 +39,10 @@ pub struct Spec {
     pub simulate_s: f64,
     /// The vibrometer and force sensor (noise; quantisation is the converters', below).
     pub sensor: SensorModel,
+    /// Samples taken while the magnet holds the pin, before the release.
+    pub hold: usize,
+    /// Cubic spring coefficient k3, N/m³ (0: linear blades).
+    pub k3: f64,
 }
 
 /// The records of the bundle: one unloaded, one Coulomb–viscous, one noisy; all five channels at
@@ -60,6 +64,8 @@ pub fn specs() -> Vec<Spec> {
             max_duration_s: 3.0,
             simulate_s: 3.1,
             sensor: clean.clone(),
+            hold: HOLD,
+            k3: 0.0,
         },
         Spec {
             name: "coulomb_viscous",
@@ -71,6 +77,8 @@ pub fn specs() -> Vec<Spec> {
             max_duration_s: 5.0,
             simulate_s: 2.0,
             sensor: clean,
+            hold: HOLD,
+            k3: 0.0,
         },
         Spec {
             name: "noisy",
@@ -88,6 +96,49 @@ pub fn specs() -> Vec<Spec> {
                 seed: 11,
                 ..SensorModel::default()
             },
+            hold: HOLD,
+            k3: 0.0,
+        },
+        // The release and the motion found where they were lost: a hold at 20 kS/s with a noisy
+        // vibrometer (the first reversal was taken from the noise around the release), and a
+        // spring whose stiffness depends on the amplitude (its drifting half periods were taken
+        // for noise: "no oscillation").
+        Spec {
+            name: "held_20k",
+            about: "N 0.1 N, mu0 0.05, mu1 0.004, 20 kS/s, held 0.3 s, vibrometer noise x5",
+            load_n: 0.1,
+            mu0: 0.05,
+            mu1: 0.004,
+            rate_hz: 20_000,
+            max_duration_s: 5.0,
+            simulate_s: 1.6,
+            sensor: SensorModel {
+                disp_noise_m: 1e-7,
+                vel_noise_m_s: 1e-4,
+                bits: None,
+                force_cutoff_hz: Some(300.0),
+                seed: 12,
+                ..SensorModel::default()
+            },
+            hold: 6_000,
+            k3: 0.0,
+        },
+        Spec {
+            name: "cubic",
+            about: "N 0.3 N, mu0 0.005, mu1 0.002, cubic stiffness k3 x0^2 / k = 3 %, 5 kS/s",
+            load_n: 0.3,
+            mu0: 0.005,
+            mu1: 0.002,
+            rate_hz: 5_000,
+            max_duration_s: 8.0,
+            simulate_s: 4.5,
+            sensor: SensorModel {
+                bits: None,
+                seed: 13,
+                ..SensorModel::default()
+            },
+            hold: 1_000,
+            k3: 0.03 * 1150.0 / (X0_M * X0_M),
         },
     ]
 }
@@ -104,7 +155,8 @@ pub fn configure(s: &Spec) -> Configure {
 /// The counts of a spec: the hold, then the simulated motion; five channels per sample.
 pub fn counts(s: &Spec, cfg: &Configure) -> Result<Vec<u8>, String> {
     let rig = Rig::new(0.04, 1150.0, s.load_n).map_err(|e| e.to_string())?;
-    let model = Model::new(FrictionLaw::coulomb_viscous(s.mu0, s.mu1));
+    let model =
+        Model::new(FrictionLaw::coulomb_viscous(s.mu0, s.mu1)).with_cubic(rig.kappa_of_k3(s.k3));
     let spec = RecordSpec {
         rig,
         x0_m: X0_M,
@@ -119,7 +171,7 @@ pub fn counts(s: &Spec, cfg: &Configure) -> Result<Vec<u8>, String> {
         calib::to_count(cal[ch.index()], si).ok_or_else(|| format!("bad {ch:?} calibration"))
     };
     let temp = cal[Channel::Temperature.index()].to_count(crate::tests::app::TEMP_C);
-    let mut out = Vec::with_capacity((HOLD + rec.len()) * SAMPLE_BYTES);
+    let mut out = Vec::with_capacity((s.hold + rec.len()) * SAMPLE_BYTES);
     let mut push = |x: f64, v: f64, f: f64, ecr: f64| -> Result<(), String> {
         let s = [
             count(Channel::Displacement, x)?,
@@ -136,7 +188,7 @@ pub fn counts(s: &Spec, cfg: &Configure) -> Result<Vec<u8>, String> {
     // The hold: the pin at rest at x0, with the sensors' noise.
     let mut rng = Rng::new(s.sensor.seed ^ 0x5EED);
     let sn = &s.sensor;
-    for _ in 0..HOLD {
+    for _ in 0..s.hold {
         push(
             X0_M + sn.disp_noise_m * rng.normal(),
             sn.vel_noise_m_s * rng.normal(),
@@ -193,7 +245,7 @@ pub fn bundle() -> Result<Vec<u8>, String> {
             configure: cfg,
             mu0: s.mu0,
             mu1: s.mu1,
-            hold: HOLD as u32,
+            hold: s.hold as u32,
             counts: Bytes(&[]),
             host: placeholder,
         };
@@ -221,7 +273,7 @@ pub fn bundle() -> Result<Vec<u8>, String> {
             ));
         }
         // Keep the hold and what the pipeline took (the replay repeats the last sample after).
-        data.truncate((HOLD + a.pushed as usize) * SAMPLE_BYTES);
+        data.truncate((s.hold + a.pushed as usize) * SAMPLE_BYTES);
         let rec = Record {
             counts: Bytes(&data),
             host: a,

@@ -40,8 +40,13 @@ pub struct CrossCheck {
     pub host_mu_se: [f64; 2],
     /// (host − on-board) / √(σ_host² + σ_onboard²) for μ0 and μ1 (`null` when a σ is unknown).
     pub z: [f64; 2],
-    /// Both within [`DISAGREE_SIGMAS`].
+    /// Both within [`DISAGREE_SIGMAS`], and the on-board result usable.
     pub agree: bool,
+    /// False when the on-board analysis said its own result is not to be used: its two
+    /// estimators disagree (`estimators-disagree`). Its ± then says nothing about the record, and
+    /// a distance in σ from it is no comparison: the check reads "the on-board result is not
+    /// usable here", never "they agree".
+    pub usable: bool,
     /// What to suspect when they do not agree (or when the on-board analysis flagged the record).
     pub suspect: Option<String>,
 }
@@ -84,11 +89,19 @@ impl CrossCheck {
                 f64::NAN
             }
         });
-        let agree = z
-            .iter()
-            .all(|z| z.is_finite() && z.abs() <= DISAGREE_SIGMAS);
+        let usable = onboard.verdict != Verdict::EstimatorsDisagree;
+        let agree = usable
+            && z.iter()
+                .all(|z| z.is_finite() && z.abs() <= DISAGREE_SIGMAS);
         let suspect = if agree && onboard.verdict == Verdict::Ok {
             None
+        } else if !usable {
+            Some(
+                "the on-board analysis's two estimators (decrement and averaging) disagree: the \
+                 Coulomb–viscous law may not describe the record (`tribo explain` names what is \
+                 missing)"
+                    .into(),
+            )
         } else if onboard.verdict != Verdict::Ok {
             Some(format!(
                 "the on-board analysis flagged the record ({}): its result is the weaker of the two",
@@ -119,6 +132,7 @@ impl CrossCheck {
             host_mu_se,
             z,
             agree,
+            usable,
             suspect,
         })
     }
@@ -149,6 +163,13 @@ impl CrossCheck {
     /// One sentence: the distances in σ and whether they agree (and what to suspect if not).
     pub fn summary(&self) -> String {
         let z = sigmas;
+        if !self.usable {
+            let mut s = String::from(NOT_USABLE);
+            if let Some(w) = &self.suspect {
+                s.push_str(&format!("; {w}"));
+            }
+            return s;
+        }
         let mut s = format!(
             "host − on-board: μ0 {}, μ1 {}: {}",
             z(self.z[0]),
@@ -172,6 +193,16 @@ impl CrossCheck {
             OnboardSource::Rig => "the rig's own result",
             OnboardSource::Record => "the firmware's pipeline on these samples",
         };
+        if !self.usable {
+            let mut s = format!(
+                "on-board   mu0 {:.6}, mu1 {:.6} ({src}, estimators-disagree): {NOT_USABLE}",
+                self.onboard_mu[0], self.onboard_mu[1],
+            );
+            if let Some(why) = &self.suspect {
+                s.push_str(&format!("\n           why: {why}"));
+            }
+            return s;
+        }
         let mut s = format!(
             "on-board   mu0 {:.6} ± {:.1e}, mu1 {:.6} ± {:.1e} ({src}): host − on-board = {} and {} — {}",
             self.onboard_mu[0],
@@ -192,6 +223,9 @@ impl CrossCheck {
         s
     }
 }
+
+/// What the cross-check says of an on-board result whose estimators disagree.
+pub const NOT_USABLE: &str = "the on-board result is not usable here";
 
 /// A distance in combined σ, signed (`?σ` when unknown).
 fn sigmas(v: f64) -> String {
@@ -254,6 +288,38 @@ mod tests {
         assert!(!bad.agree);
         assert!(bad.text().contains("DISAGREE"), "{}", bad.text());
         assert!(bad.suspect.as_deref().unwrap().contains("explain"));
+    }
+
+    /// The issue's case: the on-board estimators disagree, the "best" result's ± is inflated by
+    /// their difference (0.32 on μ0 = 0.029), and a host fit at −0.0σ from it read "they agree".
+    #[test]
+    fn estimators_that_disagree_are_not_usable_never_agreement() {
+        let mut ob = onboard(0.029, 0.004, 0.32);
+        ob.verdict = Verdict::EstimatorsDisagree;
+        let c = CrossCheck::of_values(
+            [0.0291, 0.0041],
+            [1e-5, 1e-5],
+            Some(FitVerdict::Adequate),
+            &ob,
+            OnboardSource::Record,
+        )
+        .unwrap();
+        assert!(!c.usable && !c.agree, "{c:?}");
+        for s in [c.text(), c.summary()] {
+            assert!(s.contains("not usable here"), "{s}");
+            assert!(!s.contains("agree —") && !s.contains("they agree"), "{s}");
+            assert!(!s.contains('σ'), "no distance in σ from it: {s}");
+        }
+        // an on-board result that is Ok stays usable
+        let ok = CrossCheck::of_values(
+            [0.029, 0.004],
+            [1e-5, 1e-5],
+            None,
+            &onboard(0.029, 0.004, 1e-5),
+            OnboardSource::Rig,
+        )
+        .unwrap();
+        assert!(ok.usable && ok.agree, "{ok:?}");
     }
 
     #[test]

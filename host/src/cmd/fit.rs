@@ -45,7 +45,7 @@ coefficients of μ(v) = Σ p_j v^j, v in m/s), `params`, `params_se`, `iteration
 `n_eff` (effectively independent residuals), `half_cycles`, `span` (the part of the record
 compared: `start`, `end`, `samples`, the noise of y and y' read from the record, `rest_level`,
 `spikes` and `clipped` samples left out), `cross_check` (the on-board result beside the host's:
-`onboard_mu`, `onboard_mu_se`, `z`, `agree`, `suspect`; `null` for a law the rig does not fit,
+`onboard_mu`, `onboard_mu_se`, `z`, `agree`, `usable`, `suspect`; `null` for a law the rig does not fit,
 `{\"unavailable\": why}` when there is none), `record`, `rig` (the constants used and where each
 came from: record, flag, default) and `defaults` (the constants a default stood in for). A record
 that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"message\", …}`, any
@@ -58,7 +58,9 @@ after it are not compared); speckle spikes and a few clipped peaks are left out 
 
 The on-board result (the rig's own for a run folder, else the firmware's pipeline run over the
 record) is shown beside the host fit, with the distance between them in combined σ; more than 3σ
-on μ0 or μ1 is called a disagreement, with what to suspect.
+on μ0 or μ1 is called a disagreement, with what to suspect. When the on-board analysis's own two
+estimators disagree (`estimators-disagree`), its result is called not usable here (`usable`:
+false), never compared.
 
 `--windows N` also fits the law on N successive windows of equal amplitude drop (thesis
 ch. 3.7, Tables 6–7) and prints one row per window; with `--json` the object gains

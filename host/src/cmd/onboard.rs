@@ -4,10 +4,12 @@
 //! The record's SI samples are turned into 16-bit counts through a calibration that spans the record
 //! like the rig's bipolar converters would (each channel's full scale is ±1.05 × its largest
 //! magnitude, zero at mid-scale), then fed one by one to the very same
-//! [`tribo_firmware::analysis::Pipeline`] the MCU runs. No offset capture is needed (the zeros of
-//! this calibration are exact): the pipeline is released at once, and a record that starts with the
-//! pin still held has that hold skipped (up to an eighth of a period before the velocity first exceeds
-//! 1 % of its peak). The record must be uniformly sampled (1 % jitter at most).
+//! [`tribo_firmware::analysis::Pipeline`] the MCU runs. The release is read from the data as `tribo
+//! fit` reads it (the velocity leaving its own noise for good, traced back along the sine); the
+//! samples before it are the hold, captured as the rig captures it while the magnet holds (zeros
+//! and noise: the reversal detector arms at 8 × that noise); a record that starts at the release
+//! has no hold, and the pipeline reads the noise from the motion. The record must be uniformly
+//! sampled (1 % jitter at most).
 use crate::firmware::analysis::Pipeline;
 use crate::firmware::calib;
 use crate::physics::Record;
@@ -77,7 +79,18 @@ const MAX_JITTER: f64 = 0.01;
 const HEADROOM: f64 = 1.05;
 
 /// Runs the on-board pipeline over a record (sampled live, 16-bit counts) and returns its result.
+/// The release is read from the data as `tribo fit` reads it.
 pub fn analyse(record: &Record) -> anyhow::Result<OnboardResult> {
+    analyse_released_at(record, None)
+}
+
+/// [`analyse`] with the release at sample `release` when it is known (as on the rig, where the
+/// magnet's release is an event), else read from the data. The samples before it are the hold:
+/// the pipeline captures them as the rig does while the magnet holds.
+pub fn analyse_released_at(
+    record: &Record,
+    release: Option<usize>,
+) -> anyhow::Result<OnboardResult> {
     record.validate()?;
     let rig = record.rig()?;
     let dt = record.dt();
@@ -118,8 +131,29 @@ pub fn analyse(record: &Record) -> anyhow::Result<OnboardResult> {
         calibration[Channel::Force as usize] = bipolar(ft)?;
         channels = channels.with(Channel::Force);
     }
-    let x0 = record.x.first().map(|x| x.abs()).filter(|x| *x > 0.0);
-    let x0 = x0.unwrap_or_else(|| record.x.iter().fold(0.0f64, |m, v| m.max(v.abs())));
+    // The release is read from the data as `tribo fit` reads it; what comes before it is the hold.
+    let start = match release {
+        Some(i) if i < record.len() => i,
+        Some(i) => bail!(
+            "the release at sample {i} is past the record's end ({} samples)",
+            record.len()
+        ),
+        None => release_index(record),
+    };
+    // The release amplitude: the largest |x| over the first period after the release (the
+    // release displacement itself for a record that starts held).
+    let period = (2.0 * std::f64::consts::PI / rig.omega() / dt).ceil() as usize;
+    let x0 = record
+        .x
+        .iter()
+        .skip(start)
+        .take(period.max(1))
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let x0 = if x0 > 0.0 {
+        x0
+    } else {
+        record.x.iter().fold(0.0f64, |m, v| m.max(v.abs()))
+    };
     let duration =
         record.t.last().copied().unwrap_or(0.0) - record.t.first().copied().unwrap_or(0.0);
     let cfg = Configure {
@@ -135,21 +169,28 @@ pub fn analyse(record: &Record) -> anyhow::Result<OnboardResult> {
         calibration,
     };
     let mut pipeline = Pipeline::new(&cfg)?;
-    pipeline.release();
-    let start = release_index(record);
     let count = |ch: Channel, v: f64| calib::to_count(calibration[ch as usize], v).unwrap_or(0);
-    let mut sample = [0u16; 3];
-    for i in start..record.len() {
-        sample[0] = count(Channel::Displacement, record.x[i]);
-        sample[1] = count(Channel::Velocity, record.v[i]);
-        let n = match &record.ft {
+    let sample = |i: usize| -> ([u16; 3], usize) {
+        let mut s = [0u16; 3];
+        s[0] = count(Channel::Displacement, record.x[i]);
+        s[1] = count(Channel::Velocity, record.v[i]);
+        match &record.ft {
             Some(ft) => {
-                sample[2] = count(Channel::Force, ft[i]);
-                3
+                s[2] = count(Channel::Force, ft[i]);
+                (s, 3)
             }
-            None => 2,
-        };
-        if pipeline.push(&sample[..n]) != crate::firmware::analysis::Phase::Running {
+            None => (s, 2),
+        }
+    };
+    // The hold, as the rig captures it while the magnet holds: the zeros and the noise.
+    for i in 0..start {
+        let (s, n) = sample(i);
+        pipeline.capture(&s[..n]);
+    }
+    pipeline.release();
+    for i in start..record.len() {
+        let (s, n) = sample(i);
+        if pipeline.push(&s[..n]) != crate::firmware::analysis::Phase::Running {
             break;
         }
     }

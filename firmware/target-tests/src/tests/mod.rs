@@ -22,6 +22,8 @@ pub const TESTS: &[Test] = &[
     test!(pipeline::unloaded),
     test!(pipeline::coulomb_viscous),
     test!(pipeline::noisy),
+    test!(pipeline::held_20k),
+    test!(pipeline::cubic),
     test!(app::coulomb_viscous_run),
     test!(app::unloaded_run),
     test!(app::selftest_checks),

@@ -187,3 +187,14 @@ pub fn coulomb_viscous(cx: &mut Cx) -> Outcome {
 pub fn noisy(cx: &mut Cx) -> Outcome {
     on_record(cx, "noisy", names!("noisy"))
 }
+
+/// Held 0.3 s at 20 kS/s with five times the simulator's vibrometer noise: the first reversal is
+/// the motion's, not the noise's around the release.
+pub fn held_20k(cx: &mut Cx) -> Outcome {
+    on_record(cx, "held_20k", names!("held_20k"))
+}
+
+/// A cubic spring (3 % of k at the release), 94 cycles: the half periods drift with the amplitude.
+pub fn cubic(cx: &mut Cx) -> Outcome {
+    on_record(cx, "cubic", names!("cubic"))
+}
