@@ -17,10 +17,12 @@
 //!   drives the outputs safe, notes which task and lets the IWDG reset the chip
 //!   (`tribo_firmware::watchdog`). The flash and USB tasks wait on their peripherals and do not
 //!   check in; the sampler is hardware (its reader is the app task).
-//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. A suspend (what a cable pull
-//!   looks like without VBUS sensing) or a bus reset is "link down": frames are refused (they wait
-//!   in the run store) until a host is back; then the sender resends the frame it was sending, whole,
-//!   and the application forgets any half-received frame (`host_link`).
+//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. The bus events (power, bus
+//!   reset, suspend/resume, configuration) go through `tribo_firmware::link_tx::BusState`; a
+//!   suspend (what a cable pull looks like without VBUS sensing) or a bus reset is "link down", and
+//!   a bus reset also ends a suspend: frames are refused (they wait in the run store) until a host
+//!   is back; then the sender resends, whole, the first frame the host did not acknowledge, and the
+//!   application forgets any half-received frame (`host_link`).
 //!
 //! Panics and HardFaults go to `crate::safety` (safe state, reset record, reset).
 //!
@@ -56,6 +58,7 @@ use static_cell::{ConstStaticCell, StaticCell};
 use tribo_firmware::app::{App, AppConfig};
 use tribo_firmware::ecr::{count_to_volts, FULL_SCALE_V};
 use tribo_firmware::hal::*;
+use tribo_firmware::link_tx::BusState;
 use tribo_firmware::reset::{self, BootRecovery};
 use tribo_firmware::runstore::RunStore;
 use tribo_firmware::selftest::Deliberate;
@@ -99,9 +102,10 @@ struct Shared {
     /// A host is connected (the CDC class is configured and the bus not suspended): frames may be
     /// queued for it.
     connected: AtomicBool,
-    /// The bus is suspended (with VBUS sensing off, a pulled cable looks like this).
-    usb_suspended: AtomicBool,
-    /// A suspend, resume or bus reset happened (`host_link::UsbEvents`), for the sender.
+    /// The USB bus as the device's handler was told of it (`host_link::UsbEvents`): whether the
+    /// link is up, and in which session.
+    usb_bus: Mutex<Cs, Cell<BusState>>,
+    /// A bus event happened (`host_link::UsbEvents`), for the sender.
     usb_event: Signal<Cs, ()>,
     /// The application's first poll (the recovery of the last run from flash) is over: the
     /// watchdog may start.
@@ -356,7 +360,7 @@ async fn main(spawner: Spawner) {
         thermocouple: THERMOCOUPLE.take(),
         liveness: Liveness::new(BOARD_TASKS, now_ms()),
         connected: AtomicBool::new(false),
-        usb_suspended: AtomicBool::new(false),
+        usb_bus: Mutex::new(Cell::new(BusState::new())),
         usb_event: Signal::new(),
         app_started: Signal::new(),
         stall_thermocouple: AtomicBool::new(false),
