@@ -252,18 +252,42 @@ async fn watchdog_task(shared: &'static Shared, mut wdg: IndependentWatchdog<'st
 /// 100 ms and handed over as bytes; configured again when the configuration does not read back (a
 /// converter reset by a glitch), at most once a second. Whether to trust a read is the
 /// application's call.
+///
+/// Chip select is driven by software, with the datasheet's timing as explicit core-cycle delays
+/// (`tc::cs_delays`, twice each minimum at [`CORE_HZ`]): t_CC after it falls, t_CCH before it
+/// rises, and t_CWH of high after every transfer, so that the three configuration writes are three
+/// transfers to the chip, not one burst.
 #[embassy_executor::task]
 async fn thermocouple_task(
     shared: &'static Shared,
     mut spi: Spi<'static, Blocking, spi::mode::Master>,
     mut cs: Output<'static>,
 ) {
+    const CS: tc::CsDelays = tc::cs_delays(CORE_HZ);
+    /// One transfer framed by chip select. The DSB after each pin write waits until the store has
+    /// left the core's write buffer, so that the delay counts from the pin change and the SPI
+    /// (on another bus) cannot start before chip select is low; the last SCK edge is over when
+    /// the blocking transfer has read its last byte (mode 1 samples on it), so the hold counts
+    /// from there.
+    fn transfer(
+        spi: &mut Spi<'static, Blocking, spi::mode::Master>,
+        cs: &mut Output<'static>,
+        buf: &mut [u8],
+    ) -> bool {
+        cs.set_low();
+        cortex_m::asm::dsb();
+        cortex_m::asm::delay(CS.setup);
+        let ok = spi.blocking_transfer_in_place(buf).is_ok();
+        cortex_m::asm::delay(CS.hold);
+        cs.set_high();
+        cortex_m::asm::dsb();
+        cortex_m::asm::delay(CS.inactive);
+        ok
+    }
     fn configure(spi: &mut Spi<'static, Blocking, spi::mode::Master>, cs: &mut Output<'static>) {
         for (reg, value) in tc::CONFIG_WRITES {
             let mut w = [0x80 | reg, value];
-            cs.set_low();
-            let _ = spi.blocking_transfer_in_place(&mut w);
-            cs.set_high();
+            let _ = transfer(spi, cs, &mut w);
         }
     }
     configure(&mut spi, &mut cs);
@@ -277,9 +301,7 @@ async fn thermocouple_task(
         shared.liveness.check_in(task::THERMOCOUPLE, now_ms());
         // Address 0x00 (read), then the 16 registers 0x00..=0x0F.
         let mut buf = [0u8; 1 + tc::REGISTERS];
-        cs.set_low();
-        let ok = spi.blocking_transfer_in_place(&mut buf).is_ok();
-        cs.set_high();
+        let ok = transfer(&mut spi, &mut cs, &mut buf);
         // On an SPI error nothing new is published: the reading ages, and the application counts
         // it missing.
         if ok {
