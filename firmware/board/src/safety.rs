@@ -237,3 +237,35 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
     }
     cortex_m::peripheral::SCB::sys_reset()
 }
+
+/// A non-maskable interrupt: on the H743 the HSE clock security system (the ST-LINK's clock
+/// stopped; the core runs on the HSI from here), or a source nothing here enables. Nothing can
+/// mask it, nothing here clears its cause, and a return would only take it again: the same path
+/// as a HardFault (outputs safe, record, reset). The recovery marker is left as it is: should an
+/// NMI ever come from a flash read during the recovery, the next boot erases that sector rather
+/// than read it again (a lost run, never a boot loop).
+#[exception]
+unsafe fn NonMaskableInt() {
+    safe_state();
+    record(ResetCause::CpuFault, b"NMI (HSE clock security system?)");
+    // No defmt here: the NMI can preempt a log write in progress (defmt-rtt's critical section
+    // does not mask it), and the logger taken twice panics, overwriting this record.
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// An exception or interrupt with no handler of its own (an interrupt enabled with nothing bound
+/// to it, a debug monitor or SVCall nobody uses): before, it spun here with the outputs as they
+/// were. Now it takes the fatal path: outputs safe, record (with the exception number), reset.
+/// The recovery marker is cleared: this is not a flash read, and the sector the recovery was
+/// reading is good.
+#[exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    safe_state();
+    let mut m = MessageBuf::new();
+    // `irqn` is the interrupt number (negative: a system exception, as in the NVIC's numbering).
+    let _ = write!(m, "unhandled exception or interrupt irqn={irqn}");
+    recovering(None);
+    record(ResetCause::CpuFault, m.as_bytes());
+    defmt::error!("unhandled irqn={=i16}, outputs safe, resetting", irqn);
+    cortex_m::peripheral::SCB::sys_reset()
+}
