@@ -12,7 +12,9 @@
 //!   checks it, `tribo_firmware::thermocouple`).
 //! * `flash`: erases and programs bank 2 for the run store, one operation at a time as the
 //!   application asks ([`FlashLink`]), interrupt-driven, so the application keeps running meanwhile.
-//! * `watchdog`: started once the app's first poll (the flash recovery) is over, feeds the IWDG
+//! * `watchdog`: the IWDG runs from the first instruction after reset with a boot timeout of ~33 s
+//!   (`memory::BOOT_WATCHDOG`); once the app's first poll (the flash recovery) is over, this task
+//!   sets the run timeout and feeds the IWDG
 //!   while the periodic tasks (app, thermocouple) check in; otherwise
 //!   drives the outputs safe, notes which task and lets the IWDG reset the chip
 //!   (`tribo_firmware::watchdog`). The flash and USB tasks wait on their peripherals and do not
@@ -217,14 +219,21 @@ fn now_ms() -> u32 {
 /// once, the reset record names it, and the IWDG, no longer fed, resets the chip within its
 /// timeout. (A core stuck in one task never runs this: the IWDG resets it all the same.)
 #[embassy_executor::task]
-async fn watchdog_task(shared: &'static Shared, mut wdg: IndependentWatchdog<'static, IWDG1>) {
-    // Not before the application's first poll (the flash recovery) is over; every task's allowance
-    // counts from here.
+async fn watchdog_task(shared: &'static Shared, iwdg: embassy_stm32::Peri<'static, IWDG1>) {
+    // The IWDG has run since the first instruction after reset with the boot timeout
+    // (`memory::BOOT_WATCHDOG`, ~33 s), unfed: through the clocks' start (the HSE-ready wait has
+    // no timeout of its own), the run store's recovery and its erase-first step. The run
+    // timeout, and the feeding by check-ins, start once the application's first poll (the
+    // recovery) is over; every task's allowance counts from here.
     shared.app_started.wait().await;
     for i in 0..BOARD_TASKS.len() {
         shared.liveness.check_in(i, now_ms());
     }
+    let mut wdg = IndependentWatchdog::new(iwdg, limits::WATCHDOG_TIMEOUT_MS * 1000);
     wdg.unleash();
+    // Reload now: the counter still holds boot-timeout ticks, which the new prescaler shortens
+    // but does not bring under the run timeout's reload.
+    wdg.pet();
     let mut ticker = Ticker::every(Duration::from_millis(FEED_PERIOD_MS as u64));
     loop {
         ticker.next().await;
@@ -369,6 +378,9 @@ async fn main(spawner: Spawner) {
         );
     }
     safety::freeze_watchdog_when_halted();
+    if !memory::boot_watchdog_matches_pac() {
+        defmt::error!("the start-up code's IWDG1 address is not the PAC's: no boot watchdog");
+    }
     defmt::info!("last reset: {}", boot.cause);
     // SRAM3 (the DMA ring) allocated to the CPU's domain, so D2 stays on while the CPU runs.
     embassy_stm32::pac::RCC
@@ -511,8 +523,7 @@ async fn main(spawner: Spawner) {
     spawn!(spawner, thermocouple_task(shared, spi, cs));
     spawn!(spawner, flash_task(flash));
     spawn!(spawner, app_task(shared, hw, serial, boot, recovery));
-    // Last: every task is running when the watchdog starts counting, which is after the
-    // application's first poll (see `watchdog_task`).
-    let wdg = IndependentWatchdog::new(p.IWDG1, limits::WATCHDOG_TIMEOUT_MS * 1000);
-    spawn!(spawner, watchdog_task(shared, wdg));
+    // Last: every task is running when the watchdog's run timeout starts, which is after the
+    // application's first poll (see `watchdog_task`); until then the boot timeout runs.
+    spawn!(spawner, watchdog_task(shared, p.IWDG1));
 }
