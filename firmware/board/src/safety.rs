@@ -247,7 +247,7 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
 #[exception]
 unsafe fn NonMaskableInt() {
     safe_state();
-    record(ResetCause::CpuFault, b"NMI (HSE clock security system?)");
+    record(ResetCause::CpuFault, reset::nmi_message().as_bytes());
     // No defmt here: the NMI can preempt a log write in progress (defmt-rtt's critical section
     // does not mask it), and the logger taken twice panics, overwriting this record.
     cortex_m::peripheral::SCB::sys_reset()
@@ -261,11 +261,11 @@ unsafe fn NonMaskableInt() {
 #[exception]
 unsafe fn DefaultHandler(irqn: i16) {
     safe_state();
-    let mut m = MessageBuf::new();
-    // `irqn` is the interrupt number (negative: a system exception, as in the NVIC's numbering).
-    let _ = write!(m, "unhandled exception or interrupt irqn={irqn}");
     recovering(None);
-    record(ResetCause::CpuFault, m.as_bytes());
+    record(
+        ResetCause::CpuFault,
+        reset::unhandled_message(irqn).as_bytes(),
+    );
     defmt::error!("unhandled irqn={=i16}, outputs safe, resetting", irqn);
     cortex_m::peripheral::SCB::sys_reset()
 }
