@@ -110,6 +110,20 @@ core::arch::global_asm!(
     "    str r1, [r0, #8]",
     "    ldr r1, ={reload}",
     "    str r1, [r0]",
+    // ES0392 (STM32H743 errata), revision Y only (DBGMCU_IDCODE.REV_ID < 0x2000): AXI SRAM reads
+    // can return corrupted data unless the AXI switch matrix issues one read at a time to its
+    // target 7 (the AXI SRAM): AXI_TARG7_FN_MOD.READ_ISS_OVERRIDE = 1, as ST's SystemInit does,
+    // before `.bss` and `.data` (in the AXI SRAM) are touched.
+    "    ldr r0, ={idcode}",
+    "    ldr r0, [r0]",
+    "    lsrs r0, r0, #16",
+    "    cmp r0, #0x2000",
+    "    bhs 4f",
+    "    ldr r0, ={targ7}",
+    "    movs r1, #1",
+    "    str r1, [r0]",
+    "    dsb",
+    "4:",
     "    ldr r0, =__srtt",
     "    ldr r1, =__ertt",
     "    ldr r2, =__sirtt",
@@ -133,6 +147,8 @@ core::arch::global_asm!(
     reload = const 0xAAAA,
     pr = const BOOT_WATCHDOG.pr,
     rl = const BOOT_WATCHDOG.rl,
+    idcode = const 0x5C00_1000u32,
+    targ7 = const 0x5100_8108u32,
 );
 
 /// The watchdog at boot: IWDG1 (RM0433: 0x5800_4800; KR at +0, PR at +4, RLR at +8), prescaler
