@@ -192,6 +192,22 @@ pub fn boot_report(flags: ResetFlags, read_record: impl FnOnce() -> Record) -> B
     BootReport { cause, message }
 }
 
+/// The message of a non-maskable interrupt (kept with [`ResetCause::CpuFault`]): on the H743 the
+/// HSE clock security system, the one source the firmware could meet.
+pub fn nmi_message() -> MessageBuf {
+    let mut m = MessageBuf::new();
+    let _ = m.write_str("NMI (HSE clock security system?)");
+    m
+}
+
+/// The message of an exception or interrupt with no handler of its own (kept with
+/// [`ResetCause::CpuFault`]): its number as cortex-m-rt gives it (negative: a system exception).
+pub fn unhandled_message(irqn: i16) -> MessageBuf {
+    let mut m = MessageBuf::new();
+    let _ = write!(m, "unhandled exception or interrupt irqn={irqn}");
+    m
+}
+
 /// The message of a CPU fault: where it happened and the fault status registers.
 pub fn cpu_fault_message(pc: u32, lr: u32, cfsr: u32, hfsr: u32, bfar: u32) -> MessageBuf {
     let mut m = MessageBuf::new();
@@ -327,6 +343,17 @@ mod tests {
             core::str::from_utf8(f.as_bytes()).unwrap(),
             "HardFault at pc=0x08001234 lr=0xfffffff9 cfsr=0x00008200 hfsr=0x40000000 bfar=0x20040000"
         );
+        assert_eq!(
+            core::str::from_utf8(unhandled_message(i16::MIN).as_bytes()).unwrap(),
+            "unhandled exception or interrupt irqn=-32768"
+        );
+        for (cause, m) in [
+            (ResetCause::CpuFault, nmi_message()),
+            (ResetCause::CpuFault, unhandled_message(149)),
+        ] {
+            let (c, back) = decode(&encode(cause, m.as_bytes())).unwrap();
+            assert_eq!((c, back.as_bytes()), (cause, m.as_bytes()));
+        }
     }
 
     #[test]

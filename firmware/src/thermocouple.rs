@@ -71,6 +71,51 @@ pub const CONFIG_WRITES: [(u8, u8); 3] =
 /// and the threshold registers (left as they are) and of the cold-junction offset.
 pub const CONFIG_READBACK: [u8; 10] = [CR0, CR1, 0xFF, 0x7F, 0xC0, 0x7F, 0xFF, 0x80, 0x00, 0x00];
 
+/// The MAX31856's serial-interface minimums (datasheet, "Serial-Interface Timing"), in ns: chip
+/// select low to the first SCK edge (t_CC), the last SCK edge to chip select high (t_CCH), and chip
+/// select high between two transfers (t_CWH). Without the last, back-to-back register writes can
+/// merge into one burst on the chip (the pin toggles in a few core cycles, ~30 ns at 400 MHz).
+pub const T_CC_NS: u32 = 100;
+pub const T_CCH_NS: u32 = 100;
+pub const T_CWH_NS: u32 = 400;
+
+/// Each delay is this many times its datasheet minimum: the margin covers the GPIO write's path
+/// through the bus matrix (the store can reach the pin some bus cycles after the core retires it).
+pub const CS_MARGIN: u32 = 2;
+
+/// The chip-select delays in core cycles, for a busy-wait that lasts at least as many cycles as it
+/// is given (`cortex_m::asm::delay`: one cycle or more per count on a Cortex-M7; interrupts only
+/// lengthen it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CsDelays {
+    /// After chip select goes low, before the transfer starts (t_CC).
+    pub setup: u32,
+    /// After the transfer, before chip select goes high (t_CCH).
+    pub hold: u32,
+    /// After chip select goes high, before anything can take it low again (t_CWH).
+    pub inactive: u32,
+}
+
+/// Core cycles that last at least `ns` at `core_hz` (rounded up).
+pub const fn cycles_at_least(ns: u32, core_hz: u32) -> u32 {
+    let c = (ns as u64 * core_hz as u64).div_ceil(1_000_000_000);
+    if c > u32::MAX as u64 {
+        u32::MAX
+    } else {
+        c as u32
+    }
+}
+
+/// The chip-select delays at a core clock of `core_hz`, each [`CS_MARGIN`] times its minimum. A
+/// core slower than `core_hz` only lengthens them.
+pub const fn cs_delays(core_hz: u32) -> CsDelays {
+    CsDelays {
+        setup: cycles_at_least(T_CC_NS * CS_MARGIN, core_hz),
+        hold: cycles_at_least(T_CCH_NS * CS_MARGIN, core_hz),
+        inactive: cycles_at_least(T_CWH_NS * CS_MARGIN, core_hz),
+    }
+}
+
 /// Whether the register file shows the converter configured as [`CONFIG_WRITES`] leave it.
 pub fn config_ok(regs: &Registers) -> bool {
     regs[..CONFIG_READBACK.len()] == CONFIG_READBACK
@@ -229,6 +274,61 @@ fn round_to_i32(x: f32) -> i32 {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn chip_select_delays_at_the_board_clock() {
+        // 400 MHz: 2.5 ns a cycle; twice 100, 100 and 400 ns.
+        assert_eq!(
+            cs_delays(400_000_000),
+            CsDelays {
+                setup: 80,
+                hold: 80,
+                inactive: 320
+            }
+        );
+        // The H743's fastest core (480 MHz, revision V at VOS0) and the reset clock (HSI 64 MHz).
+        assert_eq!(cs_delays(480_000_000).inactive, 384);
+        assert_eq!(cs_delays(64_000_000).inactive, 52, "51.2 rounded up");
+        assert_eq!(cs_delays(64_000_000).setup, 13, "12.8 rounded up");
+    }
+
+    #[test]
+    fn chip_select_delays_never_fall_short_of_the_datasheet() {
+        for core_hz in [
+            1_000_000u32,
+            4_000_000,
+            8_000_000,
+            64_000_000,
+            199_999_999,
+            333_333_333,
+            400_000_000,
+            480_000_000,
+            u32::MAX,
+        ] {
+            let d = cs_delays(core_hz);
+            for (cycles, min_ns) in [
+                (d.setup, T_CC_NS),
+                (d.hold, T_CCH_NS),
+                (d.inactive, T_CWH_NS),
+            ] {
+                // cycles / core_hz >= CS_MARGIN × min_ns, in integers.
+                let lasts = cycles as u128 * 1_000_000_000;
+                let needs = (CS_MARGIN * min_ns) as u128 * core_hz as u128;
+                assert!(
+                    lasts >= needs,
+                    "{core_hz} Hz: {cycles} cycles < {min_ns} ns × margin"
+                );
+                // And not more than one cycle over (rounded up, not padded).
+                assert!(
+                    lasts < needs + 1_000_000_000,
+                    "{core_hz} Hz: {cycles} cycles"
+                );
+            }
+        }
+        assert_eq!(cycles_at_least(0, 400_000_000), 0);
+        assert_eq!(cycles_at_least(u32::MAX, u32::MAX), u32::MAX, "saturates");
+    }
+
     use super::*;
     use proptest::prelude::*;
 

@@ -87,12 +87,43 @@ pub fn take() -> Option<RunStoreMemory> {
 // initialised. It also zeroes the buffer (`.rtt_buffer`), so that its ECC is written before
 // defmt-rtt's byte writes. The DTCM is enabled out of reset. `memory.x` aligns both sections and
 // `.rtt`'s load address to 4 bytes and pads their sizes to multiples of 4.
+//
+// Before that, first of all, it starts the independent watchdog with its longest timeout
+// ([`BOOT_WATCHDOG`]): from the first instruction after reset, a boot stuck anywhere (the HSE-ready
+// wait, which has no timeout when the ST-LINK's clock output is absent; the run store's recovery;
+// its erase-first step) resets the chip, outputs in their reset state. `board::watchdog_task`
+// shortens it to the run timeout once the application runs.
 core::arch::global_asm!(
     ".section .text.__pre_init, \"ax\"",
     ".global __pre_init",
     ".type __pre_init, %function",
     ".thumb_func",
     "__pre_init:",
+    "    ldr r0, ={iwdg}",
+    "    ldr r1, ={start}",
+    "    str r1, [r0]",
+    "    ldr r1, ={unlock}",
+    "    str r1, [r0]",
+    "    movs r1, #{pr}",
+    "    str r1, [r0, #4]",
+    "    ldr r1, ={rl}",
+    "    str r1, [r0, #8]",
+    "    ldr r1, ={reload}",
+    "    str r1, [r0]",
+    // ES0392 (STM32H743 errata), revision Y only (DBGMCU_IDCODE.REV_ID < 0x2000): AXI SRAM reads
+    // can return corrupted data unless the AXI switch matrix issues one read at a time to its
+    // target 7 (the AXI SRAM): AXI_TARG7_FN_MOD.READ_ISS_OVERRIDE = 1, as ST's SystemInit does,
+    // before `.bss` and `.data` (in the AXI SRAM) are touched.
+    "    ldr r0, ={idcode}",
+    "    ldr r0, [r0]",
+    "    lsrs r0, r0, #16",
+    "    cmp r0, #0x2000",
+    "    bhs 4f",
+    "    ldr r0, ={targ7}",
+    "    movs r1, #1",
+    "    str r1, [r0]",
+    "    dsb",
+    "4:",
     "    ldr r0, =__srtt",
     "    ldr r1, =__ertt",
     "    ldr r2, =__sirtt",
@@ -110,4 +141,34 @@ core::arch::global_asm!(
     "    b 2b",
     "3:  bx lr",
     ".size __pre_init, . - __pre_init",
+    iwdg = const BOOT_WATCHDOG.base,
+    start = const 0xCCCC,
+    unlock = const 0x5555,
+    reload = const 0xAAAA,
+    pr = const BOOT_WATCHDOG.pr,
+    rl = const BOOT_WATCHDOG.rl,
+    idcode = const 0x5C00_1000u32,
+    targ7 = const 0x5100_8108u32,
 );
+
+/// The watchdog at boot: IWDG1 (RM0433: 0x5800_4800; KR at +0, PR at +4, RLR at +8), prescaler
+/// /256 (PR = 6), reload 0xFFF: 4096 × 256 ticks of the LSI (32 kHz nominal, 29.5–34 kHz over the
+/// part's range), 30.8–35.5 s. Long enough for a boot that works (the recovery reads at most the
+/// 1 MiB bank, an erase-first step is one sector, ≤ 2.2 s), short enough that a stuck one resets.
+/// The base is checked against the PAC at boot ([`boot_watchdog_matches_pac`]).
+pub struct BootWatchdog {
+    pub base: u32,
+    pub pr: u32,
+    pub rl: u32,
+}
+pub const BOOT_WATCHDOG: BootWatchdog = BootWatchdog {
+    base: 0x5800_4800,
+    pr: 6,
+    rl: 0xFFF,
+};
+
+/// Whether [`BOOT_WATCHDOG`]'s base is the PAC's IWDG1 (if not, the start-up code wrote to
+/// something else: logged by the caller).
+pub fn boot_watchdog_matches_pac() -> bool {
+    embassy_stm32::pac::IWDG1.as_ptr() as u32 == BOOT_WATCHDOG.base
+}

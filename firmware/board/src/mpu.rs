@@ -6,7 +6,7 @@
 //! |---|---|---|---|
 //! | 0 | flash bank 2 (0x0810_0000, 1 MiB) | normal, non-cacheable, execute-never | the run store erases and programs it behind the cache's back: a cached line would keep the bytes from before an erase or a program |
 //! | 1 | the stack's guard: the lowest [`STACK_GUARD_BYTES`] of the stack area | no access, execute-never | a stack that grows into it faults at once instead of writing over `.bss` (the app task's future, the USB buffers) |
-//! | 5 | the no-init RAM (`NOINIT`, SRAM4's last KiB: reset record, recovery marker) | normal, non-cacheable, shareable, execute-never | what the fatal paths write there must be in the SRAM when `sys_reset` cuts the core off: `SCB::sys_reset` does not clean the D-cache |
+//! | 5 | the no-init RAM (`NOINIT`, SRAM4's last KiB: reset record, recovery marker) | normal, non-cacheable, shareable, execute-never | what the fatal paths write there must be in the SRAM when `sys_reset` cuts the core off: `SCB::sys_reset` does not clean the D-cache. The MPU is enabled without HFNMIENA, so inside HardFault and NMI it is off and this region does not apply: `safety::clean_dcache` cleans the lines after every store there |
 //! | 7 | the converter's DMA ring (`DMA_RING`, 16 KiB of SRAM3) | normal, non-cacheable, shareable, execute-never | the DMA writes it under the reader at any moment (see `sampling.rs`) |
 //!
 //! The RTT control block and the defmt buffer need no region: they are in the DTCM (`memory.x`,

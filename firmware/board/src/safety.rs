@@ -29,8 +29,9 @@ use tribo_firmware::wire::{BootReport, ResetCause};
 /// start-up code does not initialise). It survives a reset that keeps the D3 domain powered (a
 /// panic's or fault's `sys_reset`, the watchdog, the reset pin), not a power-on or brown-out, after
 /// which it is garbage and is not read (`RCC_RSR`, [`ResetFlags::ram_kept`]). MPU region 5 makes
-/// this RAM non-cacheable ([`noinit_region`]), so the fatal paths' stores are in the SRAM, not in
-/// a D-cache line, when the chip resets: `sys_reset` does not clean the cache.
+/// this RAM non-cacheable ([`noinit_region`]) and every store here cleans its cache lines
+/// ([`clean_dcache`]: inside HardFault and NMI the MPU is off), so the fatal paths' stores are in
+/// the SRAM, not in a D-cache line, when the chip resets: `sys_reset` does not clean the cache.
 #[link_section = ".reset_record"]
 static mut RECORD: MaybeUninit<Record> = MaybeUninit::uninit();
 
@@ -73,7 +74,33 @@ unsafe fn store(p: *mut u32, words: &[u32]) {
         // SAFETY: the caller's contract: `p + i` is inside the static.
         unsafe { p.add(i).write_volatile(*w) };
     }
-    // The stores reach the (non-cacheable) SRAM before anything that follows, a reset included.
+    cortex_m::asm::dsb();
+    clean_dcache(p as u32, 4 * words.len() as u32);
+}
+
+/// Cleans the D-cache lines holding `[addr, addr + bytes)` to the SRAM, then a DSB: what was
+/// stored there is in the SRAM before anything that follows, a reset included.
+///
+/// Needed although MPU region 5 makes the no-init RAM non-cacheable: the MPU is enabled without
+/// HFNMIENA (`mpu.rs`), so inside the HardFault and NMI handlers it is off, the default memory map
+/// applies, and SRAM4 is then normal write-back write-allocate memory: the handler's record would
+/// sit in a D-cache line, and `SCB::sys_reset` does not clean the cache. On the normal path (MPU
+/// on, the lines uncached) and with the D-cache off, cleaning is a no-op. Not testable under QEMU
+/// (it does not model caches): argued from the ARMv7-M architecture manual (MPU_CTRL.HFNMIENA;
+/// DCCMVAC, clean by address to the point of coherency, acts on the line holding the address
+/// whatever the attributes of the current access).
+fn clean_dcache(addr: u32, bytes: u32) {
+    /// The Cortex-M7's D-cache line.
+    const LINE: u32 = 32;
+    let end = addr.saturating_add(bytes);
+    let mut line = addr & !(LINE - 1);
+    while line < end {
+        // SAFETY: DCCMVAC (CBP, 0xE000_EF68) is a write-only, stateless System Control Space
+        // register, always mapped on a Cortex-M7; cleaning a line writes its dirty data back to
+        // memory and changes no value any code can observe.
+        unsafe { (*cortex_m::peripheral::CBP::PTR).dccmvac.write(line) };
+        line += LINE;
+    }
     cortex_m::asm::dsb();
 }
 
@@ -235,5 +262,37 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
     if let Some(offset) = reset::bank2_fault_offset(cfsr, bfar, crate::mpu::BANK2_BASE, g.bytes()) {
         recovering(Some(offset));
     }
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// A non-maskable interrupt: on the H743 the HSE clock security system (the ST-LINK's clock
+/// stopped; the core runs on the HSI from here), or a source nothing here enables. Nothing can
+/// mask it, nothing here clears its cause, and a return would only take it again: the same path
+/// as a HardFault (outputs safe, record, reset). The recovery marker is left as it is: should an
+/// NMI ever come from a flash read during the recovery, the next boot erases that sector rather
+/// than read it again (a lost run, never a boot loop).
+#[exception]
+unsafe fn NonMaskableInt() {
+    safe_state();
+    record(ResetCause::CpuFault, reset::nmi_message().as_bytes());
+    // No defmt here: the NMI can preempt a log write in progress (defmt-rtt's critical section
+    // does not mask it), and the logger taken twice panics, overwriting this record.
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// An exception or interrupt with no handler of its own (an interrupt enabled with nothing bound
+/// to it, a debug monitor or SVCall nobody uses): before, it spun here with the outputs as they
+/// were. Now it takes the fatal path: outputs safe, record (with the exception number), reset.
+/// The recovery marker is cleared: this is not a flash read, and the sector the recovery was
+/// reading is good.
+#[exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    safe_state();
+    recovering(None);
+    record(
+        ResetCause::CpuFault,
+        reset::unhandled_message(irqn).as_bytes(),
+    );
+    defmt::error!("unhandled irqn={=i16}, outputs safe, resetting", irqn);
     cortex_m::peripheral::SCB::sys_reset()
 }

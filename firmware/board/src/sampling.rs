@@ -92,7 +92,14 @@ impl RingView for DmaView {
         // valid), never in the D-cache (MPU region 7, or the D-cache left off when that region
         // could not be placed: `mpu::configure_and_enable_caches`), and only the DMA writes it: a
         // volatile read sees what the DMA last wrote (a torn scan is detected by the reader from
-        // the DMA position).
+        // the DMA position). Aliasing: while the DMA runs, the ring buffer driver holds a
+        // `&'static mut [u16]` to the same memory (`start_ring`). This pointer is not derived from
+        // it (it comes from `addr_of_mut!(DMA_RING)`), so a read through it ends that reference's
+        // uniqueness, and any later access through the reference would be undefined behaviour.
+        // There is none: the driver uses the reference only in `new` (its address and length, for
+        // the stream's registers); its `read*` methods, the only ones that touch the memory
+        // through it, are never called (`Sampler` keeps the ring buffer only to keep the stream
+        // running and to stop it). The DMA's writes are outside the Rust memory model.
         unsafe { self.0.add(i).read_volatile() }
     }
 }
@@ -235,8 +242,11 @@ impl Sampler {
         let request = RxDma::<ADC1>::request(&*ch);
         let channel = embassy_stm32::dma::Channel::new(ch, crate::irqs::Irqs);
         // SAFETY: `DMA_RING` is zeroed, 'static, and given to this one ring buffer (the previous
-        // one was dropped); the only other access to it is `DmaView`'s volatile reads, which never
-        // form a reference. The peripheral address is ADC1's data register, read 16 bits at a time.
+        // one was dropped, so no other reference to it exists). The reference lives on in the
+        // ring buffer while `DmaView` reads the same memory through a raw pointer that is not
+        // derived from it: sound only because the reference is never used to access the memory
+        // after `new` (see `DmaView::word`; never call the ring buffer's `read*` methods). The
+        // peripheral address is ADC1's data register, read 16 bits at a time.
         let mut ring = unsafe {
             let buf: &'static mut [u16] =
                 core::slice::from_raw_parts_mut(addr_of_mut!(DMA_RING) as *mut u16, RING_WORDS);

@@ -1,13 +1,14 @@
-//! The fatal paths on the target: a panic inside a task and a HardFault, each in a run of the
-//! binary of its own (`cargo xtask target-test` starts one QEMU per fatal test after the others:
-//! neither returns to the runner).
+//! The fatal paths on the target: a panic inside a task, a HardFault, an NMI and an interrupt with
+//! no handler of its own, each in a run of the binary of its own (`cargo xtask target-test` starts
+//! one QEMU per fatal test after the others: none returns to the runner).
 //!
-//! The binary's panic and HardFault handlers (`src/qemu.rs`), when the run is one of these tests,
-//! do what the board's do (`firmware/board/src/safety.rs`), in the same order and with the same
+//! The binary's panic, HardFault, NMI and default handlers (`src/qemu.rs`), when the run is one of
+//! these tests, do what the board's do (`firmware/board/src/safety.rs`), in the same order and with the same
 //! library code: the safe state first ([`tribo_firmware::safety::apply`], here on a register image of
 //! live outputs, since QEMU's machine has no STM32 peripherals), then the message formatted into the
 //! same [`reset::MessageBuf`] (the HardFault's from the exception frame and the fault status
-//! registers with [`reset::cpu_fault_message`]) and kept as a [`reset::encode`]d record. Then
+//! registers with [`reset::cpu_fault_message`]; the NMI's and the unbound interrupt's with
+//! [`reset::nmi_message`] and [`reset::unhandled_message`]) and kept as a [`reset::encode`]d record. Then
 //! [`finish`] checks what a board would find after its reset: outputs safe, and a record that
 //! decodes to the cause and message (the `Boot` report the next `Hello` gets), and prints the
 //! instructions from the fault to safe outputs.
@@ -28,12 +29,18 @@ pub enum Fatal {
     Panic,
     /// The core takes a HardFault (an undefined instruction, escalated).
     HardFault,
+    /// A non-maskable interrupt (pended through ICSR.NMIPENDSET).
+    Nmi,
+    /// An enabled interrupt with no handler of its own (IRQ 0, pended through the NVIC).
+    UnboundIrq,
 }
 
 /// The fatal tests by name (the binary runs one when the filter is exactly its name).
-pub const FATAL: [(&str, Fatal); 2] = [
+pub const FATAL: [(&str, Fatal); 4] = [
     ("failsafe::panic_inside_a_task", Fatal::Panic),
     ("failsafe::hard_fault", Fatal::HardFault),
+    ("failsafe::nmi", Fatal::Nmi),
+    ("failsafe::unbound_interrupt", Fatal::UnboundIrq),
 ];
 
 /// The fatal test named exactly `filter`, if any.
@@ -72,6 +79,11 @@ pub fn finish(
     let (cause, expect) = match which {
         Fatal::Panic => (ResetCause::Panic, "index out of bounds"),
         Fatal::HardFault => (ResetCause::CpuFault, "HardFault at pc="),
+        Fatal::Nmi => (ResetCause::CpuFault, "NMI"),
+        Fatal::UnboundIrq => (
+            ResetCause::CpuFault,
+            "unhandled exception or interrupt irqn=0",
+        ),
     };
     let mut failure: Option<heapless::String<256>> = None;
     let mut fail = |args: core::fmt::Arguments<'_>| {
@@ -108,6 +120,8 @@ pub fn finish(
             match which {
                 Fatal::Panic => "panic",
                 Fatal::HardFault => "hard_fault",
+                Fatal::Nmi => "nmi",
+                Fatal::UnboundIrq => "unbound_interrupt",
             }
         );
         if n > BUDGET {

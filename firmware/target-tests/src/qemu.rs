@@ -253,6 +253,19 @@ fn run_fatal(out: &mut Out, platform: &str, name: &'static str, which: Fatal) ->
         // SAFETY: an undefined instruction, to take the HardFault this test is about (UsageFault
         // is not enabled, so it escalates); the handler ends the run.
         Fatal::HardFault => unsafe { core::arch::asm!("udf #0") },
+        // SAFETY: ICSR (0xE000_ED04) of the System Control Block, always mapped: NMIPENDSET
+        // (bit 31) pends the NMI this test is about; the other bits written as 0 have no effect.
+        // The NMI is taken at once and its handler ends the run.
+        Fatal::Nmi => unsafe { write_volatile(0xE000_ED04 as *mut u32, 1 << 31) },
+        // SAFETY: NVIC_ISER0 (0xE000_E100) and NVIC_ISPR0 (0xE000_E200), always mapped: IRQ 0 is
+        // enabled and pended; nothing in this binary binds a handler to it (cortex-m-rt fills every
+        // interrupt vector with `DefaultHandler`), which ends the run.
+        Fatal::UnboundIrq => unsafe {
+            write_volatile(0xE000_E100 as *mut u32, 1);
+            write_volatile(0xE000_E200 as *mut u32, 1);
+            cortex_m::asm::dsb();
+            cortex_m::asm::isb();
+        },
     }
     let _ = writeln!(
         out,
@@ -334,7 +347,42 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
 }
 
 #[exception]
+unsafe fn NonMaskableInt() {
+    if let Some((name, Fatal::Nmi)) = fatal_run() {
+        // The board's order (`firmware/board/src/safety.rs`): outputs safe, then the record.
+        let image = fatal::safe_state();
+        let n = since_trigger(ticks());
+        let record = reset::encode(ResetCause::CpuFault, reset::nmi_message().as_bytes());
+        exit(fatal::finish(
+            &mut out(),
+            name,
+            Fatal::Nmi,
+            &image,
+            &record,
+            Some(n),
+        ));
+    }
+    let mut out = out();
+    let _ = writeln!(out, "\nunexpected NMI\n\ntest result: FAILED (fault)");
+    debug::exit(debug::EXIT_FAILURE);
+}
+
+#[exception]
 unsafe fn DefaultHandler(irqn: i16) {
+    if let Some((name, Fatal::UnboundIrq)) = fatal_run() {
+        let image = fatal::safe_state();
+        let n = since_trigger(ticks());
+        let m = reset::unhandled_message(irqn);
+        let record = reset::encode(ResetCause::CpuFault, m.as_bytes());
+        exit(fatal::finish(
+            &mut out(),
+            name,
+            Fatal::UnboundIrq,
+            &image,
+            &record,
+            Some(n),
+        ));
+    }
     let mut out = out();
     let _ = writeln!(
         out,

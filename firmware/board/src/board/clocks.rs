@@ -2,6 +2,11 @@
 
 use super::*;
 
+/// The core clock [`clocks`] sets: 8 MHz / 4 × 400 / 2 (PLL1 P). Busy-waits count cycles of it
+/// (the MAX31856's chip-select delays); before the PLL runs the core is slower (HSI, 64 MHz), which
+/// only lengthens them.
+pub(super) const CORE_HZ: u32 = 8_000_000 / 4 * 400 / 2;
+
 /// The clock tree (written down in `firmware/README.md`): HSE in bypass from the ST-LINK's 8 MHz
 /// MCO (crystal-accurate) → PLL1 400 MHz core, PLL2P 25 MHz ADC kernel clock; AHB 200 MHz, APB
 /// 100 MHz, so the APB1 timers (TIM6: the sample clock) run at 200 MHz; HSI48 synchronised on the

@@ -116,8 +116,21 @@ impl RunFlash for BoardHw {
 /// * its `write` ends with `CR2 = PG off`, a whole-register write that zeroes PSIZE, and its erase
 ///   keeps whatever PSIZE holds: erases after a program would run at ×8 parallelism, several times
 ///   slower than the erase times `firmware/README.md` plans with. PSIZE is set to ×64 (0b11, the
-///   NUCLEO's 3.3 V supply) before each operation. CR2 is writable only unlocked: the bank is
-///   unlocked here first (the driver unlocks only a locked bank, and locks it again when done).
+///   NUCLEO's 3.3 V supply) before each operation, which is what erases run at; programs run at
+///   ×32, because the driver's `write` sets PSIZE to 0b10 itself. CR2 is writable only unlocked:
+///   the bank is unlocked here first (the driver unlocks only a locked bank, and locks it again
+///   when done);
+/// * its interrupt handler clears OPERR before the driver reads SR2 for the result, so a failed
+///   operation would be reported as done: `crate::irqs::KeepFlashFlags` runs first in the same
+///   interrupt and keeps SR2, and the flags it kept count here with those SR2 still shows;
+/// * its `write` polls SR2 right after each word's store with no DSB between: the status read
+///   (AHB) can overtake the last word's store (AXI), see the bank idle before the 256-bit word is
+///   even queued, and end the write (`PG` off) while the word is programming. After the driver
+///   returns, a DSB makes sure every store reached the flash interface and the bank is awaited
+///   idle (BSY, QW, WBNE clear) before its flags are read; and what was programmed is read back
+///   and compared, so that a program the bank did not complete fails instead of passing. The
+///   driver itself is not patched (it is embassy-stm32's): the argument for the race is RM0433's
+///   bus architecture, not a test on a chip.
 ///
 /// No `unsafe`: the PAC's register accessors are safe; the flash task is the only one that runs
 /// flash operations (the application only reads, never while one runs), so nothing else writes
@@ -147,6 +160,20 @@ mod bank2 {
         sr
     }
 
+    /// A DSB (every store of the operation reached the flash interface), then waits until bank 2
+    /// is idle: nothing queued or being written (BSY, QW, WBNE clear).
+    pub(super) async fn settle() {
+        cortex_m::asm::dsb();
+        let bank = pac::FLASH.bank(1);
+        loop {
+            let sr = bank.sr().read();
+            if !sr.bsy() && !sr.qw() && !sr.wbne() {
+                return;
+            }
+            embassy_futures::yield_now().await;
+        }
+    }
+
     /// Unlocks bank 2 (if locked) and sets PSIZE to ×64, then clears its flags.
     pub(super) fn prepare() {
         let bank = pac::FLASH.bank(1);
@@ -169,13 +196,23 @@ pub(super) async fn erase_sector(
     flags: &AtomicU32,
 ) -> bool {
     bank2::prepare();
+    crate::irqs::FLASH_IRQ_SR2.store(0, Ordering::Release);
     let ok = region
         .erase(sector * SECTOR, (sector + 1) * SECTOR)
         .await
         .is_ok();
-    note_flags(bank2::clear_flags(), "erase", flags);
-    ok
+    bank2::settle().await;
+    let sr = bank2::clear_flags() | crate::irqs::FLASH_IRQ_SR2.swap(0, Ordering::AcqRel);
+    note_flags(sr, "erase", flags);
+    ok && sr & OP_ERRORS == 0
 }
+
+/// FLASH_SR2's flags in bits 17..=28 (errors, ECC events, CRC end), logged when set.
+const SR_ERRORS: u32 = 0x1FFE_0000;
+/// Of them, those that say an erase or program failed (RM0433 §4.9: WRPERR 17, PGSERR 18,
+/// STRBERR 19, INCERR 21, OPERR 22); the ECC flags come from reads, which do not run during an
+/// operation.
+const OP_ERRORS: u32 = 1 << 17 | 1 << 18 | 1 << 19 | 1 << 21 | 1 << 22;
 
 /// Programs `data` at `offset` of bank 2 with the driver, flags cleared around it.
 async fn program(
@@ -185,16 +222,29 @@ async fn program(
     flags: &AtomicU32,
 ) -> bool {
     bank2::prepare();
+    crate::irqs::FLASH_IRQ_SR2.store(0, Ordering::Release);
     let ok = region.write(offset, data).await.is_ok();
-    note_flags(bank2::clear_flags(), "program", flags);
-    ok
+    bank2::settle().await;
+    let sr = bank2::clear_flags() | crate::irqs::FLASH_IRQ_SR2.swap(0, Ordering::AcqRel);
+    note_flags(sr, "program", flags);
+    ok && sr & OP_ERRORS == 0 && programmed_as(region, offset, data)
+}
+
+/// Whether bank 2 reads back `data` at `offset` (after a program; the bank is idle), compared in
+/// pieces of a flash word.
+fn programmed_as(region: &mut Bank2Region<'static, Async>, offset: u32, data: &[u8]) -> bool {
+    let mut back = [0u8; FLASH_WORD];
+    data.chunks(FLASH_WORD).enumerate().all(|(i, want)| {
+        let at = offset + (i * FLASH_WORD) as u32;
+        region.blocking_read(at, &mut back[..want.len()]).is_ok() && back[..want.len()] == *want
+    })
 }
 
 /// Logs the error flags (FLASH_SR2 bits 17..=28) an operation left, and keeps SR2 for the
 /// self-test (`flags`).
 fn note_flags(sr: u32, what: &str, flags: &AtomicU32) {
     flags.fetch_or(sr, Ordering::AcqRel);
-    let errors = sr & 0x1FFE_0000;
+    let errors = sr & SR_ERRORS;
     if errors != 0 {
         defmt::warn!(
             "bank 2 {}: FLASH_SR2 error flags {=u32:#010x}, cleared",

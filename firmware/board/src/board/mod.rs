@@ -12,15 +12,19 @@
 //!   checks it, `tribo_firmware::thermocouple`).
 //! * `flash`: erases and programs bank 2 for the run store, one operation at a time as the
 //!   application asks ([`FlashLink`]), interrupt-driven, so the application keeps running meanwhile.
-//! * `watchdog`: started once the app's first poll (the flash recovery) is over, feeds the IWDG
+//! * `watchdog`: the IWDG runs from the first instruction after reset with a boot timeout of ~33 s
+//!   (`memory::BOOT_WATCHDOG`); once the app's first poll (the flash recovery) is over, this task
+//!   sets the run timeout and feeds the IWDG
 //!   while the periodic tasks (app, thermocouple) check in; otherwise
 //!   drives the outputs safe, notes which task and lets the IWDG reset the chip
 //!   (`tribo_firmware::watchdog`). The flash and USB tasks wait on their peripherals and do not
 //!   check in; the sampler is hardware (its reader is the app task).
-//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. A suspend (what a cable pull
-//!   looks like without VBUS sensing) or a bus reset is "link down": frames are refused (they wait
-//!   in the run store) until a host is back; then the sender resends the frame it was sending, whole,
-//!   and the application forgets any half-received frame (`host_link`).
+//! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. The bus events (power, bus
+//!   reset, suspend/resume, configuration) go through `tribo_firmware::link_tx::BusState`; a
+//!   suspend (what a cable pull looks like without VBUS sensing) or a bus reset is "link down", and
+//!   a bus reset also ends a suspend: frames are refused (they wait in the run store) until a host
+//!   is back; then the sender resends, whole, the first frame the host did not acknowledge, and the
+//!   application forgets any half-received frame (`host_link`).
 //!
 //! Panics and HardFaults go to `crate::safety` (safe state, reset record, reset).
 //!
@@ -56,6 +60,7 @@ use static_cell::{ConstStaticCell, StaticCell};
 use tribo_firmware::app::{App, AppConfig};
 use tribo_firmware::ecr::{count_to_volts, FULL_SCALE_V};
 use tribo_firmware::hal::*;
+use tribo_firmware::link_tx::BusState;
 use tribo_firmware::reset::{self, BootRecovery};
 use tribo_firmware::runstore::RunStore;
 use tribo_firmware::selftest::Deliberate;
@@ -99,9 +104,10 @@ struct Shared {
     /// A host is connected (the CDC class is configured and the bus not suspended): frames may be
     /// queued for it.
     connected: AtomicBool,
-    /// The bus is suspended (with VBUS sensing off, a pulled cable looks like this).
-    usb_suspended: AtomicBool,
-    /// A suspend, resume or bus reset happened (`host_link::UsbEvents`), for the sender.
+    /// The USB bus as the device's handler was told of it (`host_link::UsbEvents`): whether the
+    /// link is up, and in which session.
+    usb_bus: Mutex<Cs, Cell<BusState>>,
+    /// A bus event happened (`host_link::UsbEvents`), for the sender.
     usb_event: Signal<Cs, ()>,
     /// The application's first poll (the recovery of the last run from flash) is over: the
     /// watchdog may start.
@@ -213,14 +219,21 @@ fn now_ms() -> u32 {
 /// once, the reset record names it, and the IWDG, no longer fed, resets the chip within its
 /// timeout. (A core stuck in one task never runs this: the IWDG resets it all the same.)
 #[embassy_executor::task]
-async fn watchdog_task(shared: &'static Shared, mut wdg: IndependentWatchdog<'static, IWDG1>) {
-    // Not before the application's first poll (the flash recovery) is over; every task's allowance
-    // counts from here.
+async fn watchdog_task(shared: &'static Shared, iwdg: embassy_stm32::Peri<'static, IWDG1>) {
+    // The IWDG has run since the first instruction after reset with the boot timeout
+    // (`memory::BOOT_WATCHDOG`, ~33 s), unfed: through the clocks' start (the HSE-ready wait has
+    // no timeout of its own), the run store's recovery and its erase-first step. The run
+    // timeout, and the feeding by check-ins, start once the application's first poll (the
+    // recovery) is over; every task's allowance counts from here.
     shared.app_started.wait().await;
     for i in 0..BOARD_TASKS.len() {
         shared.liveness.check_in(i, now_ms());
     }
+    let mut wdg = IndependentWatchdog::new(iwdg, limits::WATCHDOG_TIMEOUT_MS * 1000);
     wdg.unleash();
+    // Reload now: the counter still holds boot-timeout ticks, which the new prescaler shortens
+    // but does not bring under the run timeout's reload.
+    wdg.pet();
     let mut ticker = Ticker::every(Duration::from_millis(FEED_PERIOD_MS as u64));
     loop {
         ticker.next().await;
@@ -248,18 +261,42 @@ async fn watchdog_task(shared: &'static Shared, mut wdg: IndependentWatchdog<'st
 /// 100 ms and handed over as bytes; configured again when the configuration does not read back (a
 /// converter reset by a glitch), at most once a second. Whether to trust a read is the
 /// application's call.
+///
+/// Chip select is driven by software, with the datasheet's timing as explicit core-cycle delays
+/// (`tc::cs_delays`, twice each minimum at [`CORE_HZ`]): t_CC after it falls, t_CCH before it
+/// rises, and t_CWH of high after every transfer, so that the three configuration writes are three
+/// transfers to the chip, not one burst.
 #[embassy_executor::task]
 async fn thermocouple_task(
     shared: &'static Shared,
     mut spi: Spi<'static, Blocking, spi::mode::Master>,
     mut cs: Output<'static>,
 ) {
+    const CS: tc::CsDelays = tc::cs_delays(CORE_HZ);
+    /// One transfer framed by chip select. The DSB after each pin write waits until the store has
+    /// left the core's write buffer, so that the delay counts from the pin change and the SPI
+    /// (on another bus) cannot start before chip select is low; the last SCK edge is over when
+    /// the blocking transfer has read its last byte (mode 1 samples on it), so the hold counts
+    /// from there.
+    fn transfer(
+        spi: &mut Spi<'static, Blocking, spi::mode::Master>,
+        cs: &mut Output<'static>,
+        buf: &mut [u8],
+    ) -> bool {
+        cs.set_low();
+        cortex_m::asm::dsb();
+        cortex_m::asm::delay(CS.setup);
+        let ok = spi.blocking_transfer_in_place(buf).is_ok();
+        cortex_m::asm::delay(CS.hold);
+        cs.set_high();
+        cortex_m::asm::dsb();
+        cortex_m::asm::delay(CS.inactive);
+        ok
+    }
     fn configure(spi: &mut Spi<'static, Blocking, spi::mode::Master>, cs: &mut Output<'static>) {
         for (reg, value) in tc::CONFIG_WRITES {
             let mut w = [0x80 | reg, value];
-            cs.set_low();
-            let _ = spi.blocking_transfer_in_place(&mut w);
-            cs.set_high();
+            let _ = transfer(spi, cs, &mut w);
         }
     }
     configure(&mut spi, &mut cs);
@@ -273,9 +310,7 @@ async fn thermocouple_task(
         shared.liveness.check_in(task::THERMOCOUPLE, now_ms());
         // Address 0x00 (read), then the 16 registers 0x00..=0x0F.
         let mut buf = [0u8; 1 + tc::REGISTERS];
-        cs.set_low();
-        let ok = spi.blocking_transfer_in_place(&mut buf).is_ok();
-        cs.set_high();
+        let ok = transfer(&mut spi, &mut cs, &mut buf);
         // On an SPI error nothing new is published: the reading ages, and the application counts
         // it missing.
         if ok {
@@ -343,6 +378,9 @@ async fn main(spawner: Spawner) {
         );
     }
     safety::freeze_watchdog_when_halted();
+    if !memory::boot_watchdog_matches_pac() {
+        defmt::error!("the start-up code's IWDG1 address is not the PAC's: no boot watchdog");
+    }
     defmt::info!("last reset: {}", boot.cause);
     // SRAM3 (the DMA ring) allocated to the CPU's domain, so D2 stays on while the CPU runs.
     embassy_stm32::pac::RCC
@@ -356,7 +394,7 @@ async fn main(spawner: Spawner) {
         thermocouple: THERMOCOUPLE.take(),
         liveness: Liveness::new(BOARD_TASKS, now_ms()),
         connected: AtomicBool::new(false),
-        usb_suspended: AtomicBool::new(false),
+        usb_bus: Mutex::new(Cell::new(BusState::new())),
         usb_event: Signal::new(),
         app_started: Signal::new(),
         stall_thermocouple: AtomicBool::new(false),
@@ -485,8 +523,7 @@ async fn main(spawner: Spawner) {
     spawn!(spawner, thermocouple_task(shared, spi, cs));
     spawn!(spawner, flash_task(flash));
     spawn!(spawner, app_task(shared, hw, serial, boot, recovery));
-    // Last: every task is running when the watchdog starts counting, which is after the
-    // application's first poll (see `watchdog_task`).
-    let wdg = IndependentWatchdog::new(p.IWDG1, limits::WATCHDOG_TIMEOUT_MS * 1000);
-    spawn!(spawner, watchdog_task(shared, wdg));
+    // Last: every task is running when the watchdog's run timeout starts, which is after the
+    // application's first poll (see `watchdog_task`); until then the boot timeout runs.
+    spawn!(spawner, watchdog_task(shared, p.IWDG1));
 }
