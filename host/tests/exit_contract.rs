@@ -35,17 +35,7 @@ fn interrupt_a_recording(signal: &str, status: i32) {
         .spawn()
         .unwrap();
     let mut err = BufReader::new(child.stderr.take().unwrap());
-    let mut seen = String::new();
-    loop {
-        let mut line = String::new();
-        if err.read_line(&mut line).unwrap() == 0 {
-            panic!("tribo ended before recording: {seen}");
-        }
-        seen.push_str(&line);
-        if line.contains("recording run") {
-            break;
-        }
-    }
+    let seen = wait_for_recording(&mut err);
     send(signal, child.id());
     let mut rest = String::new();
     std::io::Read::read_to_string(&mut err, &mut rest).unwrap();
@@ -121,17 +111,7 @@ fn an_interrupted_campaign_says_how_to_resume_it_with_its_own_store() {
         .spawn()
         .unwrap();
     let mut err = BufReader::new(child.stderr.take().unwrap());
-    let mut seen = String::new();
-    loop {
-        let mut line = String::new();
-        if err.read_line(&mut line).unwrap() == 0 {
-            panic!("tribo ended before recording: {seen}");
-        }
-        seen.push_str(&line);
-        if line.contains("recording run") {
-            break;
-        }
-    }
+    let seen = wait_for_recording(&mut err);
     send("INT", child.id());
     let mut rest = String::new();
     std::io::Read::read_to_string(&mut err, &mut rest).unwrap();
@@ -144,4 +124,20 @@ fn an_interrupted_campaign_says_how_to_resume_it_with_its_own_store() {
         rig.addr
     );
     assert!(rest.contains(&again), "no `{again}` in: {rest}");
+}
+
+/// Reads `err` until tribo says it is recording a run (returns what it read); panics if it ends
+/// first.
+fn wait_for_recording(err: &mut impl BufRead) -> String {
+    let mut seen = String::new();
+    loop {
+        let mut line = String::new();
+        if err.read_line(&mut line).unwrap() == 0 {
+            panic!("tribo ended before recording: {seen}");
+        }
+        seen.push_str(&line);
+        if line.contains("recording run") {
+            return seen;
+        }
+    }
 }
