@@ -1,8 +1,8 @@
 //! Strong effects and pairs, as issue 32 met them: cubic stiffness of 4–10 % of k at the release
 //! amplitude (hardening and softening) on records of about 70 cycles, and quadratic velocity
 //! dependence with a frictional lag or a cubic stiffness beside it. Prints what `tribo explain`
-//! names and measures, with the truth. (What it prints today is in the README: these are not
-//! yet right.)
+//! names and measures, with the truth. (What it prints today is in the README: the cubic
+//! stiffness alone is named and measured; the pairs are not yet right.)
 //!
 //! `cargo run --release -p tribo-explain --example strong_effects`
 

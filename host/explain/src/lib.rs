@@ -291,6 +291,7 @@ pub fn explain_with_progress(
         )
         .filter(|p| p.gap <= m.gap)
         .unwrap_or(m);
+        let m = settle(&data, m, e, opts.max_iter);
         let ev = Evidence::of(&data, &cur, &m, opts);
         let m = with_standard_errors(&data, m);
         steps.push(Step {
@@ -355,4 +356,36 @@ pub fn explain_with_progress(
         diagnostics,
     };
     Ok((ex, data))
+}
+
+/// The fit of a named effect, moved to the bottom of its valley. The force channel's misfit is
+/// only piecewise smooth in the parameters (a velocity reversal crossing a sample instant changes
+/// the sampled force by a step), so Levenberg–Marquardt can stop in a small hollow of it: on a
+/// −10 % cubic stiffness it stopped 4.7 σ (its own ±) from the truth, where the misfit with the
+/// rest re-fitted was 60 units of χ² below. The fit is restarted with each of the effect's
+/// constants moved by ±3 of its standard errors, and the best is kept.
+fn settle(data: &Prepared, m: FittedModel, e: Effect, max_iter: usize) -> FittedModel {
+    let Some(i) = m.spec.effects.iter().position(|&x| x == e) else {
+        return m;
+    };
+    let o = m.spec.offset(i);
+    let se = standard_errors_of(data, &m);
+    let mut starts = Vec::new();
+    for j in o..o + e.n_params() {
+        let s = se.get(j).copied().unwrap_or(f64::NAN);
+        if !(s.is_finite() && s > 0.0) {
+            continue;
+        }
+        for d in [-3.0, 3.0] {
+            let mut p = m.p.clone();
+            p[j] += d * s;
+            if m.spec.in_range(&p) {
+                starts.push(p);
+            }
+        }
+    }
+    match fit_spec(data, &m.spec, &starts, max_iter) {
+        Some(b) if b.gap < m.gap => b,
+        _ => m,
+    }
 }
