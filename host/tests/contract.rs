@@ -275,6 +275,12 @@ fn every_command_and_input_class_has_one_status_and_one_kind_of_message() {
         ),
         // Out of range: a usage error, before anything is sent or read.
         row("out of range", "fit good.csv --load-n 0", 2, "--load-n 0"),
+        row(
+            "out of range",
+            "sim --law coulomb --mu 0.1,0.2 -o two.csv",
+            2,
+            "needs 1 constant(s) in --mu, got 2",
+        ),
         row("wrong units", "fit good.csv --load-n 300", 2, "mN"),
         row(
             "wrong units",

@@ -1,6 +1,6 @@
 //! `tribo sim`: generate a record (CSV) of the rig's free response from a chosen friction law.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Parser;
 use std::path::PathBuf;
 use tribo_physics::bench::{Bench, BenchRecord};
@@ -112,10 +112,12 @@ pub fn law_of(spec: LawSpec, mu: &[f64]) -> Result<FrictionLaw> {
         s => s.n_params(),
     };
     if mu.len() != need {
-        bail!(
+        // The user's word against the law's: a usage error (status 2), as clap's own are.
+        return Err(crate::exit::Usage(format!(
             "law {spec} needs {need} constant(s) in --mu, got {}",
             mu.len()
-        );
+        ))
+        .into());
     }
     Ok(match spec {
         LawSpec::Viscous => FrictionLaw::viscous(mu[0]),
