@@ -178,6 +178,13 @@ impl RunStore<'_> {
         if !usable || self.writer.inflight.is_some() {
             return;
         }
+        // Never a sector the held run's copy occupies (a copy that fills the bank: the next run
+        // erases it when it starts, and its RunStarted waits for that erase).
+        if self.writer.geometry == g
+            && self.writer.sectors_used().max(self.writer.erased) >= g.sectors
+        {
+            return;
+        }
         let sector = self.next_start(g);
         if self.ahead.is_some_and(|(ag, s, _)| ag == g && s == sector) {
             return;
