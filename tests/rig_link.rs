@@ -289,6 +289,9 @@ fn ctrl_c_aborts_the_run_cleanly() {
 fn killed_tribo_run_leaves_a_readable_run() {
     // Real time: the run lasts about a second, long enough to kill the recorder in the middle.
     let (port, truth) = virtual_rig(0.02, 0.004, 5, 1.0);
+    // Past the rig's boot-time erase ahead (1.1 s), so that the run streams live (see
+    // `ctrl_c_aborts_the_run_cleanly`).
+    std::thread::sleep(Duration::from_millis(1500));
     let store = tempfile::tempdir().unwrap();
     // Killed once it has logged a few dozen blocks.
     let (mut child, dir) = spawn_tribo_run(&port, store.path());
