@@ -446,7 +446,9 @@ pub fn rig_copy(link: &mut Link, run_id: u32) -> Vec<Vec<u8>> {
     .expect("the rig holds the run");
     let mut frames = vec![];
     let mut last = Instant::now();
-    while last.elapsed() < Duration::from_millis(800) {
+    // Silent for longer than a sector erase (2.2 s at most): the rig erases the next run's first
+    // sector ahead after a run and after a boot, and a run held in flash only waits for it.
+    while last.elapsed() < Duration::from_millis(2500) {
         let Some(f) = link.next(Duration::from_millis(50)).expect("clean line") else {
             continue;
         };

@@ -258,6 +258,10 @@ fn spawn_tribo_run(
 #[cfg(unix)] // Ctrl-C sent with kill(1)
 fn ctrl_c_aborts_the_run_cleanly() {
     let (port, _) = virtual_rig(0.02, 0.004, 8, 1.0);
+    // The rig erases the first run's sector ahead after booting (1.1 s) and sends `RunStarted`
+    // only once the run's number is in flash: released sooner, this short run would arrive in one
+    // burst and end before the Ctrl-C.
+    std::thread::sleep(Duration::from_millis(1500));
     let store = tempfile::tempdir().unwrap();
     let (mut child, dir) = spawn_tribo_run(&port, store.path());
     let kill = std::process::Command::new("kill")
@@ -285,6 +289,9 @@ fn ctrl_c_aborts_the_run_cleanly() {
 fn killed_tribo_run_leaves_a_readable_run() {
     // Real time: the run lasts about a second, long enough to kill the recorder in the middle.
     let (port, truth) = virtual_rig(0.02, 0.004, 5, 1.0);
+    // Past the rig's boot-time erase ahead (1.1 s), so that the run streams live (see
+    // `ctrl_c_aborts_the_run_cleanly`).
+    std::thread::sleep(Duration::from_millis(1500));
     let store = tempfile::tempdir().unwrap();
     // Killed once it has logged a few dozen blocks.
     let (mut child, dir) = spawn_tribo_run(&port, store.path());

@@ -21,6 +21,12 @@
 //!   so the run may go on long after it (60 s at 20 kS/s fills the bank in ~18 s) and its flash
 //!   copy still ends cleanly. A flash slower than the run (its unwritten bytes filling ¾ of the
 //!   ring) is cut early the same way, at the first record it has not begun, rather than fail.
+//! * **Run numbers**: between runs (a copy done, failed or off, and after a boot) the store erases
+//!   the sector the next run starts at ahead of it, and the application sends `RunStarted` only
+//!   once the header's flash words are programmed ([`RunStore::header_durable`]): a poll after the
+//!   release (a release within 1.1 s of a boot waits for that erase). A number the host has seen is
+//!   in flash, so no power cut, however many in a row, lets the rig give it again. Flash reads
+//!   (pulls of a run held in flash only) wait while the erase ahead runs.
 //! * **After a power loss** [`RunStore::recover`] finds the newest run in flash (the highest run id
 //!   among the sectors that open with a valid header) and reads it back record by record, each frame
 //!   checked (CRC, decoding, run id, block order); a torn or foreign record ends it there. The run is
@@ -111,6 +117,10 @@ pub struct RunStore<'a> {
     /// Blocks refused because the index was full (never the case with [`MAX_RUN_BLOCKS`]).
     refused: u32,
     writer: Writer,
+    /// The sector of flash `.0` the next run starts at, erased ahead (`.2`: the erase is done),
+    /// so that the run's header, and with it its number, is in flash within a poll or two of the
+    /// release.
+    ahead: Option<(FlashGeometry, u32, bool)>,
 }
 
 impl<'a> RunStore<'a> {
@@ -130,6 +140,7 @@ impl<'a> RunStore<'a> {
             events: 0,
             refused: 0,
             writer: Writer::OFF,
+            ahead: None,
         }
     }
 
@@ -167,12 +178,28 @@ impl<'a> RunStore<'a> {
         if g.sectors == 0 {
             return None;
         }
-        if self.writer.geometry != g {
+        let (used, spare) = if self.writer.geometry != g {
             // No copy in this flash: the next run starts at sector 0.
-            return Some(g.sectors - 1);
+            (0, g.sectors - 1)
+        } else {
+            (
+                self.writer.sectors_used().max(self.writer.erased),
+                (self.writer.start + g.sectors - 1) % g.sectors,
+            )
+        };
+        // Nor the sector erased ahead for the next run.
+        let ahead = self.ahead.is_some_and(|(ag, s, _)| ag == g && s == spare);
+        (used < g.sectors && !ahead).then_some(spare)
+    }
+
+    /// Whether the run's header (and with it its run number) is in flash, or never will be (no
+    /// usable flash, or the flash failed). The application holds `RunStarted` back until then, so
+    /// that a number the host has seen survives any power cut and is never given again.
+    pub fn header_durable(&self) -> bool {
+        match self.writer.state {
+            FlashState::Writing => self.writer.written >= self.first_pos(),
+            _ => true,
         }
-        let used = self.writer.sectors_used().max(self.writer.erased);
-        (used < g.sectors).then(|| (self.writer.start + g.sectors - 1) % g.sectors)
     }
 
     /// The header frame, if a run is held.
@@ -280,11 +307,16 @@ impl<'a> RunStore<'a> {
             && g.sector_bytes.is_multiple_of(FLASH_WORD as u32)
             && g.sectors > 0
             && g.bytes() > FLASH_RESERVE + 2 * MAX_FRAME as u32;
-        // The new image starts after the sectors the previous one used (wear spread over the bank).
-        let start = if self.writer.geometry == g && g.sectors > 0 {
-            (self.writer.start + self.writer.sectors_used()) % g.sectors
-        } else {
-            0
+        let start = self.next_start(g);
+        // The sector erased ahead counts as erased (or, its erase still running, as this run's).
+        let ahead = self
+            .ahead
+            .take()
+            .filter(|&(ag, s, _)| ag == g && s == start);
+        let (erased, ahead_running) = match ahead {
+            Some((_, _, true)) => (1, false),
+            Some((_, _, false)) => (0, true),
+            None => (0, false),
         };
         self.header = slot;
         self.result.clear();
@@ -294,7 +326,10 @@ impl<'a> RunStore<'a> {
         self.events = 0;
         self.refused = 0;
         self.ring.reset(0);
-        let inflight = self.writer.inflight.map(|_| Op::Stale);
+        let inflight = self.writer.inflight.map(|op| match op {
+            Op::Ahead if ahead_running => Op::Erase,
+            _ => Op::Stale,
+        });
         self.writer = Writer {
             geometry: g,
             start,
@@ -304,6 +339,7 @@ impl<'a> RunStore<'a> {
                 FlashState::Off
             },
             inflight,
+            erased,
             ..Writer::OFF
         };
         // The header is the stream's first record.
@@ -314,6 +350,16 @@ impl<'a> RunStore<'a> {
         self.make_room(2 + n as u32);
         self.ring.append(&rec[..2 + n]);
         true
+    }
+
+    /// The sector of flash `g` the next run's image starts at: after the sectors the held run's
+    /// image used (wear spread over the bank), 0 with no run held in `g`.
+    fn next_start(&self, g: FlashGeometry) -> u32 {
+        if self.writer.geometry == g && g.sectors > 0 {
+            (self.writer.start + self.writer.sectors_used()) % g.sectors
+        } else {
+            0
+        }
     }
 
     /// Stores the next block's frame. False if it is not the next block or no run is open.

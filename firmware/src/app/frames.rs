@@ -72,6 +72,11 @@ impl App<'_> {
                         self.want = None;
                         return sent;
                     };
+                    // The run's number leaves the rig only once flash holds it: a power cut
+                    // after that cannot let the next run take it again.
+                    if !self.store.header_durable() {
+                        return sent;
+                    }
                     self.out[..h.len()].copy_from_slice(h);
                     (h.len(), Some(Want::Blocks(from_block)))
                 }

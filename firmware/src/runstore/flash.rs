@@ -13,6 +13,8 @@ pub(super) enum Op {
     },
     /// Started for an earlier run: its outcome no longer matters.
     Stale,
+    /// The erase ahead of the sector the next run starts at (see [`super::RunStore::service`]).
+    Ahead,
 }
 
 /// The run's flash image: the stream's records up to `cut` (all of them if none), then the result
@@ -165,6 +167,36 @@ impl RunStore<'_> {
         true
     }
 
+    /// Between runs (the copy done, failed or off), erases the sector the next run starts at, so
+    /// that the run's header reaches flash a poll or two after the release rather than a sector
+    /// erase (1.1 s) later: `RunStarted` waits for it ([`super::RunStore::header_durable`]).
+    fn erase_ahead<F: RunFlash>(&mut self, flash: &mut F) {
+        let g = flash.flash_geometry();
+        let usable = g.sector_bytes >= FLASH_WORD as u32
+            && g.sector_bytes.is_multiple_of(FLASH_WORD as u32)
+            && g.sectors > 0;
+        if !usable || self.writer.inflight.is_some() {
+            return;
+        }
+        // Never a sector the held run's copy occupies (a copy that fills the bank: the next run
+        // erases it when it starts, and its RunStarted waits for that erase).
+        if self.writer.geometry == g
+            && self.writer.sectors_used().max(self.writer.erased) >= g.sectors
+        {
+            return;
+        }
+        let sector = self.next_start(g);
+        if self.ahead.is_some_and(|(ag, s, _)| ag == g && s == sector) {
+            return;
+        }
+        if flash.flash_erase(sector) {
+            self.ahead = Some((g, sector, false));
+            self.writer.inflight = Some(Op::Ahead);
+        } else {
+            self.ahead = None;
+        }
+    }
+
     /// Moves the flash copy along: at most one erase or program is started per call.
     pub fn service<F: RunFlash>(&mut self, flash: &mut F) {
         if flash.flash_busy() {
@@ -174,6 +206,10 @@ impl RunStore<'_> {
             let failed = flash.flash_take_error();
             match op {
                 Op::Stale => {}
+                // An erase ahead that failed is only not ahead: the run erases it again.
+                Op::Ahead => {
+                    self.ahead = self.ahead.filter(|_| !failed).map(|(g, s, _)| (g, s, true))
+                }
                 _ if failed => {
                     self.writer.state = FlashState::Failed;
                     return;
@@ -183,6 +219,7 @@ impl RunStore<'_> {
             }
         }
         if self.writer.state != FlashState::Writing {
+            self.erase_ahead(flash);
             return;
         }
         let w = FLASH_WORD as u32;

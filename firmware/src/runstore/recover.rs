@@ -99,6 +99,7 @@ impl RunStore<'_> {
         self.refused = 0;
         self.ring.reset(stream_end);
         self.writer = w;
+        self.ahead = None;
         Some(Recovered {
             run_id,
             blocks,

@@ -358,7 +358,9 @@ fn a_rate_the_timer_cannot_make_is_answered_with_the_rate_used() {
     assert_eq!(h.command(HostMsg::Arm), Ok(()));
     h.wait(300);
     assert_eq!(h.command(HostMsg::Release), Ok(()));
-    h.wait(200);
+    // Released 0.3 s after the boot: RunStarted waits for the boot's erase ahead (1.1 s), then
+    // for the run's header to be in flash.
+    h.wait(1_200);
     let header = h
         .frames
         .iter()

@@ -266,7 +266,8 @@ fn twenty_ks_per_s_with_five_channels_streams_live() {
     c.max_duration_s = 4.0;
     assert_eq!(h.command(HostMsg::Configure(c)).0, Ok(()));
     assert_eq!(h.command(HostMsg::Arm).0, Ok(()));
-    h.wait(300);
+    // Past the boot's erase ahead (1.1 s): released sooner, RunStarted and the stream wait for it.
+    h.wait(1_200);
     let (r, mut frames) = h.command(HostMsg::Release);
     assert_eq!(r, Ok(()));
     let t0 = h.rig.now_us();

@@ -103,8 +103,11 @@ fn the_flash_check_waits_for_the_run_s_flash_copy_and_spares_the_sectors_it_hold
     full_run(&mut b);
     settle_flash(&mut b);
     // The second run starts at sector 1 (after the first one's): the spare sector is the one
-    // before it, which the next runs reach last.
-    full_run(&mut b);
+    // before it, which the next runs reach last. Mid-run, its copy is being written.
+    b.ready();
+    b.take();
+    b.send(HostMsg::Release);
+    b.run_for(300);
     assert_eq!(b.app.store().flash_state(), FlashState::Writing);
     assert_eq!(
         b.command(HostMsg::SelfTest(SelfTestCheck::Flash { bytes: 256 }))
@@ -112,6 +115,12 @@ fn the_flash_check_waits_for_the_run_s_flash_copy_and_spares_the_sectors_it_hold
         Err(ErrorCode::Busy),
         "the run is still being written to flash"
     );
+    for _ in 0..3000 {
+        if b.app.state() == RigState::Finished {
+            break;
+        }
+        b.run_for(1);
+    }
     settle_flash(&mut b);
     let run = b.app.store().run_id();
     let held: Vec<u8> = b.hw.flash.bytes()[128 * 1024..129 * 1024].to_vec();
