@@ -230,6 +230,19 @@ impl Session<'_> {
         }
     }
 
+    /// Waits for the page's confirmation dialog and returns its text.
+    fn dialog_text(&self, timeout: Duration) -> String {
+        self.wait("the confirmation", timeout, |p| {
+            let mut r =
+                p.b.agent
+                    .get(format!("{}/session/{}/alert/text", p.b.base, p.id))
+                    .call()
+                    .ok()?;
+            let v: Value = r.body_mut().read_json().ok()?;
+            v["value"].as_str().map(str::to_string)
+        })
+    }
+
     fn wait_text(&self, id: &str, has: &str, timeout: Duration) -> String {
         self.wait(&format!("#{id} showing {has:?}"), timeout, |s| {
             let t = s.text(id);
@@ -396,15 +409,7 @@ fn a_run_from_the_page_gives_what_the_cli_gives_and_faults_show() {
     page.wait_text("state", "armed", Duration::from_secs(5));
     page.click("release");
     // The plate set to 30 °C moments ago is still settling: the page asks first; accepted.
-    let asked = page.wait("the confirmation", Duration::from_secs(5), |p| {
-        let mut r =
-            p.b.agent
-                .get(format!("{}/session/{}/alert/text", p.b.base, p.id))
-                .call()
-                .ok()?;
-        let v: Value = r.body_mut().read_json().ok()?;
-        v["value"].as_str().map(str::to_string)
-    });
+    let asked = page.dialog_text(Duration::from_secs(5));
     assert!(asked.contains("still settling"), "{asked}");
     page.post("/alert/accept", json!({}));
     // The trace grows while the rig streams.
@@ -680,15 +685,7 @@ fn a_page_of_another_name_or_origin_cannot_drive_the_panel() {
     page.click("arm");
     page.wait_text("state", "armed", Duration::from_secs(5));
     page.click("release");
-    let asked = page.wait("the confirmation", Duration::from_secs(5), |p| {
-        let mut r =
-            p.b.agent
-                .get(format!("{}/session/{}/alert/text", p.b.base, p.id))
-                .call()
-                .ok()?;
-        let v: Value = r.body_mut().read_json().ok()?;
-        v["value"].as_str().map(str::to_string)
-    });
+    let asked = page.dialog_text(Duration::from_secs(5));
     assert!(asked.contains("still settling"), "{asked}");
     page.post("/alert/dismiss", json!({}));
     page.wait_text("message", "not sent", Duration::from_secs(5));
