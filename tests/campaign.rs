@@ -4,8 +4,9 @@ mod host_common;
 
 use host_common::*;
 use std::path::Path;
-use tribo::cmd::campaign::{finished, Args, Plan, Point};
-use tribo::cmd::run::LinkArgs;
+use tribo::campaign::{finished, Plan, Point};
+use tribo::cmd::campaign::Args;
+use tribo::link::args::LinkArgs;
 use tribo::link::Address;
 use tribo_store::catalog::{Axis, Bin, RunCatalog, Value};
 use tribo_store::{Catalog, Filter};
@@ -146,7 +147,7 @@ fn campaign_resumes_without_redoing_finished_runs() {
 #[test]
 fn a_campaign_over_loads_on_the_virtual_rig_gets_the_same_dimensionless_friction_at_each_load() {
     // `tribo rig --virtual`: the simulated knob follows each run's load.
-    let rig = tribo::cmd::rig::VirtualArgs {
+    let rig = tribo::virtual_rig::VirtualArgs {
         mu0: Some(0.02),
         mu1: Some(0.004),
         speed: 20.0,

@@ -2,7 +2,7 @@
 //! run it leaves is what `tribo fit` and `tribo report` read.
 
 use tribo::cmd::demo::{demo, Args};
-use tribo::cmd::rig::VirtualArgs;
+use tribo::virtual_rig::VirtualArgs;
 use tribo_physics::identify::{fit, FitOptions};
 use tribo_physics::LawSpec;
 

@@ -110,8 +110,8 @@ fn a_stalled_reader_gives_a_stored_run_whose_gap_the_host_reports_and_will_not_f
     // The firmware's on-board result, from the half-cycles before the gap, replays on the host
     // (the replay steps over the gap as the rig's pipeline did).
     let recorded = *run.result().unwrap();
-    let replayed = tribo::cmd::replay::replay_pipeline(run).unwrap();
-    let d = tribo::cmd::replay::compare(&recorded, &replayed, 1e-3);
+    let replayed = tribo::replay::replay_pipeline(run).unwrap();
+    let d = tribo::replay::compare(&recorded, &replayed, 1e-3);
     assert!(d.is_empty(), "{d:?}");
     assert!(recorded.cycles >= 5, "{recorded:?}");
 }

@@ -27,7 +27,7 @@ impl RigOnTcp {
         }
     }
 
-    /// Keeps a rig started elsewhere (e.g. by `tribo::cmd::rig::VirtualArgs::listen`).
+    /// Keeps a rig started elsewhere (e.g. by `tribo::virtual_rig::VirtualArgs::listen`).
     pub fn from(rig: TcpRig) -> RigOnTcp {
         RigOnTcp {
             addr: Address::from(rig.addr()),

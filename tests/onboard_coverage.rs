@@ -9,7 +9,7 @@
 //! The bench grid (`cargo run --release -p tribo --example onboard_grid`) checks the same over
 //! holds, rates, rigs and noise levels; this is the quick check.
 
-use tribo::cmd::onboard::analyse;
+use tribo::onboard::analyse;
 use tribo_physics::integrate::Method;
 use tribo_physics::sensor::{generate, RecordSpec, SensorModel};
 use tribo_physics::{FrictionLaw, Model, Rig};

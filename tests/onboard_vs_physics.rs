@@ -7,7 +7,7 @@
 //! issue's precision (μ0 ± 0.001, μ1 ± 0.0002, the thesis's claim for its offline analysis) must hold
 //! over the real rig's range of loads and friction.
 
-use tribo::cmd::onboard::analyse;
+use tribo::onboard::analyse;
 use tribo_physics::integrate::Method;
 use tribo_physics::sensor::{generate, RecordSpec, SensorModel};
 use tribo_physics::{FrictionLaw, Model, Rig};

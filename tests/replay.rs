@@ -4,7 +4,7 @@
 mod host_common;
 
 use host_common::*;
-use tribo::cmd::replay::{compare, envelope_vs_simulation, replay_pipeline};
+use tribo::replay::{compare, envelope_vs_simulation, replay_pipeline};
 
 #[test]
 fn replay_reproduces_the_onboard_result_and_locates_a_wrong_law() {

@@ -184,7 +184,7 @@ fn child_tribo_run() {
         return;
     };
     let args = tribo::cmd::run::Args {
-        link: tribo::cmd::run::LinkArgs {
+        link: tribo::link::args::LinkArgs {
             port: Some(Address::parse(&port.to_string_lossy()).unwrap()),
             store: Some(store.into()),
         },
@@ -497,7 +497,7 @@ fn a_restarted_rig_never_completes_an_older_run_with_its_number() {
 #[test]
 fn with_button_the_run_starts_when_the_rig_button_is_pressed() {
     // `tribo rig --virtual --button-after 0.3`: a finger on the button 0.3 s after arming.
-    let rig = tribo::cmd::rig::VirtualArgs {
+    let rig = tribo::virtual_rig::VirtualArgs {
         button_after: Some(0.3),
         speed: 20.0,
         ..Default::default()

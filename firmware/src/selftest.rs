@@ -24,6 +24,14 @@ use crate::wire::{
 
 const _: () = assert!(SELFTEST_CHANNELS == ANALOG_CHANNELS);
 
+/// The STM32H743's pins of the analog inputs, in [`crate::wire::Channel::ALL`]'s order
+/// (displacement, velocity, force, ECR): the board scans them in this order (`tribo-board`'s
+/// `board::init`), `tribo selftest` names them.
+pub const ANALOG_PINS: [&str; ANALOG_CHANNELS] = ["PA3", "PC0", "PB1", "PF11"];
+/// FLASH_SR2's flags in bits 17..=28 on the STM32H743 (errors, ECC events, CRC end): the board
+/// logs them, `tribo selftest` judges them.
+pub const FLASH_SR2_FLAGS: u32 = 0x1FFE_0000;
+
 /// Shortest and longest converter check, ms.
 pub const CONVERTER_MS: core::ops::RangeInclusive<u32> = 100..=60_000;
 /// Largest slice of the flash one check programs (one sector at most).

@@ -18,7 +18,7 @@
 //! `cargo run --release -p tribo --example onboard_grid -- [--seeds N] [--verbose]`
 
 use std::collections::BTreeMap;
-use tribo::cmd::onboard::analyse;
+use tribo::onboard::analyse;
 use tribo_physics::bench::{rigs, Bench, BenchRecord, NOISE_LEVELS};
 use tribo_physics::identify::{fit, FitOptions, LawSpec};
 use tribo_physics::sensor::SensorModel;

@@ -1,15 +1,27 @@
 //! `tribo`: the host side of the oscillating tribometer.
 //!
-//! The CLI (`src/main.rs`) is thin: each subcommand parses its arguments and calls one function of
-//! this library, found in the module of the same name under [`cmd`].
+//! The CLI (`src/main.rs`) is thin: each subcommand's arguments and printing are in the module of
+//! the same name under [`cmd`], which calls this library's modules; no module outside [`cmd`]
+//! imports it, and no command imports another (what several share of their command lines is in
+//! `cmd::common`).
 
+pub mod analysis;
 pub mod archive;
+pub mod campaign;
 pub mod cmd;
 pub mod exit;
+pub mod export;
+pub mod lab;
 pub mod link;
 pub mod load;
+pub mod onboard;
 pub mod out;
+pub mod panel;
+pub mod replay;
 pub mod signals;
+pub mod simulate;
+pub mod ui;
+pub mod virtual_rig;
 
 pub use load::{load_for_fit, load_record, Holes, LONGEST_CLEAN_STRETCH_FLAG};
 

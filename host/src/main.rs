@@ -27,7 +27,7 @@ enum Command {
     /// List attached rigs: port, USB id, serial number, firmware version.
     Devices(tribo::cmd::devices::Args),
     /// Take a run: configure, settle the heater, arm, release, stream, save, print μ0/μ1.
-    #[command(after_help = tribo::cmd::run::safety_help())]
+    #[command(after_help = tribo::ui::safety_help())]
     Run(tribo::cmd::run::Args),
     /// The rig's state, temperature, last fault and last reset cause.
     Status(tribo::cmd::status::Args),
@@ -36,7 +36,7 @@ enum Command {
     /// Fetch the rig's last run (or complete a stored one), resuming after the last good block.
     Pull(tribo::cmd::pull::Args),
     /// A series of runs over loads × temperatures × repetitions from PLAN.toml, resumable.
-    #[command(after_help = tribo::cmd::run::safety_help())]
+    #[command(after_help = tribo::ui::safety_help())]
     Campaign(tribo::cmd::campaign::Args),
     /// Start the virtual rig (firmware logic + physics simulator) on a local TCP address.
     Rig(tribo::cmd::rig::Args),

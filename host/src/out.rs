@@ -114,3 +114,14 @@ pub fn json_on_error(json: bool, record: &std::path::Path, e: anyhow::Error) -> 
     }
     e
 }
+
+/// Writes to standard output. A closed pipe (`tribo run … | head`) is an error that stops the
+/// command, unwinding through its hold on the rig (which sends `Safe`); `main` ends quietly on it
+/// (`crate::out`).
+pub fn text(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    o.write_all(text.as_bytes())
+        .and_then(|_| o.flush())
+        .map_err(|e| anyhow::Error::new(e).context("cannot write to standard output"))
+}

@@ -6,8 +6,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-use tribo::cmd::rig::VirtualArgs;
 use tribo::link::{Address, Link};
+use tribo::virtual_rig::VirtualArgs;
 use tribo_store::Run;
 use tribo_wire::{DeviceMsg, HostMsg};
 

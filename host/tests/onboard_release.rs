@@ -10,7 +10,7 @@
 //! cubic stiffness "no-oscillation (51 cycles)" (its half periods drift, which the plausibility test
 //! of the frequency took for noise).
 
-use tribo::cmd::onboard::{analyse, analyse_released_at};
+use tribo::onboard::{analyse, analyse_released_at};
 use tribo_physics::bench::{Bench, BenchRecord, NOISE_LEVELS};
 use tribo_physics::identify::{fit, FitOptions, LawSpec};
 use tribo_physics::sensor::SensorModel;

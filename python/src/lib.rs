@@ -13,7 +13,7 @@ use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::path::{Path, PathBuf};
-use tribo::cmd::export::{catalog_row_json, catalog_rows, catalog_table, Table};
+use tribo::export::{catalog_row_json, catalog_rows, catalog_table, Table};
 use tribo::load::{LoadError, RigFlags};
 use tribo_physics::identify::{FitError, FitOptions, LawSpec};
 use tribo_physics::record::{RecordError as RecError, RecordErrorKind, Units};
@@ -470,29 +470,17 @@ fn read_record<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDic
     record_dict(py, rec, Some(&path))
 }
 
-/// Runs `tribo sim` with these flags (without `-o`) and returns its record as a dict.
+/// The record `tribo sim` makes with these options (JSON: `tribo sim`'s option names with `_`,
+/// e.g. `{"law": "quadratic", "noise": true}`), as a dict: the simulator called directly.
 #[pyfunction]
-fn simulate<'py>(py: Python<'py>, flags: Vec<String>) -> PyResult<Bound<'py, PyDict>> {
-    use clap::Parser as _;
+fn simulate<'py>(py: Python<'py>, options: String) -> PyResult<Bound<'py, PyDict>> {
     let rec = py
         .detach(|| -> Res<Record> {
-            static N: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-            let tmp = std::env::temp_dir().join(format!(
-                "tribo-py-sim-{}-{}.csv",
-                std::process::id(),
-                N.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-            ));
-            let argv = std::iter::once("sim".to_string())
-                .chain(flags)
-                .chain(["-o".into(), tmp.display().to_string()]);
-            let mut a = tribo::cmd::sim::Args::try_parse_from(argv)
-                .map_err(|e| Failure::Value(e.render().to_string()))?;
-            a.quiet = true;
-            let r = tribo::cmd::sim::run(a)
+            let o: tribo::simulate::SimOptions = serde_json::from_str(&options)
+                .map_err(|e| Failure::Value(format!("simulate: {e}")))?;
+            tribo::simulate::simulate(&o)
+                .map(|(rec, _)| rec)
                 .map_err(|e| failure(e, None))
-                .and_then(|()| Record::load(&tmp).map_err(|e| record_failure(&e)));
-            let _ = std::fs::remove_file(&tmp);
-            r
         })
         .map_err(|f| f.into_py(py))?;
     record_dict(py, rec, None)
@@ -578,7 +566,7 @@ struct FitArgs {
 
 /// `tribo fit --json`'s object, made as the command makes it.
 fn fit_json(src: Source, a: FitArgs) -> Res<String> {
-    use tribo::cmd::fit::{apparatus_damping, cross_check, cross_check_json};
+    use tribo::analysis::{apparatus_damping, cross_check, cross_check_json};
     let (mut rec, path, defaults) = src.load(a.holes)?;
     let anyhow_f = |e: anyhow::Error| failure(e, Some(&path));
     let json_f = |e: serde_json::Error| Failure::Tribo(e.to_string());
@@ -696,10 +684,10 @@ fn explain_json(src: Source, opts: tribo_explain::ExplainOptions, h: tribo::Hole
     .map_err(not_analysable)?;
     let (ex, _) = tribo_explain::explain_with_progress(&data, &opts, &mut |_, _, _| {})
         .map_err(not_analysable)?;
-    let check = tribo::cmd::fit::cross_check(&path, &record, &ex.base_fit);
+    let check = tribo::analysis::cross_check(&path, &record, &ex.base_fit);
     let json_f = |e: serde_json::Error| Failure::Tribo(e.to_string());
     let mut j = serde_json::to_value(&ex).map_err(json_f)?;
-    j["cross_check"] = tribo::cmd::fit::cross_check_json(&check).map_err(json_f)?;
+    j["cross_check"] = tribo::analysis::cross_check_json(&check).map_err(json_f)?;
     if !ex.gap_final.is_finite() {
         return Err(Failure::Tribo(format!(
             "{}: the fit diverged",

@@ -405,24 +405,22 @@ def read_record(path: PathLike) -> Record:
 
 @_usage
 def simulate(**flags: Any) -> Record:
-    """A simulated record, made by ``tribo sim`` with these flags (Python names, e.g.
+    """A simulated record, the one ``tribo sim`` makes with these options (Python names, e.g.
     ``law="quadratic", mu=[0.02, 0.01, 0.005], noise=True, duration_s=2, held_s=0.5``).
 
-    A flag set to True is passed bare (``noise=True`` → ``--noise``); a list is joined with
-    commas. ``tribo sim --help`` lists the flags and their defaults.
+    ``tribo sim --help`` lists the options and their defaults; an option left out or None keeps
+    its default, an unknown one is a ValueError.
     """
-    argv: List[str] = []
+    options: Dict[str, Any] = {}
     for k, v in flags.items():
-        flag = "--" + k.replace("_", "-")
-        if v is None or v is False:
+        if v is None:
             continue
-        if v is True:
-            argv.append(flag)
-        elif isinstance(v, (list, tuple, np.ndarray)):
-            argv += [flag, ",".join(repr(float(x)) for x in v)]
-        else:
-            argv += [flag, str(v)]
-    return Record(_tribo.simulate(argv))
+        if isinstance(v, (list, tuple, np.ndarray)):
+            v = [float(x) for x in v]
+        elif isinstance(v, np.generic):
+            v = v.item()
+        options[k] = v
+    return Record(_tribo.simulate(json.dumps(options)))
 
 
 Source = Union[PathLike, Record]

@@ -2,10 +2,10 @@
 //! link's frames exactly as a USB rig sends them, saved, printed and drawn — no hardware, no set-up,
 //! no socket or terminal.
 
-use super::rig::VirtualArgs;
-use super::run::{abort_flag, print_outcome, Ui};
 use crate::link::firmware_version;
 use crate::link::session::{record_run, Progress, RunPlan};
+use crate::ui::{abort_flag, print_outcome, Ui};
+use crate::virtual_rig::VirtualArgs;
 use anyhow::Context;
 use std::path::PathBuf;
 use tribo_wire::Configure;

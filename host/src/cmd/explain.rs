@@ -158,14 +158,14 @@ fn run_inner(args: Args) -> Result<()> {
     });
     bar.finish_and_clear();
     let (ex, data) = result.map_err(not_analysable)?;
-    let check = crate::cmd::fit::cross_check(&args.record, &record, &ex.base_fit);
+    let check = crate::analysis::cross_check(&args.record, &record, &ex.base_fit);
     if args.json {
         let mut j = serde_json::to_value(&ex).context("writing the explanation as JSON")?;
-        j["cross_check"] = crate::cmd::fit::cross_check_json(&check)?;
+        j["cross_check"] = crate::analysis::cross_check_json(&check)?;
         crate::out::print_json(&j)?;
     } else {
         out!("{}", ex.to_text())?;
-        if let Some(line) = crate::cmd::fit::cross_check_text(&check) {
+        if let Some(line) = crate::analysis::cross_check_text(&check) {
             outln!("{line}")?;
         }
     }

@@ -1,5 +1,6 @@
 //! One module per `tribo` subcommand: its clap arguments and the function that runs it.
 pub mod campaign;
+pub mod common;
 pub mod demo;
 pub mod devices;
 pub mod explain;

@@ -4,8 +4,9 @@
 //! run into a new folder. Exits 3 when the run is still not whole (the rig no longer holds part of
 //! it, or stopped answering), saying exactly what is missing and why.
 
-use super::run::{print_outcome, LinkArgs, Ui};
+use crate::link::args::LinkArgs;
 use crate::link::session::{pull_run, RunNotHeld};
+use crate::ui::{print_outcome, Ui};
 use std::path::PathBuf;
 
 /// Arguments of `tribo pull`.
@@ -24,7 +25,7 @@ pub struct Args {
     /// SHA-256 is checked against the catalog's.
     #[arg(long, value_name = "ID", conflicts_with_all = ["run", "salvage"])]
     pub from_catalog: Option<String>,
-    #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
+    #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// No progress bar or messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]
@@ -34,7 +35,9 @@ pub struct Args {
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(id) = &args.from_catalog {
-        return super::sync::pull_from_catalog(args.catalog.as_deref(), id, &args.link.store());
+        let said = crate::lab::pull_from_catalog(args.catalog.as_deref(), id, &args.link.store())?;
+        crate::outln!("{said}")?;
+        return Ok(());
     }
     let (mut link, info) = match (args.link.connect(), &args.run) {
         (Ok(c), _) => c,

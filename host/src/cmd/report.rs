@@ -28,8 +28,8 @@ pub struct Args {
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
     #[command(flatten)]
-    pub period: super::runs::Period,
-    #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
+    pub period: super::common::Period,
+    #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Select the campaign's runs by label substring instead of campaign name.
     #[arg(long)]
@@ -151,7 +151,7 @@ fn campaign(
             store.display()
         );
     }
-    let cat = super::sync::open_catalog(args.catalog.as_deref(), &store)?;
+    let cat = crate::lab::open_catalog(args.catalog.as_deref(), &store)?;
     let filter = args.period.apply(if args.label {
         Filter {
             label: Some(args.target.clone()),

@@ -1,5 +1,7 @@
 //! `tribo runs`: lists and filters the runs of the store (from its SQLite catalog).
 
+use super::common::Period;
+use crate::export::{run_json, with_fields};
 use crate::outln;
 use std::path::PathBuf;
 use tribo_store::{Catalog, CatalogRow, Filter, RunStatus};
@@ -31,7 +33,7 @@ pub struct Args {
     pub rig: Option<String>,
     #[command(flatten)]
     pub period: Period,
-    #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
+    #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Rebuild the catalog from the run folders first.
     #[arg(long)]
@@ -59,52 +61,6 @@ fn status_names() -> clap::builder::PossibleValuesParser {
 /// The state of a run folder whose frame log cannot be read as it is (damage, not a torn tail):
 /// listed all the same, with what `tribo pull --salvage` does about it.
 const DAMAGED: &str = "damaged";
-
-/// `--since`/`--until`: the days a command's runs were taken in (`tribo runs`, `table`, `report
-/// CAMPAIGN`), on the local and the lab catalog alike.
-#[derive(clap::Args, Debug, Clone, Default)]
-pub struct Period {
-    /// Runs taken on or after this day (UTC), e.g. `--since 2026-01-01` for this year's.
-    #[arg(long, value_name = "YYYY-MM-DD", value_parser = day)]
-    pub since: Option<String>,
-    /// Runs taken on or before this day (UTC).
-    #[arg(long, value_name = "YYYY-MM-DD", value_parser = day)]
-    pub until: Option<String>,
-}
-
-impl Period {
-    /// A period that ends before it begins is a usage error (status 2).
-    pub fn check(&self) -> anyhow::Result<()> {
-        if let (Some(a), Some(b)) = (&self.since, &self.until) {
-            if a > b {
-                return Err(crate::exit::Usage(format!(
-                    "--since {a} is after --until {b}: no run can be in between"
-                ))
-                .into());
-            }
-        }
-        Ok(())
-    }
-
-    /// `f` restricted to the period.
-    pub fn apply(&self, f: Filter) -> Filter {
-        Filter {
-            since: self.since.clone(),
-            until: self.until.clone(),
-            ..f
-        }
-    }
-}
-
-fn day(s: &str) -> Result<String, String> {
-    if tribo_store::catalog::is_day(s) {
-        Ok(s.to_string())
-    } else {
-        Err(format!(
-            "{s:?} is not a day: write it YYYY-MM-DD, e.g. 2026-01-01"
-        ))
-    }
-}
 
 fn load_range(s: &str) -> Result<(f64, f64), String> {
     parse_range(s, "load").map_err(|e| e.to_string())
@@ -145,7 +101,7 @@ pub fn parse_range(s: &str, what: &str) -> anyhow::Result<(f64, f64)> {
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
     args.period.check()?;
-    if let Some(url) = super::sync::lab_url(args.catalog.as_deref())? {
+    if let Some(url) = crate::lab::lab_url(args.catalog.as_deref())? {
         return lab(args, &url);
     }
     let store = args
@@ -435,28 +391,5 @@ fn filter(args: &Args, status: Option<String>) -> Filter {
         rig: args.rig.clone(),
         since: args.period.since.clone(),
         until: args.period.until.clone(),
-    }
-}
-
-/// One catalogued run as `tribo runs --json` gives it: the one spelling of a run's row, which the
-/// lab catalog's listing, `tribo export --catalog` and the Python package extend.
-pub fn run_json(r: &CatalogRow) -> serde_json::Value {
-    serde_json::json!({
-        "id": r.id, "path": r.path, "created": r.created, "status": r.status,
-        "completeness": r.completeness, "blocks": r.blocks,
-        "blocks_expected": r.blocks_expected, "lost_samples": r.lost_samples,
-        "label": r.label, "campaign": r.campaign, "repeat": r.repeat,
-        "load_n": r.load_n, "temp_c": r.temp_c, "temp_setpoint_c": r.temp_setpoint_c,
-        "serial": r.serial,
-        "onboard_mu0": r.onboard_mu0, "onboard_mu1": r.onboard_mu1,
-        "host_mu0": r.host_mu0, "host_mu1": r.host_mu1,
-        "host_mu0_se": r.host_mu0_se, "host_mu1_se": r.host_mu1_se,
-    })
-}
-
-/// `j` (an object) with the fields of `more` (an object) added or replaced.
-pub fn with_fields(j: &mut serde_json::Value, more: serde_json::Value) {
-    if let (Some(o), serde_json::Value::Object(m)) = (j.as_object_mut(), more) {
-        o.extend(m);
     }
 }

@@ -3,8 +3,9 @@
 //! limits that module documents and prints one row per check: pass, FAIL, or "hardware only" (a
 //! figure only the real chip has, e.g. the flash controller's flags on the virtual rig).
 
-use super::run::{out, LinkArgs};
+use crate::link::args::LinkArgs;
 use crate::link::{firmware_version, reset_cause_text, Address, Link, LinkError, LinkErrorKind};
+use crate::out::text as out;
 use anyhow::bail;
 use serde_json::json;
 use std::time::{Duration, Instant};
@@ -126,7 +127,7 @@ pub fn converter_rows(r: &ConverterReport) -> Vec<Row> {
                "seconds": dt, "lost": r.lost}),
     )];
     let cal = Configure::real_rig(0.3).calibration;
-    let pins = ["PA3", "PC0", "PB1", "PF11"];
+    let pins = tribo_firmware::selftest::ANALOG_PINS;
     for (i, s) in r.channels.iter().enumerate() {
         let ch = Channel::ALL[i];
         let verdict = judge_channel(s, r.samples);
@@ -160,7 +161,7 @@ pub fn converter_rows(r: &ConverterReport) -> Vec<Row> {
 }
 
 /// The flash controller's error flags (FLASH_SR2 bits 17–28 on the STM32H743).
-const FLASH_ERROR_FLAGS: u32 = 0x1FFE_0000;
+const FLASH_ERROR_FLAGS: u32 = tribo_firmware::selftest::FLASH_SR2_FLAGS;
 
 /// Rows of a flash report: the check, then the controller's flags.
 pub fn flash_rows(r: &FlashReport) -> Vec<Row> {
@@ -568,6 +569,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 mod tests {
     use super::*;
     use tribo_wire::{ChannelStats, SampleClock};
+
+    /// The pins `tribo selftest` names are the ones the board scans, in its order.
+    #[test]
+    fn the_pins_named_are_the_boards() {
+        let board = include_str!("../../../firmware/board/src/board/mod.rs");
+        let scanned: Vec<&str> = board
+            .lines()
+            .filter_map(|l| l.trim().strip_prefix("p.")?.strip_suffix(".degrade_adc(),"))
+            .collect();
+        assert_eq!(scanned, tribo_firmware::selftest::ANALOG_PINS);
+    }
 
     fn report() -> ConverterReport {
         let s = ChannelStats {

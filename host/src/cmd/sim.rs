@@ -1,15 +1,10 @@
 //! `tribo sim`: generate a record (CSV) of the rig's free response from a chosen friction law.
 
+use crate::simulate::{simulate, SimOptions};
 use anyhow::{Context, Result};
 use clap::Parser;
 use std::path::PathBuf;
-use tribo_physics::bench::{Bench, BenchRecord};
 use tribo_physics::identify::LawSpec;
-use tribo_physics::integrate::Method;
-use tribo_physics::law::FrictionLaw;
-use tribo_physics::record::{Record, Units};
-use tribo_physics::sensor::{generate, Ecr, RecordSpec, SensorModel, Thermal};
-use tribo_physics::{Model, Rig};
 
 /// Simulate the rig's free damped oscillation and write it as a record.
 ///
@@ -105,110 +100,40 @@ pub struct Args {
     pub quiet: bool,
 }
 
-/// The law of `--law` with constants `--mu`.
-pub fn law_of(spec: LawSpec, mu: &[f64]) -> Result<FrictionLaw> {
-    let need = match spec {
-        LawSpec::Viscous => 1,
-        s => s.n_params(),
-    };
-    if mu.len() != need {
-        // The user's word against the law's: a usage error (status 2), as clap's own are.
-        return Err(crate::exit::Usage(format!(
-            "law {spec} needs {need} constant(s) in --mu, got {}",
-            mu.len()
-        ))
-        .into());
+impl Args {
+    /// The simulation these arguments ask for.
+    pub fn options(&self) -> SimOptions {
+        SimOptions {
+            law: self.law,
+            mu: self.mu.clone(),
+            mass_kg: self.mass_kg,
+            stiffness: self.stiffness,
+            load_n: self.load_n,
+            x0_m: self.x0_m,
+            duration_s: self.duration_s,
+            rate_hz: self.rate_hz,
+            apparatus_mu1: self.apparatus_mu1,
+            k3: self.k3,
+            noise: self.noise,
+            bits: self.bits,
+            disp_noise_m: self.disp_noise_m,
+            vel_noise_m_s: self.vel_noise_m_s,
+            force_lag_s: self.force_lag_s,
+            temp_c: self.temp_c,
+            ecr_log10: self.ecr_log10,
+            seed: self.seed,
+            held_s: self.held_s,
+            dropouts_per_s: self.dropouts_per_s,
+            floor_m: self.floor_m,
+            floor_hz: self.floor_hz,
+            dimensionless: self.dimensionless,
+        }
     }
-    Ok(match spec {
-        LawSpec::Viscous => FrictionLaw::viscous(mu[0]),
-        s => s.law(mu),
-    })
 }
 
 /// Runs `tribo sim`.
 pub fn run(a: Args) -> Result<()> {
-    let rig = Rig::new(a.mass_kg, a.stiffness, a.load_n)?;
-    let law = law_of(a.law, &a.mu)?;
-    let model = Model::new(law)
-        .with_apparatus_damping(a.apparatus_mu1)
-        .with_cubic(rig.kappa_of_k3(a.k3));
-    model.validate()?;
-    let spec = RecordSpec {
-        rig,
-        x0_m: a.x0_m,
-        v0_m_s: 0.0,
-        duration_s: a.duration_s,
-        rate_hz: a.rate_hz,
-    };
-    let sensor = if a.noise || a.temp_c.is_some() || a.ecr_log10.is_some() {
-        let base = if a.noise {
-            SensorModel {
-                bits: (a.bits > 0).then_some(a.bits),
-                disp_noise_m: a.disp_noise_m,
-                vel_noise_m_s: a.vel_noise_m_s,
-                force_lag_s: a.force_lag_s,
-                ..SensorModel::default()
-            }
-        } else {
-            SensorModel::ideal()
-        };
-        Some(SensorModel {
-            thermal: a.temp_c.map(|t| Thermal {
-                start_c: t,
-                drift_c_per_s: 0.0,
-                noise_c: if a.noise { 0.05 } else { 0.0 },
-            }),
-            ecr: a.ecr_log10.map(|l| Ecr {
-                log10_sliding: l,
-                log10_rest: 3.0,
-                fluctuation_decades: 0.0,
-            }),
-            seed: a.seed,
-            ..base
-        })
-    } else {
-        None
-    };
-    for (name, v) in [
-        ("--held-s", a.held_s),
-        ("--dropouts-per-s", a.dropouts_per_s),
-        ("--floor-m", a.floor_m),
-        ("--floor-hz", a.floor_hz),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(
-                crate::exit::Usage(format!("{name} must be finite and ≥ 0 (got {v})")).into(),
-            );
-        }
-    }
-    let bench = Bench {
-        held_s: a.held_s,
-        dropouts_per_s: a.dropouts_per_s,
-        floor_m: a.floor_m,
-        floor_hz: a.floor_hz,
-        ..Bench::default()
-    };
-    let mut rec = if bench == Bench::default() {
-        generate(&spec, &model, Method::default(), sensor.as_ref())?
-    } else {
-        BenchRecord {
-            rig,
-            model: model.clone(),
-            x0_m: a.x0_m,
-            after_release_s: a.duration_s,
-            rate_hz: a.rate_hz,
-            sensor: sensor.clone().unwrap_or_else(|| SensorModel {
-                seed: a.seed,
-                ..SensorModel::ideal()
-            }),
-            bench,
-        }
-        .make()?
-    };
-    if a.dimensionless {
-        let (t, y, v) = rec.dimensionless()?;
-        rec = Record::new(t, y, v, Some(Rig::UNIT), Units::Dimensionless);
-    }
+    let (rec, model) = simulate(&a.options())?;
     if a.output.as_os_str() == "-" {
         // `-o -`: the CSV on standard output (a pipe into another tool).
         crate::out!("{}", rec.to_csv_string())?;
@@ -226,4 +151,16 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `tribo sim`'s defaults are the library's: the Python package simulates with the latter.
+    #[test]
+    fn the_command_line_defaults_are_the_librarys() {
+        let a = Args::try_parse_from(["sim", "-o", "x.csv"]).unwrap();
+        assert_eq!(a.options(), SimOptions::default());
+    }
 }

@@ -1,8 +1,11 @@
 //! `tribo status`: what the rig is doing, its last fault and why it last reset.
 
-use super::run::{out, LinkArgs};
-use crate::link::{explain_fault, firmware_version, heater_fault_text, reset_cause_text, uptime};
-use tribo_wire::{Control, RigState, Status};
+use crate::link::args::LinkArgs;
+use crate::link::{
+    explain_fault, firmware_version, heater_fault_text, reset_cause_text, state_name, uptime,
+};
+use crate::out::text as out;
+use tribo_wire::{Control, Status};
 
 /// Arguments of `tribo status`.
 #[derive(clap::Args, Debug)]
@@ -13,18 +16,6 @@ pub struct Args {
     /// "boot_message"}`.
     #[arg(long)]
     pub json: bool,
-}
-
-/// The rig's state as a lab technician reads it.
-pub fn state_name(s: RigState) -> &'static str {
-    match s {
-        RigState::Idle => "idle (not configured)",
-        RigState::Configured => "configured",
-        RigState::Armed => "armed (the magnet holds the pin)",
-        RigState::Running => "running a run",
-        RigState::Finished => "run finished",
-        RigState::Fault => "FAULT (heater cut off)",
-    }
 }
 
 /// The status as text, one `name  value` line each.
@@ -120,7 +111,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tribo_wire::{FaultReason, FaultReport, HeaterFault, ResetCause};
+    use tribo_wire::{FaultReason, FaultReport, HeaterFault, ResetCause, RigState};
 
     fn status() -> Status {
         Status {

@@ -28,8 +28,8 @@ pub struct Args {
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
     #[command(flatten)]
-    pub period: super::runs::Period,
-    #[arg(long, value_name = "URL", help = super::sync::CATALOG_HELP)]
+    pub period: super::common::Period,
+    #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Print one JSON object: `{"value", "row_axis", "col_axis", "rows": [..], "cols": [..],
     /// "row_labels": [..], "col_labels": [..], "cells": [[{"mean", "sd", "n"} | null, ..], ..]}`.
@@ -54,7 +54,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let rows: Axis = args.rows.parse()?;
     let cols: Axis = args.cols.parse()?;
     let value: Value = args.value.parse()?;
-    let cat = super::sync::open_catalog(args.catalog.as_deref(), &store)?;
+    let cat = crate::lab::open_catalog(args.catalog.as_deref(), &store)?;
     let filter = args.period.apply(Filter {
         campaign: args.campaign.clone(),
         rig: args.rig.clone(),

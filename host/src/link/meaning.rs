@@ -234,3 +234,15 @@ mod tests {
         );
     }
 }
+
+/// The rig's state as a lab technician reads it.
+pub fn state_name(s: tribo_wire::RigState) -> &'static str {
+    match s {
+        tribo_wire::RigState::Idle => "idle (not configured)",
+        tribo_wire::RigState::Configured => "configured",
+        tribo_wire::RigState::Armed => "armed (the magnet holds the pin)",
+        tribo_wire::RigState::Running => "running a run",
+        tribo_wire::RigState::Finished => "run finished",
+        tribo_wire::RigState::Fault => "FAULT (heater cut off)",
+    }
+}

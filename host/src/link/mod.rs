@@ -14,6 +14,7 @@
 //! * [`hold`]: while a session holds the rig, a heartbeat renews its lease, and every exit the host
 //!   controls sends `Safe`.
 
+pub mod args;
 pub mod devices;
 pub mod hold;
 mod meaning;
@@ -29,7 +30,7 @@ pub mod transport;
 use meaning::command_name;
 pub use meaning::{
     explain, explain_fault, field_name, firmware_version, heater_fault_text, reset_cause_text,
-    uptime,
+    state_name, uptime,
 };
 pub use transport::Address;
 

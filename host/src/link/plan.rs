@@ -65,3 +65,33 @@ impl RunPlan {
         }
     }
 }
+
+/// The heater's settling rule (`tribo run --settle-tol/--settle-secs/--settle-timeout`, a
+/// campaign's `settle_tol_c`, `settle_s`, `settle_timeout_s`) as a plate can meet it: a tolerance
+/// above 0 (a reading never equals its setpoint: 0 waits the whole timeout) and inside the
+/// heater's band (±[`limits::HEATER_BAND_C`], where the plate counts as at its setpoint), a time
+/// of 0 s or more, and a timeout longer than that time.
+///
+/// [`limits::HEATER_BAND_C`]: tribo_wire::limits::HEATER_BAND_C
+pub fn check_settle(tol_c: f32, settle_s: f64, timeout_s: f64) -> Result<(), String> {
+    let band = tribo_wire::limits::HEATER_BAND_C;
+    if !(tol_c.is_finite() && tol_c > 0.0 && tol_c < band) {
+        return Err(format!(
+            "the settle tolerance must be above 0 and below {band} °C (the heater's band; default {} °C)",
+            tribo_wire::limits::SETTLE_TOL_C
+        ));
+    }
+    if !(settle_s.is_finite() && settle_s >= 0.0) {
+        return Err(format!(
+            "the settle time must be 0 s or more (default {} s)",
+            tribo_wire::limits::SETTLE_S
+        ));
+    }
+    if !(timeout_s.is_finite() && timeout_s > settle_s) {
+        return Err(format!(
+            "the settle timeout must be longer than the settle time (default {} s)",
+            tribo_wire::limits::SETTLE_TIMEOUT_S
+        ));
+    }
+    Ok(())
+}

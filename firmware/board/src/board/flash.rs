@@ -208,7 +208,7 @@ pub(super) async fn erase_sector(
 }
 
 /// FLASH_SR2's flags in bits 17..=28 (errors, ECC events, CRC end), logged when set.
-const SR_ERRORS: u32 = 0x1FFE_0000;
+const SR_ERRORS: u32 = tribo_firmware::selftest::FLASH_SR2_FLAGS;
 /// Of them, those that say an erase or program failed (RM0433 §4.9: WRPERR 17, PGSERR 18,
 /// STRBERR 19, INCERR 21, OPERR 22); the ECC flags come from reads, which do not run during an
 /// operation.

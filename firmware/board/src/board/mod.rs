@@ -447,7 +447,8 @@ async fn main(spawner: Spawner) {
     });
 
     // ADC1, 16 bits, calibrated by the driver; scans of displacement PA3, velocity PC0, force PB1,
-    // ECR PF11 (pins set analog by `degrade_adc`), triggered by TIM6, DMA1 stream 0 into the ring.
+    // ECR PF11 (pins set analog by `degrade_adc`; `tribo_firmware::selftest::ANALOG_PINS` names
+    // them, in this order), triggered by TIM6, DMA1 stream 0 into the ring.
     let adc = Adc::new_with_config(
         p.ADC1,
         AdcConfig {

@@ -1,12 +1,13 @@
-//! The panel's rig thread: it alone owns the link, polls the rig's status, runs the page's commands
+//! The panel's link thread: it alone owns the link, polls the rig's status, runs the page's commands
 //! through the same library calls as `tribo run` (configure, heater, arm, [`release`],
 //! [`stream_run`]), and files what it sees into the [`Shared`] state the pages read.
 
 use super::state::{Shared, Trace};
-use crate::cmd::run::{result_table, LinkArgs};
+use crate::link::args::LinkArgs;
 use crate::link::hold::SafeHandle;
 use crate::link::session::{release, stream_run, HeaterPlan, Progress, RunPlan};
 use crate::link::{explain_fault, firmware_version, Link, LinkError, LinkErrorKind};
+use crate::ui::result_table;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
@@ -46,13 +47,13 @@ impl Cmd {
 /// The answer to a command: done (with what to say), or refused (with the rig's reason).
 pub type Reply = Result<String, String>;
 
-/// What the rig thread is given.
-pub struct RigThread {
+/// What the link thread is given.
+pub struct LinkThread {
     pub link: LinkArgs,
     pub store: PathBuf,
     pub shared: Arc<Mutex<Shared>>,
     pub cmds: Receiver<(Cmd, Sender<Reply>)>,
-    /// `Safe` from any thread, whatever the rig thread is doing (set while connected).
+    /// `Safe` from any thread, whatever the link thread is doing (set while connected).
     pub safe: Arc<Mutex<Option<SafeHandle>>>,
     /// Stops a run's stream (the page's "safe", Ctrl-C).
     pub abort: Arc<AtomicBool>,
@@ -62,7 +63,7 @@ pub struct RigThread {
 
 const POLL: Duration = Duration::from_millis(250);
 
-impl RigThread {
+impl LinkThread {
     fn with<R>(&self, f: impl FnOnce(&mut Shared) -> R) -> R {
         let mut s = match self.shared.lock() {
             Ok(s) => s,

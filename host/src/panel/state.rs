@@ -1,7 +1,7 @@
 //! What the pages show: the rig's state, the plate's temperature history, the run being recorded
 //! (decimated for drawing; the store keeps every block), its result and the campaign grid.
 
-use crate::cmd::status::state_name;
+use crate::link::state_name;
 use serde_json::{json, Value};
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -196,7 +196,7 @@ fn num(x: f64) -> Value {
     }
 }
 
-/// Everything the pages show, shared between the rig thread and the page servers.
+/// Everything the pages show, shared between the link thread and the page servers.
 pub struct Shared {
     /// Bumped on every change; the event streams send the state when it moved.
     pub version: u64,

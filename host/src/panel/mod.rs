@@ -1,6 +1,6 @@
-//! `tribo panel`: the rig's front panel, a local web page served by this program.
+//! The rig's front panel (`tribo panel`), a local web page served by this program.
 //!
-//! One thread owns the link to the rig ([`rig`]): it polls the rig's status, runs the page's
+//! One thread owns the link to the rig ([`link_thread`]): it polls the rig's status, runs the page's
 //! commands through the library calls `tribo run` makes (so the rig's interlocks refuse what they
 //! refuse there), holds the rig's lease with a heartbeat while it is connected, and streams a run
 //! into the store exactly as `tribo run` does. The pages read the [`state`] it keeps through
@@ -25,12 +25,13 @@
 //! * The page's HTML, CSS and JavaScript are built into the program: nothing is fetched from the
 //!   network.
 
-mod rig;
+mod link_thread;
 mod state;
 
-use crate::cmd::run::{abort_flag, LinkArgs};
+use crate::link::args::LinkArgs;
+use crate::ui::abort_flag;
 use anyhow::{bail, Context};
-use rig::{Cmd, Reply, RigThread};
+use link_thread::{Cmd, LinkThread, Reply};
 use serde_json::{json, Value};
 use state::Shared;
 use std::io::{Read, Write};
@@ -47,45 +48,6 @@ const SCRIPT: &str = include_str!("page.js");
 
 /// How long a controlling page may be silent (its event stream gone) before another takes over.
 const CONTROL_STALE: Duration = Duration::from_secs(3);
-
-/// Arguments of `tribo panel`.
-#[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:
-  tribo panel
-      the only attached rig (else tcp://127.0.0.1:7411); the page on http://127.0.0.1:7420/
-  tribo panel --port tcp://127.0.0.1:7411 --listen 127.0.0.1:0
-      a virtual rig (`tribo rig --virtual` in another terminal); the page on a free port
-  tribo panel --listen 0.0.0.0:7420 --token S
-      served to the lab network: open http://IP-OF-THIS-PC:7420/?token=S (the panel answers
-      to its IP addresses; to open it by a name, listen on that name: --listen NAME:7420)
-
-The page shows the rig (connected, serial, state, lease, last fault and reset), the plate's
-temperature against its setpoint (\"settled\" within the settling tolerance for the settling
-time), the run as it is recorded (displacement with its envelope, velocity, force, ECR; lost blocks
-and acquisition gaps shaded), the result (on-board and host fit, as `tribo run` prints it, and a
-link to the run's report) and the store's campaign grid (host μ0 per load × temperature, as `tribo
-table`). Its controls (heater, configure, arm, release) go to the rig as `tribo run` sends them;
-one page controls, the others view; Safe works from every page. Runs are stored as `tribo run`
-stores them. GET /api/state gives the page's state as JSON, for scripts.
-
-Closing the panel (Ctrl-C: exit status 130) makes the rig safe; a killed panel leaves it to the
-rig's lease, which expires within 3 s.")]
-pub struct Args {
-    #[command(flatten)]
-    pub link: LinkArgs,
-    /// Address the page is served on, IP:PORT or NAME:PORT (127.0.0.1:0 picks a free port; the
-    /// address is printed). The panel answers only to requests addressed to it: this address,
-    /// the name given here, or `localhost` on loopback.
-    #[arg(long, default_value = "127.0.0.1:7420", value_name = "HOST:PORT")]
-    pub listen: String,
-    /// Access token the page must carry (`http://HOST:PORT/?token=…`); required when --listen is
-    /// not a loopback address. Default: $TRIBO_PANEL_TOKEN.
-    #[arg(long)]
-    pub token: Option<String>,
-    /// No progress messages: set by `tribo -q`/`--quiet`.
-    #[arg(skip)]
-    pub quiet: bool,
-}
 
 /// What every request handler needs.
 #[derive(Clone)]
@@ -215,30 +177,36 @@ fn fresh_token() -> String {
     format!("{:016x}{:016x}", part(1), part(std::process::id() as u64))
 }
 
-/// Runs the subcommand.
-pub fn run(args: Args) -> anyhow::Result<()> {
-    let token = args
-        .token
-        .clone()
+/// Serves the panel on `listen` (`IP:PORT` or `NAME:PORT`) for the rig `link` reaches, until
+/// Ctrl-C (an [`crate::exit::Interrupted`] error). The access token: `token`, else
+/// `$TRIBO_PANEL_TOKEN`, else one made here (required beyond loopback).
+pub fn serve(
+    link: &LinkArgs,
+    listen: &str,
+    token: Option<String>,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    let listen_arg = listen;
+    let token = token
         .or_else(|| std::env::var("TRIBO_PANEL_TOKEN").ok())
         .filter(|t| !t.is_empty());
-    let (listen, name) = parse_listen(&args.listen)?;
+    let (listen, name) = parse_listen(listen_arg)?;
     if !listen.ip().is_loopback() && token.is_none() {
         return Err(crate::exit::Usage(format!(
             "--listen {} serves the panel beyond this PC: give an access token too (--token SECRET or \
              $TRIBO_PANEL_TOKEN), then open http://IP-OF-THIS-PC:{}/?token=SECRET; or keep the default \
              loopback address",
-            args.listen,
+            listen_arg,
             listen.port()
         ))
         .into());
     }
-    let store = args.link.writable_store()?;
+    let store = link.writable_store()?;
     let server = tiny_http::Server::http(listen).map_err(|e| {
         anyhow::anyhow!(
             "cannot serve the panel on {}: {e}; is another panel running? Choose another address with \
              --listen (127.0.0.1:0 picks a free port)",
-            args.listen
+            listen_arg
         )
     })?;
     let addr = server
@@ -251,8 +219,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (tx, rx) = mpsc::channel();
     let safe = Arc::new(Mutex::new(None));
     let run_abort = Arc::new(AtomicBool::new(false));
-    let rig = RigThread {
-        link: args.link.clone(),
+    let rig = LinkThread {
+        link: link.clone(),
         store: store.clone(),
         shared: shared.clone(),
         cmds: rx,
@@ -285,8 +253,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None if addr.ip().is_unspecified() => format!("IP-OF-THIS-PC:{}", addr.port()),
         None => addr.to_string(),
     };
-    crate::cmd::run::out(&format!("front panel on http://{shown}/?token={token}\n"))?;
-    if !args.quiet {
+    crate::out::text(&format!("front panel on http://{shown}/?token={token}\n"))?;
+    if !quiet {
         crate::errln!("open it in a browser; Ctrl-C closes the panel (the rig is made safe)");
     }
     while !abort.load(Ordering::Relaxed) {
@@ -446,7 +414,7 @@ fn post(ctx: &Ctx, name: &str, client: Option<&str>, body: &str) -> (u16, Value)
         );
     };
     if name == "safe" {
-        // From any page, at any time, whatever the rig thread is doing.
+        // From any page, at any time, whatever the link thread is doing.
         ctx.abort.store(true, Ordering::Relaxed);
         let handle = ctx.safe.lock().ok().and_then(|h| h.clone());
         let (ok, text) = match handle {
