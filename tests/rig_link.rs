@@ -208,7 +208,7 @@ fn child_tribo_run() {
     };
     // Exit as `tribo` would: the status of the exit contract (130 when interrupted by Ctrl-C).
     if let Err(e) = tribo::cmd::run::run(args) {
-        std::process::exit(tribo::exit::status_of(&e).code() as i32);
+        std::process::exit(tribo::cmd::exit::status_of(&e).code() as i32);
     }
 }
 

@@ -6,21 +6,17 @@ use tribo_physics::identify::{FitResult, LawSpec};
 use tribo_physics::Record;
 
 /// The on-board cross-check of a Coulomb–viscous host fit: the rig's stored result for a run
-/// folder, else the firmware's pipeline over the record's samples. `Ok(None)` for other laws (the
+/// (the one [`crate::load::open`] opened), else the firmware's pipeline over the record's samples. `Ok(None)` for other laws (the
 /// rig fits only Coulomb–viscous); `Err(why)` when there is no on-board result to compare with.
 pub fn cross_check(
-    path: &std::path::Path,
+    run: Option<&tribo_store::Run>,
     rec: &Record,
     r: &FitResult,
 ) -> std::result::Result<Option<CrossCheck>, String> {
     if r.law != LawSpec::CoulombViscous {
         return Ok(None);
     }
-    let stored = path
-        .is_dir()
-        .then(|| tribo_store::Run::open(path).ok())
-        .flatten()
-        .and_then(|run| run.result().copied());
+    let stored = run.and_then(|run| run.result().copied());
     let (ob, source) = match stored {
         Some(ob) => (ob, OnboardSource::Rig),
         None => (
@@ -62,4 +58,138 @@ pub fn apparatus_damping(rec: &Record, r: &FitResult) -> Option<(f64, f64, f64)>
     let rig = rec.rig.filter(|_| rec.apparatus)?;
     let (mu_a, se) = (*r.mu.get(1)?, *r.mu_se.get(1)?);
     Some((mu_a, se, mu_a * rig.mass_kg * rig.omega()))
+}
+
+/// What to fit: `tribo fit`'s options (the Python package's `fit`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitRequest {
+    /// The law asked for (an apparatus record, load 0, gets its damping instead: [`Fitted::spec`]).
+    pub law: LawSpec,
+    /// Rig constants given instead of the record's.
+    pub flags: crate::load::RigFlags,
+    /// The blades' damping μ_a held fixed in the fit (0 to [`crate::load::MAX_APPARATUS_MU1`]).
+    pub apparatus_mu1: f64,
+    /// Independent fits over this many windows of the record (0: none).
+    pub windows: usize,
+}
+
+/// The on-board cross-check: the comparison, `None` for a law the rig does not fit, or why there
+/// is none.
+pub type Check = Result<Option<CrossCheck>, String>;
+
+/// A law fitted to a record: the one estimator of `tribo fit` and the Python package.
+#[derive(Debug)]
+pub struct Fitted {
+    /// The law fitted: the one asked for, or the apparatus's damping for a record at load 0.
+    pub spec: LawSpec,
+    /// The rig constants used and where each came from.
+    pub rig: crate::load::RigUsed,
+    /// The options the fit ran with.
+    pub options: tribo_physics::identify::FitOptions,
+    pub result: FitResult,
+    pub check: Check,
+    /// One fit per window, when asked for.
+    pub windows: Option<Vec<tribo_physics::identify::WindowFit>>,
+}
+
+/// What a fit gave: constants, or a record no constant can be fitted to.
+#[derive(Debug)]
+pub enum FitOutcome {
+    Fitted(Box<Fitted>),
+    /// Too few half cycles, no motion…: no constant is fitted (status 3).
+    NotAnalysable {
+        rig: crate::load::RigUsed,
+        why: tribo_physics::identify::NotAnalysable,
+    },
+}
+
+/// Fits `req.law` to a record [`crate::load::open`] opened (its rig constants replaced by the
+/// flags' first), with the on-board cross-check against its `run`'s result. A flag or μ_a out of
+/// range is a [`crate::exit::Usage`] error; a fit that fails otherwise is an error under the
+/// record's `name`.
+pub fn fit_law(
+    name: &str,
+    rec: &mut Record,
+    defaults: &[String],
+    run: Option<&tribo_store::Run>,
+    req: &FitRequest,
+) -> anyhow::Result<FitOutcome> {
+    use tribo_physics::identify::{fit, fit_windows, FitError, FitOptions};
+    crate::load::plausible_apparatus_mu1(req.apparatus_mu1)?;
+    let rig = crate::load::apply_rig_flags(rec, req.flags, defaults)?;
+    let options = FitOptions {
+        apparatus_mu1: req.apparatus_mu1,
+        ..FitOptions::default()
+    };
+    // The apparatus alone (load 0): no friction law, only the blades' damping μ_a (viscous).
+    let spec = tribo_physics::identify::law_for(rec, req.law);
+    let result = match fit(rec, spec, &options) {
+        Ok(r) => r,
+        Err(FitError::NotAnalysable(why)) => return Ok(FitOutcome::NotAnalysable { rig, why }),
+        Err(e) => return Err(anyhow::Error::new(e).context(name.to_string())),
+    };
+    // `Ok(None)` for a law the rig does not fit (the apparatus run's viscous one included).
+    let check = cross_check(run, rec, &result);
+    let windows = if req.windows > 0 {
+        Some(fit_windows(rec, spec, req.windows, &options)?)
+    } else {
+        None
+    };
+    Ok(FitOutcome::Fitted(Box::new(Fitted {
+        spec,
+        rig,
+        options,
+        result,
+        check,
+        windows,
+    })))
+}
+
+impl Fitted {
+    /// `tribo fit --json`'s object (the Python package's `Fit`): the fit, `record` (its name),
+    /// `rig`, `defaults`, `cross_check`, an apparatus record's `mu_a`, and `windows` when asked.
+    pub fn json(&self, record: &str, rec: &Record) -> serde_json::Result<serde_json::Value> {
+        let mut j = serde_json::to_value(&self.result)?;
+        j["record"] = record.into();
+        j["rig"] = serde_json::to_value(self.rig)?;
+        j["defaults"] = serde_json::to_value(self.rig.defaults())?;
+        j["cross_check"] = cross_check_json(&self.check)?;
+        if let Some((mu_a, se, c)) = apparatus_damping(rec, &self.result) {
+            j["apparatus"] = true.into();
+            j["mu_a"] = mu_a.into();
+            j["mu_a_se"] = serde_json::to_value(se)?;
+            j["c_n_s_per_m"] = c.into();
+        }
+        if let Some(w) = &self.windows {
+            j["windows"] = serde_json::to_value(w)?;
+        }
+        Ok(j)
+    }
+}
+
+/// `tribo fit --json`'s object for a record no constant can be fitted to.
+pub fn not_analysable_json(
+    record: &str,
+    rig: &crate::load::RigUsed,
+    why: &tribo_physics::identify::NotAnalysable,
+) -> serde_json::Value {
+    serde_json::json!({
+        "record": record,
+        "verdict": "not-analysable",
+        "reason": why.name(),
+        "message": why.to_string(),
+        "rig": rig,
+        "defaults": rig.defaults(),
+    })
+}
+
+/// `tribo explain --json`'s object (the Python package's `Explanation`): the explanation and its
+/// `cross_check`.
+pub fn explanation_json(
+    ex: &tribo_explain::Explanation,
+    check: &Check,
+) -> serde_json::Result<serde_json::Value> {
+    let mut j = serde_json::to_value(ex)?;
+    j["cross_check"] = cross_check_json(check)?;
+    Ok(j)
 }

@@ -90,7 +90,7 @@ impl Table {
                 .with_context(|| format!("cannot read the run {}", path.display()))?;
             return Table::of_run(&run);
         }
-        let rec = tribo_physics::Record::load(path)?;
+        let rec = crate::load::load_record(path)?;
         Ok(Table::of_record(&rec))
     }
 

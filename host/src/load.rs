@@ -69,20 +69,72 @@ fn run_error(path: &Path) -> impl FnOnce(StoreError) -> LoadError + '_ {
 /// The flag that makes `tribo fit` / `tribo explain` fit the longest stretch without holes.
 pub const LONGEST_CLEAN_STRETCH_FLAG: &str = "--longest-clean-stretch";
 
-/// Loads a record: a directory is a run recorded by `tribo` (its samples in SI with its rig
-/// constants), anything else is a CSV file in the physics formats. Samples keep their times, so a
-/// run with holes gives a time axis with jumps (see [`load_for_fit`]).
-pub fn load_record(path: &Path) -> Result<Record, LoadError> {
-    if path == Path::new("-") {
-        return stdin_record();
-    }
-    if path.is_dir() {
+/// A path opened by [`open`], the one loader of every command, the reports, the panel and the
+/// Python package: its record, the rig constants a default stood in for, and the run.
+#[derive(Debug)]
+pub struct Opened {
+    /// The samples, as the [`Holes`] policy asked.
+    pub record: Record,
+    /// The rig constants a run folder's metadata says a default stood in for (empty for a CSV
+    /// file): what a result made with them must say.
+    pub defaults: Vec<String>,
+    /// The run, for a run folder (its on-board result, metadata, completeness); `None` for a CSV
+    /// file or standard input.
+    pub run: Option<tribo_store::Run>,
+}
+
+/// Opens a record once: a directory is a run recorded by `tribo` (its samples in SI with its rig
+/// constants; the store's warnings about it on standard error), `-` a CSV on standard input,
+/// anything else a CSV file in the physics formats. `holes` says what to do with a record that is
+/// not whole or has holes.
+pub fn open(path: &Path, holes: Holes) -> Result<Opened, LoadError> {
+    if path.is_dir() && path != Path::new("-") {
         let run = open_run(path)?;
-        let rec = run.record().map_err(run_error(path))?;
-        rec.validate().map_err(|e| e.in_file(path))?;
-        return Ok(rec);
+        let defaults = run.meta().defaults.clone();
+        let record = match holes {
+            Holes::Keep | Holes::Whole => {
+                if holes == Holes::Whole && !run.is_complete() {
+                    return Err(LoadError::Incomplete {
+                        path: path.to_path_buf(),
+                        message: incomplete_run(&run, path),
+                    });
+                }
+                let rec = run.record().map_err(run_error(path))?;
+                rec.validate().map_err(|e| e.in_file(path))?;
+                rec
+            }
+            Holes::Refuse | Holes::LongestCleanStretch => run_for_fit(&run, path, holes)?,
+        };
+        return Ok(Opened {
+            record,
+            defaults,
+            run: Some(run),
+        });
     }
-    Ok(Record::load(path)?)
+    let rec = if path == Path::new("-") {
+        stdin_record()?
+    } else {
+        Record::load(path)?
+    };
+    let record = match holes {
+        Holes::Keep | Holes::Whole => rec,
+        Holes::Refuse | Holes::LongestCleanStretch => {
+            let stretches = time_axis_stretches(&rec.t);
+            let described = describe_time_holes(&rec.t, &stretches);
+            stretch_for_fit(rec, stretches, described, path, holes)?
+        }
+    };
+    Ok(Opened {
+        record,
+        defaults: Vec::new(),
+        run: None,
+    })
+}
+
+/// Loads a record ([`open`] with [`Holes::Keep`]): samples keep their times, so a run with holes
+/// gives a time axis with jumps (see [`load_for_fit`]).
+pub fn load_record(path: &Path) -> Result<Record, LoadError> {
+    open(path, Holes::Keep).map(|o| o.record)
 }
 
 /// A CSV record read from standard input (the path `-`, as `tribo sim -o -` writes one).
@@ -108,12 +160,23 @@ pub enum Holes {
     Refuse,
     /// Keep the longest stretch of consecutive samples (told on stderr).
     LongestCleanStretch,
+    /// Keep every sample at its time (a time axis with jumps), and a run that is not whole as far
+    /// as it goes: to export or draw what is stored.
+    Keep,
+    /// As [`Holes::Keep`], but refuse a run folder that is not whole
+    /// ([`LoadError::Incomplete`]): for the analyses that take a record as it is.
+    Whole,
 }
 
-/// A record ready to fit: no holes, or the longest stretch without one.
+/// A record ready to fit ([`open`] with [`Holes::Refuse`] or [`Holes::LongestCleanStretch`]): no
+/// holes, or the longest stretch without one.
 pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
-    let (rec, stretches, described) = if path.is_dir() {
-        let run = open_run(path)?;
+    open(path, holes).map(|o| o.record)
+}
+
+/// A run folder's record ready to fit.
+fn run_for_fit(run: &tribo_store::Run, path: &Path, holes: Holes) -> Result<Record, LoadError> {
+    {
         if !run.is_complete() && run.missing_blocks().is_empty() {
             // Not whole, yet no hole inside: the log's end is cut (or the end never came). What
             // it holds is analysed only when asked for.
@@ -127,27 +190,28 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
                         ),
                     })
                 }
-                Holes::LongestCleanStretch => crate::errln!(
+                _ => crate::errln!(
                     "note: {}: {}; analysing what it holds",
                     path.display(),
                     run.completeness().summary()
                 ),
             }
         }
-        let rec = run.record().map_err(run_error(path))?;
-        let stretches = positions_of(&run)?;
-        let described = describe_run_holes(&run);
-        (rec, stretches, described)
-    } else {
-        let rec = if path == Path::new("-") {
-            stdin_record()?
-        } else {
-            Record::load(path)?
-        };
-        let stretches = time_axis_stretches(&rec.t);
-        let described = describe_time_holes(&rec.t, &stretches);
-        (rec, stretches, described)
-    };
+    }
+    let rec = run.record().map_err(run_error(path))?;
+    let stretches = positions_of(run)?;
+    let described = describe_run_holes(run);
+    stretch_for_fit(rec, stretches, described, path, holes)
+}
+
+/// `rec` ready to fit: whole if it has one stretch, else refused or its longest stretch.
+fn stretch_for_fit(
+    rec: Record,
+    stretches: Vec<Range<usize>>,
+    described: String,
+    path: &Path,
+    holes: Holes,
+) -> Result<Record, LoadError> {
     if stretches.len() <= 1 {
         rec.validate().map_err(|e| e.in_file(path))?;
         return Ok(rec);
@@ -164,7 +228,7 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
         }
     };
     match holes {
-        Holes::Refuse => Err(LoadError::Holes {
+        Holes::Refuse | Holes::Keep | Holes::Whole => Err(LoadError::Holes {
             run: path.is_dir(),
             path: path.to_path_buf(),
             message: format!(
@@ -217,7 +281,7 @@ fn open_run(path: &Path) -> Result<tribo_store::Run, LoadError> {
 
 /// A record with a non-finite sample is read but cannot be analysed: that is
 /// [`crate::exit::Incomplete`] (status 3), not an error (status 1).
-fn analysable(r: Result<Record, LoadError>) -> anyhow::Result<Record> {
+fn analysable<T>(r: Result<T, LoadError>) -> anyhow::Result<T> {
     r.map_err(|e| {
         if e.is_non_finite() {
             let said = crate::exit::chain_text(&e);
@@ -231,19 +295,9 @@ fn analysable(r: Result<Record, LoadError>) -> anyhow::Result<Record> {
 /// [`load_record`] for the analysis commands (a non-finite sample is status 3; so is a run folder
 /// that is not whole, refused: [`LoadError::Incomplete`]).
 pub fn load_for_analysis(path: &Path) -> anyhow::Result<Record> {
-    if path.is_dir() {
-        let run = open_run(path)?;
-        if !run.is_complete() {
-            return Err(LoadError::Incomplete {
-                path: path.to_path_buf(),
-                message: incomplete_run(&run, path),
-            }
-            .into());
-        }
-    }
-    let rec = analysable(load_record(path))?;
-    plausible_record(&rec).map_err(|e| e.context(path.display().to_string()))?;
-    Ok(rec)
+    let o = open_analysable(path, Holes::Whole)?;
+    plausible_record(&o.record).map_err(|e| e.context(path.display().to_string()))?;
+    Ok(o.record)
 }
 
 /// What a run that is not whole lacks and how to get it: `the run is incomplete: 79 of ? blocks
@@ -262,17 +316,13 @@ pub fn incomplete_run(run: &tribo_store::Run, path: &Path) -> String {
 
 /// [`load_for_fit`] for the analysis commands (a non-finite sample is status 3).
 pub fn load_analysable_for_fit(path: &Path, holes: Holes) -> anyhow::Result<Record> {
-    analysable(load_for_fit(path, holes))
+    open_analysable(path, holes).map(|o| o.record)
 }
 
-/// The rig constants a run folder's metadata says a default stood in for (empty for a CSV file).
-pub fn recorded_defaults(path: &Path) -> Vec<String> {
-    if !path.is_dir() {
-        return Vec::new();
-    }
-    tribo_store::Run::open(path)
-        .map(|r| r.meta().defaults.clone())
-        .unwrap_or_default()
+/// [`open`] for the analysis commands: a record with a non-finite sample is read but cannot be
+/// analysed ([`crate::exit::Incomplete`], status 3).
+pub fn open_analysable(path: &Path, holes: Holes) -> anyhow::Result<Opened> {
+    analysable(open(path, holes))
 }
 
 /// Where a rig constant of a result came from.

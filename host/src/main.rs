@@ -78,19 +78,7 @@ fn main() -> std::process::ExitCode {
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) if tribo::out::is_broken_pipe(&e) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            let status = tribo::exit::status_of(&e);
-            let label = match status {
-                tribo::exit::Status::Incomplete => "incomplete",
-                tribo::exit::Status::Interrupted(_) => "interrupted",
-                _ => "error",
-            };
-            tribo::errln!("{label}: {e}");
-            for cause in e.chain().skip(1) {
-                tribo::errln!("  caused by: {cause}");
-            }
-            std::process::ExitCode::from(status.code())
-        }
+        Err(e) => std::process::ExitCode::from(tribo::cmd::exit::report(&e).code()),
     }
 }
 

@@ -69,7 +69,7 @@ pub fn install_pipe_hook() {
         {
             // Exiting here skips the destructors: a rig this process holds is made safe first.
             crate::link::hold::make_all_safe();
-            std::process::exit(crate::exit::Status::Ok.code().into());
+            std::process::exit(0);
         }
         default(info)
     }));
@@ -86,33 +86,6 @@ pub fn print_json(v: impl std::fmt::Display) -> std::io::Result<()> {
 /// Whether [`print_json`] printed the command's object.
 pub fn json_printed() -> bool {
     JSON_PRINTED.load(std::sync::atomic::Ordering::Relaxed)
-}
-
-/// For a `--json` command that stops on an error before printing its object: prints one object
-/// all the same, `{"record", "verdict": "not-analysable" | "interrupted" | "error", "status",
-/// "message"}` (the status the process exits with, the message with its causes), so that a
-/// script reading standard output always gets one object. Returns the error.
-pub fn json_on_error(json: bool, record: &std::path::Path, e: anyhow::Error) -> anyhow::Error {
-    if json && !json_printed() {
-        let status = crate::exit::status_of(&e);
-        let verdict = match status {
-            crate::exit::Status::Incomplete => "not-analysable",
-            crate::exit::Status::Interrupted(_) => "interrupted",
-            _ => "error",
-        };
-        let message = e
-            .chain()
-            .map(|c| c.to_string())
-            .collect::<Vec<_>>()
-            .join(": ");
-        let _ = print_json(serde_json::json!({
-            "record": record.display().to_string(),
-            "verdict": verdict,
-            "status": status.code(),
-            "message": message,
-        }));
-    }
-    e
 }
 
 /// Writes to standard output. A closed pipe (`tribo run … | head`) is an error that stops the

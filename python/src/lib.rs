@@ -15,7 +15,7 @@ use pyo3::types::{PyDict, PyList};
 use std::path::{Path, PathBuf};
 use tribo::export::{catalog_row_json, catalog_rows, catalog_table, Table};
 use tribo::load::{LoadError, RigFlags};
-use tribo_physics::identify::{FitError, FitOptions, LawSpec};
+use tribo_physics::identify::LawSpec;
 use tribo_physics::record::{RecordError as RecError, RecordErrorKind, Units};
 use tribo_physics::{Record, Rig};
 use tribo_store::ErrorKind;
@@ -465,7 +465,11 @@ fn record_dict<'py>(
 #[pyfunction]
 fn read_record<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>> {
     let rec = py
-        .detach(|| Record::load(&path).map_err(|e| record_failure(&e)))
+        .detach(|| {
+            tribo::load::open(&path, tribo::Holes::Keep)
+                .map(|o| o.record)
+                .map_err(|e| failure(e.into(), Some(&path)))
+        })
         .map_err(|f| f.into_py(py))?;
     record_dict(py, rec, Some(&path))
 }
@@ -539,18 +543,23 @@ fn source_of(
 }
 
 impl Source {
-    /// The record, ready to fit, its name, and the rig constants its metadata says were defaults.
-    fn load(self, holes: tribo::Holes) -> Res<(Record, PathBuf, Vec<String>)> {
+    /// The record ready to fit, as [`tribo::load::open`] opens a path (with the rig constants its
+    /// metadata says were defaults, and the run), and its name.
+    fn load(self, holes: tribo::Holes) -> Res<(tribo::load::Opened, PathBuf)> {
         match self {
             Source::Path(p) => {
-                let rec = tribo::load::load_analysable_for_fit(&p, holes)
-                    .map_err(|e| failure(e, Some(&p)))?;
-                let d = tribo::load::recorded_defaults(&p);
-                Ok((rec, p, d))
+                let o =
+                    tribo::load::open_analysable(&p, holes).map_err(|e| failure(e, Some(&p)))?;
+                Ok((o, p))
             }
             Source::Arrays(rec, name) => {
                 rec.validate().map_err(|e| record_failure(&e))?;
-                Ok((*rec, PathBuf::from(name), Vec::new()))
+                let o = tribo::load::Opened {
+                    record: *rec,
+                    defaults: Vec::new(),
+                    run: None,
+                };
+                Ok((o, PathBuf::from(name)))
             }
         }
     }
@@ -564,49 +573,32 @@ struct FitArgs {
     holes: tribo::Holes,
 }
 
-/// `tribo fit --json`'s object, made as the command makes it.
+/// `tribo fit --json`'s object, made by the function the command calls.
 fn fit_json(src: Source, a: FitArgs) -> Res<String> {
-    use tribo::analysis::{apparatus_damping, cross_check, cross_check_json};
-    let (mut rec, path, defaults) = src.load(a.holes)?;
-    let anyhow_f = |e: anyhow::Error| failure(e, Some(&path));
-    let json_f = |e: serde_json::Error| Failure::Tribo(e.to_string());
-    tribo::load::plausible_apparatus_mu1(a.apparatus_mu1).map_err(anyhow_f)?;
-    let rig = tribo::load::apply_rig_flags(&mut rec, a.flags, &defaults).map_err(anyhow_f)?;
-    let opts = FitOptions {
+    use tribo::analysis::{fit_law, FitOutcome, FitRequest};
+    let (opened, path) = src.load(a.holes)?;
+    let mut rec = opened.record;
+    let name = path.display().to_string();
+    let req = FitRequest {
+        law: a.law,
+        flags: a.flags,
         apparatus_mu1: a.apparatus_mu1,
-        ..FitOptions::default()
+        windows: a.windows,
     };
-    let spec = tribo_physics::identify::law_for(&rec, a.law);
-    let r = match tribo_physics::identify::fit(&rec, spec, &opts) {
-        Ok(r) => r,
-        Err(FitError::NotAnalysable(why)) => {
+    let f = match fit_law(&name, &mut rec, &opened.defaults, opened.run.as_ref(), &req)
+        .map_err(|e| failure(e, Some(&path)))?
+    {
+        FitOutcome::Fitted(f) => f,
+        FitOutcome::NotAnalysable { why, .. } => {
             return Err(Failure::NotAnalysable {
-                msg: format!(
-                    "{}: not analysable: {why}; no constant is fitted",
-                    path.display()
-                ),
+                msg: format!("{name}: not analysable: {why}; no constant is fitted"),
                 reason: Some(why.name().to_string()),
             })
         }
-        Err(e) => return Err(Failure::Tribo(format!("{}: {e}", path.display()))),
     };
-    let check = cross_check(&path, &rec, &r);
-    let mut j = serde_json::to_value(&r).map_err(json_f)?;
-    j["record"] = path.display().to_string().into();
-    j["rig"] = serde_json::to_value(rig).map_err(json_f)?;
-    j["defaults"] = serde_json::to_value(rig.defaults()).map_err(json_f)?;
-    j["cross_check"] = cross_check_json(&check).map_err(json_f)?;
-    if let Some((mu_a, se, c)) = apparatus_damping(&rec, &r) {
-        j["apparatus"] = true.into();
-        j["mu_a"] = mu_a.into();
-        j["mu_a_se"] = serde_json::to_value(se).map_err(json_f)?;
-        j["c_n_s_per_m"] = c.into();
-    }
-    if a.windows > 0 {
-        let w = tribo_physics::identify::fit_windows(&rec, spec, a.windows, &opts)
-            .map_err(|e| Failure::Tribo(format!("{}: {e}", path.display())))?;
-        j["windows"] = serde_json::to_value(&w).map_err(json_f)?;
-    }
+    let j = f
+        .json(&name, &rec)
+        .map_err(|e| Failure::Tribo(e.to_string()))?;
     Ok(j.to_string())
 }
 
@@ -664,7 +656,8 @@ fn fit(
 
 /// `tribo explain --json`'s object, made as the command makes it.
 fn explain_json(src: Source, opts: tribo_explain::ExplainOptions, h: tribo::Holes) -> Res<String> {
-    let (record, path, _) = src.load(h)?;
+    let (opened, path) = src.load(h)?;
+    let record = &opened.record;
     let not_analysable = |e: tribo_explain::ExplainError| -> Failure {
         if e.is_not_analysable() {
             Failure::NotAnalysable {
@@ -684,10 +677,9 @@ fn explain_json(src: Source, opts: tribo_explain::ExplainOptions, h: tribo::Hole
     .map_err(not_analysable)?;
     let (ex, _) = tribo_explain::explain_with_progress(&data, &opts, &mut |_, _, _| {})
         .map_err(not_analysable)?;
-    let check = tribo::analysis::cross_check(&path, &record, &ex.base_fit);
-    let json_f = |e: serde_json::Error| Failure::Tribo(e.to_string());
-    let mut j = serde_json::to_value(&ex).map_err(json_f)?;
-    j["cross_check"] = tribo::analysis::cross_check_json(&check).map_err(json_f)?;
+    let check = tribo::analysis::cross_check(opened.run.as_ref(), &record, &ex.base_fit);
+    let j = tribo::analysis::explanation_json(&ex, &check)
+        .map_err(|e| Failure::Tribo(e.to_string()))?;
     if !ex.gap_final.is_finite() {
         return Err(Failure::Tribo(format!(
             "{}: the fit diverged",

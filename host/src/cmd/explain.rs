@@ -3,7 +3,7 @@
 //! lives in the `tribo-explain` crate.
 
 use crate::exit::Incomplete;
-use crate::load::load_analysable_for_fit;
+use crate::load::open_analysable;
 use crate::{out, outln};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
@@ -102,7 +102,7 @@ pub struct Args {
 /// Runs the subcommand.
 pub fn run(args: Args) -> Result<()> {
     let (json, path) = (args.json, args.record.clone());
-    run_inner(args).map_err(|e| crate::out::json_on_error(json, &path, e))
+    run_inner(args).map_err(|e| super::exit::json_on_error(json, &path, e))
 }
 
 fn run_inner(args: Args) -> Result<()> {
@@ -121,8 +121,9 @@ fn run_inner(args: Args) -> Result<()> {
     } else {
         crate::Holes::Refuse
     };
-    let record = load_analysable_for_fit(&args.record, holes)?;
-    crate::load::plausible_record(&record)
+    let opened = open_analysable(&args.record, holes)?;
+    let record = &opened.record;
+    crate::load::plausible_record(record)
         .map_err(|e| e.context(args.record.display().to_string()))?;
     let not_analysable = |e: tribo_explain::ExplainError| -> anyhow::Error {
         if e.is_not_analysable() {
@@ -158,10 +159,10 @@ fn run_inner(args: Args) -> Result<()> {
     });
     bar.finish_and_clear();
     let (ex, data) = result.map_err(not_analysable)?;
-    let check = crate::analysis::cross_check(&args.record, &record, &ex.base_fit);
+    let check = crate::analysis::cross_check(opened.run.as_ref(), record, &ex.base_fit);
     if args.json {
-        let mut j = serde_json::to_value(&ex).context("writing the explanation as JSON")?;
-        j["cross_check"] = crate::analysis::cross_check_json(&check)?;
+        let j = crate::analysis::explanation_json(&ex, &check)
+            .context("writing the explanation as JSON")?;
         crate::out::print_json(&j)?;
     } else {
         out!("{}", ex.to_text())?;

@@ -1,9 +1,11 @@
 //! `tribo fit`: identify a friction law from a record (thesis ch. 3.5), with the standard error of
 //! every constant, the record's noise floor and a verdict.
 
-use crate::analysis::{apparatus_damping, cross_check, cross_check_json, cross_check_text};
+use crate::analysis::{
+    apparatus_damping, cross_check_text, fit_law, not_analysable_json, FitOutcome, FitRequest,
+};
 use crate::exit::Incomplete;
-use crate::load::{apply_rig_flags, load_analysable_for_fit, recorded_defaults, RigFlags, RigUsed};
+use crate::load::{open_analysable, RigFlags, RigUsed};
 use crate::{out, outln};
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -11,8 +13,8 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use tribo_physics::envelope::mark_crandall;
 use tribo_physics::identify::{
-    fit, fit_windows, scaled_envelope, EnvelopeData, FitError, FitOptions, FitResult, FitVerdict,
-    LawSpec, WindowFit, ADEQUATE_RATIO, NUMERICAL_FLOOR,
+    scaled_envelope, EnvelopeData, FitOptions, FitResult, FitVerdict, LawSpec, WindowFit,
+    ADEQUATE_RATIO, NUMERICAL_FLOOR,
 };
 use tribo_physics::Record;
 use tribo_report::plot::{Panel, Series};
@@ -110,103 +112,68 @@ pub struct Args {
 /// Runs `tribo fit`.
 pub fn run(a: Args) -> Result<()> {
     let (json, path) = (a.json, a.record.clone());
-    run_inner(a).map_err(|e| crate::out::json_on_error(json, &path, e))
+    run_inner(a).map_err(|e| super::exit::json_on_error(json, &path, e))
 }
 
 fn run_inner(a: Args) -> Result<()> {
-    crate::load::plausible_apparatus_mu1(a.apparatus_mu1)?;
     let spec = a.law;
     let holes = if a.longest_clean_stretch {
         crate::Holes::LongestCleanStretch
     } else {
         crate::Holes::Refuse
     };
-    let mut rec = load_analysable_for_fit(&a.record, holes)?;
-    let rig = apply_rig_flags(
-        &mut rec,
-        RigFlags {
+    // The one visit to the loader: the record, the constants that were defaults, the run.
+    let opened = open_analysable(&a.record, holes)?;
+    let mut rec = opened.record;
+    let req = FitRequest {
+        law: spec,
+        flags: RigFlags {
             mass_kg: a.mass_kg,
             stiffness_n_per_m: a.stiffness,
             load_n: a.load_n,
         },
-        &recorded_defaults(&a.record),
-    )?;
-    let opts = FitOptions {
         apparatus_mu1: a.apparatus_mu1,
-        ..FitOptions::default()
+        windows: a.windows,
     };
-    // The apparatus alone (load 0): no friction law, only the blades' damping μ_a (viscous).
-    let fitted = tribo_physics::identify::law_for(&rec, spec);
-    if fitted != spec && spec != LawSpec::CoulombViscous {
-        crate::errln!(
-            "note: {} is the apparatus alone (load 0): it has no friction law; its damping is \
-             fitted ({fitted}) instead of {spec}",
-            a.record.display()
-        );
-    }
-    let spec = fitted;
-    let r = match fit(&rec, spec, &opts) {
-        Ok(r) => r,
-        Err(FitError::NotAnalysable(why)) => {
+    let name = a.record.display().to_string();
+    let f = match fit_law(&name, &mut rec, &opened.defaults, opened.run.as_ref(), &req)? {
+        FitOutcome::Fitted(f) => f,
+        FitOutcome::NotAnalysable { rig, why } => {
             if a.json {
-                let j = serde_json::json!({
-                    "record": a.record.display().to_string(),
-                    "verdict": "not-analysable",
-                    "reason": why.name(),
-                    "message": why.to_string(),
-                    "rig": rig,
-                    "defaults": rig.defaults(),
-                });
-                crate::out::print_json(&j)?;
+                crate::out::print_json(not_analysable_json(&name, &rig, &why))?;
             }
             return Err(Incomplete(format!(
-                "{}: not analysable: {why}; no constant is fitted",
-                a.record.display()
+                "{name}: not analysable: {why}; no constant is fitted"
             ))
             .into());
         }
-        Err(e) => return Err(e).with_context(|| format!("{}", a.record.display())),
     };
-    // `Ok(None)` for a law the rig does not fit (the apparatus run's viscous one included).
-    let check = cross_check(&a.record, &rec, &r);
-    let windows = if a.windows > 0 {
-        fit_windows(&rec, spec, a.windows, &opts)?
-    } else {
-        Vec::new()
-    };
+    if f.spec != spec && spec != LawSpec::CoulombViscous {
+        crate::errln!(
+            "note: {name} is the apparatus alone (load 0): it has no friction law; its damping is \
+             fitted ({}) instead of {spec}",
+            f.spec
+        );
+    }
+    let r = &f.result;
     if a.json {
-        let mut j = serde_json::to_value(&r)?;
-        j["record"] = a.record.display().to_string().into();
-        j["rig"] = serde_json::to_value(rig)?;
-        j["defaults"] = serde_json::to_value(rig.defaults())?;
-        j["cross_check"] = cross_check_json(&check)?;
-        if let Some((mu_a, se, c)) = apparatus_damping(&rec, &r) {
-            j["apparatus"] = true.into();
-            j["mu_a"] = mu_a.into();
-            j["mu_a_se"] = serde_json::to_value(se)?;
-            j["c_n_s_per_m"] = c.into();
-        }
-        if a.windows > 0 {
-            j["windows"] = serde_json::to_value(&windows)?;
-        }
-        crate::out::print_json(&j)?;
+        crate::out::print_json(f.json(&name, &rec)?)?;
     } else {
-        out!("{}", table(&a.record.display().to_string(), &rig, &r, &rec))?;
-        if let Some(line) = cross_check_text(&check) {
+        out!("{}", table(&name, &f.rig, r, &rec))?;
+        if let Some(line) = cross_check_text(&f.check) {
             outln!("{line}")?;
         }
-        if a.windows > 0 {
-            out!("{}", window_table(&windows))?;
+        if let Some(w) = &f.windows {
+            out!("{}", window_table(w))?;
         }
     }
     if let Some(p) = &a.plot {
-        let svg = figure(&rec, &r, spec, &opts)?;
+        let svg = figure(&rec, r, f.spec, &f.options)?;
         std::fs::write(p, svg).with_context(|| format!("writing {}", p.display()))?;
     }
     if r.verdict == FitVerdict::NotConverged {
         return Err(Incomplete(format!(
-            "{}: the fit did not converge in {} iterations; its constants are not trustworthy",
-            a.record.display(),
+            "{name}: the fit did not converge in {} iterations; its constants are not trustworthy",
             r.iterations
         ))
         .into());

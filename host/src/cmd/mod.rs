@@ -3,6 +3,7 @@ pub mod campaign;
 pub mod common;
 pub mod demo;
 pub mod devices;
+pub mod exit;
 pub mod explain;
 pub mod export;
 pub mod fit;

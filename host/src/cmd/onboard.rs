@@ -20,7 +20,7 @@ pub struct Args {
 /// channel, a non-finite sample) ends with status 3 and no coefficients (JSON: `null`s).
 pub fn run(args: Args) -> anyhow::Result<()> {
     let (json, path) = (args.json, args.record.clone());
-    run_inner(args).map_err(|e| crate::out::json_on_error(json, &path, e))
+    run_inner(args).map_err(|e| super::exit::json_on_error(json, &path, e))
 }
 
 fn run_inner(args: Args) -> anyhow::Result<()> {

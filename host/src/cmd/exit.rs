@@ -1,0 +1,105 @@
+//! The exit statuses of `tribo`, one contract for every command (documented in the README):
+//!
+//! | status | meaning |
+//! |---|---|
+//! | 0 | done, and the data is whole |
+//! | 1 | error: nothing usable was produced (the message says what to do next) |
+//! | 2 | usage: the command line was wrong (clap's own status, or a value the rig would refuse) |
+//! | 3 | finished, but the data is incomplete or not analysable: the output says exactly what is missing |
+//! | 130, 143, 129 | interrupted by Ctrl-C (SIGINT), SIGTERM or SIGHUP (128 + the signal's number): stopped cleanly, the rig made safe, what was received kept |
+//!
+//! Decided here only: a library function that finished with incomplete data returns
+//! [`crate::exit::Incomplete`] as its error (after printing or storing everything it has), and
+//! [`status_of`] maps it to status 3, as it maps the library's other typed errors
+//! ([`crate::exit`], [`crate::load::LoadError`], the store's usage errors). Any other error is
+//! status 1.
+
+use crate::exit::{Incomplete, Interrupted, Usage};
+use crate::signals::Signal;
+
+/// The statuses `tribo` exits with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    Ok,
+    Error,
+    Usage,
+    Incomplete,
+    /// Stopped by this signal: 128 + its number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP).
+    Interrupted(Signal),
+}
+
+impl Status {
+    pub const fn code(self) -> u8 {
+        match self {
+            Status::Ok => 0,
+            Status::Error => 1,
+            Status::Usage => 2,
+            Status::Incomplete => 3,
+            Status::Interrupted(s) => s.status(),
+        }
+    }
+}
+
+/// The status an error from a command maps to.
+pub fn status_of(e: &anyhow::Error) -> Status {
+    if e.chain().any(|c| c.downcast_ref::<Interrupted>().is_some()) {
+        Status::Interrupted(crate::signals::received().unwrap_or(Signal::Interrupt))
+    } else if e.chain().any(|c| {
+        c.downcast_ref::<Incomplete>().is_some()
+            || c.downcast_ref::<crate::load::LoadError>()
+                .is_some_and(|l| l.is_incomplete())
+    }) {
+        Status::Incomplete
+    } else if e.chain().any(|c| {
+        c.downcast_ref::<Usage>().is_some()
+            || c.downcast_ref::<tribo_store::StoreError>()
+                .is_some_and(|s| s.kind == tribo_store::ErrorKind::Usage)
+    }) {
+        Status::Usage
+    } else {
+        Status::Error
+    }
+}
+
+/// For a `--json` command that stops on an error before printing its object: prints one object
+/// all the same, `{"record", "verdict": "not-analysable" | "interrupted" | "error", "status",
+/// "message"}` (the status the process exits with, the message with its causes), so that a
+/// script reading standard output always gets one object. Returns the error.
+pub fn json_on_error(json: bool, record: &std::path::Path, e: anyhow::Error) -> anyhow::Error {
+    if json && !crate::out::json_printed() {
+        let status = status_of(&e);
+        let verdict = match status {
+            Status::Incomplete => "not-analysable",
+            Status::Interrupted(_) => "interrupted",
+            _ => "error",
+        };
+        let message = e
+            .chain()
+            .map(|c| c.to_string())
+            .collect::<Vec<_>>()
+            .join(": ");
+        let _ = crate::out::print_json(serde_json::json!({
+            "record": record.display().to_string(),
+            "verdict": verdict,
+            "status": status.code(),
+            "message": message,
+        }));
+    }
+    e
+}
+
+/// Prints an error that ends the command, as the chain of its causes, one per line, and returns
+/// the status to exit with.
+pub fn report(e: &anyhow::Error) -> Status {
+    let status = status_of(e);
+    let label = match status {
+        Status::Incomplete => "incomplete",
+        Status::Interrupted(_) => "interrupted",
+        _ => "error",
+    };
+    crate::errln!("{label}: {e}");
+    for cause in e.chain().skip(1) {
+        crate::errln!("  caused by: {cause}");
+    }
+    status
+}
