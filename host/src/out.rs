@@ -54,6 +54,7 @@ pub fn is_broken_pipe(e: &anyhow::Error) -> bool {
 
 /// Makes the panic of `println!`/`print!` on a closed standard output (`failed printing to stdout:
 /// Broken pipe`) a quiet exit with status 0; any other panic is reported as before.
+#[cfg(feature = "cli")]
 pub fn install_pipe_hook() {
     let default = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
