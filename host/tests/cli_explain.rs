@@ -1,19 +1,13 @@
 //! The `tribo explain --json` command-line contract, on records written by this test.
 
+mod support;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use support::tribo;
 use tribo_explain::serde_json::{self, Value};
 use tribo_physics::integrate::Method;
 use tribo_physics::law::FrictionLaw;
 use tribo_physics::model::{Model, Rig};
 use tribo_physics::sensor::{generate, RecordSpec, SensorModel};
-
-fn tribo(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_tribo"))
-        .args(args)
-        .output()
-        .expect("run tribo")
-}
 
 fn dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("tribo-cli-explain-{name}-{}", std::process::id()));

@@ -1,13 +1,7 @@
 //! The `tribo sim` / `tribo fit --json` command-line contract that other tools rely on.
 
-use std::process::Command;
-
-fn tribo(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_tribo"))
-        .args(args)
-        .output()
-        .expect("run tribo")
-}
+mod support;
+use support::tribo;
 
 /// `tribo sim` of a Coulomb–viscous contact (μ0 = 0.03, μ1 = 0.012, 1.5 s) into `rec`, plus `extra`
 /// flags; the command must succeed.

@@ -2,19 +2,13 @@
 //! errors, closed pipes, `-q`, the rig constants that defaults stood in for, and advice that names
 //! flags which exist. Exit statuses as documented (0 ok, 1 error, 2 usage, 3 incomplete).
 
+mod support;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
+use support::tribo;
 use tribo_physics::integrate::Method;
 use tribo_physics::sensor::{generate, RecordSpec, SensorModel};
 use tribo_physics::{FrictionLaw, Model, Record, Rig};
-
-fn tribo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tribo"))
-        .args(args)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run tribo")
-}
 
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()

@@ -3,15 +3,15 @@
 //! that needs a real process); and the exit statuses of commands that leave or find a run
 //! incomplete (status 3, saying "incomplete: N of M blocks"), against those that do not.
 
+mod support;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
+use support::{tribo, TRIBO};
 use tribo::link::{Address, Link};
 use tribo::virtual_rig::VirtualArgs;
 use tribo_store::Run;
 use tribo_wire::{DeviceMsg, HostMsg};
-
-const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
 
 /// A virtual rig on a free local port, at `speed`× real time; it stops when dropped.
 fn rig(mu0: f64, speed: f64) -> (tribo_rig::TcpRig, Address) {
@@ -25,15 +25,6 @@ fn rig(mu0: f64, speed: f64) -> (tribo_rig::TcpRig, Address) {
     let (tcp, _) = args.listen("127.0.0.1:0", |_| {}).unwrap();
     let addr = Address::from(tcp.addr());
     (tcp, addr)
-}
-
-fn tribo(args: &[&str]) -> Output {
-    Command::new(TRIBO)
-        .args(args)
-        .env_remove("TRIBO_PORT")
-        .env_remove("TRIBO_STORE")
-        .output()
-        .unwrap()
 }
 
 fn text(o: &Output) -> String {

@@ -5,17 +5,14 @@
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-use tribo_catalog::testing::{synthetic_run, PgServer, ADMIN, ADMIN_PASSWORD};
+use tribo_testkit::{synthetic_store, PgServer, ADMIN, ADMIN_PASSWORD};
 
-const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
+mod support;
+use support::TRIBO;
 
 fn tribo(args: &[&str], password: &str) -> Command {
-    let mut c = Command::new(TRIBO);
-    c.args(args)
-        .env("PGPASSWORD", password)
-        .env_remove("TRIBO_CATALOG")
-        .env_remove("PGPASSFILE")
-        .stdin(Stdio::null());
+    let mut c = support::command(args);
+    c.env("PGPASSWORD", password).env_remove("PGPASSFILE");
     c
 }
 
@@ -31,19 +28,18 @@ fn ok(o: Output) -> String {
 }
 
 fn store_of(dir: &Path, serial: &str, n: u32) {
-    for i in 0..n {
-        synthetic_run(dir, serial, i + 1, 2, 0.01, |m| {
+    synthetic_store(
+        dir,
+        serial,
+        1,
+        n,
+        |_| 0.01,
+        |i, m| {
             m.campaign = Some("dlc-60".into());
             m.temp_setpoint_c = Some(if i % 2 == 0 { 60.0 } else { 25.0 });
             m.load_n = 0.2;
-        });
-    }
-}
-
-fn count(pg: &PgServer) -> usize {
-    pg.psql("lab", "SELECT count(*) FROM tribo_runs")
-        .parse()
-        .unwrap()
+        },
+    );
 }
 
 #[test]
@@ -151,7 +147,7 @@ fn pcs_sync_at_once_one_is_killed_and_the_lab_reads_across_rigs() {
     for k in kids {
         ok(k.wait_with_output().unwrap());
     }
-    assert_eq!(count(&pg), 120);
+    assert_eq!(pg.run_count(), 120);
     let again = ok(tribo(
         &[
             "sync",
@@ -198,12 +194,12 @@ fn pcs_sync_at_once_one_is_killed_and_the_lab_reads_across_rigs() {
     .spawn()
     .unwrap();
     let t = Instant::now();
-    while count(&pg) == 120 && t.elapsed() < Duration::from_secs(60) {
+    while pg.run_count() == 120 && t.elapsed() < Duration::from_secs(60) {
         std::thread::sleep(Duration::from_millis(5));
     }
     k.kill().unwrap();
     k.wait().unwrap();
-    let sent = count(&pg) - 120;
+    let sent = pg.run_count() - 120;
     assert!(
         sent > 0 && sent.is_multiple_of(10),
         "whole batches only: {sent}"
@@ -229,7 +225,7 @@ fn pcs_sync_at_once_one_is_killed_and_the_lab_reads_across_rigs() {
         300,
         "{j}"
     );
-    assert_eq!(count(&pg), 420);
+    assert_eq!(pg.run_count(), 420);
 
     // Reading the lab: across rigs, one rig, a campaign table.
     let runs: serde_json::Value = serde_json::from_str(&ok(tribo(
@@ -326,7 +322,7 @@ fn pcs_sync_at_once_one_is_killed_and_the_lab_reads_across_rigs() {
         err.contains("may not") && err.contains("INSERT and UPDATE"),
         "{err}"
     );
-    assert_eq!(count(&pg), 420);
+    assert_eq!(pg.run_count(), 420);
 }
 
 #[test]
@@ -467,8 +463,6 @@ fn pull_from_catalog_fetches_a_run_from_a_shared_folder_and_checks_its_hash() {
         "{err}"
     );
 }
-
-mod support;
 
 /// `tribo campaign --catalog URL` on two rigs, one PC each: each PC's campaign syncs its runs and
 /// prints the lab's table, so the second one sees the runs of both rigs in one cell. With the
@@ -739,8 +733,8 @@ fn a_missing_password_a_read_only_role_and_a_damaged_run_are_told_what_to_do() {
     );
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    assert_eq!(v["runs"].as_array().unwrap().len(), count(&pg), "{v}");
-    assert_eq!(count(&pg), 1);
+    assert_eq!(v["runs"].as_array().unwrap().len(), pg.run_count(), "{v}");
+    assert_eq!(pg.run_count(), 1);
     let o = tribo(
         &[
             "export",

@@ -15,8 +15,7 @@ use std::process::Command;
 use support::{RigProcess, TRIBO};
 
 fn tribo(args: &[&str], store: &Path) -> std::process::Output {
-    Command::new(TRIBO)
-        .args(args)
+    support::command(args)
         .arg("--store")
         .arg(store)
         .output()

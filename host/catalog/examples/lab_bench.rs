@@ -7,10 +7,10 @@
 //! (defaults 10, 10000, 1000).
 
 use std::time::{Duration, Instant};
-use tribo_catalog::testing::{synthetic_run, PgServer};
 use tribo_catalog::{LabCatalog, LabRun, RunCatalog};
 use tribo_store::catalog::{Axis, Value};
 use tribo_store::{CatalogRow, Filter};
+use tribo_testkit::{synthetic_run, PgServer};
 
 fn run(pc: usize, i: usize) -> LabRun {
     let load = [0.1, 0.2, 0.3, 0.4][i % 4];

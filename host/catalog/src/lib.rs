@@ -11,13 +11,12 @@
 //! * [`sync`]: pushes a PC's runs (metadata, on-board and host results with their ±, campaign,
 //!   rig serial, the frame log's SHA-256 and where it lives): idempotent, resumable, safe from
 //!   many PCs at once (one transaction per batch, one row per rig serial and rig run number).
-//! * [`testing`]: a real PostgreSQL server in a temporary folder, and synthetic run folders, for
-//!   the tests and the benchmark.
+//!
+//! The tests' PostgreSQL server and synthetic runs are in `tribo-testkit` (a dev-dependency).
 
 pub mod lab;
 pub mod schema;
 pub mod sync;
-pub mod testing;
 pub mod url;
 
 pub use lab::{LabCatalog, LabRow, LabRun, PushCounts};

@@ -4,10 +4,10 @@
 use std::path::Path;
 use std::sync::mpsc;
 use std::time::Duration;
-use tribo_catalog::testing::{synthetic_run, PgServer};
 use tribo_catalog::{sync, LabCatalog, RunCatalog, SyncOptions};
 use tribo_store::catalog::{Axis, Bin, Value};
 use tribo_store::Filter;
+use tribo_testkit::{synthetic_run, synthetic_store, PgServer};
 
 fn opts(pc: &str) -> SyncOptions {
     SyncOptions {
@@ -21,23 +21,20 @@ fn opts(pc: &str) -> SyncOptions {
 /// A store of `n` runs of rig `serial` (run numbers from `first`), campaign `c`, loads 0.2/0.4 N,
 /// temperatures 25/60 °C.
 fn store_of(dir: &Path, serial: &str, first: u32, n: u32) {
-    for i in 0..n {
-        let load = if i % 2 == 0 { 0.2 } else { 0.4 };
-        let temp = if (i / 2) % 2 == 0 { 25.0 } else { 60.0 };
-        synthetic_run(dir, serial, first + i, 2, 0.01 + 0.001 * i as f32, |m| {
+    synthetic_store(
+        dir,
+        serial,
+        first,
+        n,
+        |i| 0.01 + 0.001 * i as f32,
+        |i, m| {
             m.campaign = Some("c".into());
             m.repeat = Some(i / 4 + 1);
-            m.load_n = load;
-            m.temp_setpoint_c = Some(temp);
+            m.load_n = if i % 2 == 0 { 0.2 } else { 0.4 };
+            m.temp_setpoint_c = Some(if (i / 2) % 2 == 0 { 25.0 } else { 60.0 });
             m.label = Some(format!("DLC {i}"));
-        });
-    }
-}
-
-fn count(pg: &PgServer) -> i64 {
-    pg.psql("lab", "SELECT count(*) FROM tribo_runs")
-        .parse()
-        .unwrap()
+        },
+    );
 }
 
 #[test]
@@ -61,7 +58,7 @@ fn sync_is_idempotent_reads_across_rigs_and_follows_a_log_that_grows() {
     // Again: nothing sent, nothing changed.
     let r = sync(a.path(), &url, &opts("pc-a"), &mut |_, _| {}).unwrap();
     assert_eq!((r.unchanged, r.pushed), (12, Default::default()), "{r:?}");
-    assert_eq!(count(&pg), 20);
+    assert_eq!(pg.run_count(), 20);
 
     let lab = LabCatalog::connect(&url).unwrap();
     let all = lab.lab_runs(&Filter::default()).unwrap();
@@ -150,7 +147,7 @@ fn sync_is_idempotent_reads_across_rigs_and_follows_a_log_that_grows() {
         port: "COM3".into(),
     });
     let mut w = tribo_store::RunWriter::create(c.path(), meta).unwrap();
-    for f in tribo_catalog::testing::frames(&cfg, 5, 6, 0, 3, 0.02) {
+    for f in tribo_testkit::frames(&cfg, 5, 6, 0, 3, 0.02) {
         w.append_frame(&f).unwrap();
     }
     let dir = w.dir().to_path_buf();
@@ -164,7 +161,7 @@ fn sync_is_idempotent_reads_across_rigs_and_follows_a_log_that_grows() {
     assert_ne!(before[0].run.row.status, "complete");
     std::thread::sleep(Duration::from_millis(20));
     let (mut w, _) = tribo_store::RunWriter::resume(&dir, false).unwrap();
-    for f in tribo_catalog::testing::frames(&cfg, 5, 6, 3, 6, 0.02)
+    for f in tribo_testkit::frames(&cfg, 5, 6, 3, 6, 0.02)
         .into_iter()
         .skip(1)
     {
@@ -186,7 +183,7 @@ fn sync_is_idempotent_reads_across_rigs_and_follows_a_log_that_grows() {
     let counts = lab.push(&[older]).unwrap();
     assert_eq!(counts.kept, 1);
     assert_eq!(lab.find("00000000000000c3/5").unwrap()[0].run, stale);
-    assert_eq!(count(&pg), 21);
+    assert_eq!(pg.run_count(), 21);
 }
 
 #[test]
@@ -241,7 +238,7 @@ fn a_role_without_write_rights_gets_a_clear_error_and_nothing_is_written() {
         text.contains("\"reader\" may not") && text.contains("INSERT and UPDATE"),
         "{text}"
     );
-    assert_eq!(count(&pg), 0);
+    assert_eq!(pg.run_count(), 0);
     // It reads all the same.
     assert!(LabCatalog::connect(&reader)
         .unwrap()
@@ -292,7 +289,7 @@ fn a_server_restarted_mid_sync_is_waited_for_and_nothing_is_lost_or_doubled() {
     pg.start_again();
     let r = h.join().unwrap().unwrap();
     assert!(r.reconnects >= 1, "{r:?}");
-    assert_eq!(count(&pg), 120);
+    assert_eq!(pg.run_count(), 120);
     let again = sync(a.path(), &url, &opts("pc-a"), &mut |_, _| {}).unwrap();
     assert_eq!(again.unchanged, 120, "{again:?}");
 }
@@ -331,18 +328,18 @@ fn a_network_cut_fails_clearly_and_the_next_sync_sends_the_rest() {
     assert!(e.contains("cannot be reached"), "{e}");
     assert!(t.elapsed() < Duration::from_secs(15));
     pg.start_again();
-    let partial = count(&pg);
+    let partial = pg.run_count();
     assert!(
         partial > 0 && partial < 60 && partial % 5 == 0,
         "whole batches only: {partial}"
     );
     let r = sync(a.path(), &url, &opts("pc-a"), &mut |_, _| {}).unwrap();
     assert_eq!(
-        (r.unchanged as i64, r.pushed.inserted as i64),
+        (r.unchanged as usize, r.pushed.inserted as usize),
         (partial, 60 - partial),
         "{r:?}"
     );
-    assert_eq!(count(&pg), 60);
+    assert_eq!(pg.run_count(), 60);
 }
 
 #[test]
@@ -352,11 +349,10 @@ fn tls_when_the_url_asks_for_it_with_the_server_s_certificate_verified() {
     }
     let pg = PgServer::start();
     let ca = pg.enable_tls();
-    let env =
-        |k: &str| (k == "PGPASSWORD").then(|| tribo_catalog::testing::ADMIN_PASSWORD.to_string());
+    let env = |k: &str| (k == "PGPASSWORD").then(|| tribo_testkit::ADMIN_PASSWORD.to_string());
     let base = format!(
         "postgres://{}@localhost:{}/lab",
-        tribo_catalog::testing::ADMIN,
+        tribo_testkit::ADMIN,
         pg.port
     );
     let parse = |u: &str| tribo_catalog::LabUrl::parse_with(u, &env).unwrap();

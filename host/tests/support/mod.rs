@@ -1,14 +1,32 @@
-//! A virtual rig as a process of its own (`tribo rig --virtual --listen 127.0.0.1:0`), for the
+//! What the host's integration tests share: the `tribo` binary spawned ([`tribo`], [`command`]),
+//! and a virtual rig as a process of its own (`tribo rig --virtual --listen 127.0.0.1:0`), for the
 //! tests where the rig must outlive the host or serve several hosts in turn.
 #![allow(dead_code)]
 
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::mpsc::{self, Receiver};
 use std::time::{Duration, Instant};
 use tribo::link::{Address, Link};
 
 pub const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
+
+/// `tribo ARGS` as a command: no standard input, and none of the environment's `TRIBO_PORT`,
+/// `TRIBO_STORE` or `TRIBO_CATALOG` (a test says what it means).
+pub fn command(args: &[&str]) -> Command {
+    let mut c = Command::new(TRIBO);
+    c.args(args)
+        .env_remove("TRIBO_PORT")
+        .env_remove("TRIBO_STORE")
+        .env_remove("TRIBO_CATALOG")
+        .stdin(Stdio::null());
+    c
+}
+
+/// `tribo ARGS` run to its end ([`command`]).
+pub fn tribo(args: &[&str]) -> Output {
+    command(args).output().expect("run tribo")
+}
 
 /// A `tribo rig --virtual` process and the lines of its console, with when they were read.
 pub struct RigProcess {

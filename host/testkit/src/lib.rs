@@ -1,5 +1,7 @@
-//! For tests and benchmarks: a real PostgreSQL server in a temporary folder, and synthetic run
-//! folders written through the store as a rig's frames would be.
+//! Test helpers of the host crates, for tests and benchmarks only (a dev-dependency, never a
+//! production one): a real PostgreSQL server in a temporary folder ([`PgServer`]), and synthetic
+//! runs written through the store as a rig's frames would be ([`synthetic_run`], [`frames`],
+//! [`synthetic_store`]).
 //!
 //! The server is Debian's PostgreSQL (`/usr/lib/postgresql/*/bin`, or `TRIBO_PG_BIN`, or `initdb`
 //! on the PATH): `initdb` and `pg_ctl` in a temporary folder, on a free localhost port, run as the
@@ -326,18 +328,18 @@ impl PgServer {
         format!("postgres://{user}@127.0.0.1:{}/{db}", self.port)
     }
 
-    /// A [`crate::LabUrl`] of database `db` as `user` with `password`, read from no environment
+    /// A [`tribo_catalog::LabUrl`] of database `db` as `user` with `password`, read from no environment
     /// but this.
-    pub fn lab_url(&self, user: &str, password: &str, db: &str) -> crate::LabUrl {
+    pub fn lab_url(&self, user: &str, password: &str, db: &str) -> tribo_catalog::LabUrl {
         let pw = password.to_string();
-        crate::LabUrl::parse_with(&self.url(user, db), &move |k| {
+        tribo_catalog::LabUrl::parse_with(&self.url(user, db), &move |k| {
             (k == "PGPASSWORD").then(|| pw.clone())
         })
         .expect("the test server's URL")
     }
 
-    /// The admin's [`crate::LabUrl`] of database `lab`.
-    pub fn admin(&self) -> crate::LabUrl {
+    /// The admin's [`tribo_catalog::LabUrl`] of database `lab`.
+    pub fn admin(&self) -> tribo_catalog::LabUrl {
         self.lab_url(ADMIN, ADMIN_PASSWORD, "lab")
     }
 
@@ -348,6 +350,15 @@ impl PgServer {
 
     pub fn folder(&self) -> &Path {
         self.dir.path()
+    }
+}
+
+impl PgServer {
+    /// How many runs the lab catalog in database `lab` holds.
+    pub fn run_count(&self) -> usize {
+        self.psql("lab", "SELECT count(*) FROM tribo_runs")
+            .parse()
+            .expect("a count of runs")
     }
 }
 
@@ -469,4 +480,20 @@ pub fn frames(
         }));
     }
     out
+}
+
+/// A store of `n` synthetic runs of rig `serial` ([`synthetic_run`], two blocks each), run
+/// numbers from `first`: the `i`-th (from 0) with on-board μ0 `mu0(i)`, described by
+/// `meta_fn(i, meta)`.
+pub fn synthetic_store(
+    store: &Path,
+    serial: &str,
+    first: u32,
+    n: u32,
+    mu0: impl Fn(u32) -> f32,
+    meta_fn: impl Fn(u32, &mut RunMeta),
+) {
+    for i in 0..n {
+        synthetic_run(store, serial, first + i, 2, mu0(i), |m| meta_fn(i, m));
+    }
 }
