@@ -13,9 +13,8 @@ use clap::{Parser, Subcommand};
 #[derive(Parser)]
 #[command(name = "tribo", version, about, long_about)]
 struct Cli {
-    /// No progress bars or progress messages (results, warnings and errors are still printed).
-    #[arg(short, long, global = true)]
-    quiet: bool,
+    #[command(flatten)]
+    global: tribo::cmd::Global,
     #[command(subcommand)]
     command: Command,
 }
@@ -83,7 +82,7 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    let quiet = cli.quiet;
+    let quiet = cli.global.quiet;
     match cli.command {
         Command::Onboard(a) => tribo::cmd::onboard::run(a),
         Command::Devices(a) => tribo::cmd::devices::run(a),

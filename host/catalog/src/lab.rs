@@ -18,6 +18,7 @@ use tribo_store::{CatalogRow, Filter, StoreError};
 pub struct LabRun {
     /// The rig's serial number and its own number for the run: the run's key in the lab.
     pub rig_serial: String,
+    /// The rig's own number for the run.
     pub rig_run: i64,
     /// The PC that holds the frame log (its host name, or `--pc`).
     pub pc: String,
@@ -25,12 +26,14 @@ pub struct LabRun {
     pub log_dir: String,
     /// SHA-256 of the frame log, hex.
     pub log_sha256: String,
+    /// The frame log's size, bytes.
     pub log_bytes: i64,
     /// The log's size and time on its PC ([`tribo_store::catalog::log_stamp`]): what tells the
     /// next sync the run changed.
     pub pc_stamp: String,
-    /// On-board standard errors of μ0 and μ1.
+    /// On-board standard error of μ0.
     pub onboard_mu0_se: Option<f64>,
+    /// On-board standard error of μ1.
     pub onboard_mu1_se: Option<f64>,
     /// Everything else, as the local catalog holds it (`row.id`: the run folder's name).
     pub row: CatalogRow,
@@ -39,6 +42,7 @@ pub struct LabRun {
 /// One run read back from the lab catalog.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LabRow {
+    /// The run as it was pushed.
     pub run: LabRun,
     /// When it was last written (server time, RFC 3339).
     pub synced_at: String,
@@ -58,9 +62,13 @@ pub struct PushCounts {
 /// What the lab knows of a run, to decide whether a PC's copy needs pushing.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Known {
+    /// The PC whose copy the lab holds.
     pub pc: String,
+    /// Where that PC keeps the run folder.
     pub log_dir: String,
+    /// The log's size and time on that PC ([`LabRun::pc_stamp`]).
     pub pc_stamp: String,
+    /// The log's size, bytes.
     pub log_bytes: i64,
 }
 
@@ -249,6 +257,7 @@ impl LabCatalog {
         Ok(cat)
     }
 
+    /// The URL it was reached at.
     pub fn url(&self) -> &LabUrl {
         &self.url
     }

@@ -13,6 +13,7 @@
 //!   many PCs at once (one transaction per batch, one row per rig serial and rig run number).
 //!
 //! The tests' PostgreSQL server and synthetic runs are in `tribo-testkit` (a dev-dependency).
+#![warn(missing_docs)]
 
 pub mod lab;
 pub mod schema;
@@ -27,6 +28,7 @@ pub use url::LabUrl;
 use std::path::Path;
 use tribo_store::{ErrorKind, StoreError};
 
+/// The catalog's results: its errors are the store's ([`StoreError`]), one kind for both catalogs.
 pub type Result<T, E = StoreError> = std::result::Result<T, E>;
 
 /// A catalog error with nothing underneath.

@@ -47,6 +47,7 @@ pub struct SyncReport {
     pub local: usize,
     /// Runs the lab already held as this PC has them (not sent).
     pub unchanged: usize,
+    /// What the push did with the others.
     pub pushed: PushCounts,
     /// Runs the lab holds a fuller copy of (from another PC), not sent.
     pub fuller_elsewhere: usize,

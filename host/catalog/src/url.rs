@@ -17,7 +17,10 @@ pub enum Tls {
     /// TLS, the server's certificate verified against `root` (a PEM file: `sslrootcert=`) or else
     /// the public web roots; `require` (TLS if the server offers it: `prefer`) or not.
     On {
+        /// The CA certificate (`sslrootcert=`), else the public web roots.
         root: Option<PathBuf>,
+        /// TLS required (`require`, `verify-ca`, `verify-full`), or only used when offered
+        /// (`prefer`).
         required: bool,
     },
 }
@@ -263,6 +266,7 @@ impl LabUrl {
         self.pgpass_ignored.as_deref()
     }
 
+    /// Whether and how the connection uses TLS.
     pub fn tls(&self) -> &Tls {
         &self.tls
     }

@@ -2,6 +2,7 @@
 //! production one): a real PostgreSQL server in a temporary folder ([`PgServer`]), and synthetic
 //! runs written through the store as a rig's frames would be ([`synthetic_run`], [`frames`],
 //! [`synthetic_store`]).
+#![warn(missing_docs)]
 //!
 //! The server is Debian's PostgreSQL (`/usr/lib/postgresql/*/bin`, or `TRIBO_PG_BIN`, or `initdb`
 //! on the PATH): `initdb` and `pg_ctl` in a temporary folder, on a free localhost port, run as the
@@ -17,10 +18,12 @@ use tribo_wire::*;
 
 /// The superuser of a test server and its password (the server asks TCP clients for it).
 pub const ADMIN: &str = "tribo_admin";
+/// [`ADMIN`]'s password.
 pub const ADMIN_PASSWORD: &str = "admin-pw-0";
 
 /// A PostgreSQL server of its own, stopped and deleted when dropped.
 pub struct PgServer {
+    /// The localhost port it listens on.
     pub port: u16,
     bin: PathBuf,
     data: PathBuf,
@@ -348,6 +351,7 @@ impl PgServer {
         std::fs::read_to_string(self.dir.path().join("log")).unwrap_or_default()
     }
 
+    /// The temporary folder that holds its data, deleted when it is dropped.
     pub fn folder(&self) -> &Path {
         self.dir.path()
     }
