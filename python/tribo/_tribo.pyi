@@ -1,6 +1,6 @@
 """Type stubs of the Rust extension (`python/src/lib.rs`); use the `tribo` package's API."""
 
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
