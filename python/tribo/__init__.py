@@ -257,6 +257,36 @@ class Fit(_Json):
     amplitude), ``span``, ``cross_check`` (the on-board result beside it), ``rig``, ``record``…
     """
 
+    @property
+    def law(self) -> str:
+        """The law fitted (``coulomb-viscous``, ``quadratic``, …)."""
+        return self.json["law"]
+
+    @property
+    def verdict(self) -> str:
+        """``adequate``, ``inadequate`` or ``not-converged``."""
+        return self.json["verdict"]
+
+    @property
+    def mu(self) -> List[float]:
+        """The dimensionless constants μ0, μ1, … in order of j."""
+        return self.json["mu"]
+
+    @property
+    def mu_se(self) -> List[Optional[float]]:
+        """Their standard errors (None where unknown)."""
+        return self.json["mu_se"]
+
+    @property
+    def gap(self) -> float:
+        """The envelope's misfit, relative to the initial amplitude."""
+        return self.json["gap"]
+
+    @property
+    def noise_floor(self) -> float:
+        """The record's noise floor, relative to the initial amplitude."""
+        return self.json["noise_floor"]
+
     def __repr__(self) -> str:
         mu = ", ".join(f"{m:.6g} ± {s:.2g}" for m, s in zip(self.json["mu"], self.json["mu_se"]))
         return f"<tribo.Fit {self.json['law']}: mu = [{mu}], {self.json['verdict']}>"
