@@ -69,8 +69,10 @@ fn run_error(path: &Path) -> impl FnOnce(StoreError) -> LoadError + '_ {
 /// The flag that makes `tribo fit` / `tribo explain` fit the longest stretch without holes.
 pub const LONGEST_CLEAN_STRETCH_FLAG: &str = "--longest-clean-stretch";
 
-/// A path opened by [`open`], the one loader of every command, the reports, the panel and the
-/// Python package: its record, the rig constants a default stood in for, and the run.
+/// A path opened by [`open`], the loader of the commands that turn a path into a record (`fit`,
+/// `explain`, `onboard`, `report` of a record, `export` of a CSV) and of the Python package's
+/// `fit`, `explain` and `read_record`: its record, the rig constants a default stood in for, and
+/// the run.
 #[derive(Debug)]
 pub struct Opened {
     /// The samples, as the [`Holes`] policy asked.
@@ -176,26 +178,24 @@ pub fn load_for_fit(path: &Path, holes: Holes) -> Result<Record, LoadError> {
 
 /// A run folder's record ready to fit.
 fn run_for_fit(run: &tribo_store::Run, path: &Path, holes: Holes) -> Result<Record, LoadError> {
-    {
-        if !run.is_complete() && run.missing_blocks().is_empty() {
-            // Not whole, yet no hole inside: the log's end is cut (or the end never came). What
-            // it holds is analysed only when asked for.
-            match holes {
-                Holes::Refuse => {
-                    return Err(LoadError::Incomplete {
-                        path: path.to_path_buf(),
-                        message: format!(
-                            "{}. Pass {LONGEST_CLEAN_STRETCH_FLAG} to analyse what it holds",
-                            incomplete_run(&run, path)
-                        ),
-                    })
-                }
-                _ => crate::errln!(
-                    "note: {}: {}; analysing what it holds",
-                    path.display(),
-                    run.completeness().summary()
-                ),
+    if !run.is_complete() && run.missing_blocks().is_empty() {
+        // Not whole, yet no hole inside: the log's end is cut (or the end never came). What
+        // it holds is analysed only when asked for.
+        match holes {
+            Holes::Refuse => {
+                return Err(LoadError::Incomplete {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "{}. Pass {LONGEST_CLEAN_STRETCH_FLAG} to analyse what it holds",
+                        incomplete_run(run, path)
+                    ),
+                })
             }
+            _ => crate::errln!(
+                "note: {}: {}; analysing what it holds",
+                path.display(),
+                run.completeness().summary()
+            ),
         }
     }
     let rec = run.record().map_err(run_error(path))?;

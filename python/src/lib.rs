@@ -669,7 +669,7 @@ fn explain_json(src: Source, opts: tribo_explain::ExplainOptions, h: tribo::Hole
         }
     };
     let data = tribo_explain::Prepared::new(
-        &record,
+        record,
         opts.max_env_points,
         opts.max_force_points,
         opts.force_cutoff_hz,
@@ -677,7 +677,7 @@ fn explain_json(src: Source, opts: tribo_explain::ExplainOptions, h: tribo::Hole
     .map_err(not_analysable)?;
     let (ex, _) = tribo_explain::explain_with_progress(&data, &opts, &mut |_, _, _| {})
         .map_err(not_analysable)?;
-    let check = tribo::analysis::cross_check(opened.run.as_ref(), &record, &ex.base_fit);
+    let check = tribo::analysis::cross_check(opened.run.as_ref(), record, &ex.base_fit);
     let j = tribo::analysis::explanation_json(&ex, &check)
         .map_err(|e| Failure::Tribo(e.to_string()))?;
     if !ex.gap_final.is_finite() {

@@ -137,7 +137,7 @@ fn run_inner(args: Args) -> Result<()> {
         }
     };
     let data = Prepared::new(
-        &record,
+        record,
         opts.max_env_points,
         opts.max_force_points,
         opts.force_cutoff_hz,

@@ -207,6 +207,18 @@ pub fn firmware_version(info: &DeviceInfo) -> String {
     )
 }
 
+/// The rig's state as a lab technician reads it.
+pub fn state_name(s: tribo_wire::RigState) -> &'static str {
+    match s {
+        tribo_wire::RigState::Idle => "idle (not configured)",
+        tribo_wire::RigState::Configured => "configured",
+        tribo_wire::RigState::Armed => "armed (the magnet holds the pin)",
+        tribo_wire::RigState::Running => "running a run",
+        tribo_wire::RigState::Finished => "run finished",
+        tribo_wire::RigState::Fault => "FAULT (heater cut off)",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -232,17 +244,5 @@ mod tests {
             field_name(Field::HeaterRamp),
             "the heater ramp (0.1–30 °C/min)"
         );
-    }
-}
-
-/// The rig's state as a lab technician reads it.
-pub fn state_name(s: tribo_wire::RigState) -> &'static str {
-    match s {
-        tribo_wire::RigState::Idle => "idle (not configured)",
-        tribo_wire::RigState::Configured => "configured",
-        tribo_wire::RigState::Armed => "armed (the magnet holds the pin)",
-        tribo_wire::RigState::Running => "running a run",
-        tribo_wire::RigState::Finished => "run finished",
-        tribo_wire::RigState::Fault => "FAULT (heater cut off)",
     }
 }
