@@ -330,7 +330,7 @@ fn a_network_cut_fails_clearly_and_the_next_sync_sends_the_rest() {
     pg.start_again();
     let partial = pg.run_count();
     assert!(
-        partial > 0 && partial < 60 && partial % 5 == 0,
+        partial > 0 && partial < 60 && partial.is_multiple_of(5),
         "whole batches only: {partial}"
     );
     let r = sync(a.path(), &url, &opts("pc-a"), &mut |_, _| {}).unwrap();
