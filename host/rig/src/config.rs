@@ -34,8 +34,11 @@ use tribo_physics::FrictionLaw;
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Noise {
+    /// Displacement, m.
     pub displacement_m: f64,
+    /// Velocity, m/s.
     pub velocity_m_s: f64,
+    /// Force, N.
     pub force_n: f64,
     /// Thermocouple, °C.
     pub temperature_c: f64,
@@ -59,9 +62,13 @@ impl Default for Noise {
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ThermalModel {
+    /// `T_ambient`, °C.
     pub ambient_c: f64,
+    /// `P`, the heater's power at full duty, W.
     pub heater_power_w: f64,
+    /// `R`, the plate's thermal resistance to the room, K/W.
     pub resistance_k_per_w: f64,
+    /// `C`, the plate's heat capacity, J/K.
     pub capacity_j_per_k: f64,
 }
 
@@ -82,9 +89,13 @@ impl Default for ThermalModel {
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct EcrModel {
+    /// log10(R/Ω) while sliding.
     pub log10_film: f64,
+    /// Standard deviation of its fluctuations, decades.
     pub fluctuation_decades: f64,
+    /// Correlation time of the fluctuations, s.
     pub correlation_s: f64,
+    /// log10(R/Ω) while the pin is at rest.
     pub log10_rest: f64,
 }
 
@@ -121,8 +132,11 @@ pub const RIG_CONSTANTS: [&str; 6] = [
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AcquisitionFaults {
+    /// The firmware stops reading the converter's ring this long after the release, ms.
     pub stall_reader_after_ms: Option<u64>,
+    /// How long it stops reading, ms.
     pub stall_reader_ms: u64,
+    /// The ADC overruns this long after the release, ms.
     pub adc_overrun_after_ms: Option<u64>,
 }
 
@@ -130,7 +144,9 @@ pub struct AcquisitionFaults {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct VirtualRigConfig {
+    /// Moving mass, kg.
     pub mass_kg: f64,
+    /// Blade stiffness, N/m.
     pub stiffness_n_per_m: f64,
     /// Normal load, N (0 = unloaded: only the apparatus damping acts).
     pub load_n: f64,
@@ -147,8 +163,11 @@ pub struct VirtualRigConfig {
     pub force_cutoff_hz: f64,
     /// Time lag of the force channel behind the velocity, s (the thesis observed ~3 ms, ch. 4.4).
     pub force_lag_s: f64,
+    /// Sensor noise.
     pub noise: Noise,
+    /// The heated plate.
     pub thermal: ThermalModel,
+    /// The contact's electrical resistance.
     pub ecr: EcrModel,
     /// Seed of every random draw: the same seed gives the same run.
     pub seed: u64,

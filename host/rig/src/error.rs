@@ -18,6 +18,7 @@ pub enum RigError {
         name: &'static str,
         /// What it must be.
         rule: &'static str,
+        /// The value given.
         value: f64,
     },
     /// The rig constants and the contact law do not make a model the simulator can run.

@@ -8,6 +8,7 @@
 //!   [`VirtualRig::take_output`].
 //! * [`serve`](mod@serve): the rig in real time (or faster) for a host: over any byte stream
 //!   ([`serve()`]), to successive TCP connections ([`TcpRig`]), or in-process ([`in_process`]).
+#![warn(missing_docs)]
 
 pub mod config;
 mod error;
@@ -53,6 +54,7 @@ impl Task {
 pub struct RigEvent {
     /// Device time, µs.
     pub t_us: u64,
+    /// What happened, in words.
     pub what: String,
 }
 

@@ -161,6 +161,7 @@ pub struct SimHardware {
 }
 
 impl SimHardware {
+    /// The simulated hardware of a rig configured by `cfg`, at rest.
     pub fn new(cfg: &VirtualRigConfig) -> Result<SimHardware, RigError> {
         let (rig, model, cal) = contact(cfg)?;
         let mut hw = SimHardware {
@@ -343,10 +344,12 @@ impl SimHardware {
         })
     }
 
+    /// What the electromagnet is driven with now.
     pub fn magnet(&self) -> MagnetDrive {
         self.magnet
     }
 
+    /// The front panel's lamps as they are lit now.
     pub fn lamps(&self) -> Lamps {
         self.lamps
     }
