@@ -568,6 +568,10 @@ wire_type! {
         NotSampling,
         HeaterUnhealthy,
         MagnetOff,
+        // ---- protocol v3 ----
+        /// A deliberate fault of the self-test (a panic, a stalled task) is refused while the
+        /// heater heats: a reset is tried with every output already off, never to turn one off.
+        HeaterOn,
     }
 }
 
