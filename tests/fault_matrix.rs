@@ -393,6 +393,7 @@ fn lost_header_events_result_and_end() {
             |m| matches!(m, DeviceMsg::RunStarted(_)),
             |m| matches!(m, DeviceMsg::Gap(_)),
             |m| matches!(m, DeviceMsg::EcrRange(_)),
+            |m| matches!(m, DeviceMsg::Chain(_)),
             |m| matches!(m, DeviceMsg::Result(_)),
             |m| matches!(m, DeviceMsg::RunEnded(_)),
         ],
@@ -411,8 +412,8 @@ fn lost_header_events_result_and_end() {
     });
     let o = o.expect("the run finishes");
     assert!(
-        stats.damaged_rig_frames() >= 4,
-        "header, gap, result, end dropped"
+        stats.damaged_rig_frames() >= 5,
+        "header, gap, result, end dropped (the chain as well)"
     );
     let id = o.run.header().unwrap().run_id;
     let truth = bench.rig_frames(id);

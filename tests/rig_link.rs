@@ -75,6 +75,10 @@ fn a_run_over_the_link_is_stored_whole_and_recovers_the_simulated_contact() {
     let csv = tribo_physics::Record::load(&o.run.dir().join("samples.csv")).unwrap();
     assert_eq!(rec.len(), csv.len());
     assert_eq!(rec.rig, csv.rig);
+    // The record states the force channel's low-pass the rig said (the virtual rig's charge
+    // amplifier), in the folder and in its CSV: an analysis need not fit it.
+    assert_eq!(rec.force_cutoff_hz, Some(300.0));
+    assert_eq!(csv.force_cutoff_hz, Some(300.0));
     assert!(rec
         .x
         .iter()

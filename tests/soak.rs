@@ -77,6 +77,7 @@ fn run_frame(raw: &[u8]) -> Option<(u32, Option<u32>)> {
         DeviceMsg::Packed(p) => (p.run_id, Some(p.block)),
         DeviceMsg::Gap(g) => (g.run_id, None),
         DeviceMsg::EcrRange(e) => (e.run_id, None),
+        DeviceMsg::Chain(c) => (c.run_id, None),
         DeviceMsg::Result(r) => (r.run_id, None),
         DeviceMsg::RunEnded(e) => (e.run_id, None),
         _ => return None,

@@ -91,6 +91,10 @@ pub trait SampleSource {
     /// index of the first. A batch starting after the index that followed the previous one means the
     /// samples in between are lost (an empty batch still carries where reading goes on).
     fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch;
+    /// The force channel's analog low-pass in front of the converter, as the board is built: what
+    /// each run's [`crate::wire::DeviceMsg::Chain`] frame states, so that an analysis of the
+    /// record need not fit it.
+    fn force_lowpass(&self) -> crate::wire::LowPass;
 }
 
 /// The user button (raw level; the application debounces).

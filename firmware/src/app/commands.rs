@@ -235,6 +235,12 @@ impl App<'_> {
             .settled_from()
             .saturating_sub(self.run_base)
             .min(u16::MAX as u64) as u16;
+        // The analog chain the run's channels go through, as the board is built: a record states
+        // its force channel's low-pass, which an analysis would otherwise fit.
+        self.push_event(DeviceMsg::Chain(AnalogChain {
+            run_id: self.run_id,
+            force_lowpass: hw.force_lowpass(),
+        }));
         self.push_event(DeviceMsg::EcrRange(EcrRangeChange {
             run_id: self.run_id,
             first_sample: 0,

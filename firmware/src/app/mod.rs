@@ -49,8 +49,8 @@ use crate::thermocouple;
 use crate::wire::codec::Packer;
 use crate::wire::frame::MAX_FRAME;
 use crate::wire::{
-    limits, BootReport, Channel, Configure, Control, Decoder, DeviceError, DeviceInfo, DeviceMsg,
-    EcrRangeChange, Encoder, EndReason, EnvelopeShape, ErrorCode, Estimate, FaultReason,
+    limits, AnalogChain, BootReport, Channel, Configure, Control, Decoder, DeviceError, DeviceInfo,
+    DeviceMsg, EcrRangeChange, Encoder, EndReason, EnvelopeShape, ErrorCode, Estimate, FaultReason,
     FaultReport, Field, Frame, Gap, HeaterSetpoint, HostMsg, Interlock, OnboardResult, PackedBlock,
     ResetCause, RigState, RunEnd, RunHeader, SampleBlock, SampleClock, Status, Verdict, CHANNELS,
     PROTOCOL_VERSION,

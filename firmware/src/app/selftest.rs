@@ -16,7 +16,8 @@ pub(super) enum SelfTestRun {
 
 impl App<'_> {
     /// Starts a check: refused while a run is armed, running or ending, while another check runs,
-    /// and (the flash check) while the last run is still being written to flash.
+    /// (the flash check) while the last run is still being written to flash, and (a deliberate
+    /// panic or stall) while the heater heats.
     pub(super) fn start_selftest<H: Hardware>(
         &mut self,
         hw: &mut H,
@@ -57,12 +58,17 @@ impl App<'_> {
                 len: len.min(FILLER_MAX as u16),
                 refused: 0,
             }),
-            SelfTestCheck::Panic => {
-                self.deliberate = Some(Deliberate::Panic);
-                return Ok(());
-            }
-            SelfTestCheck::Stall => {
-                self.deliberate = Some(Deliberate::Stall);
+            SelfTestCheck::Panic | SelfTestCheck::Stall => {
+                // The reset it provokes makes the heater safe as well, but a bring-up check must
+                // not be the way a live output goes off: the plate is let cool first.
+                if self.heater.heating() {
+                    return Err(ErrorCode::Interlock(Interlock::HeaterOn));
+                }
+                self.deliberate = Some(if check == SelfTestCheck::Panic {
+                    Deliberate::Panic
+                } else {
+                    Deliberate::Stall
+                });
                 return Ok(());
             }
         };

@@ -65,6 +65,10 @@ impl RunStore<'_> {
                     events += 1;
                     true
                 }
+                DeviceMsg::Chain(c) if tail_at.is_none() && same(c.run_id) => {
+                    events += 1;
+                    true
+                }
                 DeviceMsg::Result(r) if tail_at.is_none() && same(r.run_id) => {
                     tail_at = Some(rec);
                     result = Slot::from_slice(&buf[..len]).ok()?;

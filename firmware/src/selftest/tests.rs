@@ -29,6 +29,9 @@ impl SampleSource for Adc {
     fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
         self.model.read(out)
     }
+    fn force_lowpass(&self) -> crate::wire::LowPass {
+        crate::wire::LowPass::NONE
+    }
 }
 
 /// Noisy mid-scale displacement and velocity, a constant force, an ECR at the bottom rail.

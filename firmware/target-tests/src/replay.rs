@@ -267,6 +267,9 @@ impl SampleSource for Replay<'_> {
         self.note_read();
         self.adc.read(out)
     }
+    fn force_lowpass(&self) -> tribo_firmware::wire::LowPass {
+        tribo_firmware::wire::LowPass::butterworth(2, 300.0)
+    }
 }
 
 impl RunFlash for Replay<'_> {

@@ -25,7 +25,10 @@ pub use frame::{Decoder, EncodeError, Encoder, Frame, FrameError};
 pub use msg::*;
 
 /// Version of the message set. Bump it on any change to [`msg`] that changes the encoding.
-pub const PROTOCOL_VERSION: u16 = 2;
+///
+/// v3 added [`DeviceMsg::Chain`] (the run's analog chain) as the last variant: every v2 message
+/// keeps its bytes, so a v2 frame log reads as v3.
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// Checks the protocol number announced by the other side's hello.
 pub fn check_protocol(theirs: u16) -> Result<(), ProtocolMismatch> {

@@ -92,6 +92,15 @@ fn frames() -> Vec<(String, Vec<u8>)> {
             temp_c: f32::NAN,
         }),
     );
+    // Protocol v3: the run's analog chain, the last variant.
+    dev(
+        "device.chain",
+        101,
+        DeviceMsg::Chain(AnalogChain {
+            run_id: 5,
+            force_lowpass: LowPass::butterworth(2, 300.0),
+        }),
+    );
     for n in (0..=MAX_BLOCK_COUNTS).step_by(5) {
         for salt in [0u16, 1] {
             dev(

@@ -58,6 +58,10 @@ pub fn explain(code: ErrorCode) -> String {
                                            plate, then run again"
                 .into(),
             Interlock::MagnetOff => "release refused: the electromagnet is off; check its supply and arm again".into(),
+            Interlock::HeaterOn => "refused while the heater heats: a deliberate reset is only tried with every \
+                                    output off; turn the heater off (a plan without temperatures), then run the \
+                                    self-test again"
+                .into(),
         },
         ErrorCode::Heater(f) => format!("heater fault: {}", heater_fault_text(f)),
         ErrorCode::NoRun => "the rig holds no such run (it was power-cycled, or a newer run replaced it)".into(),

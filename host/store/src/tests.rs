@@ -948,3 +948,58 @@ fn a_catalog_from_before_setpoints_is_rebuilt_on_first_refresh() {
     assert!(bins.contains(&Some(Bin::HeaterOff)), "{bins:?}");
     assert!(bins.contains(&Some(Bin::SetpointC(40))), "{bins:?}");
 }
+
+#[test]
+fn a_run_states_the_analog_chain_its_rig_said_and_a_lost_chain_frame_is_a_hole() {
+    let d = tempfile::tempdir().unwrap();
+    let cfg = Configure::real_rig(0.3);
+    let rig = |protocol: u16| {
+        move |m: &mut RunMeta| {
+            m.device = Some(DeviceMeta {
+                firmware: "0.1.0".into(),
+                serial: "0123456789abcdef".into(),
+                protocol,
+                port: "tcp://127.0.0.1:7411".into(),
+            })
+        }
+    };
+    // A protocol v3 rig: its chain frame right after the header.
+    let mut v3 = v2_run();
+    let chain = DeviceMsg::Chain(AnalogChain {
+        run_id: 7,
+        force_lowpass: LowPass::butterworth(2, 300.0),
+    });
+    v3.insert(1, encode_vec(100, &chain).unwrap());
+    let run = record(d.path(), &cfg, &v3, rig(3));
+    assert!(run.is_complete(), "{}", run.completeness().summary());
+    assert_eq!(run.chain().map(|c| c.force_lowpass.cutoff_hz), Some(300.0));
+    let rec = run.record().unwrap();
+    assert_eq!(rec.force_cutoff_hz, Some(300.0));
+    let csv = d.path().join("r.csv");
+    run.export_csv(&csv).unwrap();
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.contains("# force_cutoff_hz=300\n"), "{text:.300}");
+    // Its chain frame lost on the line: the run is not whole (a pull brings the frame).
+    let lost: Vec<Vec<u8>> = v3
+        .iter()
+        .filter(|f| !matches!(kind(f), DeviceMsg::Chain(_)))
+        .cloned()
+        .collect();
+    let r = record(d.path(), &cfg, &lost, rig(3));
+    assert_eq!(r.completeness().event_holes, vec![0]);
+    assert!(!r.is_complete());
+    // A v2 rig never said it: whole, and the record leaves the filter unstated (an analysis fits
+    // it); a chain other than the 2-pole Butterworth a record's `force_cutoff_hz` means, too.
+    let r = record(d.path(), &cfg, &lost, rig(2));
+    assert!(r.is_complete(), "{}", r.completeness().summary());
+    assert_eq!(r.record().unwrap().force_cutoff_hz, None);
+    let mut one_pole = v2_run();
+    let chain = DeviceMsg::Chain(AnalogChain {
+        run_id: 7,
+        force_lowpass: LowPass::butterworth(1, 300.0),
+    });
+    one_pole.insert(1, encode_vec(100, &chain).unwrap());
+    let r = record(d.path(), &cfg, &one_pole, rig(3));
+    assert_eq!(r.chain().map(|c| c.force_lowpass.poles), Some(1));
+    assert_eq!(r.record().unwrap().force_cutoff_hz, None);
+}

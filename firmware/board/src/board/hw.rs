@@ -112,6 +112,9 @@ impl SampleSource for BoardHw {
     fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
         self.sampler.read(out)
     }
+    fn force_lowpass(&self) -> tribo_firmware::wire::LowPass {
+        super::FORCE_LOWPASS
+    }
 }
 
 impl Button for BoardHw {

@@ -91,6 +91,11 @@ type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
 const TX_PIPE: usize = 4096;
 /// ECR source divider: the DAC's 0..3.3 V become 0..3.3 mV across the contact.
 const ECR_DIVIDER: f32 = 1000.0;
+/// The force channel's analog chain as the rig is built: the charge amplifier's 2-pole 300 Hz
+/// low-pass (`shared/docs/rig-and-physics.md`). Every run states it (`DeviceMsg::Chain`); change
+/// it with the hardware.
+const FORCE_LOWPASS: tribo_firmware::wire::LowPass =
+    tribo_firmware::wire::LowPass::butterworth(2, 300.0);
 
 /// The converter's register file as last read (`None` before any good SPI transfer) and when
 /// (µs of uptime). The application decides how old is too old.

@@ -255,6 +255,9 @@ impl SampleSource for Mock {
         self.convert();
         self.adc.read(out)
     }
+    fn force_lowpass(&self) -> crate::wire::LowPass {
+        crate::wire::LowPass::butterworth(2, 300.0)
+    }
 }
 impl Button for Mock {
     fn button_pressed(&mut self) -> bool {

@@ -497,3 +497,36 @@ fn the_end_of_run_fit_is_spread_over_polls() {
         .map(|f| decode_one::<DeviceMsg>(f).unwrap().msg);
     assert_eq!(stored, Some(DeviceMsg::Result(one_call)));
 }
+
+#[test]
+fn every_run_states_the_board_s_analog_chain_right_after_its_header() {
+    let mut b = Bench::new();
+    b.hw.stop_s = 0.3;
+    b.ready();
+    let (r, mut msgs) = b.command(HostMsg::Release);
+    assert_eq!(r, Ok(()));
+    b.run_for(1500);
+    msgs.extend(b.msgs());
+    let at = msgs
+        .iter()
+        .position(|m| matches!(m, DeviceMsg::RunStarted(_)))
+        .expect("a run header");
+    let DeviceMsg::RunStarted(h) = &msgs[at] else {
+        unreachable!()
+    };
+    assert_eq!(
+        msgs.get(at + 1),
+        Some(&DeviceMsg::Chain(AnalogChain {
+            run_id: h.run_id,
+            force_lowpass: b.hw.force_lowpass(),
+        })),
+        "{:?}",
+        &msgs[at..(at + 3).min(msgs.len())]
+    );
+    assert!(msgs.iter().any(|m| matches!(m, DeviceMsg::RunEnded(_))));
+    let chains = msgs
+        .iter()
+        .filter(|m| matches!(m, DeviceMsg::Chain(_)))
+        .count();
+    assert_eq!(chains, 1, "once per run");
+}

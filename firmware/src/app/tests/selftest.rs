@@ -193,3 +193,33 @@ fn filler_frames_wait_for_a_link_that_has_no_room_and_none_is_lost() {
         "a refused filler is not a dropped frame"
     );
 }
+
+#[test]
+fn a_deliberate_fault_is_refused_while_the_heater_heats_and_leaves_it_heating() {
+    let mut b = Bench::new();
+    b.hw.tc = Some(reg(60.0));
+    b.run_for(200);
+    let sp = HeaterSetpoint {
+        setpoint_c: 80.0,
+        ramp_c_per_min: 10.0,
+    };
+    assert_eq!(b.command(HostMsg::SetHeater(sp)).0, Ok(()));
+    b.run_for(300);
+    assert!(b.hw.heater_duty > 0.0);
+    for check in [SelfTestCheck::Panic, SelfTestCheck::Stall] {
+        assert_eq!(
+            b.command(HostMsg::SelfTest(check)).0,
+            Err(ErrorCode::Interlock(Interlock::HeaterOn)),
+            "{check:?}"
+        );
+        assert_eq!(b.app.take_deliberate(), None);
+    }
+    b.run_for(100);
+    assert!(b.hw.heater_duty > 0.0, "the refusal changed nothing");
+    // The heater off (the host's safe command): the check goes ahead.
+    assert_eq!(b.command(HostMsg::Safe).0, Ok(()));
+    b.run_for(100);
+    assert_eq!(b.hw.heater_duty, 0.0);
+    assert_eq!(b.command(HostMsg::SelfTest(SelfTestCheck::Panic)).0, Ok(()));
+    assert_eq!(b.app.take_deliberate(), Some(Deliberate::Panic));
+}

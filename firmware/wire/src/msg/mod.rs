@@ -431,6 +431,10 @@ wire_type! {
         EcrRange(EcrRangeChange),
         /// What a self-test check measured (see [`SelfTestReport`]).
         SelfTest(SelfTestReport),
+        // ---- protocol v3 ----
+        /// Run frame, right after the header: the analog chain in front of the converter (the
+        /// force channel's low-pass), as the board is built, so that a record states it.
+        Chain(AnalogChain),
     }
 }
 
@@ -447,7 +451,42 @@ impl DeviceMsg {
                 | DeviceMsg::Gap(_)
                 | DeviceMsg::Packed(_)
                 | DeviceMsg::EcrRange(_)
+                | DeviceMsg::Chain(_)
         )
+    }
+}
+
+wire_type! {
+    /// An analog low-pass filter: `poles` = 0 for none; otherwise a Butterworth filter of that
+    /// order with its −3 dB point at `cutoff_hz`.
+    #[derive(Copy)]
+    pub struct LowPass {
+        pub poles: u8,
+        pub cutoff_hz: f32,
+    }
+}
+
+impl LowPass {
+    /// No filter.
+    pub const NONE: LowPass = LowPass {
+        poles: 0,
+        cutoff_hz: 0.0,
+    };
+
+    /// A Butterworth low-pass of `poles` poles at `cutoff_hz`.
+    pub const fn butterworth(poles: u8, cutoff_hz: f32) -> Self {
+        LowPass { poles, cutoff_hz }
+    }
+}
+
+wire_type! {
+    /// What run `run_id`'s channels went through before the converter, as the board is built
+    /// (the firmware knows its front-end; a record from another DAQ may not state it).
+    #[derive(Copy)]
+    pub struct AnalogChain {
+        pub run_id: u32,
+        /// The force channel's low-pass (the charge amplifier's output filter).
+        pub force_lowpass: LowPass,
     }
 }
 
@@ -529,6 +568,10 @@ wire_type! {
         NotSampling,
         HeaterUnhealthy,
         MagnetOff,
+        // ---- protocol v3 ----
+        /// A deliberate fault of the self-test (a panic, a stalled task) is refused while the
+        /// heater heats: a reset is tried with every output already off, never to turn one off.
+        HeaterOn,
     }
 }
 

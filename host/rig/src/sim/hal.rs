@@ -102,6 +102,9 @@ impl SampleSource for SimHardware {
     fn adc_read(&mut self, out: &mut [AnalogSample]) -> Batch {
         self.adc.read(out)
     }
+    fn force_lowpass(&self) -> tribo_wire::LowPass {
+        tribo_wire::LowPass::butterworth(2, self.cfg.force_cutoff_hz as f32)
+    }
 }
 
 impl RunFlash for SimHardware {

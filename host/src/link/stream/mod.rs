@@ -58,6 +58,7 @@ fn run_of(msg: &DeviceMsg) -> Option<u32> {
         DeviceMsg::Packed(p) => p.run_id,
         DeviceMsg::Gap(g) => g.run_id,
         DeviceMsg::EcrRange(e) => e.run_id,
+        DeviceMsg::Chain(c) => c.run_id,
         DeviceMsg::Result(r) => r.run_id,
         DeviceMsg::RunEnded(e) => e.run_id,
         _ => return None,
@@ -140,6 +141,7 @@ impl Streamer<'_, '_> {
             | DeviceMsg::Packed(_)
             | DeviceMsg::Gap(_)
             | DeviceMsg::EcrRange(_)
+            | DeviceMsg::Chain(_)
             | DeviceMsg::Result(_)
             | DeviceMsg::RunEnded(_) => return self.file_run_frame(f),
             DeviceMsg::Error(e) if e.about_seq.is_none() => {

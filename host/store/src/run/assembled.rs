@@ -10,6 +10,7 @@ pub(super) enum Slot {
     Block(u32),
     Gap(u32),
     Ecr(u32),
+    Chain,
     Result,
     End,
 }
@@ -22,6 +23,7 @@ impl Slot {
             DeviceMsg::Packed(p) => Slot::Block(p.block),
             DeviceMsg::Gap(g) => Slot::Gap(g.first_sample),
             DeviceMsg::EcrRange(e) => Slot::Ecr(e.first_sample),
+            DeviceMsg::Chain(_) => Slot::Chain,
             DeviceMsg::Result(_) => Slot::Result,
             DeviceMsg::RunEnded(_) => Slot::End,
             _ => return None,
@@ -34,6 +36,7 @@ impl Slot {
             Slot::Block(k) => format!("its block {k}"),
             Slot::Gap(s) => format!("its acquisition gap at sample {s}"),
             Slot::Ecr(s) => format!("its ECR range change at sample {s}"),
+            Slot::Chain => "its analog chain".into(),
             Slot::Result => "its on-board result".into(),
             Slot::End => "its end frame".into(),
         }
@@ -69,6 +72,10 @@ pub(super) struct Assembled {
     pub(super) gaps: BTreeMap<u32, Gap>,
     /// ECR range changes the rig reported, by first sample.
     pub(super) ecr_changes: BTreeMap<u32, EcrRangeChange>,
+    /// The analog chain the rig said the run's channels went through (protocol v3 on).
+    pub(super) chain: Option<AnalogChain>,
+    /// The protocol the log says the rig spoke (`None`: not recorded).
+    pub(super) protocol: Option<u16>,
     /// Every run frame held, as received (sequence number, bytes), by its place in the run.
     pub(super) raw: BTreeMap<Slot, (u32, Vec<u8>)>,
     /// Some sample block came packed (protocol v2 firmware, which records each ECR range change).
@@ -120,6 +127,7 @@ impl Assembled {
             DeviceMsg::EcrRange(e) => {
                 self.ecr_changes.insert(e.first_sample, e);
             }
+            DeviceMsg::Chain(c) => self.chain = Some(c),
             _ => {}
         }
         self.raw.insert(slot, (seq, raw.to_vec()));
@@ -131,12 +139,16 @@ impl Assembled {
         match msg {
             DeviceMsg::Gap(g) => self.gaps.get(&g.first_sample) == Some(g),
             DeviceMsg::EcrRange(e) => self.ecr_changes.get(&e.first_sample) == Some(e),
+            DeviceMsg::Chain(c) => self.chain.as_ref() == Some(c),
             _ => false,
         }
     }
 
     pub(super) fn from_records(records: &[Vec<u8>], protocol: Option<u16>) -> Assembled {
-        let mut a = Assembled::default();
+        let mut a = Assembled {
+            protocol,
+            ..Assembled::default()
+        };
         for r in records {
             match decode_record(protocol, r) {
                 Some(f) => {
@@ -170,7 +182,9 @@ impl Assembled {
         // A packed run (protocol v2) opens with the range its first sample was converted on: a
         // change at sample 0, sent right after the header. Without it, the first range is a guess
         // (the soak caught a lossy line that lost it while every block agreed with the guess).
-        if self.packed && !self.ecr_changes.contains_key(&0) {
+        // A protocol v3 rig says the run's analog chain right after the header, as well.
+        let chain_lost = self.chain.is_none() && self.protocol.is_some_and(|p| p >= 3);
+        if self.packed && (!self.ecr_changes.contains_key(&0) || chain_lost) {
             if let Some(&first) = self.blocks.keys().next() {
                 holes.push(first);
             }

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use tribo_physics::record::Units;
 use tribo_physics::{Record, Rig};
 use tribo_wire::{
-    Channel, Configure, DeviceMsg, EcrRangeChange, EndReason, Gap, OnboardResult, RunEnd,
-    RunHeader, SampleBlock, SampleClock,
+    AnalogChain, Channel, Configure, DeviceMsg, EcrRangeChange, EndReason, Gap, OnboardResult,
+    RunEnd, RunHeader, SampleBlock, SampleClock,
 };
 
 pub const LOG_FILE: &str = "frames.log";
@@ -296,6 +296,12 @@ impl Run {
         self.data.ecr_changes.values()
     }
 
+    /// The analog chain the rig said the run's channels went through (`None`: a run recorded
+    /// before the rig said, or whose chain frame is not held).
+    pub fn chain(&self) -> Option<&AnalogChain> {
+        self.data.chain.as_ref()
+    }
+
     /// The sample clock of the run: the header's (the rate the timer really produced), or, for a
     /// run recorded before the rig reported one, exactly the configured rate.
     pub fn clock(&self) -> SampleClock {
@@ -456,6 +462,14 @@ impl Run {
         })?;
         let mut r = Record::new(s.t, s.x, s.v, Some(rig), Units::Si);
         r.apparatus = apparatus;
+        // The record states the force channel's low-pass when the rig said it and it is the
+        // 2-pole Butterworth a record's `force_cutoff_hz` means; otherwise it is left unstated, and
+        // an analysis fits it.
+        r.force_cutoff_hz = self
+            .chain()
+            .map(|c| c.force_lowpass)
+            .filter(|lp| lp.poles == 2 && lp.cutoff_hz.is_finite() && lp.cutoff_hz > 0.0)
+            .map(|lp| clean(lp.cutoff_hz));
         r.ft = s.force;
         r.temp = s.temp_c;
         r.ecr = s.ecr_ohm;
