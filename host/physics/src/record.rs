@@ -622,3 +622,33 @@ pub fn fill_missing(v: &mut [f64]) -> bool {
     }
     true
 }
+
+#[cfg(test)]
+mod force_zero_tests {
+    use super::*;
+
+    #[test]
+    fn the_force_zero_is_read_written_and_checked() {
+        let mut text = String::from(
+            "# mass_kg=0.04\n# stiffness_n_per_m=1150\n# load_n=0.3\n# force_zero_n=-0.0012\n\
+             t_s,x_m,v_m_s,ft_n\n",
+        );
+        for i in 0..16 {
+            let t = i as f64 * 1e-3;
+            let (x, v) = (1e-4 * (170.0 * t).cos(), -0.017 * (170.0 * t).sin());
+            text.push_str(&format!("{t},{x},{v},0.006\n"));
+        }
+        let text = text.as_str();
+        let r = Record::from_csv_str(text).unwrap();
+        assert_eq!(r.force_zero_n, Some(-0.0012));
+        let back = Record::from_csv_str(&r.to_csv_string()).unwrap();
+        assert_eq!(back.force_zero_n, Some(-0.0012));
+        // Not stated: None; a bad value: an error at its line.
+        let r = Record::from_csv_str(&text.replace("# force_zero_n=-0.0012\n", "")).unwrap();
+        assert_eq!(r.force_zero_n, None);
+        let e = Record::from_csv_str(&text.replace("-0.0012", "zero")).unwrap_err();
+        assert!(e.to_string().contains("force_zero_n"), "{e}");
+        let e = Record::from_csv_str(&text.replace("-0.0012", "inf")).unwrap_err();
+        assert!(e.to_string().contains("force_zero_n"), "{e}");
+    }
+}

@@ -34,8 +34,8 @@ between measured and fitted envelopes. Both are relative to the initial amplitud
   adequate       converged, gap ≤ 1.5 × noise floor: the law describes the record
   inadequate     converged, gap above that: the law misses something (try `tribo explain`)
   not-converged  the iteration limit came first: the constants are not trustworthy (status 3)
-  drifting       converged, but the force channel shows μ0 drifting over the motion (its trend
-                 beyond 4σ and 1 %, on the `drift` line): never adequate (try `tribo explain`)
+  drifting       converged and at the noise floor, but the force channel shows μ0 drifting over
+                 the motion (its trend beyond 4σ and 1 %, on the `drift` line): never adequate
   not-analysable no oscillation (a pin that never moves is named so), too few half cycles, a
                  saturated or stuck channel or a non-finite sample: nothing is fitted, no
                  constant printed (status 3)

@@ -73,7 +73,8 @@ impl Mu0Trend {
             self.span_s,
             self.z,
             if self.significant {
-                ": a drift (running-in or thermal)"
+                ": a drift (running-in or thermal), unless the law misses how the force follows \
+                 the speed"
             } else {
                 ", within the noise"
             }

@@ -432,8 +432,10 @@ pub fn fit(rec: &Record, spec: LawSpec, opts: &FitOptions) -> Result<FitResult, 
     r.p_si = rig.p_of_mu(&r.mu);
     r.p_si_se = rig.p_of_mu(&r.mu_se);
     r.mu0_trend = mu0_trend(rec, &r);
-    if r.verdict != FitVerdict::NotConverged && r.mu0_trend.as_ref().is_some_and(|t| t.significant)
-    {
+    // Only an adequate fit turns *drifting*: an inadequate one already says the law misses
+    // something, and a law without the force's velocity dependence (a Coulomb–viscous fit of a
+    // quadratic contact) leaves a trend in the force channel that is no drift.
+    if r.verdict == FitVerdict::Adequate && r.mu0_trend.as_ref().is_some_and(|t| t.significant) {
         r.verdict = FitVerdict::Drifting;
     }
     Ok(r)
