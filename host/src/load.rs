@@ -788,6 +788,7 @@ fn slice(rec: &Record, r: Range<usize>) -> Record {
     out.temp = rec.temp.as_ref().map(cut);
     out.ecr = rec.ecr.as_ref().map(cut);
     out.force_cutoff_hz = rec.force_cutoff_hz;
+    out.force_zero_n = rec.force_zero_n;
     out
 }
 

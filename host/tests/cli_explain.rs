@@ -130,8 +130,24 @@ fn an_unstated_lowpass_is_fitted_and_printed() {
         "{text}"
     );
     assert!(text.contains("start_scale = ") && text.contains("apparatus_mu1 = "));
+    // The other nuisances of the chain, each with its ±: the displacement centre, the force
+    // channel's gain, and its zero (not stated: fitted, and said to be inseparable from a
+    // direction asymmetry).
+    assert!(text.contains("displacement centre = "), "{text}");
+    assert!(text.contains("force channel gain = "), "{text}");
+    assert!(
+        text.contains("force channel zero = ") && text.contains("cannot be told from it"),
+        "{text}"
+    );
     let out = tribo(&["explain", rec.to_str().unwrap(), "--json"]);
     let v: Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let c = &v["measurement_chain"];
+    assert!(c["displacement_center_m_se"].as_f64().unwrap() > 0.0, "{c}");
+    assert!(c["force_gain_se"].as_f64().unwrap() > 0.0, "{c}");
+    assert_eq!(c["force_gain_source"], "fitted");
+    assert_eq!(c["force_zero_source"], "fitted");
+    assert!(c["force_zero_n_se"].as_f64().unwrap() > 0.0, "{c}");
+    assert_eq!(c["force_zero_significant"], false);
     assert_eq!(v["force_cutoff_source"], "fitted");
     assert_eq!(v["force_lowpass"]["source"], "fitted");
     // At its bound (below a quarter of a sample): no cut-off, no linear ±, a profile bound.

@@ -143,6 +143,13 @@ pub struct Explanation {
     /// The force channel's low-pass in full, with its ± when fitted (`null` without a force
     /// channel).
     pub force_lowpass: Option<ForceLowpass>,
+    /// The other nuisances of the measurement chain (displacement centre, force gain and zero),
+    /// fitted with the final model, with their ± and what each can and cannot be told from.
+    pub measurement_chain: Option<MeasurementChain>,
+    /// The force channel's trend of μ0 over the motion against the final model's law
+    /// ([`tribo_physics::identify::mu0_trend_of`], `tribo fit`'s drift check); a significant one
+    /// is never called base-adequate (`null` without a force channel or a Coulomb level).
+    pub mu0_trend: Option<tribo_physics::identify::Mu0Trend>,
     /// Candidate scores per round.
     pub rounds: Vec<Vec<Candidate>>,
     /// The base model.
@@ -256,6 +263,161 @@ impl ForceLowpass {
     }
 }
 
+/// The name, in [`Explanation::ambiguous`], of a constant offset of the force channel that the
+/// record cannot tell from a direction asymmetry (its zero is not stated).
+pub const FORCE_ZERO_OFFSET: &str = "force-zero-offset";
+
+/// The measurement chain's nuisances of the final model ([`model::chain`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct MeasurementChain {
+    /// Centre of the motion relative to the vibrometer's zero (m; y for a dimensionless record):
+    /// the vibrometer's zero offset minus the shift a direction asymmetry gives the equilibrium.
+    pub displacement_center_m: f64,
+    /// Its standard error.
+    pub displacement_center_m_se: f64,
+    /// Force channel gain (measured / true), `null` without a force channel.
+    pub force_gain: Option<f64>,
+    /// Its standard error (`null` when held).
+    pub force_gain_se: Option<f64>,
+    /// `fitted`, or `held` (a law without a Coulomb level: the gain cannot be told from the
+    /// apparatus' share of the damping).
+    pub force_gain_source: Option<String>,
+    /// What the force channel reads at zero force (N): stated, or fitted (then it is the zero
+    /// offset plus any direction asymmetry `δ N`, which cannot be told apart).
+    pub force_zero_n: Option<f64>,
+    /// Its standard error when fitted.
+    pub force_zero_n_se: Option<f64>,
+    /// `record`, `option` or `fitted`.
+    pub force_zero_source: Option<String>,
+    /// When fitted: the evidence for a non-zero offset (χ²₁ units, as the effects').
+    pub force_zero_evidence: Option<f64>,
+    /// When fitted: whether that evidence passes an effect's threshold. The record then has a
+    /// direction asymmetry or a zero offset, and says nothing of which (the conclusion is
+    /// `ambiguous`).
+    pub force_zero_significant: bool,
+    /// The same offset as a direction asymmetry would be: (μ0 forward − μ0 backward) / μ0.
+    pub force_zero_as_asymmetry: Option<f64>,
+}
+
+impl MeasurementChain {
+    /// The nuisances of the final model `m`.
+    pub fn of(
+        data: &Prepared,
+        m: &FittedModel,
+        zero_source: &str,
+        opts: &ExplainOptions,
+    ) -> Option<MeasurementChain> {
+        let sim = simulate_spec(data, &m.spec, &m.p).ok()?;
+        let cf = model::chain::fit(data, &sim, data.force_zero);
+        let held = lowpass_at_bound(data, &m.spec, &m.p)
+            .then(|| m.spec.lowpass_index())
+            .flatten();
+        let [c_se, g_se, z_se] = model::chain::nuisance_standard_errors(data, &m.spec, &m.p, held);
+        let to_m = data.rig.load_n / data.rig.stiffness_n_per_m;
+        let load = data.rig.load_n;
+        let has_force = data.has_force();
+        let zero_fitted = has_force && data.force_zero.is_none();
+        let (mut ev, mut significant) = (None, false);
+        if zero_fitted {
+            // The offset held at 0 (the gain refitted), against the fitted one, in the units of
+            // an effect's evidence.
+            let c0 = model::chain::fit(data, &sim, Some(0.0));
+            let ss = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+            let n = cf.force.len();
+            if n > 0 {
+                let n_eff = effective_count(&cf.force).max(1.0);
+                let var = (ss(&cf.force) / n as f64).max(data.force_floor().powi(2));
+                let e = (ss(&c0.force) - ss(&cf.force)) / (var * n as f64 / n_eff);
+                significant = e >= opts.threshold(1);
+                ev = Some(e);
+            }
+        }
+        let mu0 = m.spec.mu(&m.p).first().copied().unwrap_or(f64::NAN);
+        let finite = |v: f64| v.is_finite().then_some(v);
+        Some(MeasurementChain {
+            displacement_center_m: cf.center * to_m,
+            displacement_center_m_se: c_se * to_m,
+            force_gain: has_force.then_some(cf.gain),
+            force_gain_se: if has_force { finite(g_se) } else { None },
+            force_gain_source: has_force
+                .then(|| if sim.gain_free { "fitted" } else { "held" }.to_string()),
+            force_zero_n: has_force.then_some(cf.zero * load),
+            force_zero_n_se: if zero_fitted {
+                finite(z_se * load)
+            } else {
+                None
+            },
+            force_zero_source: has_force.then(|| zero_source.to_string()),
+            force_zero_evidence: ev,
+            force_zero_significant: significant,
+            force_zero_as_asymmetry: (zero_fitted && mu0 != 0.0)
+                .then(|| 2.0 * cf.zero / (cf.gain * mu0)),
+        })
+    }
+
+    /// Lines of text (indented by the caller).
+    pub fn lines(&self) -> Vec<String> {
+        let mut out = vec![format!(
+            "displacement centre = {} µm (the vibrometer's zero offset, less the equilibrium \
+             shift of any direction asymmetry; fitted)",
+            pm_fixed(
+                1e6 * self.displacement_center_m,
+                1e6 * self.displacement_center_m_se
+            )
+        )];
+        if let (Some(g), Some(src)) = (self.force_gain, &self.force_gain_source) {
+            out.push(if src == "fitted" {
+                format!(
+                    "force channel gain = {} (measured / true, against the envelope's Coulomb \
+                     level; fitted)",
+                    pm_fixed(g, self.force_gain_se.unwrap_or(f64::NAN))
+                )
+            } else {
+                format!(
+                    "force channel gain held at {g} (a law without a Coulomb level cannot tell \
+                     it from the apparatus' share of the damping)"
+                )
+            });
+        }
+        if let (Some(z), Some(src)) = (self.force_zero_n, &self.force_zero_source) {
+            out.push(match src.as_str() {
+                "fitted" => format!(
+                    "force channel zero = {} N (fitted: the record does not state it, so it \
+                     includes any direction asymmetry of μ0, which cannot be told from it; as an \
+                     asymmetry it would be {:+.1} % of μ0; evidence {:.1}{})",
+                    pm_fixed(z, self.force_zero_n_se.unwrap_or(f64::NAN)),
+                    100.0 * self.force_zero_as_asymmetry.unwrap_or(f64::NAN),
+                    self.force_zero_evidence.unwrap_or(f64::NAN),
+                    if self.force_zero_significant {
+                        ", significant"
+                    } else {
+                        ", not significant"
+                    }
+                ),
+                src => format!(
+                    "force channel zero = {z} N (stated by the {})",
+                    if src == "option" {
+                        "--force-zero-n option"
+                    } else {
+                        "record"
+                    }
+                ),
+            });
+        }
+        out
+    }
+}
+
+/// `v ± se` in fixed notation with the standard error's second significant digit.
+fn pm_fixed(v: f64, se: f64) -> String {
+    if se.is_finite() && se > 0.0 {
+        let d = (1 - se.log10().floor() as i32).clamp(0, 12) as usize;
+        format!("{v:.d$} ± {se:.d$}")
+    } else {
+        format!("{v:.4e} ± ?")
+    }
+}
+
 pub(super) fn pm(v: f64, se: f64) -> String {
     if se.is_finite() && se > 0.0 {
         format!("{v:.4e} ± {se:.1e}")
@@ -296,6 +458,24 @@ impl Explanation {
                 format!("missing: {}; {remains}", self.missing_effects.join(" + "))
             }
             Conclusion::Unexplained => remains,
+            Conclusion::Ambiguous if self.ambiguous.iter().any(|a| a == FORCE_ZERO_OFFSET) => {
+                let named = if self.missing_effects.is_empty() {
+                    String::new()
+                } else {
+                    format!("missing: {}; ", self.missing_effects.join(" + "))
+                };
+                let c = self.measurement_chain.as_ref();
+                format!(
+                    "{named}unresolved: the force channel stands {:.2e} N off in both sliding \
+                     directions: a direction asymmetry of μ0 ((forward − backward) / μ0 = \
+                     {:+.1} %) or a zero offset of the force channel; the record does not state \
+                     the channel's zero (`# force_zero_n=…`), so neither is named",
+                    c.and_then(|c| c.force_zero_n).unwrap_or(f64::NAN),
+                    100.0
+                        * c.and_then(|c| c.force_zero_as_asymmetry)
+                            .unwrap_or(f64::NAN)
+                )
+            }
             Conclusion::Ambiguous => format!(
                 "unresolved: {} explain the remainder about equally well; neither is named",
                 self.ambiguous.join(" and ")
@@ -347,6 +527,11 @@ impl Explanation {
         }
         if let Some(l) = &self.force_lowpass {
             let _ = writeln!(s, "    force channel low-pass: {}", l.text());
+        }
+        if let Some(c) = &self.measurement_chain {
+            for l in c.lines() {
+                let _ = writeln!(s, "    {l}");
+            }
         }
         for st in &self.steps {
             let _ = writeln!(

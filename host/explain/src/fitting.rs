@@ -249,6 +249,12 @@ pub fn effect_params(data: &Prepared, spec: &Spec, p: &[f64], e: Effect) -> BTre
             m.insert("delay_tau".into(), q[0]);
             m.insert("delay_s".into(), rig.t_of_tau(q[0]));
         }
+        Effect::DirectionAsymmetry => {
+            // δ = (μ0_forward − μ0_backward) / 2; the relative one is added by the caller (it
+            // divides by μ0, not a linear map of p).
+            m.insert("dmu0_forward_minus_backward".into(), 2.0 * q[0]);
+            m.insert("force_offset_n".into(), q[0] * rig.load_n);
+        }
         Effect::RunningIn => {
             let span_s = rig.t_of_tau(data.tau.last().copied().unwrap_or(0.0).max(1e-12));
             m.insert("dmu0_over_motion".into(), q[0]);
@@ -302,6 +308,12 @@ pub(super) fn starts_for(
             }
         }
         Effect::ThermalDrift => vec![with(&[0.0])],
+        // The force channel's mean misfit of the current model (its zero held at the stated one).
+        Effect::DirectionAsymmetry => {
+            let n = cur.force_resid.len().max(1) as f64;
+            let d = -cur.force_resid.iter().sum::<f64>() / n * data.a0;
+            vec![with(&[d]), with(&[0.0])]
+        }
         // A drift of either sign, from a level that stays the average one.
         Effect::RunningIn => [0.0, 0.1, -0.1]
             .into_iter()

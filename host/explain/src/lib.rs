@@ -97,6 +97,10 @@ pub struct ExplainOptions {
     /// (`None`: the record's `# force_cutoff_hz`, or, if it says nothing, fitted: a parameter of
     /// every model, estimated with its ± — [`Explanation::force_lowpass`]).
     pub force_cutoff_hz: Option<f64>,
+    /// What the force channel reads at zero tangential force (N), overriding the record's
+    /// (`None`: the record's `# force_zero_n`, or, if it says nothing, a fitted nuisance that a
+    /// direction asymmetry of μ0 cannot be told from — [`model::chain`]).
+    pub force_zero_n: Option<f64>,
 }
 
 impl Default for ExplainOptions {
@@ -112,6 +116,7 @@ impl Default for ExplainOptions {
             max_force_points: 3000,
             max_iter: 15,
             force_cutoff_hz: None,
+            force_zero_n: None,
         }
     }
 }
@@ -155,6 +160,18 @@ pub fn explain_with_progress(
     progress: Progress,
 ) -> Result<(Explanation, Prepared), ExplainError> {
     let powers = base_powers(opts.base)?;
+    let mut data = data.clone();
+    let zero_source = if !data.has_force() {
+        "none"
+    } else if let Some(z) = opts.force_zero_n {
+        data.force_zero = Some(z / data.rig.load_n);
+        "option"
+    } else if data.force_zero.is_some() {
+        "record"
+    } else {
+        "fitted"
+    };
+    let data = data;
     let mut spec = Spec::base(powers.clone());
     spec.apparatus = data.has_force();
     // The force channel's low-pass, when neither the record nor the caller states it, is a
@@ -193,7 +210,6 @@ pub fn explain_with_progress(
     if spec.lowpass {
         starts.push(spec.start_with(&base_fit.params, 0.2 * data.dtau));
     }
-    let data = data.clone();
     let base = fit_spec(&data, &spec, &starts, opts.max_iter).ok_or_else(|| {
         ExplainError::BaseLaw("the base law could not be fitted to the record".into())
     })?;
@@ -217,6 +233,9 @@ pub fn explain_with_progress(
             .iter()
             .copied()
             .filter(|&e| cur.spec.can_add(e, data.has_force(), data.has_temp()))
+            // A direction asymmetry is a constant force offset with the centre moved: without the
+            // force channel's zero it is the zero offsets themselves (fitted in every model).
+            .filter(|&e| e != Effect::DirectionAsymmetry || data.force_zero.is_some())
             .filter(|&e| !settled || (e == Effect::ThermalDrift && diagnostics.temperature_moves()))
             // A Coulomb level that moves while the plate's temperature moves is read as thermal
             // drift first; running-in is what a drift in time leaves beside it.
@@ -294,16 +313,27 @@ pub fn explain_with_progress(
         let m = settle(&data, m, e, opts.max_iter);
         let ev = Evidence::of(&data, &cur, &m, opts);
         let m = with_standard_errors(&data, m);
+        let mut params = effect_params(&data, &m.spec, &m.p, e);
+        let se = standard_errors_of(&data, &m);
+        let mut params_se = effect_params(&data, &m.spec, &se, e);
+        if e == Effect::DirectionAsymmetry {
+            // (μ0f − μ0b) / μ0: relative to the mean Coulomb level (its own ± is far smaller).
+            let mu0 = m.spec.mu(&m.p).first().copied().unwrap_or(f64::NAN);
+            if let (Some(d), Some(d_se)) = (
+                params.get("dmu0_forward_minus_backward").copied(),
+                params_se.get("dmu0_forward_minus_backward").copied(),
+            ) {
+                params.insert("asymmetry_relative".into(), d / mu0);
+                params_se.insert("asymmetry_relative".into(), d_se / mu0.abs());
+            }
+        }
         steps.push(Step {
             effect: e.name().into(),
             gap_before: cur.gap,
             gap_after: m.gap,
             evidence: ev,
-            params: effect_params(&data, &m.spec, &m.p, e),
-            params_se: {
-                let se = standard_errors_of(&data, &m);
-                effect_params(&data, &m.spec, &se, e)
-            },
+            params,
+            params_se,
         });
         cur = m;
     }
@@ -314,9 +344,31 @@ pub fn explain_with_progress(
     } else {
         0.0
     };
+    let chain = MeasurementChain::of(&data, &cur, zero_source, opts);
+    if ambiguous.is_empty() && chain.as_ref().is_some_and(|c| c.force_zero_significant) {
+        ambiguous = vec![
+            Effect::DirectionAsymmetry.name().to_string(),
+            FORCE_ZERO_OFFSET.to_string(),
+        ];
+    }
+    // The force channel's trend of μ0 over the motion (`tribo fit`'s drift check, on the same
+    // samples, against the final model's law): a record whose μ0 drifts is never base-adequate.
+    let mu0_trend = data.f_meas.as_ref().and_then(|f| {
+        let mu = cur.spec.mu(&cur.p);
+        tribo_physics::identify::mu0_trend_of(
+            &data.tau,
+            &data.ydot,
+            f,
+            &mu,
+            0..data.tau.len(),
+            data.force_cutoff_hz.map(|fc| (fc, data.rate_hz)),
+            1.0 / data.rig.omega(),
+        )
+    });
+    let drifting = mu0_trend.as_ref().is_some_and(|t| t.significant);
     let conclusion = if !ambiguous.is_empty() {
         Conclusion::Ambiguous
-    } else if cur.adequate(&data) {
+    } else if cur.adequate(&data) && !(drifting && steps.is_empty()) {
         if steps.is_empty() {
             Conclusion::BaseAdequate
         } else {
@@ -342,13 +394,19 @@ pub fn explain_with_progress(
         disagreement: if conclusion == Conclusion::BaseAdequate {
             Vec::new()
         } else {
-            diag::locate(&data, &cur)
+            let mut d = diag::locate(&data, &cur);
+            if let Some(t) = mu0_trend.as_ref().filter(|t| t.significant) {
+                d.push(format!("the force channel's level: {}", t.text()));
+            }
+            d
         },
+        mu0_trend,
         steps,
         ambiguous,
         force_cutoff_hz: lowpass.as_ref().and_then(|l| l.cutoff_hz),
         force_cutoff_source: source.into(),
         force_lowpass: lowpass,
+        measurement_chain: chain,
         rounds,
         base_fit,
         base_model: base,

@@ -193,20 +193,27 @@ pub fn cases(seed: u64) -> Vec<Case> {
             truth: vec![],
         },
         Case {
-            name: "direction-dependent friction (outside the vocabulary)",
-            rec: noisy(
+            name: "direction asymmetry μ0 backward 0.8 μ0, force zero stated",
+            rec: zero_stated(noisy(
                 &Contact {
                     mu0_backward: Some(0.8 * MU0),
                     ..cv()
                 },
                 11,
-            ),
+            )),
             base: LawSpec::CoulombViscous,
-            want: vec![],
-            want_unexplained: true,
-            truth: vec![],
+            want: vec!["direction-asymmetry"],
+            want_unexplained: false,
+            truth: vec![("dmu0_forward_minus_backward", 0.2 * MU0)],
         },
     ]
+}
+
+/// The record with its force channel's zero stated as the rig's records state it (`# force_zero_n=0`):
+/// without it a direction asymmetry cannot be told from a zero offset of the force channel.
+pub fn zero_stated(mut rec: Record) -> Record {
+    rec.force_zero_n = Some(0.0);
+    rec
 }
 
 pub fn run(c: &Case) -> Explanation {
@@ -441,9 +448,11 @@ fn weaker_effects_are_missed_rather_than_misnamed() {
 }
 
 /// At every bench noise level (×1 to ×50 the simulator's default vibrometer noise): a clean record
-/// gets no name, an effect outside the vocabulary is "unexplained" and located (the force misfit
-/// differs between the sliding directions), and a 2 ms frictional lag and a 1 ms sensor lag (seen
-/// by the force channel, whatever the vibrometer's noise) are named alone.
+/// gets no name; a 30 % direction asymmetry of μ0 with the force channel's zero stated is named;
+/// the same record with the asymmetry taken out of the vocabulary (an effect outside it) is
+/// "unexplained" and located (the force misfit differs between the sliding directions); and a
+/// 2 ms frictional lag and a 1 ms sensor lag (seen by the force channel, whatever the vibrometer's
+/// noise) are named alone.
 #[test]
 fn no_false_name_and_the_force_channel_effects_at_every_noise_level() {
     use tribo_physics::bench::NOISE_LEVELS;
@@ -463,8 +472,8 @@ fn no_false_name_and_the_force_channel_effects_at_every_noise_level() {
                 "base-adequate",
             ),
             (
-                "direction-dependent μ0 (outside)",
-                record(
+                "direction asymmetry 30 %",
+                zero_stated(record(
                     &Contact {
                         mu0_backward: Some(0.7 * MU0),
                         ..cv()
@@ -472,7 +481,20 @@ fn no_false_name_and_the_force_channel_effects_at_every_noise_level() {
                     0.3,
                     1.3,
                     Some(&chain(0.0, 2)),
-                ),
+                )),
+                "direction-asymmetry",
+            ),
+            (
+                "direction asymmetry 30 %, not in the vocabulary (outside)",
+                zero_stated(record(
+                    &Contact {
+                        mu0_backward: Some(0.7 * MU0),
+                        ..cv()
+                    },
+                    0.3,
+                    1.3,
+                    Some(&chain(0.0, 2)),
+                )),
                 "unexplained",
             ),
             (
@@ -495,7 +517,17 @@ fn no_false_name_and_the_force_channel_effects_at_every_noise_level() {
             ),
         ];
         for (name, rec, want) in cases {
-            let e = explain(&rec, &ExplainOptions::default()).unwrap();
+            // The effect outside the vocabulary: the asymmetry with its name taken out.
+            let opts = ExplainOptions {
+                candidates: tribo_explain::Effect::ALL
+                    .into_iter()
+                    .filter(|&e| {
+                        want != "unexplained" || e != tribo_explain::Effect::DirectionAsymmetry
+                    })
+                    .collect(),
+                ..ExplainOptions::default()
+            };
+            let e = explain(&rec, &opts).unwrap();
             let got = if e.missing_effects.is_empty() {
                 e.conclusion.name().to_string()
             } else {

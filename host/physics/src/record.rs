@@ -5,7 +5,8 @@
 //!   `# stiffness_n_per_m=…`, `# load_n=…`.
 //! - Dimensionless CSV: header `tau,y,ydot` (the rig is [`Rig::UNIT`]).
 //! - Header keys (`# key=value`, each at most once): `mass_kg`, `stiffness_n_per_m`, `load_n` (all
-//!   three or none), and `force_cutoff_hz` (the force channel's low-pass, when it has one).
+//!   three or none), `force_cutoff_hz` (the force channel's low-pass, when it has one) and
+//!   `force_zero_n` (what the force channel reads at zero tangential force, when the rig zeroed it).
 //! - Runs recorded by `tribo` are folders, read by the `tribo` crate; [`Record::load`] refuses them
 //!   with a clear error.
 
@@ -48,6 +49,10 @@ pub struct Record {
     /// Low-pass cut-off of the force channel (the charge amplifier's, Hz), when the record says
     /// (`# force_cutoff_hz=300`); `None` = not stated.
     pub force_cutoff_hz: Option<f64>,
+    /// What the force channel reads at zero tangential force (N), when the record says
+    /// (`# force_zero_n=0`, the channel zeroed with the contact unloaded); `None` = not stated.
+    /// Without it a constant force offset cannot be told from a direction asymmetry of μ0.
+    pub force_zero_n: Option<f64>,
     /// The apparatus alone (`# load_n=0`: no contact, a calibration run). Its friction
     /// coefficients are undefined; only the blades' own damping μ_a means something. `rig.load_n`
     /// then holds a token load ([`Record::apparatus_token_load`]) so that the dimensionless form
@@ -147,7 +152,13 @@ fn at<T>(line: usize, col: usize, msg: impl std::fmt::Display) -> Result<T, Reco
 }
 
 /// The header keys a record may give (`# key=value` comment lines).
-pub const HEADER_KEYS: [&str; 4] = ["mass_kg", "stiffness_n_per_m", "load_n", "force_cutoff_hz"];
+pub const HEADER_KEYS: [&str; 5] = [
+    "mass_kg",
+    "stiffness_n_per_m",
+    "load_n",
+    "force_cutoff_hz",
+    "force_zero_n",
+];
 
 /// Line and column (from 1, columns in characters) of byte `offset` of `text`.
 fn line_col(text: &[u8], offset: usize) -> (usize, usize) {
@@ -174,6 +185,7 @@ impl Record {
             rig,
             units,
             force_cutoff_hz: None,
+            force_zero_n: None,
             apparatus: false,
             rig_partial: [None; 3],
         }
@@ -276,6 +288,11 @@ impl Record {
                 return err(format!("force_cutoff_hz must be > 0, got {fc}"));
             }
         }
+        if let Some(z) = self.force_zero_n {
+            if !z.is_finite() {
+                return err(format!("force_zero_n must be finite, got {z}"));
+            }
+        }
         Ok(())
     }
 
@@ -327,6 +344,7 @@ impl Record {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut rig_vals: [Option<f64>; 3] = [None; 3];
         let mut force_cutoff_hz: Option<f64> = None;
+        let mut force_zero_n: Option<f64> = None;
         // Every `# key=value` seen: key → line.
         let mut keys: Vec<(String, usize)> = Vec::new();
         let mut header: Option<(Vec<String>, usize)> = None;
@@ -365,6 +383,7 @@ impl Record {
                     "stiffness_n_per_m" => Some(1),
                     "load_n" => Some(2),
                     "force_cutoff_hz" => Some(3),
+                    "force_zero_n" => Some(4),
                     _ => None,
                 };
                 if let Some(i) = slot {
@@ -376,10 +395,10 @@ impl Record {
                             format!("bad value for {key}: {:?} (a number)", v.trim()),
                         )
                     })?;
-                    if i < 3 {
-                        rig_vals[i] = Some(val);
-                    } else {
-                        force_cutoff_hz = Some(val);
+                    match i {
+                        0..=2 => rig_vals[i] = Some(val),
+                        3 => force_cutoff_hz = Some(val),
+                        _ => force_zero_n = Some(val),
                     }
                 }
                 continue;
@@ -484,6 +503,7 @@ impl Record {
                 rig,
                 units: Units::Si,
                 force_cutoff_hz,
+                force_zero_n,
                 apparatus,
                 rig_partial: if rig.is_none() { rig_vals } else { [None; 3] },
             }
@@ -530,6 +550,9 @@ impl Record {
                 }
                 if let (Some(fc), Some(_)) = (self.force_cutoff_hz, &self.ft) {
                     let _ = writeln!(s, "# force_cutoff_hz={fc}");
+                }
+                if let (Some(z), Some(_)) = (self.force_zero_n, &self.ft) {
+                    let _ = writeln!(s, "# force_zero_n={z}");
                 }
                 s.push_str("t_s,x_m,v_m_s");
                 let extra: Vec<(&str, &Vec<f64>)> = [
@@ -598,4 +621,34 @@ pub fn fill_missing(v: &mut [f64]) -> bool {
         }
     }
     true
+}
+
+#[cfg(test)]
+mod force_zero_tests {
+    use super::*;
+
+    #[test]
+    fn the_force_zero_is_read_written_and_checked() {
+        let mut text = String::from(
+            "# mass_kg=0.04\n# stiffness_n_per_m=1150\n# load_n=0.3\n# force_zero_n=-0.0012\n\
+             t_s,x_m,v_m_s,ft_n\n",
+        );
+        for i in 0..16 {
+            let t = i as f64 * 1e-3;
+            let (x, v) = (1e-4 * (170.0 * t).cos(), -0.017 * (170.0 * t).sin());
+            text.push_str(&format!("{t},{x},{v},0.006\n"));
+        }
+        let text = text.as_str();
+        let r = Record::from_csv_str(text).unwrap();
+        assert_eq!(r.force_zero_n, Some(-0.0012));
+        let back = Record::from_csv_str(&r.to_csv_string()).unwrap();
+        assert_eq!(back.force_zero_n, Some(-0.0012));
+        // Not stated: None; a bad value: an error at its line.
+        let r = Record::from_csv_str(&text.replace("# force_zero_n=-0.0012\n", "")).unwrap();
+        assert_eq!(r.force_zero_n, None);
+        let e = Record::from_csv_str(&text.replace("-0.0012", "zero")).unwrap_err();
+        assert!(e.to_string().contains("force_zero_n"), "{e}");
+        let e = Record::from_csv_str(&text.replace("-0.0012", "inf")).unwrap_err();
+        assert!(e.to_string().contains("force_zero_n"), "{e}");
+    }
 }

@@ -148,6 +148,7 @@ impl CrossCheck {
             FitVerdict::Adequate,
             FitVerdict::Inadequate,
             FitVerdict::NotConverged,
+            FitVerdict::Drifting,
         ]
         .into_iter()
         .find(|v| host.verdict.as_deref() == Some(v.name()));

@@ -36,6 +36,8 @@ between measured and fitted envelopes. Both are relative to the initial amplitud
   adequate       converged, gap ≤ 1.5 × noise floor: the law describes the record
   inadequate     converged, gap above that: the law misses something (try `tribo explain`)
   not-converged  the iteration limit came first: the constants are not trustworthy (status 3)
+  drifting       converged and at the noise floor, but the force channel shows μ0 drifting over
+                 the motion (its trend beyond 4σ and 1 %, on the `drift` line): never adequate
   not-analysable no oscillation (a pin that never moves is named so), too few half cycles, a
                  saturated or stuck channel or a non-finite sample: nothing is fitted, no
                  constant printed (status 3)
@@ -350,6 +352,9 @@ fn table(record: &str, rig: &RigUsed, r: &FitResult, rec: &Record) -> String {
         r.iterations, r.points, r.n_eff, r.half_cycles
     );
     let _ = writeln!(s, "verdict    {}", r.verdict.sentence());
+    if let Some(t) = &r.mu0_trend {
+        let _ = writeln!(s, "drift      {}", t.text());
+    }
     if r.verdict == FitVerdict::Inadequate {
         let _ = writeln!(
             s,

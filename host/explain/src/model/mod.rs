@@ -16,6 +16,7 @@ use tribo_physics::sensor::{butterworth2, delay};
 use tribo_physics::uncertainty::noise_sigma;
 use tribo_physics::InvalidParameter;
 
+pub mod chain;
 mod lowpass;
 mod simulate;
 mod spec;
@@ -55,6 +56,11 @@ pub struct Prepared {
     pub a0: f64,
     /// Charge-amplifier low-pass applied to simulated force (Hz), if any.
     pub force_cutoff_hz: Option<f64>,
+    /// What the force channel reads at zero tangential force (`F/N`), when the record
+    /// (`# force_zero_n`) or the caller states it. Stated, the force channel's constant offset is
+    /// held there and a direction asymmetry of μ0 can be measured; not stated, the offset is a
+    /// fitted nuisance that a direction asymmetry cannot be told from ([`chain`]).
+    pub force_zero: Option<f64>,
     /// Whether the force channel's low-pass is known (from the record or the caller); if not,
     /// [`crate::explain_prepared`] picks the better of none and [`RIG_FORCE_CUTOFF_HZ`] and says so.
     pub force_cutoff_known: bool,
@@ -274,6 +280,10 @@ impl Prepared {
             temp_seg,
             a0,
             force_cutoff_hz: if si { stated } else { None },
+            force_zero: match (si, rec.ft.is_some(), rec.force_zero_n) {
+                (true, true, Some(z)) => Some(z / rig.load_n),
+                _ => None,
+            },
             force_cutoff_known: !si || stated.is_some() || rec.ft.is_none(),
             env_noise,
             force_noise,

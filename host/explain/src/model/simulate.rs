@@ -13,6 +13,12 @@ pub struct Simulated {
     pub f_meas: Vec<f64>,
     /// The contact's force `F/N` before the channel (no low-pass, no delay), every sample.
     pub f_true: Vec<f64>,
+    /// Direction asymmetry `δ` of the model (0 without it): the simulation is the symmetric
+    /// motion about the shifted centre; the force channel reads `δ` more ([`super::chain`]).
+    pub asym: f64,
+    /// Whether the force channel's gain is a fitted nuisance (a law with a Coulomb level, which
+    /// the envelope measures: without one the gain cannot be told from the viscous split).
+    pub gain_free: bool,
 }
 
 /// Length of the τ segments over which a drifting Coulomb level is held constant (and the
@@ -145,27 +151,20 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
         ydot,
         f_meas: fm,
         f_true: f,
+        asym: spec
+            .effect_params(Effect::DirectionAsymmetry, p)
+            .map_or(0.0, |d| d[0]),
+        gain_free: spec.powers.contains(&0),
     })
 }
 
 /// Residuals of a simulation against the record: `(envelope, force)`, both divided by the
-/// initial amplitude (forces in units of N, i.e. relative to the initial spring force `k x0`).
+/// initial amplitude (forces in units of N, i.e. relative to the initial spring force `k x0`),
+/// with the measurement chain's nuisances (displacement centre, force gain and zero) fitted to
+/// them ([`super::chain`]).
 pub fn residuals(data: &Prepared, sim: &Simulated) -> (Vec<f64>, Vec<f64>) {
-    let env: Vec<f64> = data
-        .env_idx
-        .iter()
-        .zip(&data.a_meas)
-        .map(|(&i, &m)| (sim.y[i].hypot(sim.ydot[i]) - m) / data.a0)
-        .collect();
-    let force = match &data.f_meas {
-        Some(fm) => data
-            .f_idx
-            .iter()
-            .map(|&i| (sim.f_meas[i] - fm[i]) / data.a0)
-            .collect(),
-        None => Vec::new(),
-    };
-    (env, force)
+    let c = super::chain::fit(data, sim, data.force_zero);
+    (c.env, c.force)
 }
 
 /// Root mean square (0 for an empty slice).

@@ -21,11 +21,19 @@ pub enum Effect {
     /// Running-in: the Coulomb level drifting in time at constant temperature, `μ0 + Δ τ/τ_end`
     /// (`Δ` the change over the compared motion, `τ_end` its length).
     RunningIn,
+    /// Direction asymmetry: the Coulomb level differs between the sliding directions, `μ0 + δ`
+    /// forward (y' > 0) and `μ0 − δ` backward. The friction force is `N[μ0 sgn v + δ + …]`: a
+    /// constant force while sliding, which shifts the motion's centre by `−δ` (in y) and offsets
+    /// the force channel by `+δ` — exactly what a displacement zero offset of `−δ` with a force
+    /// zero offset of `+δ` give. It is only a candidate when the force channel's zero is stated
+    /// ([`crate::Prepared::force_zero`]); the displacement centre is a fitted nuisance of every
+    /// model.
+    DirectionAsymmetry,
 }
 
 impl Effect {
     /// Every effect of the vocabulary.
-    pub const ALL: [Effect; 7] = [
+    pub const ALL: [Effect; 8] = [
         Effect::QuadraticVelocity,
         Effect::Stribeck,
         Effect::FrictionalLag,
@@ -33,6 +41,7 @@ impl Effect {
         Effect::ThermalDrift,
         Effect::SensorLag,
         Effect::RunningIn,
+        Effect::DirectionAsymmetry,
     ];
 
     /// JSON name.
@@ -45,6 +54,7 @@ impl Effect {
             Effect::ThermalDrift => "thermal-drift",
             Effect::SensorLag => "sensor-lag",
             Effect::RunningIn => "running-in",
+            Effect::DirectionAsymmetry => "direction-asymmetry",
         }
     }
 
@@ -71,6 +81,7 @@ impl Effect {
             Effect::ThermalDrift => &["dmu0_dT_per_c"],
             Effect::SensorLag => &["delay_tau"],
             Effect::RunningIn => &["dmu0_over_motion"],
+            Effect::DirectionAsymmetry => &["dmu0_half_difference"],
         }
     }
 }
@@ -154,6 +165,7 @@ impl Spec {
             Effect::ThermalDrift => !self.has(e) && has_temp && coulomb,
             Effect::SensorLag => !self.has(e) && has_force,
             Effect::RunningIn => !self.has(e) && coulomb,
+            Effect::DirectionAsymmetry => !self.has(e) && has_force,
         }
     }
 
@@ -210,7 +222,10 @@ impl Spec {
                 Effect::FrictionalLag => (0.01..=3.0).contains(&q[0]),
                 Effect::CubicStiffness => q[0].abs() <= 0.05,
                 Effect::SensorLag => (0.0..=3.0).contains(&q[0]),
-                Effect::QuadraticVelocity | Effect::ThermalDrift | Effect::RunningIn => true,
+                Effect::QuadraticVelocity
+                | Effect::ThermalDrift
+                | Effect::RunningIn
+                | Effect::DirectionAsymmetry => true,
             }
         }) && self.mu(p).iter().all(|m| m.abs() < 1.0)
             && self.start_scale(p).abs() < 0.1
@@ -266,6 +281,7 @@ impl Spec {
                 Effect::ThermalDrift => &[1e-5][..],
                 Effect::SensorLag => &[0.01][..],
                 Effect::RunningIn => &[1e-2][..],
+                Effect::DirectionAsymmetry => &[1e-3][..],
             });
         }
         s

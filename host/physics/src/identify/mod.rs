@@ -47,11 +47,13 @@ pub const ADEQUATE_RATIO: f64 = 1.5;
 pub const NUMERICAL_FLOOR: f64 = 1e-6;
 
 mod classical;
+mod drift;
 mod screen;
 mod solver;
 mod span;
 mod windows;
 pub use classical::*;
+pub use drift::*;
 pub use screen::*;
 pub use solver::*;
 pub use span::*;
@@ -149,6 +151,10 @@ pub enum FitVerdict {
     Inadequate,
     /// Levenberg–Marquardt stopped at its iteration limit: the constants are not at an optimum.
     NotConverged,
+    /// Converged, but the force channel shows μ0 drifting over the motion ([`Mu0Trend`]:
+    /// running-in, or thermal): the constants are averages over a moving contact, whatever the
+    /// envelope's gap says.
+    Drifting,
 }
 
 impl FitVerdict {
@@ -158,6 +164,7 @@ impl FitVerdict {
             FitVerdict::Adequate => "adequate",
             FitVerdict::Inadequate => "inadequate",
             FitVerdict::NotConverged => "not-converged",
+            FitVerdict::Drifting => "drifting",
         }
     }
     /// One sentence for the terminal.
@@ -171,6 +178,11 @@ impl FitVerdict {
             FitVerdict::NotConverged => {
                 "NOT converged: the iteration limit was reached before the optimum; the constants \
                  are not trustworthy"
+            }
+            FitVerdict::Drifting => {
+                "converged, but NOT adequate: μ0 drifts over the motion (the force channel's \
+                 trend); the constants are averages over a changing contact (`tribo explain` \
+                 names the drift)"
             }
         }
     }
@@ -220,6 +232,10 @@ pub struct FitResult {
     /// The part of the record compared: from the release to where the motion sinks into the
     /// noise, with the noise levels read from the record that placed it.
     pub span: MotionSpan,
+    /// The force channel's trend of μ0 over the compared motion, for a record with a force
+    /// channel and a law with a Coulomb level ([`mu0_trend`]); `null` otherwise. A significant
+    /// one makes the verdict [`FitVerdict::Drifting`].
+    pub mu0_trend: Option<Mu0Trend>,
 }
 
 impl FitResult {
@@ -415,6 +431,13 @@ pub fn fit(rec: &Record, spec: LawSpec, opts: &FitOptions) -> Result<FitResult, 
     let mut r = fit_dimensionless(&tau, &y, &ydot, spec, opts)?;
     r.p_si = rig.p_of_mu(&r.mu);
     r.p_si_se = rig.p_of_mu(&r.mu_se);
+    r.mu0_trend = mu0_trend(rec, &r);
+    // Only an adequate fit turns *drifting*: an inadequate one already says the law misses
+    // something, and a law without the force's velocity dependence (a Coulomb–viscous fit of a
+    // quadratic contact) leaves a trend in the force channel that is no drift.
+    if r.verdict == FitVerdict::Adequate && r.mu0_trend.as_ref().is_some_and(|t| t.significant) {
+        r.verdict = FitVerdict::Drifting;
+    }
     Ok(r)
 }
 
@@ -558,6 +581,7 @@ pub fn fit_envelope(
         n_eff,
         half_cycles: 0,
         span: MotionSpan::whole(data.a.len()),
+        mu0_trend: None,
     })
 }
 
