@@ -294,6 +294,14 @@ pub fn explain_with_progress(
         let m = settle(&data, m, e, opts.max_iter);
         let ev = Evidence::of(&data, &cur, &m, opts);
         let m = with_standard_errors(&data, m);
+        // The effect's own constant must be told from its absence by its own ±: the randomized
+        // grid (issue #32) found clean records named "cubic-stiffness" with evidence 70–870 and a
+        // κ 0.4–0.8 σ from zero (the misfit the evidence saw was the base model's, not one the
+        // effect's constant accounts for). An effect whose constant is within 2σ of its absence
+        // is not named.
+        if !distinct_from_absence(&data, &m, e) {
+            break;
+        }
         steps.push(Step {
             effect: e.name().into(),
             gap_before: cur.gap,
@@ -356,6 +364,21 @@ pub fn explain_with_progress(
         diagnostics,
     };
     Ok((ex, data))
+}
+
+/// Whether the effect `e` of the fitted model `m` is more than 2σ (its own standard error) from
+/// its absence: zero for every constant, the Coulomb level for Stribeck's static level. An
+/// undetermined ± does not decide.
+fn distinct_from_absence(data: &Prepared, m: &FittedModel, e: Effect) -> bool {
+    let se = standard_errors_of(data, m);
+    let (Some(q), Some(qs)) = (m.spec.effect_params(e, &m.p), m.spec.effect_params(e, &se)) else {
+        return true;
+    };
+    let z = match e {
+        Effect::Stribeck => (q[0] - m.spec.mu(&m.p)[0]) / qs[0],
+        _ => q[0] / qs[0],
+    };
+    !(z.is_finite() && z.abs() < 2.0)
 }
 
 /// The fit of a named effect, moved to the bottom of its valley. The force channel's misfit is

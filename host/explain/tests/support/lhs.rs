@@ -213,7 +213,7 @@ mod dim {
 }
 
 /// The base rig, run and chain of a point.
-fn bench_of(p: &[f64], seed: u64) -> (Bench, f64, f64, f64) {
+fn bench_of(p: &[f64], seed: u64, max_s: f64) -> (Bench, f64, f64, f64) {
     let mass = 0.03 + 0.03 * p[dim::MASS];
     let k = 800.0 + 700.0 * p[dim::STIFF];
     let load = log_between(0.05, 0.7, p[dim::LOAD]);
@@ -225,7 +225,8 @@ fn bench_of(p: &[f64], seed: u64) -> (Bench, f64, f64, f64) {
     } else {
         5.0 * (p[dim::HOLD] - 0.4) / 0.6
     };
-    let rest = 5.0 * p[dim::REST];
+    let hold = hold.min(0.2 * max_s);
+    let rest = (5.0 * p[dim::REST]).min(0.2 * max_s);
     let fc = log_between(100.0, 1000.0, p[dim::CUTOFF]);
     let filter = if p[dim::FILTER] < 1.0 / 3.0 {
         Filter::None
@@ -246,7 +247,7 @@ fn bench_of(p: &[f64], seed: u64) -> (Bench, f64, f64, f64) {
         rate_hz: rate,
         hold_s: hold,
         rest_s: rest,
-        max_s: 25.0,
+        max_s,
         filter,
         filter_stated: matches!(filter, Filter::TwoPole(_)) && p[dim::STATED] < 0.5,
         disp_noise_m: 2e-8 * noise,
@@ -421,6 +422,11 @@ fn add_effect(
 /// The grid: `records` cases in the proportions clean 12 %, alone 46 %, pairs 30 %, outside 12 %
 /// (every effect alone and every pair at least once each), from `seed`.
 pub fn grid(records: usize, seed: u64) -> Vec<Case> {
+    grid_with(records, seed, 25.0)
+}
+
+/// [`grid`] with records of at most `max_s` (the hold and the rest at most a fifth of it each).
+pub fn grid_with(records: usize, seed: u64, max_s: f64) -> Vec<Case> {
     let records = records.max(1);
     let n_clean = (records * 12).div_ceil(100).max(1);
     let n_out = (records * 12).div_ceil(100).max(2);
@@ -441,7 +447,7 @@ pub fn grid(records: usize, seed: u64) -> Vec<Case> {
         let pts = latin(n, dim::N, &mut rng);
         for (i, p) in pts.iter().enumerate() {
             let index = cases.len();
-            let (mut b, mu0, mu1, noise) = bench_of(p, seed * 100_003 + index as u64);
+            let (mut b, mu0, mu1, noise) = bench_of(p, seed * 100_003 + index as u64, max_s);
             let mut c = Friction::coulomb_viscous(mu0, mu1);
             let mut consts = Vec::new();
             let mut present = Vec::new();
