@@ -13,7 +13,8 @@
 //! `Effect::ALL`: an effect the generator makes that explain has no name for is scored as outside.
 //!
 //! `cargo run --release -p tribo-explain --example explain_lhs -- --records 520 --seed 1
-//! [--jobs 2] [--out records.tsv] [--only EFFECT] [--verbose]`
+//! [--jobs 2] [--out records.tsv] [--only EFFECT] [--groups clean,alone,pair,outside] [--case INDEX]
+//! [--verbose]` (`--only`, `--groups`: a part of the same grid; `--case`: one record in detail)
 
 #[path = "../tests/support/mod.rs"]
 mod support;
@@ -64,8 +65,9 @@ fn main() {
     let mut only: Option<String> = None;
     let mut verbose = false;
     let mut case: Option<usize> = None;
+    let mut groups: Option<String> = None;
     let mut args = std::env::args().skip(1);
-    let usage = "usage: explain_lhs [--records N] [--seed S] [--jobs J] [--out FILE] [--only EFFECT] [--case INDEX] [--verbose]";
+    let usage = "usage: explain_lhs [--records N] [--seed S] [--jobs J] [--out FILE] [--only EFFECT] [--case INDEX] [--groups clean,alone,pair,outside] [--verbose]";
     while let Some(a) = args.next() {
         let mut val = |name: &str| {
             args.next().unwrap_or_else(|| {
@@ -81,6 +83,7 @@ fn main() {
             "--only" => only = Some(val("--only")),
             "--verbose" => verbose = true,
             "--case" => case = val("--case").parse().ok(),
+            "--groups" => groups = Some(val("--groups")),
             other => {
                 eprintln!("unknown argument {other}\n{usage}");
                 std::process::exit(2)
@@ -92,6 +95,18 @@ fn main() {
     if let Some(o) = &only {
         cases.retain(|c| {
             c.label().split('+').any(|e| e == o) || (o == "none" && c.present.is_empty())
+        });
+    }
+    if let Some(g) = &groups {
+        // A part of the grid (the same records as in the whole grid).
+        cases.retain(|c| {
+            let name = match c.group {
+                Group::Clean => "clean",
+                Group::Alone => "alone",
+                Group::Pair => "pair",
+                Group::Outside => "outside",
+            };
+            g.split(',').any(|x| x == name)
         });
     }
     if let Some(i) = case {
@@ -166,7 +181,7 @@ fn main() {
                         est.join("; ")
                     );
                 }
-                if d % 10 == 0 || d == total {
+                if d.is_multiple_of(10) || d == total {
                     eprintln!(
                         "{d} / {total} records ({:.0} s)",
                         t0.elapsed().as_secs_f64()
@@ -352,7 +367,9 @@ fn report(cases: &[Case], results: &[(Outcome, Score)], vocab: &[&str], wall: f6
         "\neffect-constant coverage (named effects whose form matches explain's model, on a force \
          filter it models: none or 2-pole): truth within 2σ"
     );
-    let mut cov: BTreeMap<(&str, &str), (usize, usize, usize, Vec<f64>)> = BTreeMap::new();
+    // (effect, key) → (within 2σ, of, named without a ±, |z|s)
+    type Cov = (usize, usize, usize, Vec<f64>);
+    let mut cov: BTreeMap<(&str, &str), Cov> = BTreeMap::new();
     for (c, (o, _)) in cases.iter().zip(results) {
         for (tc, got) in &o.estimates {
             let Some(p) = c.present.iter().find(|p| p.effect == tc.effect) else {
