@@ -387,7 +387,7 @@ fn add_effect(
             c.asymmetry = sign * st * c.mu0;
             consts.push(TrueConstant {
                 effect,
-                key: "dmu0_direction",
+                key: "dmu0_forward_minus_backward",
                 value: c.asymmetry,
             });
             (format!("forward − backward {:+.2e}", c.asymmetry), true)
