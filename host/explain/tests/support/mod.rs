@@ -11,6 +11,9 @@
 //! `μ0 + r t`).
 #![allow(dead_code)]
 
+pub mod bench;
+pub mod lhs;
+
 use tribo_physics::record::{Record, Units};
 use tribo_physics::sensor::SensorModel;
 use tribo_physics::Rig;
