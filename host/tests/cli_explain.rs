@@ -159,6 +159,18 @@ fn an_unstated_lowpass_is_fitted_and_printed() {
         v["force_lowpass"]
     );
     assert_eq!(v["missing_effects"], serde_json::json!(["sensor-lag"]));
+    // The zero stated on the command line: held there, said so, no ± of its own.
+    let out = tribo(&[
+        "explain",
+        rec.to_str().unwrap(),
+        "--json",
+        "--force-zero-n",
+        "0",
+    ]);
+    let z: Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(z["measurement_chain"]["force_zero_source"], "option");
+    assert_eq!(z["measurement_chain"]["force_zero_n"], 0.0);
+    assert_eq!(z["missing_effects"], serde_json::json!(["sensor-lag"]));
     let delay = v["steps"][0]["params"]["delay_s"].as_f64().unwrap();
     let se = v["steps"][0]["params_se"]["delay_s"].as_f64().unwrap();
     assert!(
@@ -181,7 +193,11 @@ fn bad_input_is_a_clear_error() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("line") && !err.contains("panicked"), "{err}");
     // Unknown base law and unknown effect.
-    for args in [["--base", "bogus"], ["--only", "magic"]] {
+    for args in [
+        ["--base", "bogus"],
+        ["--only", "magic"],
+        ["--force-zero-n", "nan"],
+    ] {
         let out = tribo(&["explain", rec.to_str().unwrap(), args[0], args[1]]);
         assert!(!out.status.success());
         let err = String::from_utf8_lossy(&out.stderr);

@@ -32,6 +32,17 @@ fn effect(s: &str) -> Result<Effect, String> {
     })
 }
 
+/// A force in newtons that must be finite (`--force-zero-n`).
+fn finite_newtons(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(v) => Err(format!(
+            "the force channel's zero must be a finite force in N, got {v}"
+        )),
+        Err(e) => Err(format!("{s:?} is not a force in N: {e}")),
+    }
+}
+
 /// The long `--help` of the command.
 pub const LONG_ABOUT: &str = "Explain the disagreement between a friction law and a record.
 
@@ -40,7 +51,10 @@ Fits the base law to every channel (envelope from displacement and velocity; fri
 candidate effect — quadratic-velocity, stribeck, frictional-lag, cubic-stiffness, thermal-drift,
 sensor-lag, running-in (μ0 drifting in time at constant temperature). The force channel's
 low-pass is the record's (`# force_cutoff_hz=`) or `--force-cutoff-hz`; when neither states it, it
-is fitted with everything else in every model and printed with its ±. An effect is named only if adding it shrinks the misfit by more than chance would,
+is fitted with everything else in every model and printed with its ±. The force channel's zero is
+the record's (`# force_zero_n=`) or `--force-zero-n`; only with it stated can a constant force
+while sliding be named direction-asymmetry (without, it is as much a zero offset of the channel,
+and the answer is ambiguous). An effect is named only if adding it shrinks the misfit by more than chance would,
 judged with a noise model of the residuals that includes their correlation (an effective sample
 count per channel), and removes a material part of the misfit above the noise floor. The best one
 is added, the model refitted, and the search repeats. If a misfit well above the noise floor
@@ -90,6 +104,11 @@ pub struct Args {
     /// without either, it is fitted (with its ±) in every model of the search.
     #[arg(long)]
     pub force_cutoff_hz: Option<f64>,
+    /// The force channel's zero (N: what it reads with no friction force), if the record does not
+    /// state it (`# force_zero_n=`); with it stated, a constant force while sliding is named
+    /// direction-asymmetry, without it the channel's zero is fitted and such a force is ambiguous.
+    #[arg(long, value_parser = finite_newtons, allow_negative_numbers = true)]
+    pub force_zero_n: Option<f64>,
     /// No progress messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]
     pub quiet: bool,
@@ -111,6 +130,7 @@ fn run_inner(args: Args) -> Result<()> {
         base,
         max_steps: args.max_steps,
         force_cutoff_hz: args.force_cutoff_hz,
+        force_zero_n: args.force_zero_n,
         ..ExplainOptions::default()
     };
     if !args.only.is_empty() {
