@@ -495,14 +495,9 @@ fn search(
         }
         let (e, m, _) = best.clone();
         // Polish the winner (candidates are screened with a short iteration budget).
-        let m = fit_spec(
-            data,
-            &m.spec,
-            std::slice::from_ref(&m.p),
-            3 * opts.max_iter,
-        )
-        .filter(|p| p.gap <= m.gap)
-        .unwrap_or(m);
+        let m = fit_spec(data, &m.spec, std::slice::from_ref(&m.p), 3 * opts.max_iter)
+            .filter(|p| p.gap <= m.gap)
+            .unwrap_or(m);
         let m = settle(data, m, e, opts.max_iter);
         let ev = Evidence::of(data, &cur, &m, opts);
         let m = with_standard_errors(data, m);
