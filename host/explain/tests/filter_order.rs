@@ -94,6 +94,12 @@ fn a_sensor_lag_behind_a_1pole_filter_is_still_named_and_measured() {
     assert_eq!(named(&e), "sensor-lag", "{}", e.to_text());
     let st = e.steps.iter().find(|s| s.effect == "sensor-lag").unwrap();
     let (d, d_se) = (st.params["delay_s"], st.params_se["delay_s"]);
+    eprintln!(
+        "1 ms behind 1-pole 300 Hz: delay {:.4} ± {:.4} ms; {}",
+        1e3 * d,
+        1e3 * d_se,
+        e.force_lowpass.as_ref().unwrap().text()
+    );
     assert!(
         (d - 1e-3).abs() <= (3.0 * d_se).max(0.15e-3),
         "delay {d} ± {d_se} s for 1 ms\n{}",
@@ -119,6 +125,10 @@ fn a_2pole_filter_is_found_as_2pole_and_a_stated_one_used_as_stated() {
     let (rec, _) = generate(&contact(), &b);
     let e = explain(&rec, &ExplainOptions::default()).unwrap();
     let (poles, got, se, ev) = filter_of(&e);
+    eprintln!(
+        "2-pole 300 Hz: {} {poles:?} {got:.1} ± {se:.1} Hz, order evidence {ev:.1}",
+        named(&e)
+    );
     assert_eq!(e.conclusion, Conclusion::BaseAdequate, "{}", e.to_text());
     assert_eq!(poles, Some(2), "{}", e.to_text());
     assert!(ev > 0.0, "order evidence {ev}\n{}", e.to_text());
