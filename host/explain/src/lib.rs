@@ -22,7 +22,11 @@
 //!
 //! The force channel's low-pass, when the record does not state it, is a nuisance parameter of
 //! every model (its time constant, [`model::lowpass`]), fitted with the law and the effect being
-//! tried, never a guess; the result prints it with its ± ([`ForceLowpass`]).
+//! tried, never a guess; the result prints it with its ± ([`ForceLowpass`]). Its order (1-pole,
+//! [`model::lowpass_1pole`], or the 2-pole Butterworth) is chosen from the record at the base law,
+//! held the same in every model the search compares, and checked against the other order at the
+//! final model (`ForceLowpass::poles`, `ForceLowpass::order_evidence`). A stated cut-off is the
+//! 2-pole filter.
 //!
 //! The best candidate is added and the search repeats. Once the model is at the noise floor, only
 //! an effect another channel points to is still tried: thermal drift, when the temperature column
@@ -94,9 +98,10 @@ pub struct ExplainOptions {
     pub max_force_points: usize,
     /// Levenberg–Marquardt iterations per fit.
     pub max_iter: usize,
-    /// Low-pass of the force channel (Hz) applied to simulated force, overriding the record's
-    /// (`None`: the record's `# force_cutoff_hz`, or, if it says nothing, fitted: a parameter of
-    /// every model, estimated with its ± — [`Explanation::force_lowpass`]).
+    /// Low-pass of the force channel (Hz, a 2-pole filter) applied to simulated force, overriding
+    /// the record's (`None`: the record's `# force_cutoff_hz`, or, if it says nothing, fitted with
+    /// its order: a parameter of every model, estimated with its ± —
+    /// [`Explanation::force_lowpass`]).
     pub force_cutoff_hz: Option<f64>,
     /// What the force channel reads at zero tangential force (N), overriding the record's
     /// (`None`: the record's `# force_zero_n`, or, if it says nothing, a fitted nuisance that a
