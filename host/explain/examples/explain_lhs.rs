@@ -364,8 +364,8 @@ fn report(cases: &[Case], results: &[(Outcome, Score)], vocab: &[&str], wall: f6
 
     // Coverage.
     println!(
-        "\neffect-constant coverage (named effects whose form matches explain's model, on a force \
-         filter it models: none or 2-pole): truth within 2σ"
+        "\neffect-constant coverage (named effects whose form matches explain's model; every force \
+         filter of the grid, none, 1-pole or 2-pole, is one it models): truth within 2σ"
     );
     // (effect, key) → (within 2σ, of, named without a ±, |z|s)
     type Cov = (usize, usize, usize, Vec<f64>);

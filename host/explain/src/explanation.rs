@@ -178,11 +178,25 @@ pub struct ForceLowpass {
     /// filter found; at the bound, from the force misfit's profile ([`lowpass_bound`]). `null`
     /// when stated, or when the record rules out no filter up to the largest explored.
     pub cutoff_at_least_hz: Option<f64>,
+    /// The filter's order: 1 (1-pole) or 2 (2-pole Butterworth). Fitted: the order chosen from
+    /// the record (held in every model of the search; at the bound, the order the bound is
+    /// for). Stated: 2 (a stated cut-off is the charge amplifier's 2-pole filter); `null` when
+    /// none is stated.
+    pub poles: Option<u8>,
+    /// When fitted: the evidence for the chosen order over the other one, the final model
+    /// refitted with the other filter (the same χ² measure as an effect's evidence; negative
+    /// would mean the other order fits better). `null` when stated or when the refit failed.
+    pub order_evidence: Option<f64>,
 }
 
 impl ForceLowpass {
     /// The low-pass of the final model `m` (`None` without a force channel).
-    pub fn of(data: &Prepared, m: &FittedModel, source: &str) -> Option<ForceLowpass> {
+    pub fn of(
+        data: &Prepared,
+        m: &FittedModel,
+        source: &str,
+        order_evidence: Option<f64>,
+    ) -> Option<ForceLowpass> {
         if !data.has_force() {
             return None;
         }
@@ -211,6 +225,8 @@ impl ForceLowpass {
                     time_constant_s: tc,
                     time_constant_s_se: se,
                     cutoff_at_least_hz: at_least,
+                    poles: Some(m.spec.lowpass_poles),
+                    order_evidence,
                 })
             }
             None => Some(ForceLowpass {
@@ -220,7 +236,26 @@ impl ForceLowpass {
                 time_constant_s: data.force_cutoff_hz.map_or(0.0, |f| 1.0 / (two_pi * f)),
                 time_constant_s_se: None,
                 cutoff_at_least_hz: None,
+                poles: data.force_cutoff_hz.map(|_| 2),
+                order_evidence: None,
             }),
+        }
+    }
+
+    /// The evidence for the fitted order, in words.
+    fn order_text(&self) -> String {
+        let p = self.poles.unwrap_or(2);
+        let q = if p == 1 { 2 } else { 1 };
+        match self.order_evidence {
+            Some(ev) if ev >= 0.0 => {
+                format!("{p}-pole over {q}-pole by evidence {ev:.1}")
+            }
+            Some(ev) => format!(
+                "{p}-pole held from the search; the {q}-pole refit is better by evidence {:.1}, \
+                 below what a change needs",
+                -ev
+            ),
+            None => "the other order could not be refitted".into(),
         }
     }
 
@@ -228,11 +263,13 @@ impl ForceLowpass {
     pub fn text(&self) -> String {
         match (self.source.as_str(), self.cutoff_hz) {
             ("fitted", Some(fc)) => format!(
-                "{fc:.0} ± {:.0} Hz (fitted: the record does not state it; time constant {:.3} ± \
-                 {:.3} ms)",
+                "{fc:.0} ± {:.0} Hz, {}-pole (fitted: the record does not state it; time constant \
+                 {:.3} ± {:.3} ms; {})",
                 self.cutoff_hz_se.unwrap_or(f64::NAN),
+                self.poles.unwrap_or(2),
                 1e3 * self.time_constant_s,
-                1e3 * self.time_constant_s_se.unwrap_or(f64::NAN)
+                1e3 * self.time_constant_s_se.unwrap_or(f64::NAN),
+                self.order_text()
             ),
             ("fitted", None) => format!(
                 "none found (fitted: the record does not state it; time constant {:.4} ms, below a \
@@ -240,11 +277,14 @@ impl ForceLowpass {
                 1e3 * self.time_constant_s,
                 self.cutoff_at_least_hz.map_or(
                     "no cut-off within the explored range is ruled out".into(),
-                    |f| format!("a cut-off below {f:.0} Hz is ruled out at 2σ")
+                    |f| format!(
+                        "a {}-pole cut-off below {f:.0} Hz is ruled out at 2σ",
+                        self.poles.unwrap_or(2)
+                    )
                 )
             ),
             (src, Some(fc)) => format!(
-                "{fc} Hz (stated by the {})",
+                "{fc} Hz (stated by the {}), 2-pole (a stated cut-off is the charge amplifier's filter)",
                 if src == "option" {
                     "--force-cutoff-hz option"
                 } else {

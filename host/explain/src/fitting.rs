@@ -131,7 +131,7 @@ pub fn lowpass_bound(data: &Prepared, m: &FittedModel) -> Option<f64> {
     }
     let has_delay = m.spec.has(Effect::SensorLag);
     let rss = |tau_f: f64, d: f64| -> f64 {
-        let mut f = lowpass(&sim.f_true, tau_f, data.dtau);
+        let mut f = lowpass_of_order(&sim.f_true, tau_f, data.dtau, m.spec.lowpass_poles);
         if d > 0.0 {
             f = tribo_physics::sensor::delay(&f, d / data.dtau);
         }

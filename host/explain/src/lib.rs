@@ -22,7 +22,11 @@
 //!
 //! The force channel's low-pass, when the record does not state it, is a nuisance parameter of
 //! every model (its time constant, [`model::lowpass`]), fitted with the law and the effect being
-//! tried, never a guess; the result prints it with its ± ([`ForceLowpass`]).
+//! tried, never a guess; the result prints it with its ± ([`ForceLowpass`]). Its order (1-pole,
+//! [`model::lowpass_1pole`], or the 2-pole Butterworth) is chosen from the record at the base law,
+//! held the same in every model the search compares, and checked against the other order at the
+//! final model (`ForceLowpass::poles`, `ForceLowpass::order_evidence`). A stated cut-off is the
+//! 2-pole filter.
 //!
 //! The best candidate is added and the search repeats. Once the model is at the noise floor, only
 //! an effect another channel points to is still tried: thermal drift, when the temperature column
@@ -52,7 +56,8 @@ pub use model::{Effect, ExplainError, Prepared, Spec};
 pub use serde_json;
 
 use model::{
-    gap_of, lowpass, residuals, rms, simulate_spec, weighted, LOWPASS_TAU_MAX, RIG_FORCE_CUTOFF_HZ,
+    gap_of, lowpass_of_order, residuals, rms, simulate_spec, weighted, LOWPASS_TAU_MAX,
+    RIG_FORCE_CUTOFF_HZ,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -93,9 +98,10 @@ pub struct ExplainOptions {
     pub max_force_points: usize,
     /// Levenberg–Marquardt iterations per fit.
     pub max_iter: usize,
-    /// Low-pass of the force channel (Hz) applied to simulated force, overriding the record's
-    /// (`None`: the record's `# force_cutoff_hz`, or, if it says nothing, fitted: a parameter of
-    /// every model, estimated with its ± — [`Explanation::force_lowpass`]).
+    /// Low-pass of the force channel (Hz, a 2-pole filter) applied to simulated force, overriding
+    /// the record's (`None`: the record's `# force_cutoff_hz`, or, if it says nothing, fitted with
+    /// its order: a parameter of every model, estimated with its ± —
+    /// [`Explanation::force_lowpass`]).
     pub force_cutoff_hz: Option<f64>,
     /// What the force channel reads at zero tangential force (N), overriding the record's
     /// (`None`: the record's `# force_zero_n`, or, if it says nothing, a fitted nuisance that a
@@ -203,148 +209,68 @@ pub fn explain_with_progress(
     // The low-pass starts from the rig's charge amplifier and from (nearly) none.
     let tau_rig = data.rig.omega() / (2.0 * std::f64::consts::PI * RIG_FORCE_CUTOFF_HZ);
     let law_start = tribo_physics::identify::start_point(&data.tau, &data.y, &data.ydot, opts.base);
-    let mut starts = vec![
-        spec.start_with(&base_fit.params, tau_rig),
-        spec.start_with(&law_start, tau_rig),
-    ];
-    if spec.lowpass {
-        starts.push(spec.start_with(&base_fit.params, 0.2 * data.dtau));
-    }
-    let base = fit_spec(&data, &spec, &starts, opts.max_iter).ok_or_else(|| {
+    let fit_base = |spec: &Spec| {
+        let mut starts = vec![
+            spec.start_with(&base_fit.params, tau_rig),
+            spec.start_with(&law_start, tau_rig),
+        ];
+        if spec.lowpass {
+            starts.push(spec.start_with(&base_fit.params, 0.2 * data.dtau));
+        }
+        fit_spec(&data, spec, &starts, opts.max_iter)
+    };
+    // A fitted low-pass's order (1 or 2 poles, `shared/docs/real-bench.md`) is chosen from the
+    // record: the base law is fitted with each, and the one with the smaller misfit (the same
+    // number of parameters) is held in every model of the search. The final model is checked
+    // against the other order below.
+    let base = if spec.lowpass {
+        let one = Spec {
+            lowpass_poles: 1,
+            ..spec.clone()
+        };
+        match (fit_base(&spec), fit_base(&one)) {
+            (Some(a), Some(b)) => Some(if b.gap < a.gap { b } else { a }),
+            (a, b) => a.or(b),
+        }
+    } else {
+        fit_base(&spec)
+    };
+    let base = base.ok_or_else(|| {
         ExplainError::BaseLaw("the base law could not be fitted to the record".into())
     })?;
     let base = with_standard_errors(&data, base);
     progress("diagnostics", 0, 1);
     let diagnostics = diag::diagnose(&data, &base, opts.base);
-    let mut cur = base.clone();
-    let mut steps = Vec::new();
-    let mut rounds = Vec::new();
-    let mut ambiguous = Vec::new();
-    for round in 0..opts.max_steps {
-        // Once the model is at the noise floor, the envelope and the force have nothing left to
-        // point at: an effect is still tried only where another channel points to it (thermal
-        // drift when the temperature column moves over the motion), and it must still pass the
-        // same tests. (Every candidate, running-in included, is tried in the first round, at
-        // the floor or not: a drift of μ0 over the whole motion can hide below the 1.5 × floor
-        // rule.) A second velocity term fitted to a misfit below the noise is not a finding.
-        let settled = round > 0 && cur.adequate(&data);
-        let todo: Vec<Effect> = opts
-            .candidates
-            .iter()
-            .copied()
-            .filter(|&e| cur.spec.can_add(e, data.has_force(), data.has_temp()))
-            // A direction asymmetry is a constant force offset with the centre moved: without the
-            // force channel's zero it is the zero offsets themselves (fitted in every model).
-            .filter(|&e| e != Effect::DirectionAsymmetry || data.force_zero.is_some())
-            .filter(|&e| !settled || (e == Effect::ThermalDrift && diagnostics.temperature_moves()))
-            // A Coulomb level that moves while the plate's temperature moves is read as thermal
-            // drift first; running-in is what a drift in time leaves beside it.
-            .filter(|&e| {
-                e != Effect::RunningIn
-                    || !diagnostics.temperature_moves()
-                    || cur.spec.has(Effect::ThermalDrift)
-            })
-            .collect();
-        if todo.is_empty() {
-            break;
-        }
-        let mut scored: Vec<(Effect, Option<(FittedModel, Evidence)>)> = Vec::new();
-        for (i, &e) in todo.iter().enumerate() {
-            progress(
-                &format!("round {}: trying {}", round + 1, e.name()),
-                i,
-                todo.len(),
-            );
-            let s = cur.spec.with(e);
-            let starts = starts_for(&data, &cur, e, &diagnostics);
-            let fitted = fit_spec(&data, &s, &starts, opts.max_iter).map(|m| {
-                let ev = Evidence::of(&data, &cur, &m, opts);
-                (m, ev)
-            });
-            scored.push((e, fitted));
-        }
-        rounds.push(
-            scored
-                .iter()
-                .map(|(e, m)| Candidate {
-                    effect: e.name().into(),
-                    gap: m.as_ref().map(|m| m.0.gap),
-                    evidence: m.as_ref().map(|m| m.1.value),
-                    excess_removed: m.as_ref().map(|m| m.1.excess_removed),
-                    significant: m.as_ref().is_some_and(|m| m.1.significant(opts)),
-                })
-                .collect(),
-        );
-        let mut ranked: Vec<(Effect, FittedModel, Evidence)> = scored
-            .into_iter()
-            .filter_map(|(e, m)| m.map(|(m, ev)| (e, m, ev)))
-            .filter(|(_, _, ev)| ev.significant(opts))
-            .collect();
-        ranked.sort_by(|a, b| b.2.value.total_cmp(&a.2.value));
-        let Some(best) = ranked.first() else {
-            break;
-        };
-        // The runner-up among every candidate, qualified or not: an effect that explains the
-        // record about as well (or better) but misses a threshold by a little is no ground for
-        // naming the other.
-        let rival = rounds
-            .last()
-            .into_iter()
-            .flatten()
-            .filter(|c: &&Candidate| c.effect != best.0.name())
-            .filter_map(|c| Some((c.effect.clone(), c.evidence?)))
-            .max_by(|a, b| a.1.total_cmp(&b.1));
-        if let Some((name, ev)) = rival {
-            if best.2.value - ev < opts.min_margin {
-                ambiguous = vec![best.0.name().to_string(), name];
-                break;
+    let (mut base, (mut cur, mut steps, mut rounds, mut ambiguous)) = {
+        let r = search(&data, opts, &diagnostics, &base, progress);
+        (base, r)
+    };
+    // The other order against the final model, with its effects: the same constants refitted
+    // with the other filter. If it explains the record better by the evidence an effect needs,
+    // the search is run again with that order from its base law (once: no going back and forth).
+    let mut order_evidence = None;
+    if cur.spec.lowpass {
+        let other = other_order(&data, &cur, opts.max_iter);
+        if let Some(o) = &other {
+            let ev = Evidence::of(&data, &cur, o, opts);
+            order_evidence = Some(-ev.value);
+            if ev.value >= ev.threshold {
+                let spec2 = Spec {
+                    lowpass_poles: o.spec.lowpass_poles,
+                    ..base.spec.clone()
+                };
+                if let Some(b2) = fit_base(&spec2) {
+                    let b2 = with_standard_errors(&data, b2);
+                    let r = search(&data, opts, &diagnostics, &b2, progress);
+                    base = b2;
+                    (cur, steps, rounds, ambiguous) = r;
+                    order_evidence = other_order(&data, &cur, opts.max_iter)
+                        .map(|o| -Evidence::of(&data, &cur, &o, opts).value);
+                }
             }
         }
-        let (e, m, _) = best.clone();
-        // Polish the winner (candidates are screened with a short iteration budget).
-        let m = fit_spec(
-            &data,
-            &m.spec,
-            std::slice::from_ref(&m.p),
-            3 * opts.max_iter,
-        )
-        .filter(|p| p.gap <= m.gap)
-        .unwrap_or(m);
-        let m = settle(&data, m, e, opts.max_iter);
-        let ev = Evidence::of(&data, &cur, &m, opts);
-        let m = with_standard_errors(&data, m);
-        let se = standard_errors_of(&data, &m);
-        // The effect's own constant must be told from its absence by its own ±: the randomized
-        // grid (issue #32) found clean records named "cubic-stiffness" with evidence 70–870 and a
-        // κ 0.4–0.8 σ from zero (the misfit the evidence saw was the base model's, not one the
-        // effect's constant accounts for). An effect whose constant is within 2σ of its absence
-        // is not named.
-        if !distinct_from_absence(&m, &se, e) {
-            break;
-        }
-        let mut params = effect_params(&data, &m.spec, &m.p, e);
-        let mut params_se = effect_params(&data, &m.spec, &se, e);
-        if e == Effect::DirectionAsymmetry {
-            // (μ0f − μ0b) / μ0: relative to the mean Coulomb level (its own ± is far smaller).
-            let mu0 = m.spec.mu(&m.p).first().copied().unwrap_or(f64::NAN);
-            if let (Some(d), Some(d_se)) = (
-                params.get("dmu0_forward_minus_backward").copied(),
-                params_se.get("dmu0_forward_minus_backward").copied(),
-            ) {
-                params.insert("asymmetry_relative".into(), d / mu0);
-                params_se.insert("asymmetry_relative".into(), d_se / mu0.abs());
-            }
-        }
-        steps.push(Step {
-            effect: e.name().into(),
-            gap_before: cur.gap,
-            gap_after: m.gap,
-            evidence: ev,
-            params,
-            params_se,
-        });
-        cur = m;
     }
+    let base = base;
     let floor = data.noise_floor();
     let excess = |g: f64| (g * g - floor * floor).max(0.0).sqrt();
     let unexplained_fraction = if excess(base.gap) > 0.0 {
@@ -363,13 +289,21 @@ pub fn explain_with_progress(
     // samples, against the final model's law): a record whose μ0 drifts is never base-adequate.
     let mu0_trend = data.f_meas.as_ref().and_then(|f| {
         let mu = cur.spec.mu(&cur.p);
-        tribo_physics::identify::mu0_trend_of(
+        // Through the final model's low-pass: the fitted one with its order, or the stated one.
+        let fitted = cur.spec.lowpass_tau(&cur.p);
+        let poles = cur.spec.lowpass_poles;
+        let through = |c: &[f64]| match (fitted, data.force_cutoff_hz) {
+            (Some(t), _) => lowpass_of_order(c, t, data.dtau, poles),
+            (None, Some(fc)) => tribo_physics::sensor::butterworth2(c, fc, data.rate_hz),
+            (None, None) => c.to_vec(),
+        };
+        tribo_physics::identify::mu0_trend_through(
             &data.tau,
             &data.ydot,
             f,
             &mu,
             0..data.tau.len(),
-            data.force_cutoff_hz.map(|fc| (fc, data.rate_hz)),
+            &through,
             1.0 / data.rig.omega(),
         )
     });
@@ -388,7 +322,7 @@ pub fn explain_with_progress(
         Conclusion::PartlyExplained
     };
     progress("done", 1, 1);
-    let lowpass = ForceLowpass::of(&data, &cur, source);
+    let lowpass = ForceLowpass::of(&data, &cur, source, order_evidence);
     let ex = Explanation {
         conclusion,
         base: opts.base,
@@ -468,4 +402,161 @@ fn settle(data: &Prepared, m: FittedModel, e: Effect, max_iter: usize) -> Fitted
         Some(b) if b.gap < m.gap => b,
         _ => m,
     }
+}
+
+/// The stepwise search from the base model: in each round every candidate effect is fitted and
+/// scored against the current model, and the best one that passes every test is added. Returns
+/// the final model, the steps, the rounds' candidates and the ambiguous pair (if any).
+fn search(
+    data: &Prepared,
+    opts: &ExplainOptions,
+    diagnostics: &diag::Diagnostics,
+    base: &FittedModel,
+    progress: Progress,
+) -> (FittedModel, Vec<Step>, Vec<Vec<Candidate>>, Vec<String>) {
+    let mut cur = base.clone();
+    let mut steps = Vec::new();
+    let mut rounds = Vec::new();
+    let mut ambiguous = Vec::new();
+    for round in 0..opts.max_steps {
+        // Once the model is at the noise floor, the envelope and the force have nothing left to
+        // point at: an effect is still tried only where another channel points to it (thermal
+        // drift when the temperature column moves over the motion), and it must still pass the
+        // same tests. (Every candidate, running-in included, is tried in the first round, at
+        // the floor or not: a drift of μ0 over the whole motion can hide below the 1.5 × floor
+        // rule.) A second velocity term fitted to a misfit below the noise is not a finding.
+        let settled = round > 0 && cur.adequate(data);
+        let todo: Vec<Effect> = opts
+            .candidates
+            .iter()
+            .copied()
+            .filter(|&e| cur.spec.can_add(e, data.has_force(), data.has_temp()))
+            // A direction asymmetry is a constant force offset with the centre moved: without the
+            // force channel's zero it is the zero offsets themselves (fitted in every model).
+            .filter(|&e| e != Effect::DirectionAsymmetry || data.force_zero.is_some())
+            .filter(|&e| !settled || (e == Effect::ThermalDrift && diagnostics.temperature_moves()))
+            // A Coulomb level that moves while the plate's temperature moves is read as thermal
+            // drift first; running-in is what a drift in time leaves beside it.
+            .filter(|&e| {
+                e != Effect::RunningIn
+                    || !diagnostics.temperature_moves()
+                    || cur.spec.has(Effect::ThermalDrift)
+            })
+            .collect();
+        if todo.is_empty() {
+            break;
+        }
+        let mut scored: Vec<(Effect, Option<(FittedModel, Evidence)>)> = Vec::new();
+        for (i, &e) in todo.iter().enumerate() {
+            progress(
+                &format!("round {}: trying {}", round + 1, e.name()),
+                i,
+                todo.len(),
+            );
+            let s = cur.spec.with(e);
+            let starts = starts_for(data, &cur, e, diagnostics);
+            let fitted = fit_spec(data, &s, &starts, opts.max_iter).map(|m| {
+                let ev = Evidence::of(data, &cur, &m, opts);
+                (m, ev)
+            });
+            scored.push((e, fitted));
+        }
+        rounds.push(
+            scored
+                .iter()
+                .map(|(e, m)| Candidate {
+                    effect: e.name().into(),
+                    gap: m.as_ref().map(|m| m.0.gap),
+                    evidence: m.as_ref().map(|m| m.1.value),
+                    excess_removed: m.as_ref().map(|m| m.1.excess_removed),
+                    significant: m.as_ref().is_some_and(|m| m.1.significant(opts)),
+                })
+                .collect(),
+        );
+        let mut ranked: Vec<(Effect, FittedModel, Evidence)> = scored
+            .into_iter()
+            .filter_map(|(e, m)| m.map(|(m, ev)| (e, m, ev)))
+            .filter(|(_, _, ev)| ev.significant(opts))
+            .collect();
+        ranked.sort_by(|a, b| b.2.value.total_cmp(&a.2.value));
+        let Some(best) = ranked.first() else {
+            break;
+        };
+        // The runner-up among every candidate, qualified or not: an effect that explains the
+        // record about as well (or better) but misses a threshold by a little is no ground for
+        // naming the other.
+        let rival = rounds
+            .last()
+            .into_iter()
+            .flatten()
+            .filter(|c: &&Candidate| c.effect != best.0.name())
+            .filter_map(|c| Some((c.effect.clone(), c.evidence?)))
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((name, ev)) = rival {
+            if best.2.value - ev < opts.min_margin {
+                ambiguous = vec![best.0.name().to_string(), name];
+                break;
+            }
+        }
+        let (e, m, _) = best.clone();
+        // Polish the winner (candidates are screened with a short iteration budget).
+        let m = fit_spec(data, &m.spec, std::slice::from_ref(&m.p), 3 * opts.max_iter)
+            .filter(|p| p.gap <= m.gap)
+            .unwrap_or(m);
+        let m = settle(data, m, e, opts.max_iter);
+        let ev = Evidence::of(data, &cur, &m, opts);
+        let m = with_standard_errors(data, m);
+        let se = standard_errors_of(data, &m);
+        // The effect's own constant must be told from its absence by its own ±: the randomized
+        // grid (issue #32) found clean records named "cubic-stiffness" with evidence 70–870 and a
+        // κ 0.4–0.8 σ from zero (the misfit the evidence saw was the base model's, not one the
+        // effect's constant accounts for). An effect whose constant is within 2σ of its absence
+        // is not named.
+        if !distinct_from_absence(&m, &se, e) {
+            break;
+        }
+        let mut params = effect_params(data, &m.spec, &m.p, e);
+        let mut params_se = effect_params(data, &m.spec, &se, e);
+        if e == Effect::DirectionAsymmetry {
+            // (μ0f − μ0b) / μ0: relative to the mean Coulomb level (its own ± is far smaller).
+            let mu0 = m.spec.mu(&m.p).first().copied().unwrap_or(f64::NAN);
+            if let (Some(d), Some(d_se)) = (
+                params.get("dmu0_forward_minus_backward").copied(),
+                params_se.get("dmu0_forward_minus_backward").copied(),
+            ) {
+                params.insert("asymmetry_relative".into(), d / mu0);
+                params_se.insert("asymmetry_relative".into(), d_se / mu0.abs());
+            }
+        }
+        steps.push(Step {
+            effect: e.name().into(),
+            gap_before: cur.gap,
+            gap_after: m.gap,
+            evidence: ev,
+            params,
+            params_se,
+        });
+        cur = m;
+    }
+    (cur, steps, rounds, ambiguous)
+}
+
+/// The final model `m` refitted with the other order of its fitted low-pass (1 ↔ 2 poles), from
+/// its own constants with the time constant of the same delay (a 1-pole filter delays a slow
+/// signal by `τ_f`, the 2-pole Butterworth by `√2 τ_f`). `None` if `m` fits no low-pass or the
+/// fit fails.
+fn other_order(data: &Prepared, m: &FittedModel, max_iter: usize) -> Option<FittedModel> {
+    let i = m.spec.lowpass_index()?;
+    let poles = if m.spec.lowpass_poles == 1 { 2 } else { 1 };
+    let spec = Spec {
+        lowpass_poles: poles,
+        ..m.spec.clone()
+    };
+    let t = m.p[i].abs();
+    let r2 = std::f64::consts::SQRT_2;
+    let mut a = m.p.clone();
+    a[i] = if poles == 1 { r2 * t } else { t / r2 };
+    let mut b = m.p.clone();
+    b[i] = t;
+    fit_spec(data, &spec, &[a, b], max_iter)
 }

@@ -129,26 +129,20 @@ const LIMITS: &[(&str, f64)] = &[
     ("cubic-stiffness", 0.01),
 ];
 
-/// Whether explain models the record's measurement chain: a force filter of none or 2 poles (the
-/// model's low-pass); a 1-pole filter is outside it.
-fn modelled_chain(c: &Case) -> bool {
-    !matches!(c.bench.filter, Filter::OnePole(_))
-}
-
 /// The properties on the CI grid, where the full grid shows they hold (README, "What `tribo
-/// explain` can name"): no name on a clean record that starts at the release and whose force
-/// filter explain models; a load that varies along the track never named as an effect of the
-/// vocabulary; the lags and the cubic stiffness named alone, rightly, above their limits on such
-/// records, with constants within 2σ. What does not hold today (a hold before the release, a 1-pole filter, a
-/// worn stripe named Stribeck or running-in, the other effects' limits) is stated in the README,
-/// not asserted.
+/// explain` can name"): no name on a clean record that starts at the release, whatever its force
+/// filter (none, 1-pole or 2-pole, stated or not); a load that varies along the track never named
+/// as an effect of the vocabulary; the lags and the cubic stiffness named alone, rightly, above
+/// their limits on such records without a 1-pole filter, with constants within 2σ. What does not
+/// hold today (a hold before the release, the cubic term behind a 1-pole filter, a worn stripe
+/// named Stribeck or running-in, the other effects' limits) is stated in the README, not asserted.
 #[test]
 fn randomized_grid_properties() {
     let vocab = vocabulary();
     let cases = ci_grid();
     let clean: Vec<&Case> = cases
         .iter()
-        .filter(|c| c.group == Group::Clean && c.bench.hold_s == 0.0 && modelled_chain(c))
+        .filter(|c| c.group == Group::Clean && c.bench.hold_s == 0.0)
         .collect();
     // Load-varying records that start at the release are few in one hypercube: two are taken.
     let more = grid_with(240, 4, 6.0);
@@ -167,7 +161,10 @@ fn randomized_grid_properties() {
         .filter(|c| {
             c.group == Group::Alone
                 && c.bench.hold_s == 0.0
-                && modelled_chain(c)
+                // Behind a 1-pole filter (fitted with its order) the cubic term above its limit
+                // is not yet named rightly: on this grid #80 (1.7 %, 185 Hz, ×30) is
+                // *unexplained* and #128 (3.8 %, 566 Hz, ×12) gets a sensor lag beside it.
+                && !matches!(c.bench.filter, Filter::OnePole(_))
                 && LIMITS
                     .iter()
                     .any(|(e, l)| c.present[0].effect == *e && c.present[0].strength >= *l)

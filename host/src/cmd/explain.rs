@@ -50,11 +50,12 @@ Fits the base law to every channel (envelope from displacement and velocity; fri
 `ft_n` exists; temperature when `temp_c` exists), measures where it disagrees, then tries each
 candidate effect — quadratic-velocity, stribeck, frictional-lag, cubic-stiffness, thermal-drift,
 sensor-lag, running-in (μ0 drifting in time at constant temperature). The force channel's
-low-pass is the record's (`# force_cutoff_hz=`) or `--force-cutoff-hz`; when neither states it, it
-is fitted with everything else in every model and printed with its ±. The force channel's zero is
-the record's (`# force_zero_n=`) or `--force-zero-n`; only with it stated can a constant force
-while sliding be named direction-asymmetry (without, it is as much a zero offset of the channel,
-and the answer is ambiguous). An effect is named only if adding it shrinks the misfit by more than chance would,
+low-pass is the record's (`# force_cutoff_hz=`) or `--force-cutoff-hz` (a stated cut-off is a 2-pole
+filter); when neither states it, its order (1-pole or 2-pole) and time constant are fitted with
+everything else in every model and printed with its ±. The force channel's zero is the record's
+(`# force_zero_n=`) or `--force-zero-n`; only with it stated can a constant force while sliding be
+named direction-asymmetry (without, it is as much a zero offset of the channel, and the answer is
+ambiguous). An effect is named only if adding it shrinks the misfit by more than chance would,
 judged with a noise model of the residuals that includes their correlation (an effective sample
 count per channel), and removes a material part of the misfit above the noise floor. The best one
 is added, the model refitted, and the search repeats. If a misfit well above the noise floor
@@ -66,7 +67,9 @@ unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_be
 `gap_after`, `evidence`, `params` and `params_se`), `gap_initial`, `gap_final`, `noise_floor`,
 `unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source` (`record`, `option`,
 `fitted`, `none`), `force_lowpass` (`source`, `cutoff_hz` and `cutoff_hz_se`, `time_constant_s` and
-`time_constant_s_se`, `cutoff_at_least_hz`), `disagreement` (where the final model still misses,
+`time_constant_s_se`, `cutoff_at_least_hz`, `poles`: the filter's order, 1 or 2, fitted from the
+record when it states no filter, `order_evidence`: the evidence for that order over the other),
+`disagreement` (where the final model still misses,
 in sentences: each channel above its floor, the time third and amplitude band where it misses
 most, a force misfit common to both sliding directions), `base_fit` (the base law's
 constants: `tribo fit`'s result on the same record, the one estimator of a law), `base_model` (the
@@ -100,8 +103,9 @@ pub struct Args {
     /// At most this many effects are added.
     #[arg(long, default_value_t = 3)]
     pub max_steps: usize,
-    /// Low-pass of the force channel (Hz), if the record does not state it (`# force_cutoff_hz=`);
-    /// without either, it is fitted (with its ±) in every model of the search.
+    /// Low-pass of the force channel (Hz, a 2-pole filter), if the record does not state it
+    /// (`# force_cutoff_hz=`); without either, its order and cut-off are fitted (with its ±) in
+    /// every model of the search.
     #[arg(long)]
     pub force_cutoff_hz: Option<f64>,
     /// The force channel's zero (N: what it reads with no friction force), if the record does not

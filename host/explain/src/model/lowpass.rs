@@ -5,6 +5,11 @@
 //! of it down to `τ_f = 0`, where the filter is the identity, so that the fit can tell "no filter"
 //! from "a filter" without a guess. (The bilinear filter the rig's records are made with,
 //! [`tribo_physics::sensor::butterworth2`], is not: it is clamped below the Nyquist rate.)
+//!
+//! A bench's force channel may instead have a 1-pole filter (`shared/docs/real-bench.md`:
+//! none, 1-pole or 2-pole at 100–1000 Hz): [`lowpass_1pole`], `y' = ω_c (u − y)`, discretised the
+//! same way, also the identity at `τ_f = 0`. The order is part of the fitted nuisance
+//! ([`lowpass_of_order`], `Spec::lowpass_poles`).
 
 /// `exp(M)` of a 4×4 matrix (scaling and squaring of a Taylor series).
 fn expm4(m: [[f64; 4]; 4]) -> [[f64; 4]; 4] {
@@ -79,6 +84,37 @@ pub fn lowpass(u: &[f64], tau_f: f64, h: f64) -> Vec<f64> {
     out
 }
 
+/// Low-pass of a uniformly sampled signal `u` (sample interval `h` in τ) by the 1-pole filter
+/// `y' = (u − y)/τ_f` (τ units; its magnitude is used, 0 = no filter), exact for an input linear
+/// between samples, settled at the first value.
+pub fn lowpass_1pole(u: &[f64], tau_f: f64, h: f64) -> Vec<f64> {
+    let tau_f = tau_f.abs();
+    if u.is_empty() || tau_f == 0.0 || h.is_nan() || h <= 0.0 || !tau_f.is_finite() {
+        return u.to_vec();
+    }
+    // y(h) = a y0 + (1 − a) u0 + s (h − τ_f (1 − a)), a = e^{−h/τ_f}, s the input's slope.
+    let a = (-h / tau_f).exp();
+    let c = h - tau_f * (1.0 - a);
+    let mut y = u[0];
+    let mut out = Vec::with_capacity(u.len());
+    out.push(y);
+    for k in 1..u.len() {
+        let (u0, s) = (u[k - 1], (u[k] - u[k - 1]) / h);
+        y = a * y + (1.0 - a) * u0 + s * c;
+        out.push(y);
+    }
+    out
+}
+
+/// The low-pass of `poles` (1: [`lowpass_1pole`]; anything else: the 2-pole [`lowpass`]).
+pub fn lowpass_of_order(u: &[f64], tau_f: f64, h: f64, poles: u8) -> Vec<f64> {
+    if poles == 1 {
+        lowpass_1pole(u, tau_f, h)
+    } else {
+        lowpass(u, tau_f, h)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -126,5 +162,43 @@ mod tests {
         // A constant passes unchanged (settled at the first value).
         let k = lowpass(&[0.3; 50], tau_f, h);
         assert!(k.iter().all(|v| (v - 0.3).abs() < 1e-12));
+    }
+
+    #[test]
+    fn the_1pole_filter_is_exact_and_none_at_zero() {
+        // A ramp from rest: y(t) = s (t − τ (1 − e^{−t/τ})) exactly, at any sample interval.
+        let (h, tau_f, s) = (0.07, 0.3, 2.0);
+        let u: Vec<f64> = (0..200).map(|i| s * i as f64 * h).collect();
+        let y = lowpass_1pole(&u, tau_f, h);
+        let worst = y
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let t = i as f64 * h;
+                (v - s * (t - tau_f * (1.0 - (-t / tau_f).exp()))).abs()
+            })
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-12, "ramp response off by {worst}");
+        // A step settles with e^{−t/τ}.
+        let mut step = vec![0.0; 100];
+        step.iter_mut().skip(1).for_each(|v| *v = 1.0);
+        let y = lowpass_1pole(&step, tau_f, h);
+        // The step is linear over the first interval, then constant: after it, the remainder
+        // decays as e^{−t/τ}.
+        let r = (1.0 - y[50]) / (1.0 - y[20]);
+        assert!((r - (-30.0 * h / tau_f).exp()).abs() < 1e-12, "decay {r}");
+        assert_eq!(lowpass_1pole(&u, 0.0, h), u);
+        let c = lowpass_1pole(&u, 1e-6 * h, h);
+        let worst = c
+            .iter()
+            .zip(&u)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-4, "tiny time constant: {worst}");
+        assert_eq!(
+            lowpass_of_order(&u, tau_f, h, 1),
+            lowpass_1pole(&u, tau_f, h)
+        );
+        assert_eq!(lowpass_of_order(&u, tau_f, h, 2), lowpass(&u, tau_f, h));
     }
 }

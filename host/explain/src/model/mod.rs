@@ -20,7 +20,7 @@ pub mod chain;
 mod lowpass;
 mod simulate;
 mod spec;
-pub use lowpass::lowpass;
+pub use lowpass::{lowpass, lowpass_1pole, lowpass_of_order};
 pub use simulate::*;
 pub use spec::*;
 

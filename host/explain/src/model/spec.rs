@@ -103,6 +103,10 @@ pub struct Spec {
     /// record does not state): its time constant `τ_f` (τ units, [`super::lowpass`]), fitted with
     /// everything else, in every model of the search.
     pub lowpass: bool,
+    /// The fitted low-pass's order: 1 (a 1-pole filter) or 2 (the charge amplifier's 2-pole
+    /// Butterworth). Chosen from the record ([`crate::explain_prepared`]) and held the same in
+    /// every model a comparison sets side by side.
+    pub lowpass_poles: u8,
 }
 
 impl Spec {
@@ -113,6 +117,7 @@ impl Spec {
             effects: Vec::new(),
             apparatus: false,
             lowpass: false,
+            lowpass_poles: 2,
         }
     }
 

@@ -276,7 +276,6 @@ fn add_effect(
     let sign = if f < 0.5 { 1.0 } else { -1.0 };
     let y0 = b.stiffness_n_per_m * b.x0_m / b.load_n; // release amplitude, dimensionless
     let motion = b.motion_estimate_s(c.mu0).max(0.2);
-    let chain_modelled = !matches!(b.filter, Filter::OnePole(_));
     let (form, matches) = match effect {
         "quadratic-velocity" => {
             c.mu2 = st * c.mu0 / (y0 * y0);
@@ -415,7 +414,7 @@ fn add_effect(
         effect,
         strength: st,
         form,
-        form_matches: matches && chain_modelled,
+        form_matches: matches,
     }
 }
 

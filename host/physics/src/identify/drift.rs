@@ -96,6 +96,25 @@ pub fn mu0_trend_of(
     filter: Option<(f64, f64)>,
     time_per_tau: f64,
 ) -> Option<Mu0Trend> {
+    let through = |c: &[f64]| match filter {
+        Some((fc, rate)) => crate::sensor::butterworth2(c, fc, rate),
+        None => c.to_vec(),
+    };
+    mu0_trend_through(tau, ydot, f, mu, range, &through, time_per_tau)
+}
+
+/// [`mu0_trend_of`] with the force channel's low-pass given as a function of a regressor (every
+/// sample of `range`): for a filter that is not a stated 2-pole cut-off, e.g. one fitted with its
+/// order (`tribo explain`).
+pub fn mu0_trend_through(
+    tau: &[f64],
+    ydot: &[f64],
+    f: &[f64],
+    mu: &[f64],
+    range: std::ops::Range<usize>,
+    filter: &dyn Fn(&[f64]) -> Vec<f64>,
+    time_per_tau: f64,
+) -> Option<Mu0Trend> {
     let end = range.end.min(tau.len()).min(ydot.len()).min(f.len());
     let start = range.start.min(end);
     let mu0 = mu.first().copied().unwrap_or(0.0);
@@ -133,13 +152,7 @@ pub fn mu0_trend_of(
             .collect(),
     );
     let trend_col = base.len() - 1;
-    let filtered: Vec<Vec<f64>> = match filter {
-        Some((fc, rate)) => base
-            .iter()
-            .map(|c| crate::sensor::butterworth2(c, fc, rate))
-            .collect(),
-        None => base,
-    };
+    let filtered: Vec<Vec<f64>> = base.iter().map(|c| filter(c)).collect();
     let mut sel: Vec<Vec<usize>> = Vec::new();
     for &(a, b) in &cycles {
         let vmax = ydot[a..b].iter().fold(0.0f64, |m, v| m.max(v.abs()));
