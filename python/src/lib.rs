@@ -508,6 +508,7 @@ fn source_of(
     rig: Option<(f64, f64, f64)>,
     dimensionless: bool,
     name: Option<String>,
+    stated_cutoff_hz: Option<f64>,
 ) -> PyResult<Source> {
     if let Some(p) = path {
         return Ok(Source::Path(p));
@@ -536,6 +537,16 @@ fn source_of(
     rec.ft = col(ft)?;
     rec.temp = col(temp)?;
     rec.ecr = col(ecr)?;
+    // What the record states of its force channel's low-pass travels with its arrays (the drift
+    // check and explain read it, as they do from a file's header).
+    if let Some(fc) = stated_cutoff_hz {
+        if !(fc.is_finite() && fc > 0.0) {
+            return Err(PyValueError::new_err(format!(
+                "force_cutoff_hz must be a finite cut-off > 0 Hz, got {fc}"
+            )));
+        }
+    }
+    rec.force_cutoff_hz = stated_cutoff_hz;
     Ok(Source::Arrays(
         Box::new(rec),
         name.unwrap_or_else(|| "<record>".into()),
@@ -614,7 +625,7 @@ fn holes(longest_clean_stretch: bool) -> tribo::Holes {
 #[pyfunction]
 #[pyo3(signature = (path=None, *, law="coulomb-viscous", mass_kg=None, stiffness=None, load_n=None,
     apparatus_mu1=0.0, windows=0, longest_clean_stretch=false, t=None, x=None, v=None, ft=None,
-    temp=None, ecr=None, rig=None, dimensionless=false, name=None))]
+    temp=None, ecr=None, rig=None, dimensionless=false, name=None, stated_cutoff_hz=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -635,11 +646,24 @@ fn fit(
     rig: Option<(f64, f64, f64)>,
     dimensionless: bool,
     name: Option<String>,
+    stated_cutoff_hz: Option<f64>,
 ) -> PyResult<String> {
     let law: LawSpec = law
         .parse()
         .map_err(|e| PyValueError::new_err(format!("law {law:?}: {e}")))?;
-    let src = source_of(path, t, x, v, ft, temp, ecr, rig, dimensionless, name)?;
+    let src = source_of(
+        path,
+        t,
+        x,
+        v,
+        ft,
+        temp,
+        ecr,
+        rig,
+        dimensionless,
+        name,
+        stated_cutoff_hz,
+    )?;
     let a = FitArgs {
         law,
         flags: RigFlags {
@@ -693,7 +717,7 @@ fn explain_json(src: Source, opts: tribo_explain::ExplainOptions, h: tribo::Hole
 #[pyfunction]
 #[pyo3(signature = (path=None, *, base="coulomb-viscous", only=None, max_steps=3,
     force_cutoff_hz=None, longest_clean_stretch=false, t=None, x=None, v=None, ft=None, temp=None,
-    ecr=None, rig=None, dimensionless=false, name=None))]
+    ecr=None, rig=None, dimensionless=false, name=None, stated_cutoff_hz=None))]
 #[allow(clippy::too_many_arguments)]
 fn explain(
     py: Python<'_>,
@@ -712,6 +736,7 @@ fn explain(
     rig: Option<(f64, f64, f64)>,
     dimensionless: bool,
     name: Option<String>,
+    stated_cutoff_hz: Option<f64>,
 ) -> PyResult<String> {
     let base_law: LawSpec = base
         .parse()
@@ -740,7 +765,19 @@ fn explain(
             })
             .collect::<PyResult<_>>()?;
     }
-    let src = source_of(path, t, x, v, ft, temp, ecr, rig, dimensionless, name)?;
+    let src = source_of(
+        path,
+        t,
+        x,
+        v,
+        ft,
+        temp,
+        ecr,
+        rig,
+        dimensionless,
+        name,
+        stated_cutoff_hz,
+    )?;
     py.detach(|| explain_json(src, opts, holes(longest_clean_stretch)))
         .map_err(|f| f.into_py(py))
 }

@@ -156,6 +156,7 @@ class Record:
             "ecr": c(self.ecr),
             "rig": self.rig,
             "dimensionless": self.units == "dimensionless",
+            "stated_cutoff_hz": self.force_cutoff_hz,
         }
 
 

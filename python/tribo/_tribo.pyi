@@ -49,6 +49,7 @@ def fit(
     rig: Optional[Tuple[float, float, float]] = None,
     dimensionless: bool = False,
     name: Optional[str] = None,
+    stated_cutoff_hz: Optional[float] = None,
 ) -> str: ...
 def explain(
     path: Optional[str] = None,
@@ -67,6 +68,7 @@ def explain(
     rig: Optional[Tuple[float, float, float]] = None,
     dimensionless: bool = False,
     name: Optional[str] = None,
+    stated_cutoff_hz: Optional[float] = None,
 ) -> str: ...
 def catalog_runs(
     store: str,
