@@ -96,11 +96,17 @@ pub fn mu0_trend_of(
     filter: Option<(f64, f64)>,
     time_per_tau: f64,
 ) -> Option<Mu0Trend> {
-    let through = |c: &[f64]| match filter {
+    let through = butterworth_or_none(filter);
+    mu0_trend_through(tau, ydot, f, mu, range, &through, time_per_tau)
+}
+
+/// The force channel's 2-pole low-pass `(cut-off, sampling rate)` (Hz) as a function of a
+/// regressor; `None`: the identity.
+fn butterworth_or_none(filter: Option<(f64, f64)>) -> impl Fn(&[f64]) -> Vec<f64> {
+    move |c: &[f64]| match filter {
         Some((fc, rate)) => crate::sensor::butterworth2(c, fc, rate),
         None => c.to_vec(),
-    };
-    mu0_trend_through(tau, ydot, f, mu, range, &through, time_per_tau)
+    }
 }
 
 /// [`mu0_trend_of`] with the force channel's low-pass given as a function of a regressor (every
@@ -366,10 +372,7 @@ pub fn mu0_trend(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
         if fc.is_some_and(|c: f64| c >= 0.45 * rate) {
             continue;
         }
-        let through = |c: &[f64]| match fc {
-            Some(fc) => crate::sensor::butterworth2(c, fc, rate),
-            None => c.to_vec(),
-        };
+        let through = butterworth_or_none(fc.map(|fc| (fc, rate)));
         if let Some((t, rss)) = trend_and_rss(
             &tau,
             &ydot,
