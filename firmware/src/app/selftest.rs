@@ -58,6 +58,17 @@ impl App<'_> {
                 len: len.min(FILLER_MAX as u16),
                 refused: 0,
             }),
+            // Nothing to measure over time: the register file as the thermocouple task last read
+            // it, reported at the next poll.
+            SelfTestCheck::Thermocouple => {
+                let read = hw.read_thermocouple();
+                SelfTestRun::Report(SelfTestReport::Thermocouple(
+                    crate::wire::ThermocoupleReport {
+                        registers: read.map(|r| r.regs),
+                        age_us: read.map_or(u64::MAX, |r| r.age_us),
+                    },
+                ))
+            }
             SelfTestCheck::Panic | SelfTestCheck::Stall => {
                 // The reset it provokes makes the heater safe as well, but a bring-up check must
                 // not be the way a live output goes off: the plate is let cool first.
