@@ -291,8 +291,9 @@ fn refusal(e: &LinkError) -> anyhow::Error {
              `tribo selftest` again"
         ),
         Some(ErrorCode::Busy) => anyhow::anyhow!(
-            "the rig is busy (armed, running a run, still writing its last run to flash, or its \
-             stored run fills the flash): let it finish or abort it, then run `tribo selftest` again"
+            "the rig is busy (armed, running a run, still writing its last run to flash, its \
+             stored run fills the flash, or, for the reset checks, its magnet still holds): let it \
+             finish or abort it, let the magnet go, then run `tribo selftest` again"
         ),
         _ => anyhow::anyhow!("{e}"),
     }
