@@ -30,5 +30,6 @@ pub mod link_tx;
 pub mod reset;
 pub mod safety;
 pub mod selftest;
+pub mod stack;
 pub mod thermocouple;
 pub mod watchdog;

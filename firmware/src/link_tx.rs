@@ -167,8 +167,9 @@ pub fn zlp_after(len: usize, max_packet: usize, ready: bool) -> bool {
 /// What the device's handler was told, in the order embassy-usb tells it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BusEvent {
-    /// `Handler::enabled`: VBUS came (the peripheral is enabled) or went. With VBUS sensing off
-    /// the driver reports power once, at start, and never its loss.
+    /// `Handler::enabled`: VBUS came (the peripheral is enabled) or went. The board senses VBUS
+    /// (PA9): power comes with the OTG core's session request, goes with its session end (a
+    /// pull). With VBUS sensing off the driver reports power once, at start, and never its loss.
     Enabled(bool),
     /// `Handler::reset`: a bus reset (a new enumeration starts; the device is unconfigured and
     /// no longer suspended).
@@ -518,6 +519,37 @@ mod tests {
     }
 
     #[test]
+    fn a_pull_with_vbus_sensing_is_power_removed_then_a_new_session() {
+        // The board senses VBUS (PA9): a pull is `enabled(false)` (the OTG core's session-end
+        // interrupt), before or after the 3 ms of idle bus that make a suspend; a re-plug is
+        // `enabled(true)` (session request), a bus reset and a new enumeration.
+        for pull in [
+            &[Suspended(true), Enabled(false)][..],
+            &[Enabled(false)][..],
+        ] {
+            let mut s = after(&[Enabled(true), Reset, Configured(true)]);
+            let first = s.session().unwrap();
+            for &e in pull {
+                s.on(e);
+            }
+            assert_eq!(s.session(), None, "down after {pull:?}");
+            // A suspend the core reports while unpowered changes nothing.
+            s.on(Suspended(true));
+            s.on(Enabled(true));
+            assert!(!s.up(), "power back is not a configuration");
+            s.on(Reset);
+            assert!(!s.up());
+            s.on(Configured(true));
+            let second = s.session().expect("up after the re-plug's enumeration");
+            assert_ne!(first, second, "a new session: the sender resends");
+        }
+        // VBUS present at boot: the first event is the session request's power, as without
+        // sensing; no power, no link, whatever else arrives.
+        assert!(after(&[Enabled(true), Reset, Configured(true)]).up());
+        assert!(!after(&[Reset, Configured(true)]).up());
+    }
+
+    #[test]
     fn a_suspend_then_resume_is_up_again_in_a_new_session() {
         let mut s = after(&[Enabled(true), Reset, Configured(true)]);
         let first = s.session().unwrap();
@@ -652,6 +684,34 @@ mod tests {
         // In this model a packet the host took is acknowledged before the link can drop, so
         // nothing arrives twice; what the host holds of a frame cut by a drop is closed by a
         // delimiter and dropped (not one of `sent`).
+        assert_eq!(good, sent, "every frame, once, in order");
+    }
+
+    #[test]
+    fn on_the_bus_model_every_frame_reaches_the_host_through_vbus_pulls() {
+        let sent: Vec<Vec<u8>> = (1..=10u8).map(|k| frame(k, 30 + 41 * k as usize)).collect();
+        let script: &[(usize, &[BusEvent])] = &[
+            // A pull seen as VBUS gone at once (mid-frame), re-plugged.
+            (4, &[Enabled(false)]),
+            (9, &[Enabled(true)]),
+            (11, &[Reset, Configured(true)]),
+            // A pull seen as a suspend first, then VBUS gone; re-plugged to another host.
+            (20, &[Suspended(true)]),
+            (21, &[Enabled(false)]),
+            (30, &[Enabled(true), Reset, Configured(true)]),
+            // Power back but never configured for a while (a host still enumerating).
+            (38, &[Enabled(false)]),
+            (40, &[Enabled(true), Reset]),
+            (47, &[Configured(true)]),
+        ];
+        let hosts = run_bus(&sent, script);
+        assert!(
+            hosts.len() >= 4,
+            "every scripted pull was seen: {}",
+            hosts.len()
+        );
+        let got: Vec<Vec<u8>> = hosts.iter().flat_map(|h| frames(h)).collect();
+        let good: Vec<Vec<u8>> = got.iter().filter(|f| sent.contains(f)).cloned().collect();
         assert_eq!(good, sent, "every frame, once, in order");
     }
 }

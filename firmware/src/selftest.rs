@@ -433,6 +433,17 @@ pub fn judge_flash(r: &FlashReport) -> Result<(), &'static str> {
     Ok(())
 }
 
+/// A thermocouple check: the register file judged exactly as the heater judges every read
+/// ([`crate::thermocouple::check`]): the chip answered recently and not with all zeros or all
+/// ones, its configuration reads back (type K, 50 Hz filter, automatic conversions, open-circuit
+/// detection on: CR0 0x91), no fault flag (open thermocouple, over/under-voltage, ranges), the cold
+/// junction within `limits::COLD_JUNCTION_C` and the plate not below `limits::PLATE_MIN_C`.
+pub fn judge_thermocouple(
+    r: &crate::wire::ThermocoupleReport,
+) -> Result<crate::thermocouple::Reading, crate::thermocouple::BadRead> {
+    crate::thermocouple::check(r.registers.as_ref().map(|g| (g, r.age_us)))
+}
+
 /// The boot report after a deliberate act: `Err` says what it should have said.
 pub fn judge_reset(d: Deliberate, boot: &BootReport) -> Result<(), &'static str> {
     match d {

@@ -8,7 +8,9 @@ use std::net::TcpListener;
 use std::path::PathBuf;
 use std::time::Duration;
 use tribo_physics::FrictionLaw;
-use tribo_rig::{ChannelFault, HostEvent, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig};
+use tribo_rig::{
+    ChannelFault, ConverterFault, HostEvent, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig,
+};
 
 /// The simulated rig, from a TOML file and/or flags (flags win).
 #[derive(clap::Args, Debug, Clone)]
@@ -61,6 +63,12 @@ pub struct VirtualArgs {
     /// (velocity), f (force), ecr. Repeat the flag for several.
     #[arg(long = "fault", value_name = "FAULT", value_parser = parse_fault)]
     pub faults: Vec<(usize, ChannelFault)>,
+    /// Break the simulated thermocouple or its converter: `open` (a broken wire: the chip's
+    /// open-circuit flag), `shorted` (over/under-voltage), `zero` or `ones` (MISO stuck: every
+    /// byte 0x00 or 0xFF), `stale` (the chip stops answering), `reset` (its configuration lost) or
+    /// `cj=C` (the cold junction reads C °C).
+    #[arg(long = "tc-fault", value_name = "FAULT", value_parser = parse_tc_fault)]
+    pub tc_fault: Option<ConverterFault>,
     /// Print the rig's console (state-changing commands, faults, resets) on standard output.
     #[arg(skip)]
     pub log_events: bool,
@@ -82,6 +90,7 @@ impl Default for VirtualArgs {
             button_after: None,
             speed: 1.0,
             faults: Vec::new(),
+            tc_fault: None,
             log_events: false,
         }
     }
@@ -113,6 +122,23 @@ pub fn parse_fault(s: &str) -> Result<(usize, ChannelFault), String> {
         _ => return Err(format!("{s:?}: {usage}")),
     };
     Ok((channel, fault))
+}
+
+/// A `--tc-fault` value (see [`VirtualArgs::tc_fault`]).
+pub fn parse_tc_fault(s: &str) -> Result<ConverterFault, String> {
+    let usage = "expected open, shorted, zero, ones, stale, reset or cj=C (°C)";
+    Ok(match s {
+        "open" => ConverterFault::Open,
+        "shorted" => ConverterFault::Shorted,
+        "zero" => ConverterFault::AllZero,
+        "ones" => ConverterFault::AllOnes,
+        "stale" => ConverterFault::Stale,
+        "reset" => ConverterFault::Reset,
+        _ => match s.strip_prefix("cj=").map(str::parse::<f32>) {
+            Some(Ok(c)) if c.is_finite() => ConverterFault::ColdJunction(c),
+            _ => return Err(format!("{s:?}: {usage}")),
+        },
+    })
 }
 
 /// A serial number for a virtual rig: `tribo` in ASCII, then 24 bits from the clock and the
@@ -223,6 +249,7 @@ impl VirtualArgs {
         for &(channel, fault) in &self.faults {
             rig.set_channel_fault(channel, Some(fault));
         }
+        rig.set_thermocouple_fault(self.tc_fault);
         Ok((rig, opts))
     }
 

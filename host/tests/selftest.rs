@@ -81,6 +81,7 @@ fn a_sound_virtual_rig_passes_every_measured_row() {
             "input-ecr",
             "flash",
             "flash-flags",
+            "thermocouple",
             "link-throughput",
             "reset-record",
             "watchdog"
@@ -104,6 +105,18 @@ fn a_sound_virtual_rig_passes_every_measured_row() {
     // The simulated flash erases a sector in the STM32H743's typical 1.1 s (device time).
     assert!(flash["erase_us"].as_u64().unwrap() >= 1_100_000, "{flash}");
     assert_eq!(row("link-throughput")["figures"]["missing"], 0);
+    let tc = &row("thermocouple");
+    assert!(
+        tc["summary"]
+            .as_str()
+            .unwrap()
+            .contains("open-circuit detection on"),
+        "{tc:#}"
+    );
+    assert_eq!(
+        tc["figures"]["registers"][0], 0x91,
+        "CR0 as configured: {tc:#}"
+    );
     assert_eq!(row("reset-record")["figures"]["cause"], "Panic");
     assert_eq!(row("watchdog")["figures"]["cause"], "Watchdog");
     assert!(
@@ -192,4 +205,71 @@ fn a_fault_flag_that_names_no_channel_is_refused_with_the_forms_it_takes() {
         err.contains("no channel \"z\"") && err.contains("stuck:CH=CODE"),
         "{err}"
     );
+}
+
+/// `tribo selftest` against a rig started with `--tc-fault FAULT`, no resets: (exit ok, the
+/// thermocouple row, stdout, stderr).
+fn thermocouple_with(fault: &str) -> (bool, serde_json::Value, String, String) {
+    let r = rig(&["--tc-fault", fault]);
+    let o = selftest(&r, &["--no-reset", "--json"]);
+    let (out, err) = (text(&o.stdout), text(&o.stderr));
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON object");
+    let row = v["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["row"] == "thermocouple")
+        .cloned()
+        .unwrap_or_else(|| panic!("no thermocouple row: {v:#}"));
+    // Only the thermocouple row fails.
+    let failed: Vec<&str> = v["failed"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    assert_eq!(failed, ["thermocouple"], "{v:#}");
+    (o.status.success(), row, out, err)
+}
+
+#[test]
+fn an_open_thermocouple_fails_its_row_and_the_exit_status() {
+    let (ok, row, out, err) = thermocouple_with("open");
+    assert!(!ok, "exit 1: {out}\n{err}");
+    assert_eq!(row["verdict"], "fail");
+    assert!(
+        row["summary"]
+            .as_str()
+            .unwrap()
+            .contains("open thermocouple"),
+        "{row:#}"
+    );
+    assert!(
+        err.contains("thermocouple"),
+        "named on standard error: {err}"
+    );
+}
+
+#[test]
+fn a_thermocouple_converter_that_lost_its_configuration_or_reads_a_hot_cold_junction_fails() {
+    let (ok, row, ..) = thermocouple_with("reset");
+    assert!(!ok);
+    let s = row["summary"].as_str().unwrap();
+    assert!(
+        s.contains("configuration does not read back") && s.contains("CR0 0x00"),
+        "{row:#}"
+    );
+    // 50 °C is the top of the plausible range: 55 °C fails it, named.
+    let (ok, row, ..) = thermocouple_with("cj=55");
+    assert!(!ok);
+    assert!(
+        row["summary"]
+            .as_str()
+            .unwrap()
+            .contains("cold junction 55.0 °C"),
+        "{row:#}"
+    );
+    let (ok, row, ..) = thermocouple_with("ones");
+    assert!(!ok);
+    assert!(row["summary"].as_str().unwrap().contains("0xFF"), "{row:#}");
 }

@@ -88,6 +88,8 @@ pub fn take() -> Option<RunStoreMemory> {
 // defmt-rtt's byte writes. The DTCM is enabled out of reset. `memory.x` aligns both sections and
 // `.rtt`'s load address to 4 bytes and pads their sizes to multiples of 4.
 //
+// Before that, it moves thread mode to the process stack (see the comment in the assembly).
+//
 // Before that, first of all, it starts the independent watchdog with its longest timeout
 // ([`BOOT_WATCHDOG`]): from the first instruction after reset, a boot stuck anywhere (the HSE-ready
 // wait, which has no timeout when the ST-LINK's clock output is absent; the run store's recovery;
@@ -124,6 +126,26 @@ core::arch::global_asm!(
     "    str r1, [r0]",
     "    dsb",
     "4:",
+    // The two stacks (`tribo_firmware::stack`). The main stack (MSP, the vector table's initial
+    // stack pointer: the bottom 8 KiB of SRAM4, `MSP_STACK` in `memory.x`) is zeroed, so that its
+    // ECC is written before a handler's byte or half-word stores; nothing is on it yet (the reset
+    // handler pushes nothing before `main`). Then thread mode moves to the process stack
+    // (CONTROL.SPSEL = 1, PSP = the top of the AXI SRAM): the rest of the reset handler, `main`
+    // and every task run on the PSP, whose MPU guard `mpu.rs` programs, and the handlers on the
+    // MSP, which a task's overflow does not touch.
+    "    ldr r0, =_msp_stack_bottom",
+    "    ldr r1, =_stack_start",
+    "    movs r2, #0",
+    "5:  cmp r1, r0",
+    "    beq 6f",
+    "    stm r0!, {{r2}}",
+    "    b 5b",
+    "6:  ldr r0, =_task_stack_top",
+    "    msr psp, r0",
+    "    mrs r0, control",
+    "    orr r0, r0, #2",
+    "    msr control, r0",
+    "    isb",
     "    ldr r0, =__srtt",
     "    ldr r1, =__ertt",
     "    ldr r2, =__sirtt",

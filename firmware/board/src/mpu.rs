@@ -5,7 +5,7 @@
 //! | region | memory | attributes | why |
 //! |---|---|---|---|
 //! | 0 | flash bank 2 (0x0810_0000, 1 MiB) | normal, non-cacheable, execute-never | the run store erases and programs it behind the cache's back: a cached line would keep the bytes from before an erase or a program |
-//! | 1 | the stack's guard: the lowest [`STACK_GUARD_BYTES`] of the stack area | no access, execute-never | a stack that grows into it faults at once instead of writing over `.bss` (the app task's future, the USB buffers) |
+//! | 1 | the task stack's guard: the lowest aligned [`STACK_GUARD_BYTES`] (8 KiB) of the process stack (PSP), above the statics | no access, execute-never | a task stack that grows into it faults at once instead of writing over `.bss` (the app task's future, the USB buffers); no frame of the binary is larger (`cargo xtask firmware` checks), so none can skip it. The fault is taken on the main stack (MSP, SRAM4), which the overflow did not touch (`tribo_firmware::stack`) |
 //! | 5 | the no-init RAM (`NOINIT`, SRAM4's last KiB: reset record, recovery marker) | normal, non-cacheable, shareable, execute-never | what the fatal paths write there must be in the SRAM when `sys_reset` cuts the core off: `SCB::sys_reset` does not clean the D-cache. The MPU is enabled without HFNMIENA, so inside HardFault and NMI it is off and this region does not apply: `safety::clean_dcache` cleans the lines after every store there |
 //! | 7 | the converter's DMA ring (`DMA_RING`, 16 KiB of SRAM3) | normal, non-cacheable, shareable, execute-never | the DMA writes it under the reader at any moment (see `sampling.rs`) |
 //!
@@ -22,8 +22,8 @@ use tribo_firmware::hal::FlashGeometry;
 
 /// Flash bank 2 (RM0433: 0x0810_0000, 1 MiB).
 pub const BANK2_BASE: u32 = 0x0810_0000;
-/// Size of the stack's guard region.
-pub const STACK_GUARD_BYTES: u32 = 4096;
+/// Size of the task stack's guard region.
+pub const STACK_GUARD_BYTES: u32 = tribo_firmware::stack::TASK_GUARD_BYTES;
 
 /// An MPU region: number (higher wins where regions overlap), base, size, attributes.
 #[derive(Clone, Copy, defmt::Format)]
@@ -69,26 +69,25 @@ pub fn bank2() -> Region {
 }
 
 extern "C" {
-    // cortex-m-rt's link.x: the lowest address of the stack (the end of the statics in RAM), and
-    // its top (the end of RAM).
+    // cortex-m-rt's link.x: the end of the statics in RAM, the task stack's lowest address; and
+    // `memory.x`: the task stack's top (the end of the AXI SRAM).
     static _stack_end: u32;
-    static _stack_start: u32;
+    static _task_stack_top: u32;
 }
 
-/// Region 1: the guard, the first aligned [`STACK_GUARD_BYTES`] above the end of the statics; `None`
-/// if the stack is too small to give them up.
+/// Region 1: the task stack's guard, the first aligned [`STACK_GUARD_BYTES`] above the end of the
+/// statics (`tribo_firmware::stack::guard`); `None` if the stack is too small to give them up.
 pub fn stack_guard() -> Option<Region> {
     // Only the addresses of the linker's symbols are taken, never their contents.
-    let (end, start) = (
+    let (end, top) = (
         core::ptr::addr_of!(_stack_end) as u32,
-        core::ptr::addr_of!(_stack_start) as u32,
+        core::ptr::addr_of!(_task_stack_top) as u32,
     );
-    let base = end.checked_next_multiple_of(STACK_GUARD_BYTES)?;
-    // At least 32 KiB of stack above the guard (`cargo xtask firmware` checks the same).
-    (base.checked_add(STACK_GUARD_BYTES + 32 * 1024)? <= start).then_some(Region {
+    let (base, bytes) = tribo_firmware::stack::guard(end, top, STACK_GUARD_BYTES)?;
+    Some(Region {
         number: 1,
         base,
-        bytes: STACK_GUARD_BYTES,
+        bytes,
         attrs: NO_ACCESS,
     })
 }

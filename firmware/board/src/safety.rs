@@ -250,11 +250,27 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
     safe_state();
     // SAFETY: reads of the System Control Block's fault status and address registers, always
     // mapped on a Cortex-M7; no Rust object is involved.
-    let (cfsr, hfsr, bfar) = unsafe {
+    let (cfsr, hfsr, bfar, mmfar) = unsafe {
         let scb = &*cortex_m::peripheral::SCB::PTR;
-        (scb.cfsr.read(), scb.hfsr.read(), scb.bfar.read())
+        (
+            scb.cfsr.read(),
+            scb.hfsr.read(),
+            scb.bfar.read(),
+            scb.mmfar.read(),
+        )
     };
-    let m = reset::cpu_fault_message(ef.pc(), ef.lr(), cfsr, hfsr, bfar);
+    // This handler runs on the main stack (SRAM4), whatever the task stack did. A task stack that
+    // ran into its guard: the frame the core tried to stack on the PSP is not there (`ef` would be
+    // read from the guard; the MPU is off here, so that would not fault, but it is garbage), and
+    // the record says what happened instead.
+    let psp = cortex_m::register::psp::read();
+    let overflow = crate::mpu::stack_guard()
+        .is_some_and(|g| tribo_firmware::stack::task_overflow(cfsr, mmfar, psp, g.base, g.bytes));
+    let m = if overflow {
+        tribo_firmware::stack::overflow_message(psp, cfsr, hfsr, mmfar)
+    } else {
+        reset::cpu_fault_message(ef.pc(), ef.lr(), cfsr, hfsr, bfar)
+    };
     record(ResetCause::CpuFault, m.as_bytes());
     // A bus fault reading flash bank 2 (a torn word's double ECC error), whoever read it: the
     // next boot erases that sector before its recovery (`reset::boot_recovery`).

@@ -17,7 +17,7 @@ pub(super) enum SelfTestRun {
 impl App<'_> {
     /// Starts a check: refused while a run is armed, running or ending, while another check runs,
     /// (the flash check) while the last run is still being written to flash, and (a deliberate
-    /// panic or stall) while the heater heats.
+    /// panic or stall) while the heater heats or the magnet holds.
     pub(super) fn start_selftest<H: Hardware>(
         &mut self,
         hw: &mut H,
@@ -58,11 +58,28 @@ impl App<'_> {
                 len: len.min(FILLER_MAX as u16),
                 refused: 0,
             }),
+            // Nothing to measure over time: the register file as the thermocouple task last read
+            // it, reported at the next poll.
+            SelfTestCheck::Thermocouple => {
+                let read = hw.read_thermocouple();
+                SelfTestRun::Report(SelfTestReport::Thermocouple(
+                    crate::wire::ThermocoupleReport {
+                        registers: read.map(|r| r.regs),
+                        age_us: read.map_or(u64::MAX, |r| r.age_us),
+                    },
+                ))
+            }
             SelfTestCheck::Panic | SelfTestCheck::Stall => {
                 // The reset it provokes makes the heater safe as well, but a bring-up check must
                 // not be the way a live output goes off: the plate is let cool first.
                 if self.heater.heating() {
                     return Err(ErrorCode::Interlock(Interlock::HeaterOn));
+                }
+                // Nor while the coil is on (holding, or its reverse pulse): a disarmed rig keeps holding the pin until its budget
+                // runs out, and the reset would drop it. `Busy` (no interlock names the magnet
+                // holding; the host's refusal text says it).
+                if self.release.is_on() {
+                    return Err(ErrorCode::Busy);
                 }
                 self.deliberate = Some(if check == SelfTestCheck::Panic {
                     Deliberate::Panic

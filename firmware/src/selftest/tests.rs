@@ -207,3 +207,52 @@ fn the_boot_report_after_a_deliberate_act_must_name_it() {
     assert!(judge_reset(Deliberate::Stall, &boot(ResetCause::Watchdog, "")).is_err());
     assert!(judge_reset(Deliberate::Stall, &panic).is_err());
 }
+
+#[test]
+fn the_thermocouple_row_judges_each_fault_the_chip_can_show() {
+    use crate::thermocouple::{encode, sr, BadRead};
+    use crate::wire::ThermocoupleReport;
+    let at = |registers: Option<[u8; 16]>, age_us: u64| ThermocoupleReport { registers, age_us };
+    // A sound chip: configured, 23 °C on the board, the plate at 25 °C, read 100 ms ago.
+    let good = encode(25.0, 23.0, 0);
+    let r = judge_thermocouple(&at(Some(good), 100_000)).unwrap();
+    assert!((r.cold_junction_c - 23.0).abs() < 0.02 && (r.plate_c - 25.0).abs() < 0.01);
+    // Open thermocouple (the chip's open-circuit detection, on in CR0), shorted, no chip.
+    assert_eq!(
+        judge_thermocouple(&at(Some(encode(25.0, 23.0, sr::OPEN)), 0)),
+        Err(BadRead::Open)
+    );
+    assert_eq!(
+        judge_thermocouple(&at(Some(encode(25.0, 23.0, sr::OVUV)), 0)),
+        Err(BadRead::OverUnderVoltage)
+    );
+    assert_eq!(
+        judge_thermocouple(&at(Some([0xFF; 16]), 0)),
+        Err(BadRead::AllOnes)
+    );
+    assert_eq!(
+        judge_thermocouple(&at(None, u64::MAX)),
+        Err(BadRead::Missing { age_ms: u32::MAX })
+    );
+    // Not configured (a chip reset to its defaults: conversions off, detection off).
+    let mut reset = good;
+    reset[0] = 0x00;
+    assert_eq!(
+        judge_thermocouple(&at(Some(reset), 0)),
+        Err(BadRead::Config)
+    );
+    // Cold junction at the edges of the plausible range (limits::COLD_JUNCTION_C), and beyond.
+    let cj = crate::wire::limits::COLD_JUNCTION_C;
+    assert!(judge_thermocouple(&at(Some(encode(25.0, *cj.start(), 0)), 0)).is_ok());
+    assert!(judge_thermocouple(&at(Some(encode(25.0, *cj.end(), 0)), 0)).is_ok());
+    assert!(matches!(
+        judge_thermocouple(&at(Some(encode(25.0, cj.end() + 1.0, 0)), 0)),
+        Err(BadRead::ColdJunctionImplausible(_))
+    ));
+    // A read older than the heater accepts.
+    let old = crate::wire::limits::TC_MAX_AGE_MS as u64 * 1000 + 1;
+    assert!(matches!(
+        judge_thermocouple(&at(Some(good), old)),
+        Err(BadRead::Missing { .. })
+    ));
+}

@@ -13,6 +13,12 @@
 //! decodes to the cause and message (the `Boot` report the next `Hello` gets), and prints the
 //! instructions from the fault to safe outputs.
 //!
+//! The stack overflow test runs the board's two-stack layout (`firmware/board/src/memory.rs` and
+//! `mpu.rs`, from the same [`tribo_firmware::stack`] numbers): the overflowing "task" on the PSP
+//! above an MPU no-access guard, the HardFault on the MSP; its handler checks it runs on the MSP,
+//! outside the task stack, that the library tells the overflow from the fault status
+//! ([`tribo_firmware::stack::task_overflow`]), and records what the board records.
+//!
 //! What this does not cover: the board's volatile writes reaching real STM32 registers (the
 //! addresses are checked against the PAC at boot by `check_table`) and the reset itself.
 
@@ -33,14 +39,19 @@ pub enum Fatal {
     Nmi,
     /// An enabled interrupt with no handler of its own (IRQ 0, pended through the NVIC).
     UnboundIrq,
+    /// A task stack overflow: thread mode on the PSP with the board's layout
+    /// ([`tribo_firmware::stack`]: an MPU no-access guard of `TASK_GUARD_BYTES` below the task
+    /// stack, handlers on the MSP), a recursion of 1 KiB frames until it runs into the guard.
+    StackOverflow,
 }
 
 /// The fatal tests by name (the binary runs one when the filter is exactly its name).
-pub const FATAL: [(&str, Fatal); 4] = [
+pub const FATAL: [(&str, Fatal); 5] = [
     ("failsafe::panic_inside_a_task", Fatal::Panic),
     ("failsafe::hard_fault", Fatal::HardFault),
     ("failsafe::nmi", Fatal::Nmi),
     ("failsafe::unbound_interrupt", Fatal::UnboundIrq),
+    ("failsafe::stack_overflow", Fatal::StackOverflow),
 ];
 
 /// The fatal test named exactly `filter`, if any.
@@ -84,6 +95,10 @@ pub fn finish(
             ResetCause::CpuFault,
             "unhandled exception or interrupt irqn=0",
         ),
+        Fatal::StackOverflow => (
+            ResetCause::CpuFault,
+            "stack overflow: task stack hit its guard",
+        ),
     };
     let mut failure: Option<heapless::String<256>> = None;
     let mut fail = |args: core::fmt::Arguments<'_>| {
@@ -122,6 +137,7 @@ pub fn finish(
                 Fatal::HardFault => "hard_fault",
                 Fatal::Nmi => "nmi",
                 Fatal::UnboundIrq => "unbound_interrupt",
+                Fatal::StackOverflow => "stack_overflow",
             }
         );
         if n > BUDGET {

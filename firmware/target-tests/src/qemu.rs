@@ -21,6 +21,7 @@ use core::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::{debug, hio, nr, syscall1};
 use tribo_firmware::reset::{self, MessageBuf};
+use tribo_firmware::stack;
 use tribo_firmware::wire::ResetCause;
 use tribo_target_tests::fatal::{self, Fatal, FATAL};
 use tribo_target_tests::replay::Clock;
@@ -266,6 +267,7 @@ fn run_fatal(out: &mut Out, platform: &str, name: &'static str, which: Fatal) ->
             cortex_m::asm::dsb();
             cortex_m::asm::isb();
         },
+        Fatal::StackOverflow => overflow_the_task_stack(out),
     }
     let _ = writeln!(
         out,
@@ -275,6 +277,85 @@ fn run_fatal(out: &mut Out, platform: &str, name: &'static str, which: Fatal) ->
     debug::exit(debug::EXIT_FAILURE);
     #[allow(clippy::empty_loop)]
     loop {}
+}
+
+/// The stack overflow test's task stack: its lowest [`stack::TASK_GUARD_BYTES`] the guard, the
+/// rest ([`stack::MIN_TASK_STACK_BYTES`]) the stack, aligned for the MPU region.
+#[repr(C, align(8192))]
+struct TaskStack([u8; (stack::TASK_GUARD_BYTES + stack::MIN_TASK_STACK_BYTES) as usize]);
+static mut TASK_STACK: TaskStack =
+    TaskStack([0; (stack::TASK_GUARD_BYTES + stack::MIN_TASK_STACK_BYTES) as usize]);
+/// The guard of this run's task stack (base; 0 before it is set up).
+static GUARD_BASE: AtomicU32 = AtomicU32::new(0);
+
+/// The guard region of [`TASK_STACK`] (`stack::guard`, as the board places its own).
+fn task_stack_guard() -> Option<(u32, u32, u32)> {
+    let bottom = core::ptr::addr_of!(TASK_STACK) as u32;
+    let top = bottom + core::mem::size_of::<TaskStack>() as u32;
+    stack::guard(bottom, top, stack::TASK_GUARD_BYTES).map(|(base, bytes)| (base, bytes, top))
+}
+
+/// The board's layout, then a recursion on the task stack until it overflows: region 1 of the MPU
+/// a no-access guard below the task stack (background map on, HFNMIENA off: `mpu.rs`), thread
+/// mode moved to the PSP at the stack's top (`memory.rs`'s `__pre_init`), the MSP left to the
+/// handlers.
+fn overflow_the_task_stack(out: &mut Out) {
+    let Some((base, bytes, top)) = task_stack_guard() else {
+        let _ = write!(out, "(the task stack's guard could not be placed) ");
+        return;
+    };
+    GUARD_BASE.store(base, Ordering::SeqCst);
+    let rasr = 1 << 28 | (bytes.trailing_zeros() - 1) << 1 | 1;
+    // SAFETY: the MPU's RNR/RBAR/RASR/CTRL (0xE000_ED98…ED94), always mapped on a Cortex-M7:
+    // region 1 made a no-access guard over the lowest 8 KiB of TASK_STACK, which nothing else
+    // uses; the background map stays on (PRIVDEFENA), so every other access is as before.
+    unsafe {
+        cortex_m::asm::dsb();
+        write_volatile(0xE000_ED94 as *mut u32, 0);
+        write_volatile(0xE000_ED98 as *mut u32, 1);
+        write_volatile(0xE000_ED9C as *mut u32, base);
+        write_volatile(0xE000_EDA0 as *mut u32, rasr);
+        write_volatile(0xE000_ED94 as *mut u32, 1 << 2 | 1);
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+    }
+    // SAFETY: the PSP is set to the top of TASK_STACK (8-aligned), which nothing else uses, and
+    // thread mode switched to it (CONTROL.SPSEL) by the only code that runs from here on: the
+    // recursion, called on the new stack, which never returns (its overflow ends the run in the
+    // HardFault handler).
+    unsafe {
+        core::arch::asm!(
+            "msr psp, r0",
+            "mrs r1, control",
+            "orr r1, r1, #2",
+            "msr control, r1",
+            "isb",
+            "bl {task}",
+            "udf #0",
+            in("r0") top,
+            task = sym overflowing_task,
+            options(noreturn),
+        )
+    }
+}
+
+/// The task that overflows: a recursion of 1 KiB frames (each filled, as a frame of locals would
+/// be), on the PSP.
+extern "C" fn overflowing_task() -> ! {
+    let n = deep(0);
+    let _ = writeln!(out(), "the recursion returned {n}");
+    exit(false)
+}
+
+#[inline(never)]
+fn deep(depth: u32) -> u32 {
+    TRIGGERED_AT.store(ticks(), Ordering::SeqCst);
+    let mut frame = core::hint::black_box([depth as u8; 1024]);
+    if depth == u32::MAX {
+        return 0;
+    }
+    frame[depth as usize % 1024] ^= 1;
+    deep(depth + 1).wrapping_add(core::hint::black_box(frame)[7] as u32)
 }
 
 /// Instructions since the fatal test's trigger.
@@ -338,6 +419,53 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
             &record,
             Some(n),
         ));
+    }
+    if let Some((name, Fatal::StackOverflow)) = fatal_run() {
+        // The board's handler (`firmware/board/src/safety.rs`): outputs safe, then the record,
+        // told from the fault status without reading `ef` (the frame the core could not stack).
+        let image = fatal::safe_state();
+        let n = since_trigger(ticks());
+        let msp = cortex_m::register::msp::read();
+        let psp = cortex_m::register::psp::read();
+        // SAFETY: as above, and MMFAR.
+        let (cfsr, hfsr, mmfar) = unsafe {
+            let scb = &*cortex_m::peripheral::SCB::PTR;
+            (scb.cfsr.read(), scb.hfsr.read(), scb.mmfar.read())
+        };
+        let base = GUARD_BASE.load(Ordering::SeqCst);
+        let top = task_stack_guard().map_or(0, |g| g.2);
+        let mut out = out();
+        let _ = writeln!(
+            out,
+            "\n    in the handler: msp={msp:#010x} psp={psp:#010x} cfsr={cfsr:#010x} \
+             hfsr={hfsr:#010x} mmfar={mmfar:#010x}; guard {base:#010x}+{}, task stack top \
+             {top:#010x}",
+            stack::TASK_GUARD_BYTES
+        );
+        let on_msp = !(base..top).contains(&msp);
+        let told = stack::task_overflow(cfsr, mmfar, psp, base, stack::TASK_GUARD_BYTES);
+        let m = if told {
+            stack::overflow_message(psp, cfsr, hfsr, mmfar)
+        } else {
+            reset::cpu_fault_message(0, 0, cfsr, hfsr, 0)
+        };
+        let record = reset::encode(ResetCause::CpuFault, m.as_bytes());
+        let mut ok = fatal::finish(
+            &mut out,
+            name,
+            Fatal::StackOverflow,
+            &image,
+            &record,
+            Some(n),
+        );
+        if !on_msp {
+            let _ = writeln!(
+                out,
+                "    failed: the HardFault handler ran on the task stack (msp={msp:#010x})"
+            );
+            ok = false;
+        }
+        exit(ok);
     }
     let mut out = out();
     let _ = writeln!(out, "\nHardFault: {ef:?}\n\ntest result: FAILED (fault)");

@@ -30,6 +30,17 @@ fn the_self_test_messages_are_the_last_variants() {
         [13, 3, 1, 0],
         "SelfTest after EcrRange (12); FillerDone is report 3"
     );
+    // The thermocouple check came after the others: check 5, report 4; the older ones' bytes
+    // are as above.
+    assert_eq!(
+        body(&HostMsg::SelfTest(SelfTestCheck::Thermocouple)),
+        [13, 5]
+    );
+    let tc = SelfTestReport::Thermocouple(ThermocoupleReport {
+        registers: None,
+        age_us: 0,
+    });
+    assert_eq!(body(&DeviceMsg::SelfTest(tc)), [13, 4, 0, 0]);
 }
 
 #[test]
@@ -70,6 +81,14 @@ fn every_self_test_message_round_trips_and_the_largest_fits_a_frame() {
             erase2_us: 1_100_500,
             flags: Some(0x0401_0000),
         })),
+        DeviceMsg::SelfTest(SelfTestReport::Thermocouple(ThermocoupleReport {
+            registers: Some([0xFF; 16]),
+            age_us: u64::MAX,
+        })),
+        DeviceMsg::SelfTest(SelfTestReport::Thermocouple(ThermocoupleReport {
+            registers: None,
+            age_us: 100_000,
+        })),
     ];
     for (seq, m) in msgs.into_iter().enumerate() {
         let bytes = encode_vec(seq as u32, &m).unwrap();
@@ -89,6 +108,7 @@ fn every_self_test_message_round_trips_and_the_largest_fits_a_frame() {
         },
         SelfTestCheck::Panic,
         SelfTestCheck::Stall,
+        SelfTestCheck::Thermocouple,
     ] {
         let bytes = encode_vec(1, &HostMsg::SelfTest(c)).unwrap();
         assert_eq!(

@@ -35,11 +35,14 @@ pub struct Args {
 
 /// The rig's settings, one line.
 fn describe(cfg: &VirtualRigConfig, a: &VirtualArgs) -> String {
-    let faults: String = a
+    let mut faults: String = a
         .faults
         .iter()
         .map(|(c, f)| format!(", input {} {f:?}", ["x", "v", "f", "ecr"][*c]))
         .collect();
+    if let Some(f) = a.tc_fault {
+        faults.push_str(&format!(", thermocouple {f:?}"));
+    }
     format!(
         "m = {} kg, k = {} N/m, load {} N{}, contact {}, apparatus μ1 {}, seed {}, speed ×{}{faults}",
         cfg.mass_kg,

@@ -10,12 +10,13 @@ use anyhow::bail;
 use serde_json::json;
 use std::time::{Duration, Instant};
 use tribo_firmware::selftest::{
-    judge_channel, judge_flash, judge_rate, judge_reset, ChannelProblem, Deliberate, ERASE_MAX_US,
-    MIN_THROUGHPUT_BYTES_S, RATE_TOLERANCE_PPM,
+    judge_channel, judge_flash, judge_rate, judge_reset, judge_thermocouple, ChannelProblem,
+    Deliberate, ERASE_MAX_US, MIN_THROUGHPUT_BYTES_S, RATE_TOLERANCE_PPM,
 };
+use tribo_firmware::thermocouple::BadRead;
 use tribo_wire::{
     filler_byte, BootReport, Channel, Configure, ConverterReport, DeviceError, DeviceMsg,
-    ErrorCode, FlashReport, HostMsg, SelfTestCheck, SelfTestReport, FILLER_MAX,
+    ErrorCode, FlashReport, HostMsg, SelfTestCheck, SelfTestReport, ThermocoupleReport, FILLER_MAX,
 };
 
 /// Arguments of `tribo selftest`.
@@ -29,6 +30,8 @@ use tribo_wire::{
   input-ecr
   flash               a bank-2 sector the stored run does not use: erase, program, read back, erase
   flash-flags         the flash controller's error flags after it (hardware only on the virtual rig)
+  thermocouple        the MAX31856: answers, configured (type K, open-circuit detection on), no
+                        fault flag (open, shorted, ranges), cold junction 5–50 °C
   link-throughput     filler frames from the rig through the link, bytes/s and checked byte for byte
   reset-record        a deliberate panic: the rig resets and its boot report says Panic and why
   watchdog            a deliberately stalled task: outputs safe, reset, the report names the task
@@ -210,6 +213,75 @@ pub fn flash_rows(r: &FlashReport) -> Vec<Row> {
     vec![flash, flags]
 }
 
+/// The thermocouple row: the converter's register file judged as the heater judges every read.
+pub fn thermocouple_row(r: &ThermocoupleReport) -> Row {
+    let figures = json!({"registers": r.registers, "age_us": r.age_us});
+    match judge_thermocouple(r) {
+        Ok(t) => Row::new(
+            "thermocouple",
+            true,
+            format!(
+                "MAX31856 configured (type K, 50 Hz filter, open-circuit detection on), no fault \
+                 flag; cold junction {:.2} °C, plate {:.2} °C (read {:.0} ms before the check)",
+                t.cold_junction_c,
+                t.plate_c,
+                r.age_us as f64 * 1e-3
+            ),
+            figures,
+        ),
+        Err(b) => {
+            let cr = r.registers.map_or([0, 0], |g| [g[0], g[1]]);
+            let cj = tribo_wire::limits::COLD_JUNCTION_C;
+            let why = match b {
+                BadRead::Missing { age_ms: u32::MAX } => "the MAX31856 never answered: check SPI1 \
+                    (SCK PA5, MISO PA6, MOSI PB5), chip select PD14 and its supply"
+                    .to_string(),
+                BadRead::Missing { age_ms } => format!(
+                    "the MAX31856's last read is {age_ms} ms old (the task reads it every 100 ms): \
+                     it stopped answering on SPI1"
+                ),
+                BadRead::AllZero => "every register reads 0x00: MISO (PA6) stuck low or the chip \
+                    unpowered"
+                    .into(),
+                BadRead::AllOnes => {
+                    "every register reads 0xFF: MISO (PA6) stuck high or no chip".into()
+                }
+                BadRead::Config => format!(
+                    "the configuration does not read back (CR0 {:#04x}, CR1 {:#04x}; expected \
+                     0x91, 0x03): the chip did not take its writes (chip select PD14, MOSI PB5) \
+                     or is another chip",
+                    cr[0], cr[1]
+                ),
+                BadRead::Open => "open thermocouple (the chip's open-circuit detection): a wire \
+                    broken or the probe not plugged in"
+                    .into(),
+                BadRead::OverUnderVoltage => "over/under-voltage on the thermocouple inputs: \
+                    shorted to a supply or to ground"
+                    .into(),
+                BadRead::ThermocoupleRange => "the thermocouple reading is out of range (fault \
+                    flag)"
+                    .into(),
+                BadRead::ColdJunctionRange => {
+                    "the cold junction is out of range (fault flag)".into()
+                }
+                BadRead::StuckWord => "a temperature word reads all zeros or all ones: the chip \
+                    converts nothing"
+                    .into(),
+                BadRead::ColdJunctionImplausible(c) => format!(
+                    "cold junction {c:.1} °C, outside {:.0}–{:.0} °C: the converter board is \
+                     broken or heated",
+                    cj.start(),
+                    cj.end()
+                ),
+                BadRead::PlateImplausible(c) => {
+                    format!("plate {c:.1} °C: below anything the rig can be (polarity reversed?)")
+                }
+            };
+            Row::new("thermocouple", false, why, figures)
+        }
+    }
+}
+
 /// What a refused self-test command means.
 fn refusal(e: &LinkError) -> anyhow::Error {
     match e.code {
@@ -219,8 +291,9 @@ fn refusal(e: &LinkError) -> anyhow::Error {
              `tribo selftest` again"
         ),
         Some(ErrorCode::Busy) => anyhow::anyhow!(
-            "the rig is busy (armed, running a run, still writing its last run to flash, or its \
-             stored run fills the flash): let it finish or abort it, then run `tribo selftest` again"
+            "the rig is busy (armed, running a run, still writing its last run to flash, its \
+             stored run fills the flash, or, for the reset checks, its magnet still holds): let it \
+             finish or abort it, let the magnet go, then run `tribo selftest` again"
         ),
         _ => anyhow::anyhow!("{e}"),
     }
@@ -283,6 +356,7 @@ fn check_name(c: &SelfTestCheck) -> &'static str {
         SelfTestCheck::Throughput { .. } => "throughput",
         SelfTestCheck::Panic => "panic",
         SelfTestCheck::Stall => "stall",
+        SelfTestCheck::Thermocouple => "thermocouple",
     }
 }
 
@@ -498,6 +572,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Ok(SelfTestReport::Flash(r)) => rows.extend(flash_rows(&r)),
         Ok(other) => rows.push(Row::failed("flash", format!("unexpected report {other:?}"))),
         Err(e) => rows.push(Row::failed("flash", format!("{e:#}"))),
+    }
+    match measure(
+        &mut link,
+        SelfTestCheck::Thermocouple,
+        Duration::from_secs(5),
+    ) {
+        Ok(SelfTestReport::Thermocouple(r)) => rows.push(thermocouple_row(&r)),
+        Ok(other) => rows.push(Row::failed(
+            "thermocouple",
+            format!("unexpected report {other:?}"),
+        )),
+        Err(e) => rows.push(Row::failed("thermocouple", format!("{e:#}"))),
     }
     match throughput(&mut link) {
         Ok(r) => rows.push(r),

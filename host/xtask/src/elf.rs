@@ -18,13 +18,13 @@ impl Size {
     }
 }
 
-fn u16_at(b: &[u8], o: usize) -> Result<u16, String> {
+pub fn u16_at(b: &[u8], o: usize) -> Result<u16, String> {
     b.get(o..o + 2)
         .map(|s| u16::from_le_bytes([s[0], s[1]]))
         .ok_or_else(|| "truncated ELF".into())
 }
 
-fn u32_at(b: &[u8], o: usize) -> Result<u32, String> {
+pub fn u32_at(b: &[u8], o: usize) -> Result<u32, String> {
     b.get(o..o + 4)
         .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
         .ok_or_else(|| "truncated ELF".into())
@@ -104,4 +104,71 @@ pub fn size(b: &[u8]) -> Result<Size, String> {
         _ => {}
     })?;
     Ok(size)
+}
+
+/// A symbol of `.symtab`: name, value (a Thumb function's with its low bit), size, type
+/// (`st_info & 0xF`: 2 is a function).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Symbol {
+    pub name: String,
+    pub value: u32,
+    pub size: u32,
+    pub kind: u8,
+}
+
+/// Every symbol of `.symtab` (mapping symbols such as `$t` and `$d` included).
+pub fn symbols(b: &[u8]) -> Result<Vec<Symbol>, String> {
+    let shoff = u32_at(b, 0x20)? as usize;
+    let shentsize = u16_at(b, 0x2E)? as usize;
+    let shnum = u16_at(b, 0x30)? as usize;
+    let section = |i: usize| shoff + i * shentsize;
+    let mut out = vec![];
+    for i in 0..shnum {
+        let s = section(i);
+        const SHT_SYMTAB: u32 = 2;
+        if u32_at(b, s + 0x04)? != SHT_SYMTAB {
+            continue;
+        }
+        let (off, size) = (u32_at(b, s + 0x10)? as usize, u32_at(b, s + 0x14)? as usize);
+        let strtab = section(u32_at(b, s + 0x18)? as usize);
+        let str_off = u32_at(b, strtab + 0x10)? as usize;
+        for k in 0..size / 16 {
+            let e = off + 16 * k;
+            let name_off = str_off + u32_at(b, e)? as usize;
+            let tail = b.get(name_off..).ok_or("bad symbol name")?;
+            let end = tail.iter().position(|&c| c == 0).ok_or("bad symbol name")?;
+            out.push(Symbol {
+                name: String::from_utf8_lossy(&tail[..end]).into_owned(),
+                value: u32_at(b, e + 4)?,
+                size: u32_at(b, e + 8)?,
+                kind: *b.get(e + 12).ok_or("truncated ELF")? & 0xF,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// The bytes at `[addr, addr + len)` of the allocated section holding them, if it has contents
+/// in the file.
+pub fn bytes_at(b: &[u8], addr: u32, len: u32) -> Option<&[u8]> {
+    let shoff = u32_at(b, 0x20).ok()? as usize;
+    let shentsize = u16_at(b, 0x2E).ok()? as usize;
+    let shnum = u16_at(b, 0x30).ok()? as usize;
+    for i in 0..shnum {
+        let s = shoff + i * shentsize;
+        const SHT_PROGBITS: u32 = 1;
+        if u32_at(b, s + 0x04).ok()? != SHT_PROGBITS {
+            continue;
+        }
+        let (sa, off, size) = (
+            u32_at(b, s + 0x0C).ok()?,
+            u32_at(b, s + 0x10).ok()?,
+            u32_at(b, s + 0x14).ok()?,
+        );
+        if sa != 0 && addr >= sa && addr.checked_add(len)? <= sa.checked_add(size)? {
+            let start = (off + (addr - sa)) as usize;
+            return b.get(start..start + len as usize);
+        }
+    }
+    None
 }

@@ -32,6 +32,7 @@
 
 mod apt;
 mod elf;
+mod frames;
 mod memory;
 mod panel;
 mod postgres;
@@ -48,8 +49,12 @@ const TARGET: &str = toolchain::FIRMWARE.target;
 const BOARD: &str = "tribo-board";
 const TARGET_TESTS: &str = "tribo-target-tests";
 const PROFILE: &str = "firmware";
-/// Least stack the AXI SRAM must leave after the static data (the stack grows down from its end).
-const MIN_STACK: u64 = 32 * 1024;
+/// Least the AXI SRAM must leave after the static data: the task stack (PSP, growing down from its
+/// end) and its guard below it.
+const MIN_STACK: u64 =
+    (tribo_firmware::stack::MIN_TASK_STACK_BYTES + tribo_firmware::stack::TASK_GUARD_BYTES) as u64;
+/// Frames printed by `cargo xtask firmware`.
+const FRAMES_SHOWN: usize = 8;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -345,9 +350,15 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
                     ));
                 }
                 format!(
-                    ".data, .bss, .uninit; the stack has the other {:.1} KiB",
-                    kib(stack)
+                    ".data, .bss, .uninit; the task stack (PSP) has the other {:.1} KiB, \
+                     its lowest {} KiB (aligned) the MPU guard",
+                    kib(stack),
+                    tribo_firmware::stack::TASK_GUARD_BYTES / 1024
                 )
+            }
+            "MSP_STACK" => {
+                *u = r.length;
+                "the handlers' stack (MSP: interrupts, HardFault, NMI)".to_string()
             }
             _ => String::new(),
         };
@@ -363,6 +374,32 @@ fn firmware(args: &[String]) -> Result<PathBuf, String> {
         );
     }
     println!("  bank 2 of the flash (0x0810_0000, 1024 KiB): the run store, written at run time");
+    // No frame may step over the task stack's guard (no stack probes on thumbv7em).
+    let guard = tribo_firmware::stack::TASK_GUARD_BYTES;
+    let frames = frames::frames(&bytes).map_err(|e| format!("{}: {e}", elf_path.display()))?;
+    println!(
+        "largest stack frames (every SP decrement of the function summed; guard {guard} bytes):"
+    );
+    for f in frames.iter().take(FRAMES_SHOWN) {
+        println!("  {:>6} B  {:#010x}  {}", f.bytes, f.addr, f.name);
+    }
+    for f in &frames {
+        if f.bytes > guard {
+            over.push(format!(
+                "the frame of {} ({} B) is larger than the task stack's guard ({guard} B): an \
+                 overflow there could step over it (make the frame smaller or the guard larger, \
+                 tribo_firmware::stack::TASK_GUARD_BYTES)",
+                f.name, f.bytes
+            ));
+        }
+        if f.unknown {
+            over.push(format!(
+                "{} moves SP down by a register the frame reader cannot size: check its frame \
+                 against the guard by hand (host/xtask/src/frames.rs)",
+                f.name
+            ));
+        }
+    }
     if !over.is_empty() {
         return Err(over.join("; "));
     }

@@ -1,8 +1,9 @@
 //! The USB tasks: the embassy-usb device, and the CDC-ACM sender and receiver between the host
 //! and the application's pipes.
 //!
-//! A cable pull with VBUS sensing off looks to the device like a bus suspend (no more SOFs), not a
-//! disconnection. [`UsbEvents`] feeds every bus event embassy-usb gives the handler (power, bus
+//! VBUS is sensed on PA9 (the OTG FS core's own sensing, `vbus_detection`): a cable pull is a
+//! power event (session end), usually after a bus suspend (no more SOFs for 3 ms); a re-plug is
+//! power (session request), a bus reset and an enumeration. [`UsbEvents`] feeds every bus event embassy-usb gives the handler (power, bus
 //! reset, suspend and resume, configuration) into `tribo_firmware::link_tx::BusState`, which says
 //! whether the link is up and in which session; a bus reset ends a suspend (embassy-usb calls
 //! `reset()`, never `suspended(false)`, then), so a suspend during the host's first debounce or a

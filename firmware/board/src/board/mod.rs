@@ -21,7 +21,7 @@
 //!   check in; the sampler is hardware (its reader is the app task).
 //! * `usb`, `usb_tx`, `usb_rx`: embassy-usb device and CDC-ACM class. The bus events (power, bus
 //!   reset, suspend/resume, configuration) go through `tribo_firmware::link_tx::BusState`; a
-//!   suspend (what a cable pull looks like without VBUS sensing) or a bus reset is "link down", and
+//!   suspend, a loss of VBUS (sensed on PA9: a cable pull) or a bus reset is "link down", and
 //!   a bus reset also ends a suspend: frames are refused (they wait in the run store) until a host
 //!   is back; then the sender resends, whole, the first frame the host did not acknowledge, and the
 //!   application forgets any half-received frame (`host_link`).
@@ -501,7 +501,12 @@ async fn main(spawner: Spawner) {
 
     // USB OTG FS (PA11/PA12), CDC-ACM.
     let mut usb_cfg = usb::Config::default();
-    usb_cfg.vbus_detection = false;
+    // VBUS sensed on PA9 (the NUCLEO-H743ZI wires CN13's VBUS to it; the OTG core's own sensing,
+    // no GPIO set-up): the board is self-powered from the USB's point of view (the ST-LINK's
+    // cable powers it), so a pull must be seen as such (`BusEvent::Enabled(false)`), not only as
+    // a suspend. Without VBUS on PA9 the device never connects: a board without that wire needs
+    // `false` here.
+    usb_cfg.vbus_detection = true;
     let driver = usb::Driver::new_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, EP_OUT.take(), usb_cfg);
     let mut config = embassy_usb::Config::new(0x1209, 0x0001);
     config.manufacturer = Some("tribo");

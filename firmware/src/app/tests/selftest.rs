@@ -223,3 +223,41 @@ fn a_deliberate_fault_is_refused_while_the_heater_heats_and_leaves_it_heating() 
     assert_eq!(b.command(HostMsg::SelfTest(SelfTestCheck::Panic)).0, Ok(()));
     assert_eq!(b.app.take_deliberate(), Some(Deliberate::Panic));
 }
+
+#[test]
+fn a_deliberate_fault_is_refused_while_the_magnet_holds_and_leaves_it_holding() {
+    let mut b = Bench::new();
+    // Configured and armed, heater off: the magnet holds the pin.
+    b.ready();
+    assert!(matches!(b.hw.magnet(), MagnetDrive::Hold { .. }));
+    assert_eq!(b.hw.heater_duty, 0.0);
+    for check in [SelfTestCheck::Panic, SelfTestCheck::Stall] {
+        assert_eq!(
+            b.command(HostMsg::SelfTest(check)).0,
+            Err(ErrorCode::Busy),
+            "{check:?}"
+        );
+        assert_eq!(b.app.take_deliberate(), None);
+    }
+    b.run_for(100);
+    assert!(
+        matches!(b.hw.magnet(), MagnetDrive::Hold { .. }),
+        "the refusal changed nothing"
+    );
+    // Disarmed: the coil still holds the pin (until its budget runs out), and the reset would
+    // drop it: still refused.
+    assert_eq!(b.command(HostMsg::Disarm).0, Ok(()));
+    b.run_for(100);
+    assert!(matches!(b.hw.magnet(), MagnetDrive::Hold { .. }));
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Panic)).0,
+        Err(ErrorCode::Busy)
+    );
+    assert_eq!(b.app.take_deliberate(), None);
+    // The host's safe command lets the coil go: the check goes ahead.
+    assert_eq!(b.command(HostMsg::Safe).0, Ok(()));
+    b.run_for(100);
+    assert_eq!(b.hw.magnet(), MagnetDrive::Off);
+    assert_eq!(b.command(HostMsg::SelfTest(SelfTestCheck::Stall)).0, Ok(()));
+    assert_eq!(b.app.take_deliberate(), Some(Deliberate::Stall));
+}

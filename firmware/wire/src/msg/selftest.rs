@@ -36,6 +36,9 @@ wire_type! {
         /// Stop the thermocouple task on purpose (after the `Ack`): the watchdog must make the
         /// outputs safe and reset the rig, the boot report naming the task.
         Stall,
+        /// The thermocouple converter's register file as the rig last read it (configuration,
+        /// cold junction, plate, fault status). Answered by [`SelfTestReport::Thermocouple`].
+        Thermocouple,
     }
 }
 
@@ -56,6 +59,18 @@ wire_type! {
         /// Every filler frame was sent; `refused` times the link had no room and the frame
         /// waited.
         FillerDone { frames: u32, refused: u32 },
+        Thermocouple(ThermocoupleReport),
+    }
+}
+
+wire_type! {
+    /// A thermocouple check: the MAX31856's register file (0x00–0x0F) as the rig's thermocouple
+    /// task last read it, and how old that read is; `None` if the converter never answered.
+    #[derive(Copy)]
+    pub struct ThermocoupleReport {
+        pub registers: Option<[u8; 16]>,
+        /// µs between that read and the check (`u64::MAX` without one).
+        pub age_us: u64,
     }
 }
 
