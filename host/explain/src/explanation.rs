@@ -146,6 +146,9 @@ pub struct Explanation {
     /// The other nuisances of the measurement chain (displacement centre, force gain and zero),
     /// fitted with the final model, with their ± and what each can and cannot be told from.
     pub measurement_chain: Option<MeasurementChain>,
+    /// The force channel's friction level on the two sides of the track
+    /// ([`crate::diag::PositionDependence`]); when significant the record is *unexplained*.
+    pub position_dependence: Option<crate::diag::PositionDependence>,
     /// On a record held before its release: where the release falls before the first compared
     /// sample (s; negative: after it), fitted with the base law and held in every model. `null`
     /// for a record that starts in motion.
