@@ -13,8 +13,9 @@
 //! `Effect::ALL`: an effect the generator makes that explain has no name for is scored as outside.
 //!
 //! `cargo run --release -p tribo-explain --example explain_lhs -- --records 520 --seed 1
-//! [--jobs 2] [--out records.tsv] [--only EFFECT] [--groups clean,alone,pair,outside] [--case INDEX]
-//! [--verbose]` (`--only`, `--groups`: a part of the same grid; `--case`: one record in detail)
+//! [--jobs 2] [--out records.tsv] [--only EFFECT] [--groups clean,alone,pair,outside] [--every K]
+//! [--case INDEX] [--verbose]` (`--only`, `--groups`, `--every`: a part of the same grid — `--every
+//! K` keeps every K-th record of each group; `--case`: one record in detail)
 
 #[path = "../tests/support/mod.rs"]
 mod support;
@@ -66,8 +67,9 @@ fn main() {
     let mut verbose = false;
     let mut case: Option<usize> = None;
     let mut groups: Option<String> = None;
+    let mut every = 1usize;
     let mut args = std::env::args().skip(1);
-    let usage = "usage: explain_lhs [--records N] [--seed S] [--jobs J] [--out FILE] [--only EFFECT] [--case INDEX] [--groups clean,alone,pair,outside] [--verbose]";
+    let usage = "usage: explain_lhs [--records N] [--seed S] [--jobs J] [--out FILE] [--only EFFECT] [--case INDEX] [--groups clean,alone,pair,outside] [--every K] [--verbose]";
     while let Some(a) = args.next() {
         let mut val = |name: &str| {
             args.next().unwrap_or_else(|| {
@@ -84,6 +86,7 @@ fn main() {
             "--verbose" => verbose = true,
             "--case" => case = val("--case").parse().ok(),
             "--groups" => groups = Some(val("--groups")),
+            "--every" => every = val("--every").parse::<usize>().unwrap_or(1).max(1),
             other => {
                 eprintln!("unknown argument {other}\n{usage}");
                 std::process::exit(2)
@@ -109,6 +112,22 @@ fn main() {
             g.split(',').any(|x| x == name)
         });
     }
+    if every > 1 {
+        // Every K-th record of each group (the same records as in the whole grid), so that a
+        // subset of a few dozen to a few hundred records still holds every group.
+        let mut seen: BTreeMap<u8, usize> = BTreeMap::new();
+        cases.retain(|c| {
+            let g = match c.group {
+                Group::Clean => 0u8,
+                Group::Alone => 1,
+                Group::Pair => 2,
+                Group::Outside => 3,
+            };
+            let n = seen.entry(g).or_insert(0);
+            *n += 1;
+            (*n - 1).is_multiple_of(every)
+        });
+    }
     if let Some(i) = case {
         // One record in detail: explain's report and every round's candidates.
         let Some(c) = cases.iter().find(|c| c.index == i) else {
@@ -119,6 +138,9 @@ fn main() {
         match tribo_explain::explain(&c.record(), &tribo_explain::ExplainOptions::default()) {
             Ok(e) => {
                 println!("{}", e.to_text());
+                if let Some(p) = &e.position_dependence {
+                    println!("position check: {}", p.text());
+                }
                 for (k, r) in e.rounds.iter().enumerate() {
                     for c in r {
                         println!(

@@ -146,6 +146,15 @@ pub struct Explanation {
     /// The other nuisances of the measurement chain (displacement centre, force gain and zero),
     /// fitted with the final model, with their ± and what each can and cannot be told from.
     pub measurement_chain: Option<MeasurementChain>,
+    /// The force channel's friction level on the two sides of the track
+    /// ([`crate::diag::PositionDependence`]); when significant the record is *unexplained*.
+    pub position_dependence: Option<crate::diag::PositionDependence>,
+    /// On a record held before its release: where the release falls before the first compared
+    /// sample (s; negative: after it), fitted with the base law and held in every model. `null`
+    /// for a record that starts in motion.
+    pub release_offset_s: Option<f64>,
+    /// Its standard error (s).
+    pub release_offset_s_se: Option<f64>,
     /// The force channel's trend of μ0 over the motion against the final model's law
     /// ([`tribo_physics::identify::mu0_trend_of`], `tribo fit`'s drift check); a significant one
     /// is never called base-adequate (`null` without a force channel or a Coulomb level).
@@ -563,6 +572,13 @@ impl Explanation {
                 s,
                 "    apparatus_mu1 = {} (damping of the blades, which the force channel does not see)",
                 pm(*a, nse("apparatus_mu1"))
+            );
+        }
+        if let Some(r) = self.release_offset_s {
+            let _ = writeln!(
+                s,
+                "    release instant = {} µs before the first moving sample (fitted with the base law, held in every model)",
+                pm(r * 1e6, self.release_offset_s_se.unwrap_or(f64::NAN) * 1e6)
             );
         }
         if let Some(l) = &self.force_lowpass {

@@ -69,6 +69,15 @@ pub struct Prepared {
     /// Measurement noise of the force channel (`F/N`, every sample of the compared part) / `a0`;
     /// 0 without a force channel.
     pub force_noise: f64,
+    /// Whether the record holds still before the release (the motion starts after its first
+    /// sample): the release then falls between two samples, at [`Prepared::release_shift`].
+    pub held: bool,
+    /// Where the release falls relative to the first compared sample (τ units; positive: before
+    /// it). The sample nearest the release is only known to a sample or so, and a force step at
+    /// every reversal a fraction of a sample off reads as an effect, so on a held record it is a
+    /// fitted nuisance ([`crate::explain_prepared`]): the simulation starts at rest at the release
+    /// and sample `k` is compared with it at `τ_k + shift`. 0 for a record that starts in motion.
+    pub release_shift: f64,
     /// Integrator.
     pub method: Method,
     /// The whole record, dimensionless (τ, y, y'), as `tribo fit` takes it: the base law is
@@ -287,6 +296,8 @@ impl Prepared {
             force_cutoff_known: !si || stated.is_some() || rec.ft.is_none(),
             env_noise,
             force_noise,
+            held: s0 > 0,
+            release_shift: 0.0,
             method: Method::dopri(1e-8),
             record: (tau_all, y_all, ydot_all),
         })
@@ -313,7 +324,11 @@ impl Prepared {
 
     /// Initial state of the simulations: the first sample, with a velocity below 1 % of the
     /// amplitude taken as the release from rest (0) rather than as noise with a sliding direction.
+    /// A held record starts at rest at the release ([`Prepared::release_shift`]).
     pub fn initial_state(&self) -> (f64, f64) {
+        if self.held {
+            return (self.y[0], 0.0);
+        }
         let v = self.ydot[0];
         (self.y[0], if v.abs() < 0.01 * self.a0 { 0.0 } else { v })
     }

@@ -89,7 +89,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                 Vec::with_capacity(n),
             );
             for &t in &data.tau {
-                let s = sim.step_to(t)?;
+                let s = sim.step_to((t + data.release_shift).max(0.0))?;
                 steps_used_check(&sim, sim.steps(), budget)?;
                 y.push(s.y);
                 yd.push(s.ydot);
@@ -120,6 +120,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                 Vec::with_capacity(n),
             );
             for &t in &data.tau {
+                let t = (t + data.release_shift).max(0.0);
                 while t > seg_end {
                     let s = sim.step_to(seg_end)?;
                     prior += sim.steps();
