@@ -159,7 +159,7 @@ fn run_many(a: &Args) -> Result<()> {
     );
     let next = AtomicUsize::new(0);
     // Outputs waiting for those before them, and the first not yet printed.
-    let done: Mutex<(Vec<Option<(String, Option<anyhow::Error>)>>, usize)> =
+    let done: Mutex<(Vec<Option<Fitted1>>, usize)> =
         Mutex::new(((0..n).map(|_| None).collect(), 0));
     let failures: Mutex<Vec<(usize, anyhow::Error)>> = Mutex::new(Vec::new());
     let print_error: Mutex<Option<std::io::Error>> = Mutex::new(None);
@@ -232,6 +232,9 @@ fn run_many(a: &Args) -> Result<()> {
     let (_, first) = failures.swap_remove(0);
     Err(first)
 }
+
+/// One record's output and, if it failed, why.
+type Fitted1 = (String, Option<anyhow::Error>);
 
 /// The `--json` object of a record that failed before its own object was printed (as
 /// [`super::exit::json_on_error`] prints it for one record).

@@ -204,7 +204,7 @@ fn trend_and_rss(
     // the selected samples of each column are formed, and the best pair's ± is computed once.
     let rows: Vec<usize> = sel.iter().flatten().copied().collect();
     let k = filtered.len() + 1;
-    let fits: Vec<Vec<Option<(Vec<f64>, f64)>>> = super::par_map(&grid, |&memory| {
+    let fits: Vec<Vec<Option<PairFit>>> = super::par_map(&grid, |&memory| {
         let relaxed: Vec<Vec<f64>> = filtered
             .iter()
             .map(|c| first_order(c, memory, dtau))
@@ -261,6 +261,9 @@ fn trend_and_rss(
         rss,
     ))
 }
+
+/// One (memory, delay) pair's least squares: its coefficients and residual sum of squares.
+type PairFit = (Vec<f64>, f64);
 
 /// A first-order lag of time constant `t` (τ units; 0 = none) of a signal sampled every `h`,
 /// settled at its first value.
@@ -379,9 +382,10 @@ fn cluster_variance(
             }
         }
     }
-    for a in 0..k {
-        for b in 0..a {
-            xtx[a][b] = xtx[b][a];
+    let upper = xtx.clone();
+    for (a, row) in xtx.iter_mut().enumerate() {
+        for (b, v) in row.iter_mut().enumerate().take(a) {
+            *v = upper[b][a];
         }
     }
     let inv = invert(&xtx)?;
