@@ -49,6 +49,25 @@ pub fn jacobian(
     Some(jac)
 }
 
+/// [`jacobian`] with its columns computed on several threads
+/// ([`crate::identify::set_fit_threads`]); the same numbers as the serial one.
+pub fn jacobian_par(
+    r: impl Fn(&[f64]) -> Option<Vec<f64>> + Sync,
+    p: &[f64],
+    r0: &[f64],
+    rel_step: f64,
+    scales: &[f64],
+) -> Option<Jacobian> {
+    let cols: Vec<usize> = (0..p.len()).collect();
+    crate::identify::par_map(&cols, |&j| {
+        let scale = scales.get(j).copied().unwrap_or(1e-4);
+        let h = rel_step * p[j].abs().max(scale);
+        crate::identify::difference_column(&r, p, r0, j, h)
+    })
+    .into_iter()
+    .collect()
+}
+
 /// Sample autocorrelation of `r` (about its mean) at lags `0..=max_lag` (`ρ_0 = 1`); all zeros
 /// after the first for a constant series.
 pub fn autocorrelation(r: &[f64], max_lag: usize) -> Vec<f64> {

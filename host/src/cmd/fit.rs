@@ -6,7 +6,6 @@ use crate::analysis::{
 };
 use crate::exit::Incomplete;
 use crate::load::{open_analysable, RigFlags, RigUsed};
-use crate::{out, outln};
 use anyhow::{Context, Result};
 use clap::Parser;
 use std::fmt::Write as _;
@@ -79,8 +78,11 @@ stretch of consecutive samples instead (and says which on stderr).";
 #[derive(Parser, Debug)]
 pub struct Args {
     /// The record (CSV, or a run folder; `-` reads a CSV from standard input, as `tribo sim -o -`
-    /// writes one).
-    pub record: PathBuf,
+    /// writes one). Several records (`tribo fit runs/*`) are fitted on every core, with a
+    /// progress bar on standard error, and printed in the order given (with `--json`: one object
+    /// a line, in that order).
+    #[arg(required = true, num_args = 1..)]
+    pub record: Vec<PathBuf>,
     /// Law: coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre.
     #[arg(long, default_value = "coulomb-viscous")]
     pub law: LawSpec,
@@ -113,11 +115,152 @@ pub struct Args {
 
 /// Runs `tribo fit`.
 pub fn run(a: Args) -> Result<()> {
-    let (json, path) = (a.json, a.record.clone());
-    run_inner(a).map_err(|e| super::exit::json_on_error(json, &path, e))
+    if a.record.len() > 1 {
+        return run_many(&a);
+    }
+    let path = a.record[0].clone();
+    let mut buf = String::new();
+    let r = run_inner(&a, &path, &mut buf);
+    if a.json && !buf.is_empty() {
+        crate::out::print_json(buf.trim_end())?;
+    } else {
+        crate::out::text(&buf)?;
+    }
+    r.map_err(|e| super::exit::json_on_error(a.json, &path, e))
 }
 
-fn run_inner(a: Args) -> Result<()> {
+/// `tribo fit A B C…`: every record fitted on its own worker thread (as many as there are cores;
+/// each fit's own simulations then stay on its thread), the outputs printed in the order given as
+/// soon as all before them are done. Every record is fitted whatever happens to the others; the
+/// command ends with the first failure's status (in the order given), after a count on stderr.
+fn run_many(a: &Args) -> Result<()> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    if a.plot.is_some() {
+        anyhow::bail!(
+            "--plot draws one record's figure: give one record with it (fit the others without --plot)"
+        );
+    }
+    if a.record.iter().filter(|p| p.as_os_str() == "-").count() > 0 {
+        anyhow::bail!(
+            "`-` (standard input) is one record: it cannot be fitted beside others; save it to a file first"
+        );
+    }
+    let n = a.record.len();
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |c| c.get())
+        .min(n);
+    let bar = indicatif::ProgressBar::new(n as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} records fitted ({per_sec}) {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let next = AtomicUsize::new(0);
+    // Outputs waiting for those before them, and the first not yet printed.
+    let done: Mutex<(Vec<Option<Fitted1>>, usize)> =
+        Mutex::new(((0..n).map(|_| None).collect(), 0));
+    let failures: Mutex<Vec<(usize, anyhow::Error)>> = Mutex::new(Vec::new());
+    let print_error: Mutex<Option<std::io::Error>> = Mutex::new(None);
+    std::thread::scope(|s| {
+        for _ in 0..workers {
+            s.spawn(|| {
+                tribo_physics::identify::set_fit_threads(1);
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    if i >= n {
+                        break;
+                    }
+                    let path = &a.record[i];
+                    let mut buf = String::new();
+                    let r = run_inner(a, path, &mut buf).err();
+                    if a.json && buf.is_empty() {
+                        if let Some(e) = &r {
+                            buf = error_json(path, e).to_string();
+                        }
+                    }
+                    if !buf.is_empty() && !buf.ends_with('\n') {
+                        buf.push('\n');
+                    }
+                    bar.inc(1);
+                    let mut d = done.lock().unwrap_or_else(|p| p.into_inner());
+                    d.0[i] = Some((buf, r));
+                    // Print every output whose predecessors are all printed.
+                    while d.1 < n {
+                        let k = d.1;
+                        let Some((text, err)) = d.0[k].take() else {
+                            break;
+                        };
+                        d.1 += 1;
+                        let sep = if !a.json && k > 0 { "\n" } else { "" };
+                        if let Err(e) = bar.suspend(|| crate::out::text(&format!("{sep}{text}"))) {
+                            let mut pe = print_error.lock().unwrap_or_else(|p| p.into_inner());
+                            if pe.is_none() {
+                                *pe = e.downcast::<std::io::Error>().ok();
+                            }
+                        }
+                        if let Some(e) = err {
+                            if !a.json {
+                                bar.suspend(|| crate::errln!("{}: {e:#}", a.record[k].display()));
+                            }
+                            failures
+                                .lock()
+                                .unwrap_or_else(|p| p.into_inner())
+                                .push((k, e));
+                        }
+                    }
+                }
+            });
+        }
+    });
+    bar.finish_and_clear();
+    if let Some(e) = print_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        return Err(anyhow::Error::new(e).context("cannot write to standard output"));
+    }
+    let mut failures = failures.into_inner().unwrap_or_else(|p| p.into_inner());
+    failures.sort_by_key(|f| f.0);
+    if failures.is_empty() {
+        crate::errln!("{n} records fitted");
+        return Ok(());
+    }
+    crate::errln!(
+        "{} of {n} records fitted; {} not (their messages above; the status is the first one's)",
+        n - failures.len(),
+        failures.len()
+    );
+    let (_, first) = failures.swap_remove(0);
+    Err(first)
+}
+
+/// One record's output and, if it failed, why.
+type Fitted1 = (String, Option<anyhow::Error>);
+
+/// The `--json` object of a record that failed before its own object was printed (as
+/// [`super::exit::json_on_error`] prints it for one record).
+fn error_json(record: &std::path::Path, e: &anyhow::Error) -> serde_json::Value {
+    let status = super::exit::status_of(e);
+    let verdict = match status {
+        super::exit::Status::Incomplete => "not-analysable",
+        super::exit::Status::Interrupted(_) => "interrupted",
+        _ => "error",
+    };
+    let message = e
+        .chain()
+        .map(|c| c.to_string())
+        .collect::<Vec<_>>()
+        .join(": ");
+    serde_json::json!({
+        "record": record.display().to_string(),
+        "verdict": verdict,
+        "status": status.code(),
+        "message": message,
+    })
+}
+
+/// Fits one record, writing what `tribo fit` prints for it to `out` (its JSON object, or its
+/// table); the error is the command's outcome for it.
+fn run_inner(a: &Args, path: &std::path::Path, out: &mut String) -> Result<()> {
     let spec = a.law;
     let holes = if a.longest_clean_stretch {
         crate::Holes::LongestCleanStretch
@@ -125,7 +268,7 @@ fn run_inner(a: Args) -> Result<()> {
         crate::Holes::Refuse
     };
     // The one visit to the loader: the record, the constants that were defaults, the run.
-    let opened = open_analysable(&a.record, holes)?;
+    let opened = open_analysable(path, holes)?;
     let mut rec = opened.record;
     let req = FitRequest {
         law: spec,
@@ -137,12 +280,12 @@ fn run_inner(a: Args) -> Result<()> {
         apparatus_mu1: a.apparatus_mu1,
         windows: a.windows,
     };
-    let name = a.record.display().to_string();
+    let name = path.display().to_string();
     let f = match fit_law(&name, &mut rec, &opened.defaults, opened.run.as_ref(), &req)? {
         FitOutcome::Fitted(f) => f,
         FitOutcome::NotAnalysable { rig, why } => {
             if a.json {
-                crate::out::print_json(not_analysable_json(&name, &rig, &why))?;
+                let _ = writeln!(out, "{}", not_analysable_json(&name, &rig, &why));
             }
             return Err(Incomplete(format!(
                 "{name}: not analysable: {why}; no constant is fitted"
@@ -159,14 +302,14 @@ fn run_inner(a: Args) -> Result<()> {
     }
     let r = &f.result;
     if a.json {
-        crate::out::print_json(f.json(&name, &rec)?)?;
+        let _ = writeln!(out, "{}", f.json(&name, &rec)?);
     } else {
-        out!("{}", table(&name, &f.rig, r, &rec))?;
+        out.push_str(&table(&name, &f.rig, r, &rec));
         if let Some(line) = cross_check_text(&f.check) {
-            outln!("{line}")?;
+            let _ = writeln!(out, "{line}");
         }
         if let Some(w) = &f.windows {
-            out!("{}", window_table(w))?;
+            out.push_str(&window_table(w));
         }
     }
     if let Some(p) = &a.plot {

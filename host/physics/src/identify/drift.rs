@@ -156,7 +156,7 @@ fn trend_and_rss(
     let t_mid = 0.5 * (tau[start] + tau[end - 1]);
     // Regressors over the span, as the force channel would show them: the Coulomb level sgn y',
     // each velocity term of the law |y'|^j sgn y', a Coulomb level changing in time
-    // (τ − τ_mid) sgn y' (and the channel's zero, a constant, in [`regress`]).
+    // (τ − τ_mid) sgn y' (and the channel's zero, a constant, in [`least_squares_rss`]).
     let sg: Vec<f64> = (start..end).map(|i| ydot[i].signum()).collect();
     let mut base: Vec<Vec<f64>> = vec![sg.clone()];
     for j in (1..mu.len()).filter(|&j| mu[j] != 0.0) {
@@ -200,31 +200,44 @@ fn trend_and_rss(
             .take_while(|&x| x <= 1.0 + 1e-9)
             .collect()
     };
-    let mut best: Option<(f64, Vec<f64>, f64)> = None;
-    for &memory in &grid {
+    // Every pair of the grid is fitted (each memory on its own thread, [`super::par_map`]); only
+    // the selected samples of each column are formed, and the best pair's ± is computed once.
+    let rows: Vec<usize> = sel.iter().flatten().copied().collect();
+    let k = filtered.len() + 1;
+    let fits: Vec<Vec<Option<PairFit>>> = super::par_map(&grid, |&memory| {
         let relaxed: Vec<Vec<f64>> = filtered
             .iter()
             .map(|c| first_order(c, memory, dtau))
             .collect();
-        for &d in &grid {
-            let cols: Vec<Vec<f64>> = relaxed
-                .iter()
-                .map(|c| {
-                    if d > 0.0 {
-                        crate::sensor::delay(c, d / dtau)
-                    } else {
-                        c.clone()
-                    }
-                })
-                .collect();
-            if let Some((beta, rss, var_b)) = regress(&cols, trend_col, &sel, f, start) {
+        let mut x = vec![0.0; rows.len() * k];
+        grid.iter()
+            .map(|&d| {
+                design(&mut x, &relaxed, d / dtau, &rows, start);
+                least_squares_rss(&x, k, &rows, f)
+            })
+            .collect()
+    });
+    let mut best: Option<(f64, Vec<f64>, usize, usize)> = None;
+    for (im, row) in fits.into_iter().enumerate() {
+        for (id, fit) in row.into_iter().enumerate() {
+            if let Some((beta, rss)) = fit {
                 if best.as_ref().is_none_or(|b| rss < b.0) {
-                    best = Some((rss, beta, var_b));
+                    best = Some((rss, beta, im, id));
                 }
             }
         }
     }
-    let (rss, beta, var_b) = best?;
+    let (rss, beta, var_b) = {
+        let (rss, beta, im, id) = best?;
+        let relaxed: Vec<Vec<f64>> = filtered
+            .iter()
+            .map(|c| first_order(c, grid[im], dtau))
+            .collect();
+        let mut x = vec![0.0; rows.len() * k];
+        design(&mut x, &relaxed, grid[id] / dtau, &rows, start);
+        let var_b = cluster_variance(&x, k, trend_col, &beta, &sel, f)?;
+        (rss, beta, var_b)
+    };
     let b = beta[trend_col];
     let se_b = var_b.max(0.0).sqrt();
     // μ0 as the channel reads it (its gain included, which cancels in the relative change).
@@ -249,6 +262,9 @@ fn trend_and_rss(
     ))
 }
 
+/// One (memory, delay) pair's least squares: its coefficients and residual sum of squares.
+type PairFit = (Vec<f64>, f64);
+
 /// A first-order lag of time constant `t` (τ units; 0 = none) of a signal sampled every `h`,
 /// settled at its first value.
 fn first_order(x: &[f64], t: f64, h: f64) -> Vec<f64> {
@@ -265,50 +281,99 @@ fn first_order(x: &[f64], t: f64, h: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Least squares of `f` on `cols` (indexed from `start`) and a constant over the selected
-/// samples: the coefficients, the residual sum of squares and the cluster-robust variance of
-/// coefficient `t` (one cluster per entry of `sel`).
-fn regress(
-    cols: &[Vec<f64>],
-    t: usize,
-    sel: &[Vec<usize>],
-    f: &[f64],
-    start: usize,
-) -> Option<(Vec<f64>, f64, f64)> {
+/// The design matrix (row-major, `k` = columns + the constant) at the samples `rows` of `cols`
+/// (indexed from `start`), each column delayed by `d` samples (linear interpolation, first value
+/// held: [`crate::sensor::delay`] at those samples only).
+fn design(x: &mut [f64], cols: &[Vec<f64>], d: f64, rows: &[usize], start: usize) {
     let k = cols.len() + 1;
-    let row = |i: usize| -> Vec<f64> {
-        let mut r: Vec<f64> = cols.iter().map(|c| c[i - start]).collect();
-        r.push(1.0);
-        r
-    };
+    for (out, &i) in x.chunks_exact_mut(k).zip(rows) {
+        let li = i - start;
+        // Where the delayed sample falls: the same for every column.
+        let p = li as f64 - d;
+        let at = if d <= 0.0 {
+            None
+        } else if p <= 0.0 {
+            Some((0, 0.0, true))
+        } else {
+            let j = p.floor() as usize;
+            Some((j, p - j as f64, false))
+        };
+        for (o, c) in out.iter_mut().zip(cols) {
+            *o = match at {
+                None => c[li],
+                Some((_, _, true)) => c[0],
+                Some((j, fr, false)) => {
+                    if j + 1 < c.len() {
+                        c[j] * (1.0 - fr) + c[j + 1] * fr
+                    } else {
+                        c[c.len() - 1]
+                    }
+                }
+            };
+        }
+        out[k - 1] = 1.0;
+    }
+}
+
+/// Least squares of `f` (at `rows`) on the design `x` (row-major, `k` columns, the last the
+/// constant): the coefficients and the residual sum of squares.
+fn least_squares_rss(x: &[f64], k: usize, rows: &[usize], f: &[f64]) -> Option<(Vec<f64>, f64)> {
     let mut xtx = vec![vec![0.0; k]; k];
     let mut xty = vec![0.0; k];
-    for idx in sel {
-        for &i in idx {
-            let x = row(i);
-            for a in 0..k {
-                xty[a] += x[a] * f[i];
-                for b in 0..k {
-                    xtx[a][b] += x[a] * x[b];
-                }
+    // Row-major accumulators, each summed over the rows in order; the upper triangle only (x_a x_b
+    // and x_b x_a are the same number).
+    let mut acc = vec![0.0; k * k];
+    for (xr, &i) in x.chunks_exact(k).zip(rows) {
+        let fi = f[i];
+        for (a, (&xa, ty)) in xr.iter().zip(xty.iter_mut()).enumerate() {
+            *ty += xa * fi;
+            for (t, &xb) in acc[a * k + a..(a + 1) * k].iter_mut().zip(&xr[a..]) {
+                *t += xa * xb;
             }
+        }
+    }
+    for a in 0..k {
+        for b in a..k {
+            xtx[a][b] = acc[a * k + b];
+            xtx[b][a] = acc[a * k + b];
         }
     }
     let inv = invert(&xtx)?;
     let beta: Vec<f64> = (0..k)
         .map(|a| (0..k).map(|b| inv[a][b] * xty[b]).sum())
         .collect();
-    // Cluster-robust "meat": Σ_c (X_cᵀ r_c)(X_cᵀ r_c)ᵀ.
-    let mut meat = vec![vec![0.0; k]; k];
     let mut rss = 0.0;
+    for (xr, &i) in x.chunks_exact(k).zip(rows) {
+        let res = f[i] - xr.iter().zip(&beta).map(|(x, b)| x * b).sum::<f64>();
+        rss += res * res;
+    }
+    Some((beta, rss))
+}
+
+/// Cluster-robust variance of coefficient `t` of the least squares `beta` of `f` on the design
+/// `x` (rows in the order of `sel`, one cluster per entry of `sel`).
+fn cluster_variance(
+    x: &[f64],
+    k: usize,
+    t: usize,
+    beta: &[f64],
+    sel: &[Vec<usize>],
+    f: &[f64],
+) -> Option<f64> {
+    let mut xtx = vec![vec![0.0; k]; k];
+    let mut meat = vec![vec![0.0; k]; k];
+    let mut r = 0;
     for idx in sel {
         let mut g = vec![0.0; k];
         for &i in idx {
-            let x = row(i);
-            let r = f[i] - (0..k).map(|a| x[a] * beta[a]).sum::<f64>();
-            rss += r * r;
+            let xr = &x[r * k..(r + 1) * k];
+            r += 1;
+            let res = f[i] - (0..k).map(|a| xr[a] * beta[a]).sum::<f64>();
             for a in 0..k {
-                g[a] += x[a] * r;
+                g[a] += xr[a] * res;
+                for b in a..k {
+                    xtx[a][b] += xr[a] * xr[b];
+                }
             }
         }
         for a in 0..k {
@@ -317,18 +382,26 @@ fn regress(
             }
         }
     }
+    let upper = xtx.clone();
+    for (a, row) in xtx.iter_mut().enumerate() {
+        for (b, v) in row.iter_mut().enumerate().take(a) {
+            *v = upper[b][a];
+        }
+    }
+    let inv = invert(&xtx)?;
     let m = sel.len() as f64;
     // Small-sample correction of the cluster-robust estimator.
     let corr = m / (m - 1.0);
-    let var_b: f64 = (0..k)
-        .map(|a| {
-            (0..k)
-                .map(|b| inv[t][a] * meat[a][b] * inv[b][t])
-                .sum::<f64>()
-        })
-        .sum::<f64>()
-        * corr;
-    Some((beta, rss, var_b))
+    Some(
+        (0..k)
+            .map(|a| {
+                (0..k)
+                    .map(|b| inv[t][a] * meat[a][b] * inv[b][t])
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            * corr,
+    )
 }
 
 /// The trend of μ0 of a record with a force channel, over the motion `fit` compared, for a law

@@ -26,7 +26,9 @@ pub use crate::law_spec::{LawSpec, LUGRE_FIXED};
 use crate::model::{Model, Rig};
 use crate::record::{Record, RecordErrorKind};
 use crate::stats::linreg;
-use crate::uncertainty::{effective_count, hac_covariance, jacobian, noise_sigma, standard_errors};
+use crate::uncertainty::{
+    effective_count, hac_covariance, jacobian_par, noise_sigma, standard_errors,
+};
 use serde::Serialize;
 use std::f64::consts::PI;
 
@@ -523,7 +525,12 @@ pub fn fit_envelope(
     if free_start {
         q0.push(0.0);
     }
-    let lm = levenberg_marquardt(resid, &q0, opts.max_iter, opts.tol).ok_or_else(|| {
+    let lm_opts = LmOptions {
+        max_iter: opts.max_iter,
+        tol: opts.tol,
+        ..LmOptions::default()
+    };
+    let lm = levenberg_marquardt_par(resid, &q0, &lm_opts).ok_or_else(|| {
         FitError::failed("the model could not be simulated at the starting point")
     })?;
     let a0 = data.a0();
@@ -539,7 +546,7 @@ pub fn fit_envelope(
     let mut se: Vec<f64> = r_opt
         .as_ref()
         .and_then(|r0| {
-            let jac = jacobian(resid, &lm.p, r0, 1e-5, &scales)?;
+            let jac = jacobian_par(resid, &lm.p, r0, 1e-5, &scales)?;
             let mut cov = hac_covariance(&jac, r0)?;
             if !free_start {
                 add_initial_state_noise(data, spec, &lm.p, &jac, r0, opts, &mut cov)?;

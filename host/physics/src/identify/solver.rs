@@ -105,7 +105,64 @@ pub fn levenberg_marquardt(
 /// integrator's steps, the stick events of Coulomb friction on long records). Where the forward
 /// point cannot be evaluated the backward difference is used.
 pub fn levenberg_marquardt_with(
+    r: impl FnMut(&[f64]) -> Option<Vec<f64>>,
+    p0: &[f64],
+    opts: &LmOptions,
+) -> Option<LmResult> {
+    let r = std::cell::RefCell::new(r);
+    lm_core(
+        |q| (r.borrow_mut())(q),
+        |p, res| {
+            (0..p.len())
+                .map(|j| {
+                    difference_column(
+                        &|q: &[f64]| (r.borrow_mut())(q),
+                        p,
+                        res,
+                        j,
+                        step(opts, p, j),
+                    )
+                })
+                .collect()
+        },
+        p0,
+        opts,
+    )
+}
+
+/// [`levenberg_marquardt_with`] for residuals that can be evaluated on several threads at once:
+/// the Jacobian's columns are computed in parallel ([`set_fit_threads`]), each exactly as the
+/// serial version computes it, so the result is the same to the last bit.
+pub fn levenberg_marquardt_par(
+    r: impl Fn(&[f64]) -> Option<Vec<f64>> + Sync,
+    p0: &[f64],
+    opts: &LmOptions,
+) -> Option<LmResult> {
+    lm_core(
+        &r,
+        |p, res| {
+            let cols: Vec<usize> = (0..p.len()).collect();
+            par_map(&cols, |&j| {
+                difference_column(&r, p, res, j, step(opts, p, j))
+            })
+            .into_iter()
+            .collect()
+        },
+        p0,
+        opts,
+    )
+}
+
+/// The difference step of parameter `j` at `p`.
+fn step(opts: &LmOptions, p: &[f64], j: usize) -> f64 {
+    let scale = opts.scales.get(j).copied().unwrap_or(1e-4);
+    opts.rel_step * p[j].abs().max(scale)
+}
+
+/// Levenberg–Marquardt with residuals `r` and their Jacobian `jac_of(p, r(p))`.
+fn lm_core(
     mut r: impl FnMut(&[f64]) -> Option<Vec<f64>>,
+    mut jac_of: impl FnMut(&[f64], &[f64]) -> Option<Vec<Vec<f64>>>,
     p0: &[f64],
     opts: &LmOptions,
 ) -> Option<LmResult> {
@@ -120,23 +177,7 @@ pub fn levenberg_marquardt_with(
     let mut it = 0;
     while it < max_iter {
         it += 1;
-        // Jacobian.
-        let mut jac: Vec<Vec<f64>> = Vec::with_capacity(n);
-        for j in 0..n {
-            let scale = opts.scales.get(j).copied().unwrap_or(1e-4);
-            let h = opts.rel_step * p[j].abs().max(scale);
-            let mut q = p.clone();
-            q[j] += h;
-            let col = match r(&q) {
-                Some(rq) => rq.iter().zip(&res).map(|(a, b)| (a - b) / h).collect(),
-                None => {
-                    q[j] = p[j] - h;
-                    let rq = r(&q)?;
-                    rq.iter().zip(&res).map(|(a, b)| (b - a) / h).collect()
-                }
-            };
-            jac.push(col);
-        }
+        let jac = jac_of(&p, &res)?;
         let mut jtj = vec![vec![0.0; n]; n];
         let mut jtr = vec![0.0; n];
         for i in 0..n {
@@ -193,4 +234,72 @@ pub fn levenberg_marquardt_with(
         iterations: it,
         converged,
     })
+}
+
+thread_local! {
+    /// Threads [`par_map`] may use on this thread (0 = every core).
+    static INNER_THREADS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// Sets how many threads the fits run on this thread may use for their own simulations (the
+/// Jacobian's columns): 1 keeps them on this thread (a caller that already fits several records on
+/// every core), 0 = every core (the default). Results do not depend on it.
+pub fn set_fit_threads(n: usize) {
+    INNER_THREADS.with(|c| c.set(n));
+}
+
+/// Threads [`par_map`] uses on this thread.
+fn fit_threads() -> usize {
+    match INNER_THREADS.with(|c| c.get()) {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        n => n,
+    }
+}
+
+/// `items.map(f)` in order, spread over up to [`fit_threads`] threads (scoped; the calling thread
+/// takes the first share). Each item is computed exactly as it would be serially.
+pub(crate) fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec<U> {
+    let threads = fit_threads().min(items.len());
+    if threads <= 1 {
+        return items.iter().map(f).collect();
+    }
+    let chunk = items.len().div_ceil(threads);
+    let f = &f;
+    std::thread::scope(|s| {
+        let mut parts = items.chunks(chunk);
+        let first = parts.next().unwrap_or(&[]);
+        let handles: Vec<_> = parts
+            .map(|part| s.spawn(move || part.iter().map(f).collect::<Vec<U>>()))
+            .collect();
+        let mut out: Vec<U> = first.iter().map(f).collect();
+        for h in handles {
+            match h.join() {
+                Ok(v) => out.extend(v),
+                Err(e) => std::panic::resume_unwind(e),
+            }
+        }
+        out
+    })
+}
+
+/// One forward-difference column of a Jacobian at `p` (`res = r(p)`), step `h`; the backward
+/// difference where the forward point cannot be evaluated; `None` if neither can (or a residual
+/// vector of another length comes back).
+pub(crate) fn difference_column(
+    r: &(impl Fn(&[f64]) -> Option<Vec<f64>> + ?Sized),
+    p: &[f64],
+    res: &[f64],
+    j: usize,
+    h: f64,
+) -> Option<Vec<f64>> {
+    let mut q = p.to_vec();
+    q[j] += h;
+    match r(&q).filter(|v| v.len() == res.len()) {
+        Some(rq) => Some(rq.iter().zip(res).map(|(a, b)| (a - b) / h).collect()),
+        None => {
+            q[j] = p[j] - h;
+            let rq = r(&q).filter(|v| v.len() == res.len())?;
+            Some(rq.iter().zip(res).map(|(a, b)| (b - a) / h).collect())
+        }
+    }
 }
