@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use tribo_store::catalog::{Axis, Catalog, Filter, RunCatalog, Value as CatValue};
+use tribo_store::catalog::{AnyCatalog, Axis, Catalog, Filter, Value as CatValue};
 use tribo_store::Run;
 use tribo_wire::{limits, Channel, Control, Gap, RunHeader, SampleBlock, Status};
 
