@@ -8,7 +8,7 @@ use tribo::campaign::{finished, Plan, Point};
 use tribo::cmd::campaign::Args;
 use tribo::link::args::LinkArgs;
 use tribo::link::Address;
-use tribo_store::catalog::{Axis, Bin, RunCatalog, Value};
+use tribo_store::catalog::{AnyCatalog, Axis, Bin, Value};
 use tribo_store::{Catalog, Filter};
 
 fn write_plan(dir: &Path, text: &str) -> std::path::PathBuf {

@@ -63,6 +63,7 @@ fn demo_records_fits_and_draws_a_run_that_fit_and_report_can_read() {
     }
     // `tribo report RUN` on the stored run.
     let again = out.path().join("again");
-    let files = tribo_report::store::write_run_report(run, &again).unwrap();
+    let rec = tribo::load_record(run.dir()).unwrap();
+    let files = tribo_report::store::write_run_report(run, &rec, &again).unwrap();
     assert!(files.html.is_file());
 }

@@ -50,14 +50,15 @@ fn replay_reproduces_the_onboard_result_and_locates_a_wrong_law() {
 
     // The true law follows the recorded envelope to the end; a law with twice the Coulomb friction
     // leaves it within a few cycles.
-    let rows = envelope_vs_simulation(&o.run, truth.0, truth.1).unwrap();
+    let rec = tribo::load_record(o.run.dir()).unwrap();
+    let rows = envelope_vs_simulation(&rec, truth.0, truth.1).unwrap();
     let a0 = rows[0].2;
     assert!(rows.len() > 20);
     assert!(
         rows.iter().all(|r| (r.2 - r.3).abs() < 0.01 * a0),
         "true law departs"
     );
-    let wrong = envelope_vs_simulation(&o.run, 2.0 * truth.0, truth.1).unwrap();
+    let wrong = envelope_vs_simulation(&rec, 2.0 * truth.0, truth.1).unwrap();
     let first = wrong
         .iter()
         .position(|r| (r.2 - r.3).abs() > 0.02 * a0)

@@ -4,7 +4,7 @@
 
 use anyhow::{bail, Context};
 use std::path::{Path, PathBuf};
-use tribo_catalog::{LabCatalog, LabUrl, RunCatalog};
+use tribo_catalog::{AnyCatalog, LabCatalog, LabUrl};
 
 /// The lab catalog's URL (`--catalog`, else `TRIBO_CATALOG`), parsed.
 pub fn lab_url(catalog: Option<&str>) -> anyhow::Result<Option<LabUrl>> {
@@ -16,7 +16,7 @@ pub fn lab_url(catalog: Option<&str>) -> anyhow::Result<Option<LabUrl>> {
 
 /// The catalog a reading command was pointed at: the lab's (`--catalog`, `TRIBO_CATALOG`), else
 /// the store's own.
-pub fn open_catalog(catalog: Option<&str>, store: &Path) -> anyhow::Result<Box<dyn RunCatalog>> {
+pub fn open_catalog(catalog: Option<&str>, store: &Path) -> anyhow::Result<Box<dyn AnyCatalog>> {
     Ok(tribo_catalog::open(catalog, store)?)
 }
 

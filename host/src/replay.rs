@@ -15,7 +15,7 @@ use crate::firmware::analysis::{Phase, Pipeline};
 use anyhow::{bail, Context};
 use tribo_physics::envelope::mark_crandall;
 use tribo_physics::identify::FitOptions;
-use tribo_physics::{simulate, FrictionLaw, Model};
+use tribo_physics::{simulate, FrictionLaw, Model, Record};
 use tribo_store::Run;
 use tribo_wire::{Estimate, OnboardResult};
 
@@ -179,15 +179,13 @@ pub fn compare(rec: &OnboardResult, rep: &OnboardResult, tol: f64) -> Vec<Differ
     d
 }
 
-/// Envelope of the run vs the simulated Coulomb–viscous law, per cycle: `(cycle, t_s, recorded A,
+/// Envelope of a run's record (as [`crate::load::open`] opened it) vs the simulated Coulomb–viscous law, per cycle: `(cycle, t_s, recorded A,
 /// simulated A)` (SI, m), one row per cycle.
 pub fn envelope_vs_simulation(
-    run: &Run,
+    rec: &Record,
     mu0: f64,
     mu1: f64,
 ) -> anyhow::Result<Vec<(usize, f64, f64, f64)>> {
-    let rec = run.record()?;
-    rec.validate()?;
     let rig = rec.rig()?;
     let (tau, y, yd) = rec.dimensionless()?;
     let model = Model::new(FrictionLaw::coulomb_viscous(mu0, mu1));

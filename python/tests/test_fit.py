@@ -116,3 +116,47 @@ def test_a_long_fit_releases_the_gil():
     took = time.perf_counter() - t0
     # With the GIL held the whole time this loop could not have run while the fit did.
     assert took > 0.05 and ticks > 0.3 * took / 0.002, (took, ticks)
+
+
+def test_results_are_typed_objects_with_their_json_kept(run_dir):
+    f = tribo.fit(run_dir)
+    assert isinstance(f, tribo.Fit)
+    assert isinstance(f.law, str) and isinstance(f.verdict, str) and isinstance(f.converged, bool)
+    assert isinstance(f.mu, list) and len(f.mu) == 2 and all(type(m) is float for m in f.mu)
+    assert len(f.mu_se) == len(f.mu) and all(s is None or type(s) is float for s in f.mu_se)
+    assert all(type(p) is float for p in f.p_si) and len(f.p_si_se) == len(f.p_si)
+    assert type(f.gap) is float and type(f.noise_floor) is float
+    assert isinstance(f.rig, dict) and f.record == str(run_dir) and isinstance(f.defaults, list)
+    # The typed fields are the JSON's numbers, not a second computation.
+    assert f.mu == f.json["mu"] and f.verdict == f.json["verdict"] and f.gap == f.json["gap"]
+    d = f.to_dict()
+    assert d == f.json and d is not f.json and json.loads(json.dumps(d)) == d
+    e = tribo.explain(run_dir, max_steps=1)
+    assert isinstance(e, tribo.Explanation) and isinstance(e.conclusion, str)
+    assert isinstance(e.base_fit, tribo.Fit) and e.base_fit.mu == f.mu and e.base_fit.law == f.law
+    assert isinstance(e.steps, list) and all(isinstance(s, tribo.Step) for s in e.steps)
+    assert all(type(s.gap_after) is float and isinstance(s.effect, str) for s in e.steps)
+    assert type(e.gap_initial) is float and type(e.gap_final) is float
+    assert e.gap_final == e.json["gap_final"] and e.to_dict() == e.json
+
+
+def test_typed_errors_reach_python_as_their_exceptions(cli, run_dir, tmp_path):
+    # A value out of range: the CLI's status 2, Python's UsageError (a ValueError).
+    assert cli("fit", run_dir, "--apparatus-mu1", "1.1", check=False).returncode == 2
+    with pytest.raises(tribo.UsageError) as e:
+        tribo.fit(run_dir, apparatus_mu1=1.1)
+    assert isinstance(e.value, ValueError) and "1.1e-3" in str(e.value)
+    # A record with a sample that is not finite: status 3, NotAnalysable naming why.
+    rec = tmp_path / "sim.csv"
+    cli("sim", "--duration-s", "0.5", "-o", rec)
+    lines = rec.read_text().splitlines()
+    i = next(k for k, l in enumerate(lines) if l and l[0].isdigit()) + 10
+    cols = lines[i].split(",")
+    cols[1] = "NaN"
+    lines[i] = ",".join(cols)
+    nan = tmp_path / "nan.csv"
+    nan.write_text("\n".join(lines) + "\n")
+    assert cli("fit", nan, check=False).returncode == 3
+    with pytest.raises(tribo.NotAnalysable) as e:
+        tribo.fit(nan)
+    assert e.value.reason == "non-finite" and "not analysable" in str(e.value)

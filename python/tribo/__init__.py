@@ -58,6 +58,7 @@ __all__ = [
     "Run",
     "Fit",
     "Explanation",
+    "Step",
     "Catalog",
     "RunTable",
     "open_run",
@@ -224,12 +225,27 @@ class Run(Record):
         return export_parquet(self, output)
 
 
-class _Json:
-    """A result object: the command's ``--json`` object, its fields as attributes."""
+def _float(v: Any) -> float:
+    """A JSON number as a float (``null``, a NaN or an infinity written by the CLI, is NaN)."""
+    return float("nan") if v is None else float(v)
 
-    def __init__(self, text: str):
+
+def _opt_float(v: Any) -> Optional[float]:
+    return None if v is None else float(v)
+
+
+class _Result:
+    """A result: its main fields as typed attributes, the command's ``--json`` object in
+    :attr:`json` (and :meth:`to_dict`); any other field of it is reachable as an attribute or
+    ``result["field"]`` too."""
+
+    def __init__(self, j: Union[str, Dict[str, Any]]):
         #: The object as a dict, exactly the command's ``--json``.
-        self.json: Dict[str, Any] = json.loads(text)
+        self.json: Dict[str, Any] = json.loads(j) if isinstance(j, str) else j
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The command's ``--json`` object as a dict (a copy), for a script to store or send."""
+        return json.loads(json.dumps(self.json))
 
     def __getattr__(self, name: str) -> Any:
         try:
@@ -249,59 +265,160 @@ class _Json:
         return sorted(set(super().__dir__()) | set(self.json))
 
 
-class Fit(_Json):
-    """A friction-law fit: ``tribo fit --json``'s fields as attributes.
+class Fit(_Result):
+    """A friction-law fit: ``tribo fit --json``'s object, its fields typed.
 
     ``law``, ``verdict`` (adequate / inadequate / not-converged), ``mu`` and ``mu_se`` (the
     dimensionless constants and their standard errors), ``p_si`` and ``p_si_se`` (SI
     coefficients of μ(v) = Σ p_j v^j), ``gap`` and ``noise_floor`` (relative to the initial
-    amplitude), ``span``, ``cross_check`` (the on-board result beside it), ``rig``, ``record``…
+    amplitude), ``half_cycles``, ``converged``, ``record``, ``rig`` (the constants used and where
+    each came from), ``defaults``, ``cross_check`` (the on-board result beside it), an apparatus
+    record's ``mu_a``, ``windows`` when asked for; ``span`` and the rest as in the JSON.
     """
 
-    @property
-    def law(self) -> str:
-        """The law fitted (``coulomb-viscous``, ``quadratic``, …)."""
-        return self.json["law"]
+    #: The law fitted (``coulomb-viscous``, ``quadratic``, …).
+    law: str
+    #: ``adequate``, ``inadequate`` or ``not-converged``.
+    verdict: str
+    #: Whether the fit converged.
+    converged: bool
+    #: The dimensionless constants μ0, μ1, … in order of j (NaN where the CLI wrote null).
+    mu: List[float]
+    #: Their standard errors (None where unknown).
+    mu_se: List[Optional[float]]
+    #: The SI coefficients of μ(v) = Σ p_j v^j.
+    p_si: List[float]
+    #: Their standard errors (None where unknown).
+    p_si_se: List[Optional[float]]
+    #: The envelope's misfit, relative to the initial amplitude.
+    gap: float
+    #: The record's noise floor, relative to the initial amplitude.
+    noise_floor: float
+    #: Half cycles the fit used.
+    half_cycles: Optional[int]
+    #: The record fitted (its path or name); None in an explanation's ``base_fit``.
+    record: Optional[str]
+    #: The rig constants used and where each came from (None in an explanation's ``base_fit``).
+    rig: Optional[Dict[str, Any]]
+    #: The constants a default stood in for.
+    defaults: List[str]
+    #: The on-board result beside the host's, ``{"unavailable": why}``, or None for a law the rig
+    #: does not fit.
+    cross_check: Optional[Dict[str, Any]]
+    #: An apparatus record's (load 0) damping μ_a and its standard error, else None.
+    mu_a: Optional[float]
+    mu_a_se: Optional[float]
+    #: The fits over windows of the record, when asked for (``windows=N``).
+    windows: Optional[List[Dict[str, Any]]]
 
-    @property
-    def verdict(self) -> str:
-        """``adequate``, ``inadequate`` or ``not-converged``."""
-        return self.json["verdict"]
-
-    @property
-    def mu(self) -> List[float]:
-        """The dimensionless constants μ0, μ1, … in order of j."""
-        return self.json["mu"]
-
-    @property
-    def mu_se(self) -> List[Optional[float]]:
-        """Their standard errors (None where unknown)."""
-        return self.json["mu_se"]
-
-    @property
-    def gap(self) -> float:
-        """The envelope's misfit, relative to the initial amplitude."""
-        return self.json["gap"]
-
-    @property
-    def noise_floor(self) -> float:
-        """The record's noise floor, relative to the initial amplitude."""
-        return self.json["noise_floor"]
+    def __init__(self, j: Union[str, Dict[str, Any]]):
+        super().__init__(j)
+        d = self.json
+        self.law = str(d["law"])
+        self.verdict = str(d["verdict"])
+        self.converged = bool(d.get("converged", False))
+        self.mu = [_float(m) for m in d["mu"]]
+        self.mu_se = [_opt_float(s) for s in d["mu_se"]]
+        self.p_si = [_float(p) for p in d.get("p_si", [])]
+        self.p_si_se = [_opt_float(s) for s in d.get("p_si_se", [])]
+        self.gap = _float(d.get("gap"))
+        self.noise_floor = _float(d.get("noise_floor"))
+        self.half_cycles = d.get("half_cycles")
+        self.record = d.get("record")
+        self.rig = d.get("rig")
+        self.defaults = list(d.get("defaults", []))
+        self.cross_check = d.get("cross_check")
+        self.mu_a = _opt_float(d.get("mu_a"))
+        self.mu_a_se = _opt_float(d.get("mu_a_se"))
+        self.windows = d.get("windows")
 
     def __repr__(self) -> str:
-        mu = ", ".join(f"{m:.6g} ± {s:.2g}" for m, s in zip(self.json["mu"], self.json["mu_se"]))
-        return f"<tribo.Fit {self.json['law']}: mu = [{mu}], {self.json['verdict']}>"
+        mu = ", ".join(
+            f"{m:.6g} ± {s:.2g}" if s is not None else f"{m:.6g} ± ?"
+            for m, s in zip(self.mu, self.mu_se)
+        )
+        return f"<tribo.Fit {self.law}: mu = [{mu}], {self.verdict}>"
 
 
-class Explanation(_Json):
-    """What a law misses in a record: ``tribo explain --json``'s fields as attributes.
+class Step(_Result):
+    """One effect an explanation added: ``effect``, the gap before and after it, the
+    parameters it recovered and their standard errors (None where the fit cannot tell)."""
 
-    ``base_fit`` (``tribo fit``'s result), ``steps`` (each effect added and the gap after it),
-    ``gap_base``, ``gap_final``, ``noise_floor``, ``effects``, ``cross_check``…
+    #: The effect's name (``quadratic-velocity``, ``stribeck``, …).
+    effect: str
+    #: The gap of the model before adding it, and after adding it and refitting.
+    gap_before: float
+    gap_after: float
+    #: Its recovered parameters (dimensionless and SI) and their standard errors.
+    params: Dict[str, float]
+    params_se: Dict[str, Optional[float]]
+
+    def __init__(self, j: Union[str, Dict[str, Any]]):
+        super().__init__(j)
+        d = self.json
+        self.effect = str(d["effect"])
+        self.gap_before = _float(d["gap_before"])
+        self.gap_after = _float(d["gap_after"])
+        self.params = {k: _float(v) for k, v in d.get("params", {}).items()}
+        self.params_se = {k: _opt_float(v) for k, v in d.get("params_se", {}).items()}
+
+    def __repr__(self) -> str:
+        return f"<tribo.Step {self.effect}: gap {self.gap_before:.3g} → {self.gap_after:.3g}>"
+
+
+class Explanation(_Result):
+    """What a law misses in a record: ``tribo explain --json``'s object, its fields typed.
+
+    ``conclusion``, ``base`` and ``base_fit`` (``tribo fit``'s result for the base law, a
+    :class:`Fit`), ``steps`` (each effect added, a :class:`Step`), ``gap_initial``,
+    ``gap_final``, ``noise_floor``, ``unexplained_fraction``, ``missing_effects``,
+    ``ambiguous``, ``force_cutoff_hz``, ``cross_check``; the models, rounds and diagnostics as
+    in the JSON.
     """
 
+    #: What the explanation concludes (``base-adequate``, ``explained``, …).
+    conclusion: str
+    #: The base law.
+    base: str
+    #: The base law's fit (``tribo fit``'s estimator).
+    base_fit: Fit
+    #: The effects added, in order.
+    steps: List[Step]
+    #: The gap of the base law, and of the final model.
+    gap_initial: float
+    gap_final: float
+    #: The record's noise floor (relative to the initial amplitude).
+    noise_floor: float
+    #: The part of the base law's misfit the final model leaves unexplained.
+    unexplained_fraction: float
+    #: The effects the record shows and no step explained.
+    missing_effects: List[str]
+    #: Effects the record cannot tell apart.
+    ambiguous: List[str]
+    #: The force channel's low-pass cut-off used (Hz), or None.
+    force_cutoff_hz: Optional[float]
+    #: The on-board result beside the base fit (as in :attr:`Fit.cross_check`).
+    cross_check: Optional[Dict[str, Any]]
+
+    def __init__(self, j: Union[str, Dict[str, Any]]):
+        super().__init__(j)
+        d = self.json
+        self.conclusion = str(d["conclusion"])
+        self.base = str(d["base"])
+        self.base_fit = Fit(d["base_fit"])
+        self.steps = [Step(s) for s in d.get("steps", [])]
+        self.gap_initial = _float(d["gap_initial"])
+        self.gap_final = _float(d["gap_final"])
+        self.noise_floor = _float(d["noise_floor"])
+        self.unexplained_fraction = _float(d.get("unexplained_fraction"))
+        self.missing_effects = list(d.get("missing_effects", []))
+        self.ambiguous = list(d.get("ambiguous", []))
+        self.force_cutoff_hz = _opt_float(d.get("force_cutoff_hz"))
+        self.cross_check = d.get("cross_check")
+
     def __repr__(self) -> str:
-        return f"<tribo.Explanation: {', '.join(self.json)}>"
+        steps = ", ".join(s.effect for s in self.steps) or "no effect added"
+        return f"<tribo.Explanation {self.base}: {self.conclusion} ({steps})>"
 
 
 class RunTable:

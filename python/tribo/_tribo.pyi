@@ -1,4 +1,6 @@
-"""Type stubs of the Rust extension (`python/src/lib.rs`); use the `tribo` package's API."""
+"""Type stubs of the Rust extension (`python/src/`: errors, runs, fits, catalog); use the `tribo`
+package's API. `fit` and `explain` return the CLI's `--json` text, which the package wraps in its
+typed `Fit` and `Explanation` (with `Step`) classes."""
 
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -10,7 +12,8 @@ class TriboError(Exception):
     """Any failure of tribo; the message says what went wrong and what to do next."""
 
 class NotAnalysable(TriboError):
-    """Nothing can be fitted (no oscillation, too few half cycles, saturation, a non-finite sample)."""
+    """Nothing can be fitted (no oscillation, too few half cycles, saturation, a non-finite sample:
+    `reason` "non-finite", a record not plausible as written: `reason` None)."""
 
     reason: Optional[str]
 

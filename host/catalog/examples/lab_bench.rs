@@ -7,7 +7,7 @@
 //! (defaults 10, 10000, 1000).
 
 use std::time::{Duration, Instant};
-use tribo_catalog::{LabCatalog, LabRun, RunCatalog};
+use tribo_catalog::{AnyCatalog, LabCatalog, LabRun};
 use tribo_store::catalog::{Axis, Value};
 use tribo_store::{CatalogRow, Filter};
 use tribo_testkit::{synthetic_run, PgServer};

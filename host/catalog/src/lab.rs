@@ -10,7 +10,7 @@ use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use tribo_store::catalog::{table_filter, Axis, Bin, Cell, RunCatalog, Table, Value};
+use tribo_store::catalog::{table_filter, AnyCatalog, Axis, Bin, Cell, Table, Value};
 use tribo_store::{CatalogRow, Filter, StoreError};
 
 /// One run as pushed to the lab catalog: the local catalog's row and what places it in the lab.
@@ -544,7 +544,7 @@ fn read_version(c: &mut Client) -> std::result::Result<i32, postgres::Error> {
     )
 }
 
-impl RunCatalog for LabCatalog {
+impl AnyCatalog for LabCatalog {
     fn runs(&self, f: &Filter) -> Result<Vec<CatalogRow>> {
         Ok(self.lab_runs(f)?.into_iter().map(|r| r.run.row).collect())
     }

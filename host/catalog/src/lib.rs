@@ -1,8 +1,8 @@
 //! The lab catalog: every run of every rig and PC of a lab in one PostgreSQL database, next to
-//! each PC's own SQLite catalog (`tribo-store`), which stays the default and needs nothing set up.
+//! each PC's own run catalog (SQLite, `tribo-store`), which stays the default and needs nothing set up.
 //!
-//! * [`RunCatalog`] is the one catalog interface: [`tribo_store::Catalog`] (a store's SQLite file)
-//!   and [`LabCatalog`] (a server) both implement it; [`open`] gives the one a command was
+//! * [`AnyCatalog`] is the one catalog interface: [`tribo_store::Catalog`] (the run catalog, a
+//!   store's SQLite file) and [`LabCatalog`] (the lab catalog, a server) both implement it; [`open`] gives the one a command was
 //!   pointed at (`--catalog URL`, `TRIBO_CATALOG`, else the store's own).
 //! * [`url`]: the server's address, without a password (refused on the command line), with the
 //!   password from `PGPASSWORD` or the password file, TLS (rustls) when the URL asks for it.
@@ -22,7 +22,7 @@ pub mod url;
 
 pub use lab::{LabCatalog, LabRow, LabRun, PushCounts};
 pub use sync::{sync, SyncOptions, SyncReport};
-pub use tribo_store::RunCatalog;
+pub use tribo_store::AnyCatalog;
 pub use url::LabUrl;
 
 use std::path::Path;
@@ -73,7 +73,7 @@ pub fn chain(e: &dyn std::error::Error) -> String {
 /// The catalog named by `catalog` (a `postgres://` URL), else by `TRIBO_CATALOG`, else the SQLite
 /// catalog of the store at `store`, brought up to date with its run folders
 /// ([`tribo_store::Catalog::refresh`]).
-pub fn open(catalog: Option<&str>, store: &Path) -> Result<Box<dyn RunCatalog>> {
+pub fn open(catalog: Option<&str>, store: &Path) -> Result<Box<dyn AnyCatalog>> {
     match lab_url(catalog) {
         Some(url) => Ok(Box::new(LabCatalog::connect(&LabUrl::parse(&url)?)?)),
         None => {

@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::sync::mpsc;
 use std::time::Duration;
-use tribo_catalog::{sync, LabCatalog, RunCatalog, SyncOptions};
+use tribo_catalog::{sync, AnyCatalog, LabCatalog, SyncOptions};
 use tribo_store::catalog::{Axis, Bin, Value};
 use tribo_store::Filter;
 use tribo_testkit::{synthetic_run, synthetic_store, PgServer};

@@ -23,10 +23,12 @@ pub struct CampaignPoint {
     pub temp_setpoint_c: Option<f64>,
     /// Dimensionless Coulomb and viscous constants of the host fit.
     pub mu0: Option<f64>,
+    /// The viscous one (μ1).
     pub mu1: Option<f64>,
     /// Their standard errors (`None` when not known): drawn as each run's bar, and the y axis
     /// never spans less than a few of them (a difference far below the ± is not drawn as a slope).
     pub mu0_se: Option<f64>,
+    /// μ1's standard error.
     pub mu1_se: Option<f64>,
     /// Oscillation cycles until the stop.
     pub cycles: Option<f64>,

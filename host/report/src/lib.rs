@@ -31,14 +31,22 @@
 //! Rendering uses `plotters`: SVG needs no font; PNG uses the embedded DejaVu Sans
 //! (`assets/`, Bitstream Vera licence).
 
+#![warn(missing_docs)]
+
 #[cfg(feature = "store")]
+/// The report of a campaign (constants against load and temperature).
 pub mod campaign;
+/// The on-board result beside the host fit.
 pub mod crosscheck;
 mod html;
+/// Figures as panels of series, rendered to SVG and PNG.
 pub mod plot;
+/// The lubrication regime from the contact resistance.
 pub mod regime;
+/// The report of one run or record.
 pub mod run;
 #[cfg(feature = "store")]
+/// From the run store to a report (run inputs, campaign points).
 pub mod store;
 
 #[cfg(feature = "store")]
@@ -61,35 +69,38 @@ pub enum ReportError {
     /// An analysis a figure needs failed (the envelope, the windowed fits).
     #[error("cannot report: {what}")]
     Analysis {
+        /// The analysis that failed.
         what: &'static str,
+        /// Its error.
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,
-    },
-    /// A stored run could not be read.
-    #[cfg(feature = "store")]
-    #[error("cannot read the run {run}")]
-    Run {
-        run: String,
-        #[source]
-        source: tribo_store::StoreError,
     },
     /// Writing a file failed.
     #[error("cannot write {}", path.display())]
     Io {
+        /// The file not written.
         path: PathBuf,
+        /// Why.
         #[source]
         source: std::io::Error,
     },
     /// A figure could not be drawn.
     #[error("cannot draw the figure {figure}")]
     Plot {
+        /// The figure's name.
         figure: String,
+        /// The renderer's error.
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// A figure with nothing to draw (no panel, no finite data).
     #[error("nothing to draw in the figure {figure}: {why}")]
-    Empty { figure: String, why: String },
+    Empty {
+        /// The figure's name.
+        figure: String,
+        /// What is missing.
+        why: String,
+    },
 }
 
 /// A report in memory: figures, the HTML tables and notes.
@@ -99,6 +110,7 @@ pub struct Report {
     pub title: String,
     /// HTML fragment (tables) shown above the figures; already escaped.
     pub summary_html: String,
+    /// The figures, in page order.
     pub figures: Vec<Figure>,
     /// Figures skipped or fits failed, one sentence each (shown on the page).
     pub notes: Vec<String>,
@@ -112,9 +124,13 @@ pub struct Report {
 /// One written figure.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FigureFile {
+    /// File stem of the figure (`motion`).
     pub name: String,
+    /// Its heading on the page.
     pub title: String,
+    /// The SVG file written.
     pub svg: PathBuf,
+    /// The PNG file written, when PNG was asked for.
     pub png: Option<PathBuf>,
 }
 
@@ -123,6 +139,7 @@ pub struct FigureFile {
 pub struct ReportFiles {
     /// `report.html`.
     pub html: PathBuf,
+    /// The figures written.
     pub figures: Vec<FigureFile>,
     /// Same as [`Report::notes`].
     pub notes: Vec<String>,

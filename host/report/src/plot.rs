@@ -44,13 +44,16 @@ pub struct Series {
     pub name: String,
     /// Colour index into the palette.
     pub color: usize,
+    /// How it is drawn (line or points).
     pub style: Style,
+    /// Its points `(x, y)`, in data units.
     pub data: Vec<(f64, f64)>,
     /// Vertical error bars `(x, lo, hi)` drawn in the series colour.
     pub errors: Vec<(f64, f64, f64)>,
 }
 
 impl Series {
+    /// A solid line of width 2 in palette colour `color`.
     pub fn line(name: impl Into<String>, color: usize, data: Vec<(f64, f64)>) -> Series {
         Series {
             name: name.into(),
@@ -60,6 +63,7 @@ impl Series {
             errors: Vec::new(),
         }
     }
+    /// The same series drawn in another style.
     pub fn with_style(mut self, style: Style) -> Series {
         self.style = style;
         self
@@ -70,28 +74,39 @@ impl Series {
 /// dimensionless plot): `secondary = scale · primary`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Secondary {
+    /// Label of the secondary x axis (none: no secondary x axis).
     pub x_label: Option<String>,
+    /// Secondary x = `x_scale` · primary x.
     pub x_scale: f64,
+    /// Label of the secondary y axis (none: no secondary y axis).
     pub y_label: Option<String>,
+    /// Secondary y = `y_scale` · primary y.
     pub y_scale: f64,
 }
 
 /// One plotting area.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Panel {
+    /// Title above the panel.
     pub title: String,
+    /// Label of the x axis.
     pub x_label: String,
+    /// Label of the y axis.
     pub y_label: String,
+    /// The data series drawn.
     pub series: Vec<Series>,
     /// Horizontal dashed reference lines `(y, label)`: the first labelled one dark grey, later
     /// ones lighter; an empty label keeps the previous style and adds no legend entry.
     pub hlines: Vec<(f64, String)>,
     /// Shaded vertical span `(x0, x1, label)` (e.g. the samples the ECR classifier looked at).
     pub span: Option<(f64, f64, String)>,
+    /// Secondary axes, if any.
     pub secondary: Option<Secondary>,
     /// Fixed ranges (else from the data, with a margin).
     pub x_range: Option<(f64, f64)>,
+    /// The y range, as `x_range`.
     pub y_range: Option<(f64, f64)>,
+    /// Where the legend goes.
     pub legend_pos: LegendPos,
 }
 
@@ -100,13 +115,18 @@ pub struct Panel {
 pub enum LegendPos {
     /// The corner with the fewest data points.
     Auto,
+    /// Upper right corner.
     UpperRight,
+    /// Upper left corner.
     UpperLeft,
+    /// Lower right corner.
     LowerRight,
+    /// Lower left corner.
     LowerLeft,
 }
 
 impl Panel {
+    /// An empty panel with its title and axis labels, the legend upper right.
     pub fn new(
         title: impl Into<String>,
         x_label: impl Into<String>,
@@ -136,6 +156,7 @@ pub struct Figure {
     pub title: String,
     /// What to look at (one or two sentences, shown under the figure).
     pub caption: String,
+    /// The panels, top to bottom.
     pub panels: Vec<Panel>,
     /// Pixel size.
     pub size: (u32, u32),
@@ -160,6 +181,7 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(120, 120, 120), // grey
 ];
 
+/// The palette's colour `i` (cycling; colour-blind safe, Okabe–Ito).
 pub fn color(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }

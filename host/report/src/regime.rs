@@ -47,6 +47,7 @@ impl Regime {
 /// The classifier's verdict and the numbers it was based on.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RegimeAssessment {
+    /// The regime named.
     pub regime: Regime,
     /// Median `log10(R / Ω)` over the samples classified.
     pub median_log10: f64,

@@ -5,6 +5,7 @@ use crate::campaign::CampaignPoint;
 use crate::run::ReportInputs;
 use crate::{write_campaign_report, write_record_report, CampaignInputs, ReportError, ReportFiles};
 use std::path::Path;
+use tribo_physics::Record;
 use tribo_store::{CatalogRow, Run};
 
 /// What the report shows of a stored run besides its samples: metadata lines and the on-board
@@ -87,14 +88,15 @@ pub fn run_inputs(run: &Run) -> ReportInputs {
     }
 }
 
-/// Writes the report of a stored run into `out_dir` (the samples as recorded, on-board result from
-/// `result.toml`).
-pub fn write_run_report(run: &Run, out_dir: &Path) -> Result<ReportFiles, ReportError> {
-    let rec = run.record().map_err(|source| ReportError::Run {
-        run: run.id().to_string(),
-        source,
-    })?;
-    write_record_report(&rec, &run_inputs(run), out_dir)
+/// Writes the report of a stored run into `out_dir`: `rec` its samples as the loader opened them
+/// (`tribo::load::open`, the one path from a folder to a record), the on-board result from
+/// `result.toml`.
+pub fn write_run_report(
+    run: &Run,
+    rec: &Record,
+    out_dir: &Path,
+) -> Result<ReportFiles, ReportError> {
+    write_record_report(rec, &run_inputs(run), out_dir)
 }
 
 /// A campaign point from a catalog row: the host fit (the one estimator of a law; a run without

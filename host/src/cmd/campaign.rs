@@ -10,7 +10,7 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use tribo_catalog::LabCatalog;
-use tribo_store::catalog::{Axis, RunCatalog, Value};
+use tribo_store::catalog::{AnyCatalog, Axis, Value};
 use tribo_store::{Catalog, Filter};
 use tribo_wire::HostMsg;
 
@@ -203,7 +203,7 @@ fn print_table(
         campaign: Some(plan.name.clone()),
         ..Default::default()
     };
-    let (cat, what): (Box<dyn RunCatalog>, _) = match crate::lab::lab_url(catalog)? {
+    let (cat, what): (Box<dyn AnyCatalog>, _) = match crate::lab::lab_url(catalog)? {
         Some(url) => {
             // A server that cannot be reached is waited for a little, not a sync's minute: the
             // runs are safe in the store, and `tribo sync` sends them later.
@@ -242,7 +242,7 @@ fn print_table(
     print_tables(cat.as_ref(), &f, what)
 }
 
-fn print_tables(cat: &dyn RunCatalog, f: &Filter, what: &str) -> anyhow::Result<()> {
+fn print_tables(cat: &dyn AnyCatalog, f: &Filter, what: &str) -> anyhow::Result<()> {
     for v in [Value::Mu0, Value::Mu1] {
         let t = cat.table(Axis::Temp, Axis::Load, v, f)?;
         if !t.rows.is_empty() {

@@ -114,7 +114,8 @@ pub fn demo(args: &Args) -> anyhow::Result<crate::link::session::Outcome> {
 
 /// Writes the report of a stored run (figures and `report.html`) with `tribo-report`.
 pub fn write_report(run: &tribo_store::Run, dir: &std::path::Path) -> anyhow::Result<String> {
-    let files = tribo_report::store::write_run_report(run, dir)?;
+    let rec = crate::load::open(run.dir(), crate::Holes::Keep)?.record;
+    let files = tribo_report::store::write_run_report(run, &rec, dir)?;
     let mut s = format!(
         "report: {} ({} figures)",
         files.html.display(),

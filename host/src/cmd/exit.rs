@@ -11,10 +11,12 @@
 //! Decided here only: a library function that finished with incomplete data returns
 //! [`crate::exit::Incomplete`] as its error (after printing or storing everything it has), and
 //! [`status_of`] maps it to status 3, as it maps the library's other typed errors
-//! ([`crate::exit`], [`crate::load::LoadError`], the store's usage errors). Any other error is
-//! status 1.
+//! ([`crate::exit`], the loader's [`LoadError`], the analysis's [`AnalysisError`], the store's
+//! usage errors). Any other error is status 1.
 
+use crate::analysis::AnalysisError;
 use crate::exit::{Incomplete, Interrupted, Usage};
+use crate::load::LoadError;
 use crate::signals::Signal;
 
 /// The statuses `tribo` exits with.
@@ -40,18 +42,46 @@ impl Status {
     }
 }
 
+/// The status of the loader's error: 3 for a run whose data is not whole, else 1.
+fn load_status(e: &LoadError) -> Status {
+    if e.is_incomplete() {
+        Status::Incomplete
+    } else {
+        Status::Error
+    }
+}
+
+/// The status of an analysis's refusal: 2 for a value out of range, 3 for a record that cannot
+/// be analysed (as written, or a non-finite sample) or a run not whole, else 1.
+fn analysis_status(e: &AnalysisError) -> Status {
+    match e.innermost() {
+        AnalysisError::Load(l) => load_status(l),
+        AnalysisError::NonFinite(_) | AnalysisError::NotAnalysable(_) => Status::Incomplete,
+        AnalysisError::Usage(_) => Status::Usage,
+        AnalysisError::Request(_)
+        | AnalysisError::Rig(_)
+        | AnalysisError::Fit(_)
+        | AnalysisError::Of { .. } => Status::Error,
+    }
+}
+
 /// The status an error from a command maps to.
 pub fn status_of(e: &anyhow::Error) -> Status {
+    let typed = |c: &(dyn std::error::Error + 'static)| {
+        c.downcast_ref::<AnalysisError>()
+            .map(analysis_status)
+            .or_else(|| c.downcast_ref::<LoadError>().map(load_status))
+    };
     if e.chain().any(|c| c.downcast_ref::<Interrupted>().is_some()) {
         Status::Interrupted(crate::signals::received().unwrap_or(Signal::Interrupt))
-    } else if e.chain().any(|c| {
-        c.downcast_ref::<Incomplete>().is_some()
-            || c.downcast_ref::<crate::load::LoadError>()
-                .is_some_and(|l| l.is_incomplete())
-    }) {
+    } else if e
+        .chain()
+        .any(|c| c.downcast_ref::<Incomplete>().is_some() || typed(c) == Some(Status::Incomplete))
+    {
         Status::Incomplete
     } else if e.chain().any(|c| {
         c.downcast_ref::<Usage>().is_some()
+            || typed(c) == Some(Status::Usage)
             || c.downcast_ref::<tribo_store::StoreError>()
                 .is_some_and(|s| s.kind == tribo_store::ErrorKind::Usage)
     }) {

@@ -2,8 +2,8 @@
 //! explain a record, name the missing physics, add it and show the gap shrink. The logic
 //! lives in the `tribo-explain` crate.
 
+use crate::analysis::open_analysable;
 use crate::exit::Incomplete;
-use crate::load::open_analysable;
 use crate::{out, outln};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
@@ -147,8 +147,8 @@ fn run_inner(args: Args) -> Result<()> {
     };
     let opened = open_analysable(&args.record, holes)?;
     let record = &opened.record;
-    crate::load::plausible_record(record)
-        .map_err(|e| e.context(args.record.display().to_string()))?;
+    crate::analysis::plausible_record(record)
+        .map_err(|e| e.of(args.record.display().to_string()))?;
     let not_analysable = |e: tribo_explain::ExplainError| -> anyhow::Error {
         if e.is_not_analysable() {
             Incomplete(format!(

@@ -2,10 +2,10 @@
 //! every constant, the record's noise floor and a verdict.
 
 use crate::analysis::{
-    apparatus_damping, cross_check_text, fit_law, not_analysable_json, FitOutcome, FitRequest,
+    apparatus_damping, cross_check_text, fit_law, not_analysable_json, open_analysable, FitOutcome,
+    FitRequest, RigFlags, RigUsed,
 };
 use crate::exit::Incomplete;
-use crate::load::{open_analysable, RigFlags, RigUsed};
 use anyhow::{Context, Result};
 use clap::Parser;
 use std::fmt::Write as _;

@@ -24,7 +24,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn run_inner(args: Args) -> anyhow::Result<()> {
-    let record = crate::load::load_for_analysis(&args.record)?;
+    let record = crate::analysis::load_for_analysis(&args.record)?;
     // The host's screening first: a record clipped by another acquisition's converter looks
     // unsaturated to the pipeline, whose converter range is made to span the record.
     if let Ok((tau, y, ydot)) = record.dimensionless() {

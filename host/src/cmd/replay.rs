@@ -16,10 +16,17 @@ pub struct Args {
 }
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let run = Run::open(&args.run)?;
-    if let Some(r) = &run.recovery {
-        crate::errln!("warning: {r}");
+    if !args.run.is_dir() {
+        // The store's own error ("not a run folder"), not a CSV reader's.
+        Run::open(&args.run)?;
     }
+    // The one loader: the run and its samples as recorded (a run that is not whole as far as it
+    // goes), with the store's warnings about it.
+    let opened = crate::load::open(&args.run, crate::Holes::Keep)?;
+    let (rec, run) = match opened.run {
+        Some(run) => (opened.record, run),
+        None => anyhow::bail!("{} is not a run folder", args.run.display()),
+    };
     let c = run.completeness();
     // An incomplete run is replayed as far as it goes, said so, and ends with exit status 3.
     let incomplete = (!c.is_complete()).then(|| {
@@ -43,7 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             println!("no fitted apparatus damping to simulate (`tribo fit` the run first)");
             return incomplete.map_or(Ok(()), |i| Err(i.into()));
         };
-        return simulate_and_compare(&run, 0.0, mu_a, incomplete);
+        return simulate_and_compare(&rec, 0.0, mu_a, incomplete);
     }
     let replayed = match replay_pipeline(&run) {
         Ok(r) => r,
@@ -102,17 +109,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("no usable μ0/μ1 to simulate (μ0 = {mu0}, μ1 = {mu1})");
         return incomplete.map_or(Ok(()), |i| Err(i.into()));
     }
-    simulate_and_compare(&run, mu0, mu1, incomplete)
+    simulate_and_compare(&rec, mu0, mu1, incomplete)
 }
 
 /// The envelope against the simulated Coulomb–viscous law, per cycle, and the exit status.
 fn simulate_and_compare(
-    run: &Run,
+    rec: &tribo_physics::Record,
     mu0: f64,
     mu1: f64,
     incomplete: Option<crate::exit::Incomplete>,
 ) -> anyhow::Result<()> {
-    let rows = envelope_vs_simulation(run, mu0, mu1)?;
+    let rows = envelope_vs_simulation(rec, mu0, mu1)?;
     let a0 = rows.first().map_or(1.0, |r| r.2.max(1e-12));
     println!(
         "envelope vs the simulated Coulomb–viscous law (μ0 = {mu0:.5}, μ1 = {mu1:.5}), per cycle:"

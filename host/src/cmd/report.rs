@@ -6,7 +6,7 @@ use anyhow::{bail, Context};
 use std::path::{Path, PathBuf};
 use tribo_physics::identify::LawSpec;
 use tribo_report::{write_record_report, ReportFiles, ReportInputs};
-use tribo_store::{Filter, Run};
+use tribo_store::Filter;
 
 /// Arguments of `tribo report`.
 ///
@@ -77,7 +77,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let mut incomplete = None;
     let files = if path.is_dir() && path.join("meta.toml").is_file() {
-        let run = Run::open(path)?;
+        // The one loader: the run, its samples as recorded (a run that is not whole as far as
+        // it goes) and the store's warnings about it.
+        let opened = crate::load::open(path, crate::Holes::Keep)
+            .with_context(|| format!("reading the samples of {}", path.display()))?;
+        let (rec, run) = match opened.run {
+            Some(run) => (opened.record, run),
+            None => bail!("{} is not a run folder", path.display()),
+        };
         if !run.is_complete() {
             incomplete = Some(crate::exit::Incomplete(format!(
                 "the report of run {} shows what is stored, and the run is {}: `tribo pull {}` fetches the rest \
@@ -90,12 +97,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let mut inputs = tribo_report::store::run_inputs(&run);
         inputs.options.laws = laws;
         inputs.options.png = !args.no_png;
-        let rec = run
-            .record()
-            .with_context(|| format!("reading the samples of {}", path.display()))?;
         write_record_report(&rec, &inputs, &out_for(run.id()))?
     } else if path.is_file() {
-        let rec = crate::load::load_for_analysis(path)?;
+        let rec = crate::analysis::load_for_analysis(path)?;
         let stem = path
             .file_stem()
             .map_or("record".into(), |s| s.to_string_lossy().into_owned());

@@ -231,7 +231,7 @@ pub fn serve(
     let rig = std::thread::Builder::new()
         .name("tribo-panel-rig".into())
         .spawn(move || rig.run())
-        .context("starting the panel's rig thread")?;
+        .context("starting the panel's link thread")?;
     let page_needs_token = token.is_some();
     let token = token.unwrap_or_else(fresh_token);
     let ctx = Ctx {
@@ -534,7 +534,7 @@ fn post(ctx: &Ctx, name: &str, client: Option<&str>, body: &str) -> (u16, Value)
         .recv_timeout(Duration::from_secs(15))
         .unwrap_or_else(|_| {
             Err(format!(
-                "{name}: no answer from the rig thread in 15 s; check the rig line"
+                "{name}: no answer from the link thread in 15 s; check the rig line"
             ))
         });
     let (ok, text) = match r {

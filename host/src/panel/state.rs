@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use tribo_store::catalog::{Axis, Catalog, Filter, RunCatalog, Value as CatValue};
+use tribo_store::catalog::{AnyCatalog, Axis, Catalog, Filter, Value as CatValue};
 use tribo_store::Run;
 use tribo_wire::{limits, Channel, Control, Gap, RunHeader, SampleBlock, Status};
 
@@ -497,11 +497,11 @@ pub fn write_report(shared: Arc<Mutex<Shared>>, id: String, dir: PathBuf) {
         .spawn(move || {
             // What `tribo report RUN -o RUN/report` does for a run folder (the default laws, SVG).
             let r = (|| -> anyhow::Result<()> {
-                let run = Run::open(&dir)?;
+                let opened = crate::load::open(&dir, crate::Holes::Keep)?;
+                let run = anyhow::Context::context(opened.run, "not a run folder")?;
                 let mut inputs = tribo_report::store::run_inputs(&run);
                 inputs.options.png = false;
-                let rec = run.record()?;
-                tribo_report::write_record_report(&rec, &inputs, &dir.join("report"))?;
+                tribo_report::write_record_report(&opened.record, &inputs, &dir.join("report"))?;
                 Ok(())
             })();
             let mut s = match shared.lock() {

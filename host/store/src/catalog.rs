@@ -1,4 +1,5 @@
-//! The catalog: one SQLite file (`catalog.sqlite` at the store's root) indexing every run.
+//! The run catalog: one SQLite file (`catalog.sqlite` at the store's root) indexing every run of
+//! the store (the lab catalog, on PostgreSQL, is `tribo-catalog`'s).
 //!
 //! It is an index, never the only copy: [`Catalog::reindex`] rebuilds it from the run folders.
 
@@ -9,6 +10,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+/// The catalog's file name at the store's root.
 pub const CATALOG_FILE: &str = "catalog.sqlite";
 
 /// The SQLite catalog's schema version (its `user_version`): a catalog of a newer tribo is
@@ -54,33 +56,55 @@ CREATE INDEX IF NOT EXISTS runs_campaign ON runs(campaign);
 /// One catalogued run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CatalogRow {
+    /// The run's id (its folder name).
     pub id: String,
+    /// Its folder.
     pub path: PathBuf,
+    /// Creation time, UTC (`YYYY-MM-DDTHH:MM:SSZ`).
     pub created: String,
+    /// Its status (`complete`, `incomplete`, `aborted`, `recording`).
     pub status: String,
+    /// Free-text label.
     pub label: Option<String>,
+    /// The sample tested.
     pub sample: Option<String>,
+    /// The lubricant.
     pub lubricant: Option<String>,
+    /// The campaign it is part of.
     pub campaign: Option<String>,
+    /// Its repetition index in the campaign (from 1).
     pub repeat: Option<u32>,
+    /// Normal load (N).
     pub load_n: f64,
     /// Nominal temperature: the setpoint, else the measured one.
     pub temp_c: Option<f64>,
     /// The heater's setpoint; `None`: the heater was off (the run is at whatever the plate read).
     pub temp_setpoint_c: Option<f64>,
+    /// The rig's firmware version.
     pub firmware: Option<String>,
+    /// The rig's serial number.
     pub serial: Option<String>,
+    /// Samples held.
     pub samples: u64,
+    /// Sample blocks not received.
     pub missing_blocks: u64,
+    /// The on-board analysis's verdict.
     pub verdict: Option<String>,
+    /// Oscillation cycles until the stop (on-board count).
     pub cycles: Option<u32>,
+    /// The on-board μ0 (Coulomb).
     pub onboard_mu0: Option<f64>,
+    /// The on-board μ1 (viscous).
     pub onboard_mu1: Option<f64>,
+    /// The host fit's μ0 (Coulomb).
     pub host_mu0: Option<f64>,
+    /// The host fit's μ1 (viscous).
     pub host_mu1: Option<f64>,
+    /// The host fit's envelope misfit, relative to the initial amplitude.
     pub host_gap: Option<f64>,
     /// Standard errors of the host fit's μ0 and μ1.
     pub host_mu0_se: Option<f64>,
+    /// μ1's standard error.
     pub host_mu1_se: Option<f64>,
     /// Samples the rig lost (acquisition gaps reported by the run's gap frames).
     pub lost_samples: u64,
@@ -108,13 +132,19 @@ pub struct Reindexed {
 /// Which runs to list.
 #[derive(Debug, Clone, Default)]
 pub struct Filter {
+    /// Runs of this campaign.
     pub campaign: Option<String>,
     /// Substring of the label.
     pub label: Option<String>,
+    /// Runs with this status.
     pub status: Option<String>,
+    /// Lowest load (N), included.
     pub load_min: Option<f64>,
+    /// Highest load (N), included.
     pub load_max: Option<f64>,
+    /// Lowest temperature (°C), included.
     pub temp_min: Option<f64>,
+    /// Highest temperature (°C), included.
     pub temp_max: Option<f64>,
     /// Runs of this rig (its serial number).
     pub rig: Option<String>,
@@ -220,7 +250,9 @@ impl Filter {
 /// What a campaign table's rows or columns are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Axis {
+    /// The normal load (N).
     Load,
+    /// The heater's setpoint (°C; the heater off in a row of its own).
     Temp,
 }
 
@@ -241,11 +273,13 @@ impl std::str::FromStr for Axis {
 /// The quantity a campaign table shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Value {
-    /// Host fit (Levenberg–Marquardt, as the thesis's tables).
+    /// Host fit's μ0 (Levenberg–Marquardt, as the thesis's tables).
     Mu0,
+    /// Host fit's μ1.
     Mu1,
-    /// The rig's own estimate.
+    /// The rig's own estimate of μ0.
     OnboardMu0,
+    /// The rig's own estimate of μ1.
     OnboardMu1,
 }
 
@@ -268,13 +302,16 @@ impl std::str::FromStr for Value {
 /// Mean ± sample standard deviation over the repetitions in one cell.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Cell {
+    /// The mean.
     pub mean: f64,
     /// Sample standard deviation (n − 1); `None` for a single run.
     pub sd: Option<f64>,
+    /// How many runs.
     pub n: usize,
 }
 
 impl Cell {
+    /// The mean and sample standard deviation of `values` (`None` for none).
     pub fn of(values: &[f64]) -> Option<Cell> {
         let n = values.len();
         if n == 0 {
@@ -292,10 +329,15 @@ impl Cell {
 /// A campaign table: `cells[r][c]` for `rows[r]` × `cols[c]`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Table {
+    /// The row bins.
     pub rows: Vec<Bin>,
+    /// The column bins.
     pub cols: Vec<Bin>,
+    /// The cells, `cells[r][c]` (`None`: no run there).
     pub cells: Vec<Vec<Option<Cell>>>,
+    /// What the rows bin.
     pub row_axis: Axis,
+    /// What the columns bin.
     pub col_axis: Axis,
 }
 
@@ -377,9 +419,10 @@ impl Table {
     }
 }
 
-/// One catalog, whatever holds it: the store's own SQLite file ([`Catalog`]) or a lab-wide server
-/// (`tribo-catalog`). What `tribo runs`, `table`, `campaign` and `report --campaign` read.
-pub trait RunCatalog {
+/// Either catalog: the run catalog (the store's own SQLite file, [`Catalog`]) or the lab catalog
+/// (the lab's PostgreSQL server, `tribo_catalog::LabCatalog`). What `tribo runs`, `table`,
+/// `campaign` and `report --campaign` read.
+pub trait AnyCatalog {
     /// Runs matching `f`, oldest first; an invalid filter ([`Filter::check`]) is an error.
     fn runs(&self, f: &Filter) -> Result<Vec<CatalogRow>>;
     /// Where the catalog is, for messages (a folder, or a server's URL without any password).
@@ -410,7 +453,7 @@ pub fn table_filter(rows: Axis, cols: Axis, f: &Filter) -> Result<Filter> {
     Ok(f)
 }
 
-impl RunCatalog for Catalog {
+impl AnyCatalog for Catalog {
     fn runs(&self, f: &Filter) -> Result<Vec<CatalogRow>> {
         self.list(f)
     }
@@ -435,7 +478,8 @@ pub fn log_stamp(dir: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// The SQLite catalog of a store.
+/// The run catalog: the SQLite file of a store (`catalog.sqlite`) indexing its runs. (The lab
+/// catalog, across PCs and rigs, is `tribo_catalog::LabCatalog` on PostgreSQL.)
 pub struct Catalog {
     conn: Connection,
     root: PathBuf,
@@ -517,6 +561,7 @@ impl Catalog {
         })
     }
 
+    /// The store's root folder.
     pub fn root(&self) -> &Path {
         &self.root
     }

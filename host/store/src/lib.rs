@@ -25,12 +25,17 @@
 //! The [`catalog`] indexes all runs of a store in SQLite (`catalog.sqlite` at the store's root); it
 //! is an index only and [`catalog::Catalog::reindex`] rebuilds it from the folders.
 
+#![warn(missing_docs)]
+
+/// The run catalog: every run of the store indexed in one SQLite file.
 pub mod catalog;
+/// The frame log: the crash-safe append-only file of a run's frames.
 pub mod log;
+/// A run folder: its log, metadata and results, read back and written.
 pub mod run;
 mod time;
 
-pub use catalog::{Catalog, CatalogRow, Filter, Reindexed, RunCatalog};
+pub use catalog::{AnyCatalog, Catalog, CatalogRow, Filter, Reindexed};
 pub use log::{LogHeader, LogReader, LogWriter, Recovery};
 pub use run::{
     Completeness, DeviceMeta, Filed, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples,
@@ -46,7 +51,9 @@ use std::fmt;
 #[derive(Debug, thiserror::Error)]
 #[error("{msg}")]
 pub struct StoreError {
+    /// What kind of error (what the caller can do about it).
     pub kind: ErrorKind,
+    /// The message.
     pub msg: String,
     #[source]
     source: Option<Box<dyn std::error::Error + Send + Sync>>,
@@ -55,6 +62,7 @@ pub struct StoreError {
 /// Broad class of a [`StoreError`], for callers that react differently.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ErrorKind {
+    /// Reading or writing a file failed.
     Io,
     /// The log or a metadata file is damaged (not just a torn tail).
     Corrupt,
@@ -62,6 +70,7 @@ pub enum ErrorKind {
     NotFound,
     /// A caller's mistake (bad filter, bad value).
     Invalid,
+    /// The SQLite catalog failed (opening, querying or writing it).
     Catalog,
     /// A value given on the command line that cannot be right (a catalog URL with an unknown
     /// parameter, no scheme, a password in it): the CLI exits with its usage status (2).
@@ -94,6 +103,7 @@ impl StoreError {
     }
 }
 
+/// The store's result type.
 pub type Result<T, E = StoreError> = std::result::Result<T, E>;
 
 /// Default store directory: `$TRIBO_STORE`, else `./runs`.

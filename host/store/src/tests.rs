@@ -1,6 +1,6 @@
 //! Round trips through a run folder and the catalog.
 
-use crate::catalog::{Axis, Bin, RunCatalog, Value, CATALOG_FILE};
+use crate::catalog::{AnyCatalog, Axis, Bin, Value, CATALOG_FILE};
 use crate::*;
 use tribo_wire::frame::{decode_one, encode_vec};
 use tribo_wire::*;

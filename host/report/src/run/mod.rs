@@ -72,6 +72,7 @@ pub struct ReportInputs {
     /// Host fits already made (e.g. by `tribo fit` or the store); laws of
     /// [`ReportOptions::laws`] missing here are fitted by the report.
     pub fits: Vec<FitResult>,
+    /// What to draw (laws, PNG).
     pub options: ReportOptions,
 }
 

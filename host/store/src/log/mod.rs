@@ -40,6 +40,7 @@ use std::path::{Path, PathBuf};
 use tribo_wire::crc32::crc32;
 use tribo_wire::frame::{cobs_decode_in_place, MAX_FRAME};
 
+/// The first eight bytes of every frame log.
 pub const MAGIC: &[u8; 8] = b"TRIBOLOG";
 /// The format written.
 pub const FORMAT_VERSION: u32 = 2;
@@ -192,8 +193,11 @@ impl std::fmt::Display for Recovery {
 /// The records of a log and what, if anything, had to be cut off or skipped.
 #[derive(Debug, Clone)]
 pub struct LogContents {
+    /// The log's header.
     pub header: LogHeader,
+    /// Its records, in order, each as written.
     pub records: Vec<Vec<u8>>,
+    /// What had to be cut off or skipped, if anything.
     pub recovery: Option<Recovery>,
 }
 
@@ -655,6 +659,7 @@ impl LogWriter {
         self.header
     }
 
+    /// The log's file.
     pub fn path(&self) -> &Path {
         &self.path
     }

@@ -9,6 +9,7 @@ pub struct Completeness {
     pub result: bool,
     /// The end frame is held: then the run's number of blocks is known.
     pub end: bool,
+    /// Sample blocks held.
     pub blocks_held: u32,
     /// Blocks the run has, from its end frame.
     pub blocks_expected: Option<u32>,

@@ -26,6 +26,7 @@ impl RunStatus {
         RunStatus::Incomplete,
     ];
 
+    /// The status's name in `meta.toml` and the catalog.
     pub fn name(self) -> &'static str {
         match self {
             RunStatus::Recording => "recording",
@@ -61,6 +62,7 @@ pub struct DeviceMeta {
     pub firmware: String,
     /// Serial number, 16 hex digits.
     pub serial: String,
+    /// The wire protocol version it speaks.
     pub protocol: u16,
     /// Port it was reached through (`COM3`, `/dev/ttyACM0`, `tcp://127.0.0.1:7411`…).
     pub port: String,
@@ -75,23 +77,32 @@ pub struct RunMeta {
     pub id: String,
     /// Creation time, UTC, `YYYY-MM-DDTHH:MM:SSZ`.
     pub created: String,
+    /// The run's status.
     pub status: RunStatus,
+    /// Free-text label.
     #[serde(default)]
     pub label: Option<String>,
+    /// The sample tested.
     #[serde(default)]
     pub sample: Option<String>,
+    /// The lubricant.
     #[serde(default)]
     pub lubricant: Option<String>,
     /// Campaign name and this run's repetition index (from 1), if part of one.
     #[serde(default)]
     pub campaign: Option<String>,
+    /// This run's repetition index in its campaign (from 1).
     #[serde(default)]
     pub repeat: Option<u32>,
     /// Normal load N.
     pub load_n: f64,
+    /// Moving mass (kg).
     pub mass_kg: f64,
+    /// Blade stiffness (N/m).
     pub stiffness_n_per_m: f64,
+    /// Sample rate (samples per second).
     pub sample_rate_hz: u32,
+    /// Initial amplitude the pin was released from (m).
     pub initial_amplitude_m: f64,
     /// Heater setpoint asked for (`None` = heater off, room temperature).
     #[serde(default)]
@@ -99,6 +110,7 @@ pub struct RunMeta {
     /// Plane temperature measured at the release.
     #[serde(default)]
     pub temp_c: Option<f64>,
+    /// The rig it was taken on, if known.
     #[serde(default)]
     pub device: Option<DeviceMeta>,
     /// The rig's own number for the run (what `Pull` asks for).
@@ -180,14 +192,18 @@ impl RunMeta {
 pub struct HostFit {
     /// The law fitted (stored as its name).
     pub law: tribo_physics::LawSpec,
+    /// The Coulomb constant μ0.
     pub mu0: f64,
+    /// The viscous constant μ1.
     pub mu1: f64,
     /// RMS envelope misfit relative to the initial amplitude.
     pub gap: f64,
+    /// Whether the fit converged.
     pub converged: bool,
     /// Standard errors of μ0 and μ1 (`NaN` in results written before they were recorded).
     #[serde(default = "nan")]
     pub mu0_se: f64,
+    /// μ1's standard error (`NaN` in older results).
     #[serde(default = "nan")]
     pub mu1_se: f64,
     /// The fit's verdict (`adequate`, `inadequate`, `not-converged`); `None` in older results.
@@ -202,8 +218,10 @@ pub(super) fn nan() -> f64 {
 /// `result.toml`.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Results {
+    /// The rig's on-board analysis, if it sent one.
     #[serde(default)]
     pub onboard: Option<OnboardResult>,
+    /// The host's fit, if one was made.
     #[serde(default)]
     pub host: Option<HostFit>,
     /// Why the host fit failed, if it did.

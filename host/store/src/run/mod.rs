@@ -13,9 +13,13 @@ use tribo_wire::{
     RunEnd, RunHeader, SampleBlock, SampleClock,
 };
 
+/// The run's frame log in its folder.
 pub const LOG_FILE: &str = "frames.log";
+/// The run's metadata in its folder.
 pub const META_FILE: &str = "meta.toml";
+/// The run's results in its folder.
 pub const RESULT_FILE: &str = "result.toml";
+/// A CSV export of the samples in its folder.
 pub const CSV_FILE: &str = "samples.csv";
 /// Version of the run folder layout written in [`RunMeta::format`].
 pub const RUN_FORMAT: u32 = 1;
@@ -32,8 +36,11 @@ pub use writer::*;
 /// A run's samples in SI units, in time order (`t` from the release).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Samples {
+    /// Time from the release (s).
     pub t: Vec<f64>,
+    /// Displacement (m).
     pub x: Vec<f64>,
+    /// Velocity (m/s).
     pub v: Vec<f64>,
     /// Tangential force, N (if the channel was on).
     pub force: Option<Vec<f64>>,
@@ -49,13 +56,16 @@ pub struct Samples {
     /// still settling from a change (from the run's `EcrRange` frames; `None` for a run without
     /// them, recorded by older firmware).
     pub ecr_range: Option<Vec<u8>>,
+    /// Whether the ECR amplifier was still settling, per sample (as `ecr_range`).
     pub ecr_settling: Option<Vec<bool>>,
 }
 
 impl Samples {
+    /// Samples held.
     pub fn len(&self) -> usize {
         self.t.len()
     }
+    /// No sample held.
     pub fn is_empty(&self) -> bool {
         self.t.is_empty()
     }
@@ -116,7 +126,9 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 #[derive(Debug, Clone)]
 pub struct Run {
     dir: PathBuf,
+    /// Its metadata (`meta.toml`).
     pub meta: RunMeta,
+    /// Its results (`result.toml`).
     pub results: Results,
     /// What had to be cut off the frame log's end (or, salvaging, skipped), if anything.
     pub recovery: Option<Recovery>,
@@ -226,14 +238,17 @@ impl Run {
         self.log_header
     }
 
+    /// The run's folder.
     pub fn dir(&self) -> &Path {
         &self.dir
     }
 
+    /// The run's id (its folder name).
     pub fn id(&self) -> &str {
         &self.meta.id
     }
 
+    /// Its metadata.
     pub fn meta(&self) -> &RunMeta {
         &self.meta
     }
@@ -248,10 +263,12 @@ impl Run {
         self.results.host.as_ref()
     }
 
+    /// The run's header frame, if received.
     pub fn header(&self) -> Option<&RunHeader> {
         self.data.header.as_ref()
     }
 
+    /// The run's end frame, if received.
     pub fn end(&self) -> Option<&RunEnd> {
         self.data.end.as_ref()
     }
@@ -261,6 +278,7 @@ impl Run {
         self.data.blocks.values()
     }
 
+    /// Sample blocks received.
     pub fn block_count(&self) -> usize {
         self.data.blocks.len()
     }

@@ -84,14 +84,17 @@ impl RunWriter {
         ))
     }
 
+    /// The run's folder.
     pub fn dir(&self) -> &Path {
         &self.dir
     }
 
+    /// Its metadata.
     pub fn meta(&self) -> &RunMeta {
         &self.meta
     }
 
+    /// Its metadata, to change before it is saved.
     pub fn meta_mut(&mut self) -> &mut RunMeta {
         &mut self.meta
     }
@@ -174,22 +177,27 @@ impl RunWriter {
         self.data.blocks.contains_key(&i)
     }
 
+    /// Sample blocks received so far.
     pub fn blocks(&self) -> usize {
         self.data.blocks.len()
     }
 
+    /// The run's header frame, if received.
     pub fn header(&self) -> Option<&RunHeader> {
         self.data.header.as_ref()
     }
 
+    /// The run's end frame, if received.
     pub fn end(&self) -> Option<&RunEnd> {
         self.data.end.as_ref()
     }
 
+    /// The on-board result, if received.
     pub fn onboard(&self) -> Option<&OnboardResult> {
         self.data.result.as_ref()
     }
 
+    /// The blocks not received, as far as the run is known.
     pub fn missing_blocks(&self) -> Vec<u32> {
         self.data.missing()
     }

@@ -1,7 +1,17 @@
 //! The analysis both the command line and the Python package give: the on-board cross-check of a
-//! host fit, an apparatus record's damping, and the JSON of a fit and of an explanation.
+//! host fit, an apparatus record's damping, and the JSON of a fit and of an explanation; and the
+//! checks between opening a record and analysing it ([`plausible`]). Every refusal is an
+//! [`AnalysisError`]; `cmd::exit` maps it to an exit status, the Python package to an exception.
+
+mod plausible;
+
+pub use plausible::{
+    apply_rig_flags, load_analysable_for_fit, load_for_analysis, open_analysable,
+    plausible_apparatus_mu1, plausible_record, RigFlags, RigUsed, Source, MAX_APPARATUS_MU1,
+};
 
 use crate::crosscheck::{CrossCheck, OnboardSource};
+use crate::load::LoadError;
 use tribo_physics::identify::{FitResult, LawSpec};
 use tribo_physics::Record;
 
@@ -60,14 +70,72 @@ pub fn apparatus_damping(rec: &Record, r: &FitResult) -> Option<(f64, f64, f64)>
     Some((mu_a, se, mu_a * rig.mass_kg * rig.omega()))
 }
 
+/// Why a record was not analysed: the loader's error, or a check or a fit that refused it. Its
+/// variants say what kind of refusal it is (a usage error, a record that cannot be analysed as
+/// written, an error); `cmd::exit` decides the statuses, the Python package the exceptions.
+#[derive(Debug, thiserror::Error)]
+pub enum AnalysisError {
+    /// The record could not be opened ([`crate::load::open`]).
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    /// The record was read but has a sample that is not finite: nothing can be analysed.
+    #[error("not analysable: {}", crate::exit::chain_text(.0))]
+    NonFinite(LoadError),
+    /// The record cannot be analysed as written (a rig constant in its header or a motion beyond
+    /// what the rig can have, most likely another unit than its header says); the message names it.
+    #[error("{0}")]
+    NotAnalysable(String),
+    /// A value given (a flag, an option) outside what the rig or its blades can have; the
+    /// message names the likely slip.
+    #[error("{0}")]
+    Usage(String),
+    /// A request the record cannot take (rig flags for a dimensionless record, no rig constants
+    /// given at all); the message says what to add.
+    #[error("{0}")]
+    Request(String),
+    /// Rig constants the physics refuses.
+    #[error(transparent)]
+    Rig(#[from] tribo_physics::InvalidParameter),
+    /// The fit failed.
+    #[error(transparent)]
+    Fit(#[from] tribo_physics::identify::FitError),
+    /// One of the above, of the record named (its path or name).
+    #[error("{name}")]
+    Of {
+        /// The record's path or name.
+        name: String,
+        /// What refused it.
+        #[source]
+        source: Box<AnalysisError>,
+    },
+}
+
+impl AnalysisError {
+    /// This error, of the record `name` (`name: error` on one line).
+    pub fn of(self, name: String) -> AnalysisError {
+        AnalysisError::Of {
+            name,
+            source: Box::new(self),
+        }
+    }
+
+    /// The refusal itself, under the names of [`AnalysisError::Of`].
+    pub fn innermost(&self) -> &AnalysisError {
+        match self {
+            AnalysisError::Of { source, .. } => source.innermost(),
+            e => e,
+        }
+    }
+}
+
 /// What to fit: `tribo fit`'s options (the Python package's `fit`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitRequest {
     /// The law asked for (an apparatus record, load 0, gets its damping instead: [`Fitted::spec`]).
     pub law: LawSpec,
     /// Rig constants given instead of the record's.
-    pub flags: crate::load::RigFlags,
-    /// The blades' damping μ_a held fixed in the fit (0 to [`crate::load::MAX_APPARATUS_MU1`]).
+    pub flags: RigFlags,
+    /// The blades' damping μ_a held fixed in the fit (0 to [`MAX_APPARATUS_MU1`]).
     pub apparatus_mu1: f64,
     /// Independent fits over this many windows of the record (0: none).
     pub windows: usize,
@@ -83,7 +151,7 @@ pub struct Fitted {
     /// The law fitted: the one asked for, or the apparatus's damping for a record at load 0.
     pub spec: LawSpec,
     /// The rig constants used and where each came from.
-    pub rig: crate::load::RigUsed,
+    pub rig: RigUsed,
     /// The options the fit ran with.
     pub options: tribo_physics::identify::FitOptions,
     pub result: FitResult,
@@ -98,25 +166,25 @@ pub enum FitOutcome {
     Fitted(Box<Fitted>),
     /// Too few half cycles, no motion…: no constant is fitted (status 3).
     NotAnalysable {
-        rig: crate::load::RigUsed,
+        rig: RigUsed,
         why: tribo_physics::identify::NotAnalysable,
     },
 }
 
 /// Fits `req.law` to a record [`crate::load::open`] opened (its rig constants replaced by the
 /// flags' first), with the on-board cross-check against its `run`'s result. A flag or μ_a out of
-/// range is a [`crate::exit::Usage`] error; a fit that fails otherwise is an error under the
-/// record's `name`.
+/// range is an [`AnalysisError::Usage`]; a fit that fails otherwise is an error
+/// ([`AnalysisError::Of`] the record's `name`).
 pub fn fit_law(
     name: &str,
     rec: &mut Record,
     defaults: &[String],
     run: Option<&tribo_store::Run>,
     req: &FitRequest,
-) -> anyhow::Result<FitOutcome> {
+) -> Result<FitOutcome, AnalysisError> {
     use tribo_physics::identify::{fit, fit_windows, FitError, FitOptions};
-    crate::load::plausible_apparatus_mu1(req.apparatus_mu1)?;
-    let rig = crate::load::apply_rig_flags(rec, req.flags, defaults)?;
+    plausible_apparatus_mu1(req.apparatus_mu1)?;
+    let rig = apply_rig_flags(rec, req.flags, defaults)?;
     let options = FitOptions {
         apparatus_mu1: req.apparatus_mu1,
         ..FitOptions::default()
@@ -126,7 +194,7 @@ pub fn fit_law(
     let result = match fit(rec, spec, &options) {
         Ok(r) => r,
         Err(FitError::NotAnalysable(why)) => return Ok(FitOutcome::NotAnalysable { rig, why }),
-        Err(e) => return Err(anyhow::Error::new(e).context(name.to_string())),
+        Err(e) => return Err(AnalysisError::Fit(e).of(name.to_string())),
     };
     // `Ok(None)` for a law the rig does not fit (the apparatus run's viscous one included).
     let check = cross_check(run, rec, &result);
@@ -170,7 +238,7 @@ impl Fitted {
 /// `tribo fit --json`'s object for a record no constant can be fitted to.
 pub fn not_analysable_json(
     record: &str,
-    rig: &crate::load::RigUsed,
+    rig: &RigUsed,
     why: &tribo_physics::identify::NotAnalysable,
 ) -> serde_json::Value {
     serde_json::json!({
