@@ -13,7 +13,7 @@ use tribo_rig::{AcquisitionFaults, ServeOptions, VirtualRig, VirtualRigConfig};
 
 fn fit_args(record: &std::path::Path, longest: bool) -> tribo::cmd::fit::Args {
     tribo::cmd::fit::Args {
-        record: record.to_owned(),
+        record: vec![record.to_owned()],
         law: tribo_physics::LawSpec::CoulombViscous,
         json: false,
         plot: None,
