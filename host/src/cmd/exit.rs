@@ -97,25 +97,31 @@ pub fn status_of(e: &anyhow::Error) -> Status {
 /// script reading standard output always gets one object. Returns the error.
 pub fn json_on_error(json: bool, record: &std::path::Path, e: anyhow::Error) -> anyhow::Error {
     if json && !crate::out::json_printed() {
-        let status = status_of(&e);
-        let verdict = match status {
-            Status::Incomplete => "not-analysable",
-            Status::Interrupted(_) => "interrupted",
-            _ => "error",
-        };
-        let message = e
-            .chain()
-            .map(|c| c.to_string())
-            .collect::<Vec<_>>()
-            .join(": ");
-        let _ = crate::out::print_json(serde_json::json!({
-            "record": record.display().to_string(),
-            "verdict": verdict,
-            "status": status.code(),
-            "message": message,
-        }));
+        let _ = crate::out::print_json(error_json(record, &e));
     }
     e
+}
+
+/// The `--json` object of a record whose command failed before printing its own (see
+/// [`json_on_error`]).
+pub fn error_json(record: &std::path::Path, e: &anyhow::Error) -> serde_json::Value {
+    let status = status_of(e);
+    let verdict = match status {
+        Status::Incomplete => "not-analysable",
+        Status::Interrupted(_) => "interrupted",
+        _ => "error",
+    };
+    let message = e
+        .chain()
+        .map(|c| c.to_string())
+        .collect::<Vec<_>>()
+        .join(": ");
+    serde_json::json!({
+        "record": record.display().to_string(),
+        "verdict": verdict,
+        "status": status.code(),
+        "message": message,
+    })
 }
 
 /// Prints an error that ends the command, as the chain of its causes, one per line, and returns

@@ -177,7 +177,7 @@ fn run_many(a: &Args) -> Result<()> {
                     let r = run_inner(a, path, &mut buf).err();
                     if a.json && buf.is_empty() {
                         if let Some(e) = &r {
-                            buf = error_json(path, e).to_string();
+                            buf = super::exit::error_json(path, e).to_string();
                         }
                     }
                     if !buf.is_empty() && !buf.ends_with('\n') {
@@ -235,28 +235,6 @@ fn run_many(a: &Args) -> Result<()> {
 
 /// One record's output and, if it failed, why.
 type Fitted1 = (String, Option<anyhow::Error>);
-
-/// The `--json` object of a record that failed before its own object was printed (as
-/// [`super::exit::json_on_error`] prints it for one record).
-fn error_json(record: &std::path::Path, e: &anyhow::Error) -> serde_json::Value {
-    let status = super::exit::status_of(e);
-    let verdict = match status {
-        super::exit::Status::Incomplete => "not-analysable",
-        super::exit::Status::Interrupted(_) => "interrupted",
-        _ => "error",
-    };
-    let message = e
-        .chain()
-        .map(|c| c.to_string())
-        .collect::<Vec<_>>()
-        .join(": ");
-    serde_json::json!({
-        "record": record.display().to_string(),
-        "verdict": verdict,
-        "status": status.code(),
-        "message": message,
-    })
-}
 
 /// Fits one record, writing what `tribo fit` prints for it to `out` (its JSON object, or its
 /// table); the error is the command's outcome for it.
