@@ -11,19 +11,14 @@
 //! to print, and panicked (101) on a closed standard error.
 #![cfg(unix)]
 
-mod support;
-
+use crate::support::{RigProcess, TRIBO};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use support::{RigProcess, TRIBO};
 
+/// `tribo ARGS` run to its end in `dir` (the spawner of [`crate::support::command`]).
 fn tribo_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(TRIBO)
+    crate::support::command(args)
         .current_dir(dir)
-        .args(args)
-        .env_remove("TRIBO_CATALOG")
-        .env_remove("TRIBO_STORE")
-        .env_remove("TRIBO_PORT")
         .output()
         .expect("tribo runs")
 }
