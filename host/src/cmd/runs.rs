@@ -9,6 +9,9 @@ use tribo_store::{Catalog, CatalogRow, Filter, RunStatus};
 /// Arguments of `tribo runs`. The `lost` column counts the samples a run's rig lost (acquisition
 /// gaps: the run went on, and fits will not cross them).
 #[derive(clap::Args, Debug)]
+#[command(
+    after_long_help = "--json prints one JSON object: {\"runs\": [{…}, …], \"damaged\": [{\"path\", \"why\"}, …]}."
+)]
 pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
@@ -41,8 +44,8 @@ pub struct Args {
     /// Print the run folders only (for scripts).
     #[arg(long)]
     pub paths: bool,
-    /// Print one JSON object: `{"runs": [{…}, …], "damaged": [{"path", "why"}, …]}`.
-    #[arg(long)]
+    /// Print one JSON object (set by the global `--json`; its shape is in `after_long_help`).
+    #[arg(skip)]
     pub json: bool,
     /// No progress messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]

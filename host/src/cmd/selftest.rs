@@ -36,6 +36,9 @@ use tribo_wire::{
   reset-record        a deliberate panic: the rig resets and its boot report says Panic and why
   watchdog            a deliberately stalled task: outputs safe, reset, the report names the task
 
+--json prints one JSON object: {\"port\", \"firmware\", \"serial\", \"passed\", \"failed\": [row names],
+\"rows\": [{\"row\", \"verdict\": \"pass\" | \"fail\" | \"hardware-only\", \"summary\", \"figures\"}]}.
+
 Exit status: 0 every measured row passed; 1 a row failed (named on standard error) or the rig
 could not be tested.
 
@@ -46,9 +49,8 @@ Examples:
 pub struct Args {
     #[command(flatten)]
     pub link: LinkArgs,
-    /// Print one JSON object: `{"port", "firmware", "serial", "passed", "failed": [row names],
-    /// "rows": [{"row", "verdict": "pass" | "fail" | "hardware-only", "summary", "figures"}]}`.
-    #[arg(long)]
+    /// Print one JSON object (set by the global `--json`; its shape is in the command's help).
+    #[arg(skip)]
     pub json: bool,
     /// Sample rate of the converter check, S/s.
     #[arg(long, default_value_t = 10_000, value_name = "HZ")]
