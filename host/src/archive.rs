@@ -52,8 +52,11 @@ pub enum HostFitError {
         flag = crate::LONGEST_CLEAN_STRETCH_FLAG
     )]
     Gaps {
+        /// Samples the rig lost.
         lost: u64,
+        /// Acquisition gaps they were lost in.
         gaps: usize,
+        /// The run folder.
         dir: PathBuf,
     },
     /// The run's samples could not be read as a record.
@@ -132,6 +135,7 @@ pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
 /// not stored whole), with why and how to repair it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LeftOut {
+    /// The run folder left out.
     pub dir: PathBuf,
     /// `damaged: …; `tribo pull --salvage DIR` keeps …` or `incomplete: …; `tribo pull DIR` …`.
     pub why: String,

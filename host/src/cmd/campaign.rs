@@ -35,6 +35,7 @@ fn resume_command(args: &Args) -> String {
 pub struct Args {
     /// The plan (TOML: name, loads_n, temps_c, repeats, …).
     pub plan: PathBuf,
+    /// The rig to run the campaign on, and the run store.
     #[command(flatten)]
     pub link: LinkArgs,
     /// Never ask for the load knob (e.g. a virtual rig, or the load is already right).
@@ -43,7 +44,7 @@ pub struct Args {
     /// Show what would be run and what is already done, and stop.
     #[arg(long)]
     pub dry_run: bool,
-    /// The lab catalog (postgres://USER@HOST[:PORT]/DATABASE, default: $TRIBO_CATALOG): once the
+    /// The lab catalog (`postgres://USER@HOST[:PORT]/DATABASE`, default: $TRIBO_CATALOG): once the
     /// runs are taken they are synced to it (as `tribo sync`), and the table at the end is the
     /// lab's: the campaign's runs on every rig that took part. No password in the URL: it comes
     /// from PGPASSWORD or ~/.pgpass.

@@ -34,8 +34,10 @@ pub struct Args {
     /// Runs of this rig (its serial number, as `tribo devices` shows it).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
+    /// Only the runs taken in this period.
     #[command(flatten)]
     pub period: Period,
+    /// This PC's catalog of runs, or the lab's.
     #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Rebuild the catalog from the run folders first.

@@ -47,6 +47,7 @@ Examples:
   tribo rig --virtual --listen 127.0.0.1:7411 &   tribo selftest --port tcp://127.0.0.1:7411 --json"
 )]
 pub struct Args {
+    /// The rig to test.
     #[command(flatten)]
     pub link: LinkArgs,
     /// Print one JSON object (set by the global `--json`; its shape is in the command's help).
@@ -66,13 +67,16 @@ pub struct Args {
 /// A row's outcome.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
+    /// Measured and within its limits.
     Pass,
+    /// Measured and out of its limits.
     Fail,
     /// Only the real chip can measure it; neither pass nor fail.
     HardwareOnly,
 }
 
 impl Verdict {
+    /// The verdict as printed and in `--json` (`pass`, `fail`, `hardware-only`).
     pub fn name(self) -> &'static str {
         match self {
             Verdict::Pass => "pass",
@@ -85,7 +89,9 @@ impl Verdict {
 /// One row of the table.
 #[derive(Debug, Clone)]
 pub struct Row {
+    /// The row's name (`sample-rate`, `flash`, …).
     pub name: String,
+    /// Its outcome.
     pub verdict: Verdict,
     /// The figures, in words.
     pub summary: String,

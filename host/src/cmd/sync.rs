@@ -38,7 +38,7 @@ pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
     pub store: Option<PathBuf>,
-    /// The lab catalog: postgres://USER@HOST[:PORT]/DATABASE[?sslmode=verify-full&sslrootcert=CA.pem]
+    /// The lab catalog: `postgres://USER@HOST[:PORT]/DATABASE[?sslmode=verify-full&sslrootcert=CA.pem]`
     /// (default: $TRIBO_CATALOG). No password in it: it comes from PGPASSWORD or ~/.pgpass.
     #[arg(long, value_name = "URL")]
     pub catalog: Option<String>,

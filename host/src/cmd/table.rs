@@ -31,8 +31,10 @@ pub struct Args {
     /// Only this rig's runs (its serial number).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
+    /// Only the runs taken in this period.
     #[command(flatten)]
     pub period: super::common::Period,
+    /// This PC's catalog of runs, or the lab's.
     #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Print one JSON object (set by the global `--json`; its shape is in `after_long_help`).
