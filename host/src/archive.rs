@@ -2,7 +2,7 @@
 //! it again by the rig's serial number and run id.
 
 use std::path::{Path, PathBuf};
-use tribo_store::{Catalog, HostFit, Results, Run, RunMeta};
+use tribo_store::{HostFit, Results, Run, RunCatalog, RunMeta};
 
 /// The stored run taken on rig `serial` as its run `run_id`, if any (newest first).
 pub fn find_run(store: &Path, serial: &str, run_id: u32) -> anyhow::Result<Option<PathBuf>> {
@@ -127,7 +127,7 @@ pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
         }
     }
     run.save_results(results)?;
-    Catalog::open(store)?.upsert(run)?;
+    RunCatalog::open(store)?.upsert(run)?;
     Ok(())
 }
 
@@ -150,7 +150,7 @@ pub fn left_out(store: &Path, filter: &tribo_store::Filter) -> anyhow::Result<Ve
     if !store.is_dir() {
         return Ok(Vec::new());
     }
-    let cat = Catalog::open(store)?;
+    let cat = RunCatalog::open(store)?;
     cat.refresh(false)?;
     let mut out = Vec::new();
     for r in cat.list(filter)? {

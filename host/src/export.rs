@@ -16,7 +16,7 @@ use parquet::file::writer::SerializedFileWriter;
 use parquet::schema::types::{ColumnPath, Type};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tribo_store::{Catalog, CatalogRow, Filter};
+use tribo_store::{CatalogRow, Filter, RunCatalog};
 /// A column of a table to export.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Data {
@@ -366,7 +366,7 @@ pub fn catalog_rows(
         );
     }
     filter.check()?;
-    let cat = Catalog::open(store)?;
+    let cat = RunCatalog::open(store)?;
     cat.refresh(reindex)?;
     let folders = tribo_store::run::list_run_dirs(store)?;
     let known: std::collections::BTreeSet<PathBuf> = cat

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use tribo_catalog::LabCatalog;
 use tribo_store::catalog::{AnyCatalog, Axis, Value};
-use tribo_store::{Catalog, Filter};
+use tribo_store::{Filter, RunCatalog};
 use tribo_wire::HostMsg;
 
 /// `tribo campaign PLAN` with the `--store` and `--port` this command was given: what takes the
@@ -228,7 +228,7 @@ fn print_table(
                 Ok(lab) => (Box::new(lab), "every rig in the lab catalog"),
                 Err(e) => {
                     // The runs are whole and stored: show this PC's table, then say what failed.
-                    print_tables(&Catalog::open(store)?, &f, "this PC's runs")?;
+                    print_tables(&RunCatalog::open(store)?, &f, "this PC's runs")?;
                     return Err(anyhow::Error::new(e).context(format!(
                         "the campaign's runs are stored in {}, but syncing them to the lab catalog \
                          failed: run `tribo sync` when {} can be reached",
@@ -238,7 +238,7 @@ fn print_table(
                 }
             }
         }
-        None => (Box::new(Catalog::open(store)?), "this PC's runs"),
+        None => (Box::new(RunCatalog::open(store)?), "this PC's runs"),
     };
     print_tables(cat.as_ref(), &f, what)
 }

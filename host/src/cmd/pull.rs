@@ -86,7 +86,7 @@ fn salvage_offline(dir: &std::path::Path, why: anyhow::Error) -> anyhow::Result<
     let run = tribo_store::Run::open(dir)?;
     let summary = run.completeness().summary();
     if let Some(store) = dir.parent() {
-        if let Ok(cat) = tribo_store::Catalog::open(store) {
+        if let Ok(cat) = tribo_store::RunCatalog::open(store) {
             let _ = cat.upsert(&run);
         }
     }
@@ -111,7 +111,7 @@ fn salvage_offline(dir: &std::path::Path, why: anyhow::Error) -> anyhow::Result<
 fn settle_folder(dir: &std::path::Path, why: &anyhow::Error) -> anyhow::Result<()> {
     let run = tribo_store::Run::open(dir)?;
     if let Some(store) = dir.parent() {
-        if let Ok(cat) = tribo_store::Catalog::open(store) {
+        if let Ok(cat) = tribo_store::RunCatalog::open(store) {
             let _ = cat.upsert(&run);
         }
     }

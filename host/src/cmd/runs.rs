@@ -4,7 +4,7 @@ use super::common::Period;
 use crate::export::{run_json, with_fields};
 use crate::outln;
 use std::path::PathBuf;
-use tribo_store::{Catalog, CatalogRow, Filter, RunStatus};
+use tribo_store::{CatalogRow, Filter, RunCatalog, RunStatus};
 
 /// Arguments of `tribo runs`. The `lost` column counts the samples a run's rig lost (acquisition
 /// gaps: the run went on, and fits will not cross them).
@@ -116,7 +116,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !store.is_dir() {
         anyhow::bail!("no run store at {}: take a run with `tribo run` or `tribo demo`, or point --store at one", store.display());
     }
-    let cat = Catalog::open(&store)?;
+    let cat = RunCatalog::open(&store)?;
     if let Some(r) = cat.refresh(args.reindex)? {
         if !args.quiet {
             crate::errln!(
