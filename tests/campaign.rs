@@ -9,7 +9,7 @@ use tribo::cmd::campaign::Args;
 use tribo::link::args::LinkArgs;
 use tribo::link::Address;
 use tribo_store::catalog::{AnyCatalog, Axis, Bin, Value};
-use tribo_store::{Catalog, Filter};
+use tribo_store::{Filter, RunCatalog};
 
 fn write_plan(dir: &Path, text: &str) -> std::path::PathBuf {
     let p = dir.join("plan.toml");
@@ -122,7 +122,7 @@ fn campaign_resumes_without_redoing_finished_runs() {
     assert_eq!(tribo_store::run::list_run_dirs(&store).unwrap().len(), 3);
 
     // The campaign table: one cell, three repetitions, mean within the method's precision.
-    let cat = Catalog::open(&store).unwrap();
+    let cat = RunCatalog::open(&store).unwrap();
     cat.reindex().unwrap();
     let t = cat
         .table(
@@ -162,7 +162,7 @@ fn a_campaign_over_loads_on_the_virtual_rig_gets_the_same_dimensionless_friction
         "name = \"loads\"\nloads_n = [0.2, 0.5]\nmax_duration_s = 8.0\n",
     );
     tribo::cmd::campaign::run(args(&plan_path, &port, &store)).unwrap();
-    let cat = Catalog::open(&store).unwrap();
+    let cat = RunCatalog::open(&store).unwrap();
     let f = Filter {
         campaign: Some("loads".into()),
         ..Default::default()

@@ -275,7 +275,7 @@ fn truncated_log() {
         "not the stored 'complete'"
     );
     // The catalog re-index says so too.
-    let r = tribo_store::Catalog::open(store.path())
+    let r = tribo_store::RunCatalog::open(store.path())
         .unwrap()
         .reindex()
         .unwrap();

@@ -77,7 +77,7 @@ fn a_stalled_reader_gives_a_stored_run_whose_gap_the_host_reports_and_will_not_f
     assert_eq!(end.overruns, g.count);
     assert_eq!(end.reason, tribo_wire::EndReason::Stopped);
     // The catalog marks the run; its host fit was refused, saying how to get one.
-    let rows = tribo_store::Catalog::open(store.path())
+    let rows = tribo_store::RunCatalog::open(store.path())
         .unwrap()
         .list(&Default::default())
         .unwrap();

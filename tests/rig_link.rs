@@ -11,7 +11,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use tribo::link::session::{pull_run, record_run};
 use tribo::link::{Address, Link, LinkErrorKind};
-use tribo_store::{Catalog, Filter, Run, RunMeta, RunStatus, RunWriter};
+use tribo_store::{Filter, Run, RunCatalog, RunMeta, RunStatus, RunWriter};
 use tribo_wire::frame::encode_vec;
 use tribo_wire::{DeviceInfo, DeviceMsg, HostMsg};
 
@@ -86,7 +86,7 @@ fn a_run_over_the_link_is_stored_whole_and_recovers_the_simulated_contact() {
         .all(|(a, b)| (a - b).abs() <= 1e-12 * a.abs().max(1e-9)));
 
     // Catalogued.
-    let rows = Catalog::open(store.path())
+    let rows = RunCatalog::open(store.path())
         .unwrap()
         .list(&Filter::default())
         .unwrap();

@@ -2,7 +2,7 @@
 //! it again by the rig's serial number and run id.
 
 use std::path::{Path, PathBuf};
-use tribo_store::{Catalog, HostFit, Results, Run, RunMeta};
+use tribo_store::{HostFit, Results, Run, RunCatalog, RunMeta};
 
 /// The stored run taken on rig `serial` as its run `run_id`, if any (newest first).
 pub fn find_run(store: &Path, serial: &str, run_id: u32) -> anyhow::Result<Option<PathBuf>> {
@@ -52,8 +52,11 @@ pub enum HostFitError {
         flag = crate::LONGEST_CLEAN_STRETCH_FLAG
     )]
     Gaps {
+        /// Samples the rig lost.
         lost: u64,
+        /// Acquisition gaps they were lost in.
         gaps: usize,
+        /// The run folder.
         dir: PathBuf,
     },
     /// The run's samples could not be read as a record.
@@ -124,7 +127,7 @@ pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
         }
     }
     run.save_results(results)?;
-    Catalog::open(store)?.upsert(run)?;
+    RunCatalog::open(store)?.upsert(run)?;
     Ok(())
 }
 
@@ -132,6 +135,7 @@ pub fn analyse_and_catalog(run: &mut Run, store: &Path) -> anyhow::Result<()> {
 /// not stored whole), with why and how to repair it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LeftOut {
+    /// The run folder left out.
     pub dir: PathBuf,
     /// `damaged: …; `tribo pull --salvage DIR` keeps …` or `incomplete: …; `tribo pull DIR` …`.
     pub why: String,
@@ -146,7 +150,7 @@ pub fn left_out(store: &Path, filter: &tribo_store::Filter) -> anyhow::Result<Ve
     if !store.is_dir() {
         return Ok(Vec::new());
     }
-    let cat = Catalog::open(store)?;
+    let cat = RunCatalog::open(store)?;
     cat.refresh(false)?;
     let mut out = Vec::new();
     for r in cat.list(filter)? {

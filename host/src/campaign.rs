@@ -27,34 +27,50 @@ use tribo_wire::Configure;
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Plan {
+    /// The campaign's name, stored with every run; finished points are found by it on resume.
     pub name: String,
+    /// Normal loads (N), one series of runs each.
     pub loads_n: Vec<f32>,
+    /// Plate temperatures (°C); empty: every run with the heater off.
     #[serde(default)]
     pub temps_c: Vec<f32>,
+    /// Runs per load and temperature (default 1).
     #[serde(default = "one")]
     pub repeats: u32,
+    /// Label stored with every run.
     #[serde(default)]
     pub label: Option<String>,
+    /// The sample (pin and plate materials) stored with every run.
     #[serde(default)]
     pub sample: Option<String>,
+    /// The lubricant stored with every run.
     #[serde(default)]
     pub lubricant: Option<String>,
+    /// Sampling rate (Hz); default the rig's.
     #[serde(default)]
     pub rate_hz: Option<u32>,
+    /// Longest run (s); default the rig's.
     #[serde(default)]
     pub max_duration_s: Option<f32>,
+    /// Moving mass m (kg); default the real rig's.
     #[serde(default)]
     pub mass_kg: Option<f32>,
+    /// Blade stiffness k (N/m); default the real rig's.
     #[serde(default)]
     pub stiffness_n_per_m: Option<f32>,
+    /// Initial displacement x0 at the release (m); default the real rig's.
     #[serde(default)]
     pub x0_m: Option<f32>,
+    /// Heater ramp (°C/min, default 10).
     #[serde(default = "ramp")]
     pub ramp_c_per_min: f32,
+    /// Settled when the plate is within this of its setpoint (°C; `tribo run`'s default).
     #[serde(default = "tol")]
     pub settle_tol_c: f32,
+    /// …for this long (s; `tribo run`'s default).
     #[serde(default = "settle")]
     pub settle_s: f64,
+    /// Give up settling after this long (s; `tribo run`'s default).
     #[serde(default = "settle_timeout")]
     pub settle_timeout_s: f64,
     /// Ask the operator to turn the load knob when the load changes (on a terminal).
@@ -84,12 +100,16 @@ fn yes() -> bool {
 /// One run of a campaign.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Point {
+    /// Plate temperature (°C); `None`: heater off.
     pub temp_c: Option<f32>,
+    /// Normal load (N).
     pub load_n: f32,
+    /// Which repetition (from 1).
     pub repeat: u32,
 }
 
 impl Plan {
+    /// Reads and checks the plan at `path` (a plan that cannot be right is a usage error, status 2).
     pub fn load(path: &Path) -> anyhow::Result<Plan> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read the plan {}", path.display()))?;
@@ -192,6 +212,7 @@ impl Plan {
         .collect()
     }
 
+    /// The rig's configuration for a run of this plan at `load` (N).
     pub fn config(&self, load: f32) -> Configure {
         let mut c = Configure::real_rig(load);
         if let Some(v) = self.rate_hz {

@@ -16,17 +16,25 @@ use parquet::file::writer::SerializedFileWriter;
 use parquet::schema::types::{ColumnPath, Type};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tribo_store::{Catalog, CatalogRow, Filter};
+use tribo_store::{CatalogRow, Filter, RunCatalog};
 /// A column of a table to export.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Data {
+    /// Numbers (Parquet DOUBLE).
     F64(Vec<f64>),
+    /// Numbers, some missing (null in JSON, NaN in CSV and Parquet).
     OptF64(Vec<Option<f64>>),
+    /// Whole numbers (Parquet INT64).
     I64(Vec<i64>),
+    /// Whole numbers, some missing.
     OptI64(Vec<Option<i64>>),
+    /// Small whole numbers (Parquet INT32).
     I32(Vec<i32>),
+    /// Yes or no.
     Bool(Vec<bool>),
+    /// Text.
     Str(Vec<String>),
+    /// Text, some missing.
     OptStr(Vec<Option<String>>),
 }
 
@@ -358,7 +366,7 @@ pub fn catalog_rows(
         );
     }
     filter.check()?;
-    let cat = Catalog::open(store)?;
+    let cat = RunCatalog::open(store)?;
     cat.refresh(reindex)?;
     let folders = tribo_store::run::list_run_dirs(store)?;
     let known: std::collections::BTreeSet<PathBuf> = cat
@@ -394,6 +402,7 @@ pub fn catalog_row_json(r: &CatalogRow) -> serde_json::Value {
     j
 }
 
+/// The catalog's rows as one JSON object: `{"runs": [{…}, …]}`.
 pub fn catalog_json(rows: &[CatalogRow]) -> serde_json::Value {
     serde_json::json!({ "runs": rows.iter().map(catalog_row_json).collect::<Vec<_>>() })
 }
@@ -450,6 +459,7 @@ pub fn catalog_parquet(rows: &[CatalogRow], path: &Path) -> Result<()> {
     catalog_table(rows).write_parquet(path)
 }
 
+/// The catalog's rows as CSV, one line per run.
 pub fn catalog_csv(rows: &[CatalogRow]) -> String {
     let t = catalog_table(rows);
     let mut out = t

@@ -104,7 +104,7 @@ pub fn pull_from_catalog(catalog: Option<&str>, id: &str, store: &Path) -> anyho
     }
     std::fs::rename(&part, &dest).with_context(|| format!("renaming to {}", dest.display()))?;
     let run = tribo_store::Run::open(&dest)?;
-    tribo_store::Catalog::open(store)?.upsert(&run)?;
+    tribo_store::RunCatalog::open(store)?.upsert(&run)?;
     Ok(format!(
         "{}: run {}/{} from PC {:?} ({}), {}",
         dest.display(),

@@ -5,6 +5,8 @@
 //! imports it, and no command imports another (what several share of their command lines is in
 //! `cmd::common`).
 
+#![warn(missing_docs)]
+
 pub mod analysis;
 pub mod archive;
 pub mod exit;

@@ -22,7 +22,9 @@ pub enum LoadError {
     /// A run folder the store cannot read.
     #[error("cannot read the run {}", path.display())]
     Run {
+        /// The run folder.
         path: PathBuf,
+        /// What the store could not read.
         #[source]
         source: StoreError,
     },
@@ -30,7 +32,9 @@ pub enum LoadError {
     /// holes are and what to do.
     #[error("{}: {message}", path.display())]
     Holes {
+        /// The record.
         path: PathBuf,
+        /// Where the holes are and what to do.
         message: String,
         /// A run folder's holes (blocks not received, samples the rig lost): its data is
         /// incomplete (status 3); a CSV whose time axis jumps is a file to fix (status 1).
@@ -40,7 +44,12 @@ pub enum LoadError {
     /// refused for analysis: status 3, as for any incomplete run. The message says what is
     /// missing and how to get it, or how to analyse what is held.
     #[error("{}: {message}", path.display())]
-    Incomplete { path: PathBuf, message: String },
+    Incomplete {
+        /// The run folder.
+        path: PathBuf,
+        /// What is missing and how to get it.
+        message: String,
+    },
 }
 
 impl LoadError {

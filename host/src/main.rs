@@ -1,5 +1,5 @@
 //! `tribo`: command-line front end of the oscillating tribometer.
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 /// Oscillating (relaxation) tribometer: run the rig, store runs, fit friction laws, explain
 /// disagreements between model and measurement.
@@ -74,21 +74,27 @@ enum Command {
 /// A closed standard output (`tribo runs | head -1`) ends the program quietly with status 0.
 fn main() -> std::process::ExitCode {
     tribo::out::install_pipe_hook();
-    match run(Cli::parse()) {
+    // Parsed in two steps to know the subcommand's name (for `--json`'s check) without a list
+    // of the variants' names beside clap's own.
+    let matches = Cli::command().get_matches();
+    let name = matches.subcommand_name().unwrap_or_default().to_owned();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    match run(cli, &name) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) if tribo::out::is_broken_pipe(&e) => std::process::ExitCode::SUCCESS,
         Err(e) => std::process::ExitCode::from(tribo::cmd::exit::report(&e).code()),
     }
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
-    let quiet = cli.global.quiet;
+fn run(cli: Cli, name: &str) -> anyhow::Result<()> {
+    cli.global.check_for(name)?;
+    let tribo::cmd::Global { quiet, json } = cli.global;
     match cli.command {
-        Command::Onboard(a) => tribo::cmd::onboard::run(a),
+        Command::Onboard(a) => tribo::cmd::onboard::run(tribo::cmd::onboard::Args { json, ..a }),
         Command::Devices(a) => tribo::cmd::devices::run(a),
         Command::Run(a) => tribo::cmd::run::run(tribo::cmd::run::Args { quiet, ..a }),
-        Command::Status(a) => tribo::cmd::status::run(a),
-        Command::Selftest(a) => tribo::cmd::selftest::run(a),
+        Command::Status(a) => tribo::cmd::status::run(tribo::cmd::status::Args { json, ..a }),
+        Command::Selftest(a) => tribo::cmd::selftest::run(tribo::cmd::selftest::Args { json, ..a }),
         Command::Pull(a) => tribo::cmd::pull::run(tribo::cmd::pull::Args { quiet, ..a }),
         Command::Campaign(a) => {
             tribo::cmd::campaign::run(tribo::cmd::campaign::Args { quiet, ..a })
@@ -96,14 +102,40 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Rig(a) => tribo::cmd::rig::run(a),
         Command::Replay(a) => tribo::cmd::replay::run(a),
         Command::Demo(a) => tribo::cmd::demo::run(tribo::cmd::demo::Args { quiet, ..a }),
-        Command::Runs(a) => tribo::cmd::runs::run(tribo::cmd::runs::Args { quiet, ..a }),
-        Command::Table(a) => tribo::cmd::table::run(a),
+        Command::Runs(a) => tribo::cmd::runs::run(tribo::cmd::runs::Args { quiet, json, ..a }),
+        Command::Table(a) => tribo::cmd::table::run(tribo::cmd::table::Args { json, ..a }),
         Command::Sim(a) => tribo::cmd::sim::run(tribo::cmd::sim::Args { quiet, ..a }),
-        Command::Fit(a) => tribo::cmd::fit::run(a),
-        Command::Explain(a) => tribo::cmd::explain::run(tribo::cmd::explain::Args { quiet, ..a }),
+        Command::Fit(a) => tribo::cmd::fit::run(tribo::cmd::fit::Args { json, ..a }),
+        Command::Explain(a) => {
+            tribo::cmd::explain::run(tribo::cmd::explain::Args { quiet, json, ..a })
+        }
         Command::Report(a) => tribo::cmd::report::run(a),
         Command::Panel(a) => tribo::cmd::panel::run(tribo::cmd::panel::Args { quiet, ..a }),
         Command::Export(a) => tribo::cmd::export::run(tribo::cmd::export::Args { quiet, ..a }),
-        Command::Sync(a) => tribo::cmd::sync::run(tribo::cmd::sync::Args { quiet, ..a }),
+        Command::Sync(a) => tribo::cmd::sync::run(tribo::cmd::sync::Args { quiet, json, ..a }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every name in `JSON_COMMANDS` is a subcommand, so the refusal's list names real commands
+    /// and `--json` is never refused to one that prints JSON under another name.
+    #[test]
+    fn the_json_commands_are_subcommands() {
+        let cli = Cli::command();
+        let names: Vec<&str> = cli.get_subcommands().map(|c| c.get_name()).collect();
+        for c in tribo::cmd::JSON_COMMANDS {
+            assert!(
+                names.contains(&c),
+                "{c} is not a subcommand of tribo: {names:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn cli_is_well_formed() {
+        Cli::command().debug_assert();
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! `println!` panics when stdout is a pipe whose reader has gone (`tribo runs | head -1`): Rust
 //! ignores `SIGPIPE`, so the write fails with `EPIPE` and the macro panics. The commands write
-//! through [`outln!`](crate::outln) / [`out!`](crate::out) instead, which return the
+//! through [`outln!`](crate::outln) / [`out!`](macro@crate::out) instead, which return the
 //! [`std::io::Error`]; `main` recognises a broken pipe anywhere in an error's chain
 //! ([`is_broken_pipe`]) and exits with status 0 without a word, as `grep`, `ripgrep` and the
 //! coreutils do when their reader has what it wanted. As a last resort for output written with

@@ -72,8 +72,11 @@ pub fn hold_capture(run: &Run) -> Vec<Vec<u16>> {
 /// One field that differs between the recorded and replayed on-board results.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Difference {
+    /// The on-board result's name.
     pub field: String,
+    /// Its value as recorded by the rig.
     pub recorded: String,
+    /// Its value from the replay.
     pub replayed: String,
 }
 

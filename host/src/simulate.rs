@@ -16,28 +16,51 @@ use tribo_physics::{Model, Rig};
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimOptions {
+    /// Friction law: coulomb, viscous, coulomb-viscous, quadratic, poly:N or lugre.
     pub law: LawSpec,
+    /// Dimensionless constants μ0, μ1, … in order of j.
     pub mu: Vec<f64>,
+    /// Moving mass m (kg).
     pub mass_kg: f64,
+    /// Blade stiffness k (N/m).
     pub stiffness: f64,
+    /// Normal load N (N).
     pub load_n: f64,
+    /// Initial displacement x0 (m).
     pub x0_m: f64,
+    /// Duration (s).
     pub duration_s: f64,
+    /// Sampling rate (Hz).
     pub rate_hz: f64,
+    /// Apparatus viscous damping μ_a (dimensionless, = 2ζ).
     pub apparatus_mu1: f64,
+    /// Cubic spring coefficient k3 (N/m³).
     pub k3: f64,
+    /// Add the real acquisition chain: vibrometer noise, force low-pass, quantisation.
     pub noise: bool,
+    /// ADC bits (with `noise`); 0: no quantisation.
     pub bits: u32,
+    /// Displacement noise (m, standard deviation, with `noise`).
     pub disp_noise_m: f64,
+    /// Velocity noise (m/s, with `noise`).
     pub vel_noise_m_s: f64,
+    /// Force-channel lag (s, with `noise`).
     pub force_lag_s: f64,
+    /// A thermocouple column at this temperature (°C).
     pub temp_c: Option<f64>,
+    /// An ECR column: log10(Ω) while sliding.
     pub ecr_log10: Option<f64>,
+    /// Noise seed.
     pub seed: u64,
+    /// A bench's hold: the record starts this long before the release (s).
     pub held_s: f64,
+    /// A bench's speckle dropouts: single-sample velocity spikes per second.
     pub dropouts_per_s: f64,
+    /// A bench's floor motion: amplitude (m) of a slow sine.
     pub floor_m: f64,
+    /// Frequency of the floor motion (Hz).
     pub floor_hz: f64,
+    /// Write the dimensionless form `tau,y,ydot` instead of SI.
     pub dimensionless: bool,
 }
 

@@ -70,6 +70,7 @@ pub struct Ui {
 }
 
 impl Ui {
+    /// A progress display on standard error; `quiet`: none.
     pub fn new(quiet: bool) -> Ui {
         Ui {
             bar: None,
@@ -209,6 +210,7 @@ impl Ui {
         }
     }
 
+    /// Clears the progress bar, if one is shown.
     pub fn finish(&mut self) {
         if let Some(b) = self.bar.take() {
             b.finish_and_clear();

@@ -15,10 +15,10 @@ use tribo_rig::{
 /// The simulated rig, from a TOML file and/or flags (flags win).
 #[derive(clap::Args, Debug, Clone)]
 pub struct VirtualArgs {
-    /// Virtual rig description (TOML: mass_kg, stiffness_n_per_m, load_n, [law], [noise], [thermal],
-    /// [ecr], seed; see the tribo-rig docs). Missing fields take the thesis's rig.
+    /// Virtual rig description (TOML: mass_kg, stiffness_n_per_m, load_n, `[law]`, `[noise]`,
+    /// `[thermal]`, `[ecr]`, seed; see the tribo-rig docs). Missing fields take the thesis's rig.
     ///
-    /// The contact's law is a [law] table with its kind and constants, e.g.
+    /// The contact's law is a `[law]` table with its kind and constants, e.g.
     /// `kind = "coulomb_viscous"`, `mu0 = 0.02`, `mu1 = 0.004`. Kinds: coulomb (mu0), viscous
     /// (mu1), coulomb_viscous (mu0, mu1), quadratic (mu0, mu1, mu2), polynomial (mu = [μ0, μ1,
     /// …]), stribeck (mu_c, mu_s, v_s, delta, mu_v), stribeck_power, hess_soom, dahl, lugre,

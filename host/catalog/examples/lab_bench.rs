@@ -160,7 +160,7 @@ fn main() {
             );
         }
         let (_, ri) = time(|| {
-            tribo_store::Catalog::open(store.path())
+            tribo_store::RunCatalog::open(store.path())
                 .unwrap()
                 .reindex()
                 .unwrap()

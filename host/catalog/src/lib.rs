@@ -1,7 +1,7 @@
 //! The lab catalog: every run of every rig and PC of a lab in one PostgreSQL database, next to
 //! each PC's own run catalog (SQLite, `tribo-store`), which stays the default and needs nothing set up.
 //!
-//! * [`AnyCatalog`] is the one catalog interface: [`tribo_store::Catalog`] (the run catalog, a
+//! * [`AnyCatalog`] is the one catalog interface: [`tribo_store::RunCatalog`] (the run catalog, a
 //!   store's SQLite file) and [`LabCatalog`] (the lab catalog, a server) both implement it; [`open`] gives the one a command was
 //!   pointed at (`--catalog URL`, `TRIBO_CATALOG`, else the store's own).
 //! * [`url`]: the server's address, without a password (refused on the command line), with the
@@ -72,12 +72,12 @@ pub fn chain(e: &dyn std::error::Error) -> String {
 
 /// The catalog named by `catalog` (a `postgres://` URL), else by `TRIBO_CATALOG`, else the SQLite
 /// catalog of the store at `store`, brought up to date with its run folders
-/// ([`tribo_store::Catalog::refresh`]).
+/// ([`tribo_store::RunCatalog::refresh`]).
 pub fn open(catalog: Option<&str>, store: &Path) -> Result<Box<dyn AnyCatalog>> {
     match lab_url(catalog) {
         Some(url) => Ok(Box::new(LabCatalog::connect(&LabUrl::parse(&url)?)?)),
         None => {
-            let cat = tribo_store::Catalog::open(store)?;
+            let cat = tribo_store::RunCatalog::open(store)?;
             cat.refresh(false)?;
             Ok(Box::new(cat))
         }

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tribo_store::catalog::log_stamp;
 use tribo_store::run::{LOG_FILE, META_FILE};
-use tribo_store::{Catalog, CatalogRow, Filter, RunMeta};
+use tribo_store::{CatalogRow, Filter, RunCatalog, RunMeta};
 
 /// How to sync.
 #[derive(Debug, Clone)]
@@ -96,7 +96,7 @@ fn local_rows(store: &Path, report: &mut SyncReport) -> Result<Vec<CatalogRow>> 
             store.display()
         )));
     }
-    let cat = Catalog::open(store)?;
+    let cat = RunCatalog::open(store)?;
     if let Some(r) = cat.refresh(false)? {
         report.skipped.extend(r.unreadable);
     }

@@ -64,7 +64,7 @@ fn sync_is_idempotent_reads_across_rigs_and_follows_a_log_that_grows() {
     let all = lab.lab_runs(&Filter::default()).unwrap();
     assert_eq!(all.len(), 20);
     // The rows say what the local catalog says, and where the log is, with its hash.
-    let local = tribo_store::Catalog::open(a.path())
+    let local = tribo_store::RunCatalog::open(a.path())
         .unwrap()
         .list(&Filter::default())
         .unwrap();
@@ -113,7 +113,7 @@ fn sync_is_idempotent_reads_across_rigs_and_follows_a_log_that_grows() {
     // The same table as the local catalogs' rows put together.
     let mut rows = local.clone();
     rows.extend(
-        tribo_store::Catalog::open(b.path())
+        tribo_store::RunCatalog::open(b.path())
             .unwrap()
             .list(&Filter::default())
             .unwrap(),
@@ -423,7 +423,7 @@ fn runs_of_a_period_across_rigs_as_each_pc_selects_them() {
             .len(),
         2
     );
-    let local = tribo_store::Catalog::open(a.path()).unwrap();
+    let local = tribo_store::RunCatalog::open(a.path()).unwrap();
     local.reindex().unwrap();
     for (s, u) in [(Some("2026-01-01"), None), (None, Some("2025-12-31"))] {
         let mine: Vec<String> = local
@@ -484,7 +484,7 @@ fn heater_off_runs_are_one_cell_in_the_lab_and_rows_from_schema_1_are_mended_by_
         });
     }
     let local = |d: &Path| {
-        let cat = tribo_store::Catalog::open(d).unwrap();
+        let cat = tribo_store::RunCatalog::open(d).unwrap();
         cat.refresh(false).unwrap();
         cat.list(&Filter::default()).unwrap()
     };

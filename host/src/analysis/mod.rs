@@ -1,6 +1,6 @@
 //! The analysis both the command line and the Python package give: the on-board cross-check of a
 //! host fit, an apparatus record's damping, and the JSON of a fit and of an explanation; and the
-//! checks between opening a record and analysing it ([`plausible`]). Every refusal is an
+//! checks between opening a record and analysing it (`plausible.rs`). Every refusal is an
 //! [`AnalysisError`]; `cmd::exit` maps it to an exit status, the Python package to an exception.
 
 mod plausible;
@@ -154,7 +154,9 @@ pub struct Fitted {
     pub rig: RigUsed,
     /// The options the fit ran with.
     pub options: tribo_physics::identify::FitOptions,
+    /// The fitted constants with their ± and the fit's diagnostics.
     pub result: FitResult,
+    /// The check of the fit against the record (residuals, agreement).
     pub check: Check,
     /// One fit per window, when asked for.
     pub windows: Option<Vec<tribo_physics::identify::WindowFit>>,
@@ -163,10 +165,13 @@ pub struct Fitted {
 /// What a fit gave: constants, or a record no constant can be fitted to.
 #[derive(Debug)]
 pub enum FitOutcome {
+    /// Constants were fitted.
     Fitted(Box<Fitted>),
     /// Too few half cycles, no motion…: no constant is fitted (status 3).
     NotAnalysable {
+        /// The rig constants the analysis used.
         rig: RigUsed,
+        /// Why the record cannot be analysed.
         why: tribo_physics::identify::NotAnalysable,
     },
 }

@@ -62,11 +62,17 @@ pub enum Source {
 /// The rig constants a result used, and where each came from.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct RigUsed {
+    /// Moving mass m (kg).
     pub mass_kg: f64,
+    /// Blade stiffness k (N/m).
     pub stiffness_n_per_m: f64,
+    /// Normal load N (N).
     pub load_n: f64,
+    /// Where the mass came from.
     pub mass_kg_from: Source,
+    /// Where the stiffness came from.
     pub stiffness_n_per_m_from: Source,
+    /// Where the load came from.
     pub load_n_from: Source,
 }
 
@@ -119,8 +125,11 @@ impl RigUsed {
 /// Rig constants given on the command line (`--mass-kg`, `--stiffness`, `--load-n`).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RigFlags {
+    /// `--mass-kg`: the moving mass (kg).
     pub mass_kg: Option<f64>,
+    /// `--stiffness`: the blades' stiffness (N/m).
     pub stiffness_n_per_m: Option<f64>,
+    /// `--load-n`: the normal load (N).
     pub load_n: Option<f64>,
 }
 
@@ -312,8 +321,8 @@ fn plausible_constants(rec: &Record, got: [(f64, Source); 3]) -> Result<(), Anal
     Ok(())
 }
 
-/// A record as loaded, before any flag: its motion ([`plausible_motion`]) and the rig constants
-/// its header gives ([`plausible_constants`]), for the commands that take no rig flag (`explain`,
+/// A record as loaded, before any flag: its motion (`plausible_motion`) and the rig constants
+/// its header gives (`plausible_constants`), for the commands that take no rig flag (`explain`,
 /// `onboard`, `report`). Status 3 naming the likely unit mistake.
 pub fn plausible_record(rec: &Record) -> Result<(), AnalysisError> {
     plausible_motion(rec)?;

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use tribo_catalog::LabCatalog;
 use tribo_store::catalog::{AnyCatalog, Axis, Value};
-use tribo_store::{Catalog, Filter};
+use tribo_store::{Filter, RunCatalog};
 use tribo_wire::HostMsg;
 
 /// `tribo campaign PLAN` with the `--store` and `--port` this command was given: what takes the
@@ -35,6 +35,7 @@ fn resume_command(args: &Args) -> String {
 pub struct Args {
     /// The plan (TOML: name, loads_n, temps_c, repeats, …).
     pub plan: PathBuf,
+    /// The rig to run the campaign on, and the run store.
     #[command(flatten)]
     pub link: LinkArgs,
     /// Never ask for the load knob (e.g. a virtual rig, or the load is already right).
@@ -43,7 +44,7 @@ pub struct Args {
     /// Show what would be run and what is already done, and stop.
     #[arg(long)]
     pub dry_run: bool,
-    /// The lab catalog (postgres://USER@HOST[:PORT]/DATABASE, default: $TRIBO_CATALOG): once the
+    /// The lab catalog (`postgres://USER@HOST[:PORT]/DATABASE`, default: $TRIBO_CATALOG): once the
     /// runs are taken they are synced to it (as `tribo sync`), and the table at the end is the
     /// lab's: the campaign's runs on every rig that took part. No password in the URL: it comes
     /// from PGPASSWORD or ~/.pgpass.
@@ -227,7 +228,7 @@ fn print_table(
                 Ok(lab) => (Box::new(lab), "every rig in the lab catalog"),
                 Err(e) => {
                     // The runs are whole and stored: show this PC's table, then say what failed.
-                    print_tables(&Catalog::open(store)?, &f, "this PC's runs")?;
+                    print_tables(&RunCatalog::open(store)?, &f, "this PC's runs")?;
                     return Err(anyhow::Error::new(e).context(format!(
                         "the campaign's runs are stored in {}, but syncing them to the lab catalog \
                          failed: run `tribo sync` when {} can be reached",
@@ -237,7 +238,7 @@ fn print_table(
                 }
             }
         }
-        None => (Box::new(Catalog::open(store)?), "this PC's runs"),
+        None => (Box::new(RunCatalog::open(store)?), "this PC's runs"),
     };
     print_tables(cat.as_ref(), &f, what)
 }

@@ -16,6 +16,7 @@ pub struct Args {
     /// Output directory: the run store (`runs/`) and the report (`report/`).
     #[arg(long, default_value = "demo-out")]
     pub out: PathBuf,
+    /// The virtual rig the demo runs on.
     #[command(flatten)]
     pub rig: VirtualArgs,
     /// No figures.

@@ -22,15 +22,20 @@ use crate::signals::Signal;
 /// The statuses `tribo` exits with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Status {
+    /// 0: done, and the data is whole.
     Ok,
+    /// 1: an error; nothing usable was produced.
     Error,
+    /// 2: a wrong command line (or a value the rig would refuse).
     Usage,
+    /// 3: finished, but the data is incomplete or not analysable.
     Incomplete,
     /// Stopped by this signal: 128 + its number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP).
     Interrupted(Signal),
 }
 
 impl Status {
+    /// The process's exit status.
     pub const fn code(self) -> u8 {
         match self {
             Status::Ok => 0,

@@ -91,8 +91,8 @@ pub struct Args {
     /// Base law: coulomb, viscous, coulomb-viscous, quadratic, poly:N.
     #[arg(long, default_value = "coulomb-viscous", value_parser = base_law)]
     pub base: LawSpec,
-    /// Print one JSON object.
-    #[arg(long)]
+    /// Print one JSON object: set by the global `--json`.
+    #[arg(skip)]
     pub json: bool,
     /// Write before/after figures (SVG) and an HTML page into this directory.
     #[arg(long)]

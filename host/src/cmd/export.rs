@@ -66,8 +66,11 @@ pub struct Args {
 /// The formats `tribo export` writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Format {
+    /// Comma-separated values, one row per sample.
     Csv,
+    /// One JSON object: the metadata and the columns.
     Json,
+    /// Parquet: one typed row per sample, metadata and results in the key-value metadata.
     Parquet,
 }
 

@@ -86,8 +86,8 @@ pub struct Args {
     /// Law: coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre.
     #[arg(long, default_value = "coulomb-viscous")]
     pub law: LawSpec,
-    /// Print one JSON object.
-    #[arg(long)]
+    /// Print one JSON object: set by the global `--json`.
+    #[arg(skip)]
     pub json: bool,
     /// Write an SVG figure: measured vs fitted envelope.
     #[arg(long)]

@@ -11,8 +11,8 @@ pub struct Args {
     /// Record to analyse: CSV `t_s,x_m,v_m_s[,ft_n,…]` with `# mass_kg=…`, `# stiffness_n_per_m=…`,
     /// `# load_n=…` comment lines.
     pub record: PathBuf,
-    /// Print one JSON object instead of a table.
-    #[arg(long)]
+    /// Print one JSON object instead of a table: set by the global `--json`.
+    #[arg(skip)]
     pub json: bool,
 }
 

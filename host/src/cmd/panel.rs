@@ -26,6 +26,7 @@ stores them. GET /api/state gives the page's state as JSON, for scripts.
 Closing the panel (Ctrl-C: exit status 130) makes the rig safe; a killed panel leaves it to the
 rig's lease, which expires within 3 s.")]
 pub struct Args {
+    /// The rig the panel drives, and the run store.
     #[command(flatten)]
     pub link: LinkArgs,
     /// Address the page is served on, IP:PORT or NAME:PORT (127.0.0.1:0 picks a free port; the

@@ -12,6 +12,7 @@ use std::path::PathBuf;
 /// Arguments of `tribo pull`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
+    /// The rig to pull from, and the run store.
     #[command(flatten)]
     pub link: LinkArgs,
     /// Run folder to complete (default: the stored copy of the rig's last run, or a new folder).
@@ -25,6 +26,7 @@ pub struct Args {
     /// SHA-256 is checked against the catalog's.
     #[arg(long, value_name = "ID", conflicts_with_all = ["run", "salvage"])]
     pub from_catalog: Option<String>,
+    /// The lab catalog to fetch the run from instead of a rig.
     #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// No progress bar or messages: set by `tribo -q`/`--quiet`.
@@ -84,7 +86,7 @@ fn salvage_offline(dir: &std::path::Path, why: anyhow::Error) -> anyhow::Result<
     let run = tribo_store::Run::open(dir)?;
     let summary = run.completeness().summary();
     if let Some(store) = dir.parent() {
-        if let Ok(cat) = tribo_store::Catalog::open(store) {
+        if let Ok(cat) = tribo_store::RunCatalog::open(store) {
             let _ = cat.upsert(&run);
         }
     }
@@ -109,7 +111,7 @@ fn salvage_offline(dir: &std::path::Path, why: anyhow::Error) -> anyhow::Result<
 fn settle_folder(dir: &std::path::Path, why: &anyhow::Error) -> anyhow::Result<()> {
     let run = tribo_store::Run::open(dir)?;
     if let Some(store) = dir.parent() {
-        if let Ok(cat) = tribo_store::Catalog::open(store) {
+        if let Ok(cat) = tribo_store::RunCatalog::open(store) {
             let _ = cat.upsert(&run);
         }
     }

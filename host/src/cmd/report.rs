@@ -27,8 +27,10 @@ pub struct Args {
     /// A campaign's runs of this rig only (its serial number).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
+    /// Only the runs taken in this period.
     #[command(flatten)]
     pub period: super::common::Period,
+    /// This PC's catalog of runs, or the lab's.
     #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Select the campaign's runs by label substring instead of campaign name.

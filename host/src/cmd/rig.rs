@@ -21,6 +21,7 @@ pub struct Args {
     /// Run the virtual rig (the only kind this command can start).
     #[arg(long = "virtual")]
     pub virtual_rig: bool,
+    /// The virtual rig's constants, faults and speed.
     #[command(flatten)]
     pub rig: VirtualArgs,
     /// Address to listen on, HOST:PORT (port 0: any free port; the address is printed). The rig

@@ -12,6 +12,7 @@ use tribo_wire::{Configure, HeaterSetpoint};
 /// Arguments of `tribo run`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
+    /// The rig to run on, and the run store.
     #[command(flatten)]
     pub link: LinkArgs,
     /// Normal load set on the rig's knob, N (0–0.7).

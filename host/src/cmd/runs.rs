@@ -4,11 +4,14 @@ use super::common::Period;
 use crate::export::{run_json, with_fields};
 use crate::outln;
 use std::path::PathBuf;
-use tribo_store::{Catalog, CatalogRow, Filter, RunStatus};
+use tribo_store::{CatalogRow, Filter, RunCatalog, RunStatus};
 
 /// Arguments of `tribo runs`. The `lost` column counts the samples a run's rig lost (acquisition
 /// gaps: the run went on, and fits will not cross them).
 #[derive(clap::Args, Debug)]
+#[command(
+    after_long_help = "--json prints one JSON object: {\"runs\": [{…}, …], \"damaged\": [{\"path\", \"why\"}, …]}."
+)]
 pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
@@ -31,8 +34,10 @@ pub struct Args {
     /// Runs of this rig (its serial number, as `tribo devices` shows it).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
+    /// Only the runs taken in this period.
     #[command(flatten)]
     pub period: Period,
+    /// This PC's catalog of runs, or the lab's.
     #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
     /// Rebuild the catalog from the run folders first.
@@ -41,8 +46,8 @@ pub struct Args {
     /// Print the run folders only (for scripts).
     #[arg(long)]
     pub paths: bool,
-    /// Print one JSON object: `{"runs": [{…}, …], "damaged": [{"path", "why"}, …]}`.
-    #[arg(long)]
+    /// Print one JSON object (set by the global `--json`; its shape is in `after_long_help`).
+    #[arg(skip)]
     pub json: bool,
     /// No progress messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]
@@ -111,7 +116,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !store.is_dir() {
         anyhow::bail!("no run store at {}: take a run with `tribo run` or `tribo demo`, or point --store at one", store.display());
     }
-    let cat = Catalog::open(&store)?;
+    let cat = RunCatalog::open(&store)?;
     if let Some(r) = cat.refresh(args.reindex)? {
         if !args.quiet {
             crate::errln!(

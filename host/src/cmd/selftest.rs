@@ -36,6 +36,9 @@ use tribo_wire::{
   reset-record        a deliberate panic: the rig resets and its boot report says Panic and why
   watchdog            a deliberately stalled task: outputs safe, reset, the report names the task
 
+--json prints one JSON object: {\"port\", \"firmware\", \"serial\", \"passed\", \"failed\": [row names],
+\"rows\": [{\"row\", \"verdict\": \"pass\" | \"fail\" | \"hardware-only\", \"summary\", \"figures\"}]}.
+
 Exit status: 0 every measured row passed; 1 a row failed (named on standard error) or the rig
 could not be tested.
 
@@ -44,11 +47,11 @@ Examples:
   tribo rig --virtual --listen 127.0.0.1:7411 &   tribo selftest --port tcp://127.0.0.1:7411 --json"
 )]
 pub struct Args {
+    /// The rig to test.
     #[command(flatten)]
     pub link: LinkArgs,
-    /// Print one JSON object: `{"port", "firmware", "serial", "passed", "failed": [row names],
-    /// "rows": [{"row", "verdict": "pass" | "fail" | "hardware-only", "summary", "figures"}]}`.
-    #[arg(long)]
+    /// Print one JSON object (set by the global `--json`; its shape is in the command's help).
+    #[arg(skip)]
     pub json: bool,
     /// Sample rate of the converter check, S/s.
     #[arg(long, default_value_t = 10_000, value_name = "HZ")]
@@ -64,13 +67,16 @@ pub struct Args {
 /// A row's outcome.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
+    /// Measured and within its limits.
     Pass,
+    /// Measured and out of its limits.
     Fail,
     /// Only the real chip can measure it; neither pass nor fail.
     HardwareOnly,
 }
 
 impl Verdict {
+    /// The verdict as printed and in `--json` (`pass`, `fail`, `hardware-only`).
     pub fn name(self) -> &'static str {
         match self {
             Verdict::Pass => "pass",
@@ -83,7 +89,9 @@ impl Verdict {
 /// One row of the table.
 #[derive(Debug, Clone)]
 pub struct Row {
+    /// The row's name (`sample-rate`, `flash`, …).
     pub name: String,
+    /// Its outcome.
     pub verdict: Verdict,
     /// The figures, in words.
     pub summary: String,

@@ -9,12 +9,15 @@ use tribo_wire::{Control, Status};
 
 /// Arguments of `tribo status`.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_long_help = "--json prints one JSON object: {\"port\", \"firmware\", \"serial\", \"status\": {…the rig's Status…}, \"boot_message\"}."
+)]
 pub struct Args {
+    /// The rig to ask.
     #[command(flatten)]
     pub link: LinkArgs,
-    /// Print one JSON object: `{"port", "firmware", "serial", "status": {…the rig's Status…},
-    /// "boot_message"}`.
-    #[arg(long)]
+    /// Print one JSON object (set by the global `--json`; its shape is in `after_long_help`).
+    #[arg(skip)]
     pub json: bool,
 }
 

@@ -31,11 +31,14 @@ Example, the password in ~/.pgpass (labserver:5432:tribo:rig2:PASSWORD, mode 060
 
 /// Arguments of `tribo sync` (what it does: [`LONG_ABOUT`]).
 #[derive(clap::Args, Debug)]
+#[command(
+    after_long_help = "--json prints one JSON object: {\"local\", \"inserted\", \"updated\", \"kept\", \"unchanged\", \"fuller_elsewhere\", \"reconnects\", \"skipped\": [{\"path\", \"why\"}]}."
+)]
 pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
     pub store: Option<PathBuf>,
-    /// The lab catalog: postgres://USER@HOST[:PORT]/DATABASE[?sslmode=verify-full&sslrootcert=CA.pem]
+    /// The lab catalog: `postgres://USER@HOST[:PORT]/DATABASE[?sslmode=verify-full&sslrootcert=CA.pem]`
     /// (default: $TRIBO_CATALOG). No password in it: it comes from PGPASSWORD or ~/.pgpass.
     #[arg(long, value_name = "URL")]
     pub catalog: Option<String>,
@@ -54,9 +57,8 @@ pub struct Args {
     /// before giving up; what was sent stays.
     #[arg(long, default_value_t = 60)]
     pub wait: u64,
-    /// Print one JSON object: `{"local", "inserted", "updated", "kept", "unchanged",
-    /// "fuller_elsewhere", "reconnects", "skipped": [{"path", "why"}]}`.
-    #[arg(long)]
+    /// Print one JSON object (set by the global `--json`; its shape is in `after_long_help`).
+    #[arg(skip)]
     pub json: bool,
     /// No progress messages: set by `tribo -q`/`--quiet`.
     #[arg(skip)]

@@ -8,6 +8,10 @@ use tribo_store::Filter;
 
 /// Arguments of `tribo table`.
 #[derive(clap::Args, Debug)]
+#[command(
+    after_long_help = "--json prints one JSON object: {\"value\", \"row_axis\", \"col_axis\", \"rows\": [..], \"cols\": [..], \"row_labels\": [..], \"col_labels\": [..], \"cells\": [[{\"mean\", \"sd\", \"n\"} | null, ..], ..]}.
+Rows and columns are loads (N, to the mN) and heater setpoints (°C, to the degree); a temperature of null (labelled \"heater off\") holds every run taken with the heater off, whatever its plate read."
+)]
 pub struct Args {
     /// Run store directory (default: $TRIBO_STORE, else ./runs).
     #[arg(long)]
@@ -27,16 +31,14 @@ pub struct Args {
     /// Only this rig's runs (its serial number).
     #[arg(long, value_name = "SERIAL")]
     pub rig: Option<String>,
+    /// Only the runs taken in this period.
     #[command(flatten)]
     pub period: super::common::Period,
+    /// This PC's catalog of runs, or the lab's.
     #[arg(long, value_name = "URL", help = super::common::CATALOG_HELP)]
     pub catalog: Option<String>,
-    /// Print one JSON object: `{"value", "row_axis", "col_axis", "rows": [..], "cols": [..],
-    /// "row_labels": [..], "col_labels": [..], "cells": [[{"mean", "sd", "n"} | null, ..], ..]}`.
-    /// Rows and columns are loads (N, to the mN) and heater setpoints (°C, to the degree); a
-    /// temperature of `null` (labelled "heater off") holds every run taken with the heater off,
-    /// whatever its plate read.
-    #[arg(long)]
+    /// Print one JSON object (set by the global `--json`; its shape is in `after_long_help`).
+    #[arg(skip)]
     pub json: bool,
 }
 

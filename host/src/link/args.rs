@@ -20,6 +20,7 @@ pub struct LinkArgs {
 }
 
 impl LinkArgs {
+    /// The run store: `--store`, else `$TRIBO_STORE`, else `./runs`.
     pub fn store(&self) -> PathBuf {
         self.store
             .clone()

@@ -16,12 +16,15 @@ pub const RIG_PID: u16 = 0x0001;
 pub struct Port {
     /// Its name, as given to `--port`.
     pub name: String,
-    /// USB vendor and product ids (USB ports only).
+    /// USB vendor id (USB ports only).
     pub vid: Option<u16>,
+    /// USB product id (USB ports only).
     pub pid: Option<u16>,
-    /// USB serial number, manufacturer and product strings, when the device gives them.
+    /// USB serial number, when the device gives one.
     pub serial: Option<String>,
+    /// USB manufacturer string, when the device gives one.
     pub manufacturer: Option<String>,
+    /// USB product string, when the device gives one.
     pub product: Option<String>,
 }
 

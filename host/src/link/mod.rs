@@ -50,11 +50,14 @@ use tribo_wire::{
 /// A frame from the rig, with its bytes exactly as received (closing zero included).
 #[derive(Debug, Clone)]
 pub struct Incoming {
+    /// The frame's bytes as received, closing zero included.
     pub raw: Vec<u8>,
+    /// The frame decoded.
     pub frame: Frame<DeviceMsg>,
 }
 
 impl Incoming {
+    /// The message the frame carries.
     pub fn msg(&self) -> &DeviceMsg {
         &self.frame.msg
     }
@@ -84,7 +87,9 @@ pub enum LinkErrorKind {
 /// A link failure. The message says what to do next.
 #[derive(Debug, Clone)]
 pub struct LinkError {
+    /// What kind of failure (it decides what to do next).
     pub kind: LinkErrorKind,
+    /// What went wrong and what to do next.
     pub msg: String,
     /// The rig's error code, when it refused a command.
     pub code: Option<ErrorCode>,
@@ -132,9 +137,13 @@ impl Default for Timeouts {
 /// Counters of a link.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LinkStats {
+    /// Bytes received.
     pub bytes_in: u64,
+    /// Good frames received.
     pub frames_in: u64,
+    /// Frames dropped as bad (CRC, COBS, decoding).
     pub bad_frames: u64,
+    /// Frames sent.
     pub frames_out: u64,
 }
 
@@ -163,6 +172,7 @@ pub struct Link {
     reader: Option<std::thread::JoinHandle<()>>,
     /// What to check when the stream ends.
     gone_hint: &'static str,
+    /// How long to wait for the rig's answers.
     pub timeouts: Timeouts,
 }
 
@@ -310,6 +320,7 @@ impl Link {
         self.last_bad
     }
 
+    /// The link's counters so far.
     pub fn stats(&self) -> LinkStats {
         LinkStats {
             bytes_in: self.bytes_in.load(Ordering::Relaxed),

@@ -5,7 +5,9 @@ use tribo_wire::Configure;
 /// Heat the plate to a setpoint and wait until it holds it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HeaterPlan {
+    /// Plate temperature to reach (°C).
     pub setpoint_c: f32,
+    /// Heating ramp (°C/min).
     pub ramp_c_per_min: f32,
     /// Settled when within this of the setpoint…
     pub tolerance_c: f32,
@@ -33,6 +35,7 @@ impl HeaterPlan {
 /// Everything `tribo run` needs to take one run.
 #[derive(Debug, Clone)]
 pub struct RunPlan {
+    /// The rig's configuration for the run (rate, duration, rig constants, load, x0).
     pub config: Configure,
     /// `None`: heater off.
     pub heater: Option<HeaterPlan>,
@@ -40,16 +43,22 @@ pub struct RunPlan {
     pub button: bool,
     /// Leave the heater on after the run (campaigns).
     pub keep_heater: bool,
+    /// Label stored with the run.
     pub label: Option<String>,
+    /// The sample (pin and plate materials) stored with the run.
     pub sample: Option<String>,
+    /// The lubricant stored with the run.
     pub lubricant: Option<String>,
+    /// The campaign the run belongs to.
     pub campaign: Option<String>,
+    /// Which repetition of its campaign point (from 1).
     pub repeat: Option<u32>,
     /// Rig constants a default stood in for (recorded in the run's metadata).
     pub defaults: Vec<String>,
 }
 
 impl RunPlan {
+    /// A plan for `config`: heater off, released from here, nothing labelled.
     pub fn new(config: Configure) -> RunPlan {
         RunPlan {
             config,

@@ -17,7 +17,9 @@ use tribo_wire::{DeviceInfo, ErrorCode, HeaterSetpoint, HostMsg, Interlock, RunH
 /// How a recording or a pull ended.
 #[derive(Debug)]
 pub struct Outcome {
+    /// The run as stored.
     pub run: Run,
+    /// The run was stopped before its end (Ctrl-C, a signal, the rig's stop).
     pub aborted: bool,
     /// The link was lost (or the rig stopped answering) before the run was complete: the rig may
     /// still hold what is missing, and `tribo pull` fetches it.
@@ -29,6 +31,7 @@ pub struct Outcome {
     /// What the rig does not hold any more, as the rig showed it (it answered `NoRun`, or never
     /// sent these frames in the pulls it answered): lost for good.
     pub not_held: Option<String>,
+    /// What the operator should know about the run (printed after it).
     pub warnings: Vec<String>,
 }
 
@@ -207,9 +210,6 @@ pub fn record_run(
     stream_run(link, info, store, plan, previous_run, abort, obs)
 }
 
-/// Releases the armed pin: `Release`, retried for up to 3 s while the rig is still starting
-/// ([`still_starting`]). Any other refusal disarms the rig and is returned: the rig's own rule, in
-/// words.
 /// Arms the rig for a run filed in `store`; returns the rig's run number before it (frames of
 /// that run still on their way are not the new run's). First the rig is told the highest run
 /// number of it the store holds ([`HostMsg::RunFloor`]): a rig whose power went after a release,
@@ -230,6 +230,9 @@ pub fn arm(link: &mut Link, info: &DeviceInfo, store: &Path) -> Result<u32, Link
     Ok(previous_run)
 }
 
+/// Releases the armed pin: `Release`, retried for up to 3 s while the rig is still starting (the
+/// acquisition not sampling yet, the plate's temperature not read yet). Any other refusal disarms
+/// the rig and is returned: the rig's own rule, in words.
 pub fn release(link: &mut Link) -> Result<(), LinkError> {
     let t0 = Instant::now();
     loop {
@@ -344,8 +347,6 @@ pub fn stream_run(
     })
 }
 
-/// Fetches the rig's last run (or completes `target`, a run folder), resuming after the last block
-/// already stored. With `salvage`, a corrupt log is cut after its intact prefix first.
 /// The rig no longer holds the run a folder is a copy of (a newer run replaced it, or it was
 /// lost): nothing of it can be fetched. The folder (resumed, and repaired if salvaging) is what
 /// there is of it; whether that is the whole run the folder says.
@@ -360,6 +361,8 @@ impl std::fmt::Display for RunNotHeld {
 
 impl std::error::Error for RunNotHeld {}
 
+/// Fetches the rig's last run (or completes `target`, a run folder), resuming after the last block
+/// already stored. With `salvage`, a corrupt log is cut after its intact prefix first.
 pub fn pull_run(
     link: &mut Link,
     info: &DeviceInfo,

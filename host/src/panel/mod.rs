@@ -1,9 +1,9 @@
 //! The rig's front panel (`tribo panel`), a local web page served by this program.
 //!
-//! One thread owns the link to the rig ([`link_thread`]): it polls the rig's status, runs the page's
+//! One thread owns the link to the rig (`link_thread`): it polls the rig's status, runs the page's
 //! commands through the library calls `tribo run` makes (so the rig's interlocks refuse what they
 //! refuse there), holds the rig's lease with a heartbeat while it is connected, and streams a run
-//! into the store exactly as `tribo run` does. The pages read the [`state`] it keeps through
+//! into the store exactly as `tribo run` does. The pages read the `state` it keeps through
 //! server-sent events (`/events`): the rig's state every 250 ms, the run's blocks as they arrive,
 //! decimated for drawing (min and max over every 32 samples; the store keeps every sample).
 //!

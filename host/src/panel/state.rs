@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use tribo_store::catalog::{AnyCatalog, Axis, Catalog, Filter, Value as CatValue};
+use tribo_store::catalog::{AnyCatalog, Axis, Filter, RunCatalog, Value as CatValue};
 use tribo_store::Run;
 use tribo_wire::{limits, Channel, Control, Gap, RunHeader, SampleBlock, Status};
 
@@ -452,7 +452,7 @@ impl Shared {
 /// The campaign grid from the store's catalog: host μ0 mean ± sd per load × temperature cell
 /// (what `tribo table` prints), or an empty grid when the store has no complete run.
 pub fn grid(store: &Path) -> Value {
-    let Ok(cat) = Catalog::open(store) else {
+    let Ok(cat) = RunCatalog::open(store) else {
         return json!(null);
     };
     // Up to date with the folders first (a log damaged or cut since it was catalogued), as every

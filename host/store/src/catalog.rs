@@ -1,7 +1,7 @@
 //! The run catalog: one SQLite file (`catalog.sqlite` at the store's root) indexing every run of
 //! the store (the lab catalog, on PostgreSQL, is `tribo-catalog`'s).
 //!
-//! It is an index, never the only copy: [`Catalog::reindex`] rebuilds it from the run folders.
+//! It is an index, never the only copy: [`RunCatalog::reindex`] rebuilds it from the run folders.
 
 use crate::run::{list_run_dirs, Run};
 use crate::{ErrorKind, Result, StoreError};
@@ -117,7 +117,7 @@ pub struct CatalogRow {
     pub completeness: String,
 }
 
-/// What [`Catalog::reindex`] found.
+/// What [`RunCatalog::reindex`] found.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Reindexed {
     /// Runs indexed.
@@ -419,7 +419,7 @@ impl Table {
     }
 }
 
-/// Either catalog: the run catalog (the store's own SQLite file, [`Catalog`]) or the lab catalog
+/// Either catalog: the run catalog (the store's own SQLite file, [`RunCatalog`]) or the lab catalog
 /// (the lab's PostgreSQL server, `tribo_catalog::LabCatalog`). What `tribo runs`, `table`,
 /// `campaign` and `report --campaign` read.
 pub trait AnyCatalog {
@@ -453,7 +453,7 @@ pub fn table_filter(rows: Axis, cols: Axis, f: &Filter) -> Result<Filter> {
     Ok(f)
 }
 
-impl AnyCatalog for Catalog {
+impl AnyCatalog for RunCatalog {
     fn runs(&self, f: &Filter) -> Result<Vec<CatalogRow>> {
         self.list(f)
     }
@@ -480,10 +480,14 @@ pub fn log_stamp(dir: &Path) -> String {
 
 /// The run catalog: the SQLite file of a store (`catalog.sqlite`) indexing its runs. (The lab
 /// catalog, across PCs and rigs, is `tribo_catalog::LabCatalog` on PostgreSQL.)
-pub struct Catalog {
+pub struct RunCatalog {
     conn: Connection,
     root: PathBuf,
 }
+
+/// The run catalog's former name, kept so that code written against it (on branches not merged
+/// yet) still builds; new code says [`RunCatalog`].
+pub type Catalog = RunCatalog;
 
 fn db_err(ctx: &str, e: rusqlite::Error) -> StoreError {
     StoreError::caused(
@@ -493,9 +497,9 @@ fn db_err(ctx: &str, e: rusqlite::Error) -> StoreError {
     )
 }
 
-impl Catalog {
+impl RunCatalog {
     /// Opens (or creates) the catalog of the store at `root`.
-    pub fn open(root: &Path) -> Result<Catalog> {
+    pub fn open(root: &Path) -> Result<RunCatalog> {
         std::fs::create_dir_all(root).map_err(|e| {
             StoreError::io(format!("cannot create the store {}", root.display()), e)
         })?;
@@ -547,7 +551,7 @@ impl Catalog {
         if version < 2 {
             // Version 2 tells a heater-off run from one held at a setpoint: the rows of an earlier
             // catalog do not know, so they are marked stale and rebuilt from the run folders by the
-            // next [`Catalog::refresh`].
+            // next [`RunCatalog::refresh`].
             conn.execute_batch("UPDATE runs SET log_stamp = ''")
                 .map_err(|e| db_err("schema", e))?;
         }
@@ -555,7 +559,7 @@ impl Catalog {
             conn.pragma_update(None, "user_version", CATALOG_VERSION)
                 .map_err(|e| db_err("schema", e))?;
         }
-        Ok(Catalog {
+        Ok(RunCatalog {
             conn,
             root: root.to_owned(),
         })
@@ -645,9 +649,9 @@ impl Catalog {
         Ok(out)
     }
 
-    /// Brings the catalog up to date with the run folders: rebuilt ([`Catalog::reindex`]) when
+    /// Brings the catalog up to date with the run folders: rebuilt ([`RunCatalog::reindex`]) when
     /// `force`, when it does not know a folder (a killed recorder, runs copied in), when a log
-    /// changed since it was catalogued (a pull completed it, a copy truncated it, [`Catalog::stale`])
+    /// changed since it was catalogued (a pull completed it, a copy truncated it, [`RunCatalog::stale`])
     /// or when its rows come from a tribo that did not record what this one reads. Returns what
     /// the rebuild found, `None` when the catalog was already up to date. What every reader of a
     /// store's catalog calls first.

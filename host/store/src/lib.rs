@@ -23,7 +23,7 @@
 //! frames ([`Run::frames`], in the rig's order).
 //!
 //! The [`catalog`] indexes all runs of a store in SQLite (`catalog.sqlite` at the store's root); it
-//! is an index only and [`catalog::Catalog::reindex`] rebuilds it from the folders.
+//! is an index only and [`catalog::RunCatalog::reindex`] rebuilds it from the folders.
 
 #![warn(missing_docs)]
 
@@ -35,7 +35,7 @@ pub mod log;
 pub mod run;
 mod time;
 
-pub use catalog::{AnyCatalog, Catalog, CatalogRow, Filter, Reindexed};
+pub use catalog::{AnyCatalog, Catalog, CatalogRow, Filter, Reindexed, RunCatalog};
 pub use log::{LogHeader, LogReader, LogWriter, Recovery};
 pub use run::{
     Completeness, DeviceMeta, Filed, HostFit, Results, Run, RunMeta, RunStatus, RunWriter, Samples,

@@ -231,7 +231,7 @@ fn gaps_and_ecr_ranges_are_stored_and_place_every_sample() {
     assert_eq!((r[at(620)], st[at(620)]), (2, true));
     assert_eq!((r[at(621)], st[at(621)]), (2, false));
     // The catalog marks it.
-    let cat = Catalog::open(d.path()).unwrap();
+    let cat = RunCatalog::open(d.path()).unwrap();
     cat.upsert(&run).unwrap();
     let rows = cat.list(&Filter::default()).unwrap();
     assert_eq!(rows[0].lost_samples, 300);
@@ -360,7 +360,7 @@ fn open_reports_what_is_wrong() {
     // io::Error underneath.
     let file = d.path().join("a-file");
     std::fs::write(&file, "").unwrap();
-    let Err(e) = Catalog::open(&file.join("store")) else {
+    let Err(e) = RunCatalog::open(&file.join("store")) else {
         panic!("a store made under a file");
     };
     assert_eq!(e.kind, ErrorKind::Io);
@@ -409,7 +409,7 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
                 .push(mu0 as f64);
         }
     }
-    let cat = Catalog::open(d.path()).unwrap();
+    let cat = RunCatalog::open(d.path()).unwrap();
     let r = cat.reindex().unwrap();
     assert_eq!(
         (r.indexed, r.unreadable.len(), r.incomplete.len()),
@@ -440,7 +440,7 @@ fn catalog_lists_filters_and_tabulates_mean_and_sd() {
         let other = tempfile::tempdir().unwrap();
         let link = other.path().join("store");
         std::os::unix::fs::symlink(d.path(), &link).unwrap();
-        let rows = Catalog::open(&link)
+        let rows = RunCatalog::open(&link)
             .unwrap()
             .list(&Filter::default())
             .unwrap();
@@ -654,11 +654,11 @@ fn a_catalog_from_before_the_gap_column_is_migrated() {
         .unwrap();
     let cfg = Configure::real_rig(0.3);
     let run = record(d.path(), &cfg, &run_frames(&cfg, 2, 0.02), |_| {});
-    let cat = Catalog::open(d.path()).unwrap();
+    let cat = RunCatalog::open(d.path()).unwrap();
     cat.upsert(&run).unwrap();
     assert_eq!(cat.list(&Filter::default()).unwrap()[0].lost_samples, 0);
     // Opening it again leaves it as it is.
-    Catalog::open(d.path()).unwrap();
+    RunCatalog::open(d.path()).unwrap();
 }
 
 #[test]
@@ -862,7 +862,7 @@ fn a_run_whose_log_lost_frames_is_not_complete_whatever_its_metadata_says() {
         "derived from the log"
     );
     assert!(back.recovery.is_some());
-    let cat = Catalog::open(d.path()).unwrap();
+    let cat = RunCatalog::open(d.path()).unwrap();
     let r = cat.reindex().unwrap();
     assert_eq!(r.incomplete.len(), 1);
     assert!(
@@ -888,7 +888,7 @@ fn a_run_whose_log_lost_frames_is_not_complete_whatever_its_metadata_says() {
 fn a_catalog_of_a_newer_tribo_is_refused_and_one_of_an_older_is_versioned() {
     let d = tempfile::tempdir().unwrap();
     {
-        let c = Catalog::open(d.path()).unwrap();
+        let c = RunCatalog::open(d.path()).unwrap();
         assert!(c.list(&Filter::default()).unwrap().is_empty());
     }
     let conn = rusqlite::Connection::open(d.path().join(catalog::CATALOG_FILE)).unwrap();
@@ -899,7 +899,7 @@ fn a_catalog_of_a_newer_tribo_is_refused_and_one_of_an_older_is_versioned() {
     conn.pragma_update(None, "user_version", catalog::CATALOG_VERSION + 1)
         .unwrap();
     drop(conn);
-    let e = Catalog::open(d.path()).err().unwrap().to_string();
+    let e = RunCatalog::open(d.path()).err().unwrap().to_string();
     assert!(e.contains("newer tribo") && e.contains("--reindex"), "{e}");
 }
 
@@ -918,7 +918,7 @@ fn a_catalog_from_before_setpoints_is_rebuilt_on_first_refresh() {
             m.label = Some(format!("{sp:?}"));
         });
     }
-    let cat = Catalog::open(d.path()).unwrap();
+    let cat = RunCatalog::open(d.path()).unwrap();
     assert!(
         cat.refresh(false).unwrap().is_some(),
         "new folders: rebuilt"
@@ -933,7 +933,7 @@ fn a_catalog_from_before_setpoints_is_rebuilt_on_first_refresh() {
     conn.execute_batch("ALTER TABLE runs DROP COLUMN temp_setpoint_c; PRAGMA user_version = 1;")
         .unwrap();
     drop(conn);
-    let cat = Catalog::open(d.path()).unwrap();
+    let cat = RunCatalog::open(d.path()).unwrap();
     assert!(
         cat.list(&Filter::default())
             .unwrap()

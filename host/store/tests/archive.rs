@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 use tribo_store::log::{LogHeader, LogReader, LogWriter};
-use tribo_store::{Catalog, Filter, Run, RunStatus};
+use tribo_store::{Filter, Run, RunCatalog, RunStatus};
 use tribo_wire::crc32::crc32;
 use tribo_wire::{DeviceMsg, SampleClock};
 
@@ -124,7 +124,7 @@ fn a_v1_run_folder_reads_whole_with_the_samples_v1_exported() {
     );
 
     // The catalog re-index lists it complete.
-    let cat = Catalog::open(dir.parent().unwrap()).unwrap();
+    let cat = RunCatalog::open(dir.parent().unwrap()).unwrap();
     let r = cat.reindex().unwrap();
     assert_eq!((r.indexed, r.unreadable.len()), (1, 0));
     let rows = cat.list(&Filter::default()).unwrap();

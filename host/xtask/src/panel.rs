@@ -1,4 +1,4 @@
-//! The front panel's browser tests (`host/tests/panel_browser.rs`): `tribo panel` driven in
+//! The front panel's browser tests (`host/tests/it/panel_browser.rs`): `tribo panel` driven in
 //! Debian's headless `chromium` through `chromedriver`, against a virtual rig. They are
 //! `#[ignore]`d in a plain `cargo test` (they need the browser); here chromium and its driver are
 //! installed when missing (root, apt-get), and the tests run: a missing browser is an error, never
@@ -27,8 +27,9 @@ pub fn browser_tests() -> Result<(), String> {
         "-p",
         "tribo",
         "--test",
-        "panel_browser",
+        "it",
         "--",
         "--ignored",
+        "panel_browser::",
     ]))
 }

@@ -1,4 +1,4 @@
-//! The lab catalog's tests (`host/catalog/tests/lab.rs`, `host/tests/lab_catalog.rs`) start a
+//! The lab catalog's tests (`host/catalog/tests/lab.rs`, `host/tests/it/lab_catalog.rs`) start a
 //! real PostgreSQL server of their own; CI must have its binaries and must not skip them.
 
 use crate::apt;

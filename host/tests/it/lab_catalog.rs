@@ -7,8 +7,8 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 use tribo_testkit::{synthetic_store, PgServer, ADMIN, ADMIN_PASSWORD};
 
-mod support;
-use support::TRIBO;
+use crate::support;
+use crate::support::TRIBO;
 
 fn tribo(args: &[&str], password: &str) -> Command {
     let mut c = support::command(args);

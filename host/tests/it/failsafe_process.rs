@@ -11,12 +11,10 @@
 //! * A held session (in-process rig, real time): the heartbeat thread alone keeps the lease through
 //!   a silence longer than it; dropping the hold sends `Safe`; without it the lease expires.
 
-mod support;
-
+use crate::support::{RigProcess, TRIBO};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use support::{RigProcess, TRIBO};
 use tribo::link::{Address, Link};
 use tribo_wire::{limits, FaultReason};
 

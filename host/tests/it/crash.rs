@@ -3,11 +3,10 @@
 //! that needs a real process); and the exit statuses of commands that leave or find a run
 //! incomplete (status 3, saying "incomplete: N of M blocks"), against those that do not.
 
-mod support;
+use crate::support::{tribo, TRIBO};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-use support::{tribo, TRIBO};
 use tribo::link::{Address, Link};
 use tribo::virtual_rig::VirtualArgs;
 use tribo_store::Run;

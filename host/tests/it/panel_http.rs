@@ -1,12 +1,12 @@
 //! `tribo panel` without a browser: who may open the page (loopback, or the access token), what
 //! the page's address serves, and the answers to commands when no rig is there.
 
-mod support;
+use crate::support;
 
+use crate::support::TRIBO;
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
-use support::TRIBO;
 
 struct Panel(Child, String);
 

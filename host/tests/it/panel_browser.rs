@@ -16,14 +16,12 @@
 //! so they are `#[ignore]`d in a plain `cargo test`; `cargo xtask ci` installs both when missing
 //! and runs them (`cargo test -p tribo --test panel_browser -- --ignored`), failing if they are absent.
 
-mod support;
-
+use crate::support::{RigProcess, TRIBO};
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-use support::{RigProcess, TRIBO};
 use tribo_wire::limits;
 
 fn which(name: &str) -> Option<PathBuf> {

@@ -1,7 +1,6 @@
 //! The `tribo sim` / `tribo fit --json` command-line contract that other tools rely on.
 
-mod support;
-use support::tribo;
+use crate::support::tribo;
 
 /// `tribo sim` of a Coulomb–viscous contact (μ0 = 0.03, μ1 = 0.012, 1.5 s) into `rec`, plus `extra`
 /// flags; the command must succeed.

@@ -8,11 +8,11 @@
 //! B's blocks on their way, and they were filed into the victim ("incomplete: 164 of 156 blocks",
 //! a host fit 0.024 ± 0.002 where the rig said 0.0200).
 
-mod support;
+use crate::support;
 
+use crate::support::{RigProcess, TRIBO};
 use std::path::Path;
 use std::process::Command;
-use support::{RigProcess, TRIBO};
 
 fn tribo(args: &[&str], store: &Path) -> std::process::Output {
     support::command(args)

@@ -6,11 +6,9 @@
 //! taken; later, every interruption exited 130, whichever signal it was.)
 #![cfg(unix)]
 
-mod support;
-
+use crate::support::{RigProcess, TRIBO};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
-use support::{RigProcess, TRIBO};
 
 /// Sends `signal` (`kill -SIGNAL`) to process `pid`.
 fn send(signal: &str, pid: u32) {

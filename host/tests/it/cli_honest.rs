@@ -2,10 +2,9 @@
 //! errors, closed pipes, `-q`, the rig constants that defaults stood in for, and advice that names
 //! flags which exist. Exit statuses as documented (0 ok, 1 error, 2 usage, 3 incomplete).
 
-mod support;
+use crate::support::tribo;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-use support::tribo;
 use tribo_physics::integrate::Method;
 use tribo_physics::sensor::{generate, RecordSpec, SensorModel};
 use tribo_physics::{FrictionLaw, Model, Record, Rig};
@@ -338,7 +337,7 @@ fn out_of_range_run_settings_are_usage_errors_naming_flag_and_range() {
 fn into_closed_pipe(args: &[&str]) -> Output {
     let (reader, writer) = std::io::pipe().unwrap();
     drop(reader);
-    let child = Command::new(env!("CARGO_BIN_EXE_tribo"))
+    let child = Command::new(crate::support::TRIBO)
         .args(args)
         .stdin(Stdio::null())
         .stdout(writer)

@@ -1,8 +1,7 @@
 //! The `tribo explain --json` command-line contract, on records written by this test.
 
-mod support;
+use crate::support::tribo;
 use std::path::{Path, PathBuf};
-use support::tribo;
 use tribo_explain::serde_json::{self, Value};
 use tribo_physics::integrate::Method;
 use tribo_physics::law::FrictionLaw;

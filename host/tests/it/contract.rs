@@ -11,19 +11,14 @@
 //! to print, and panicked (101) on a closed standard error.
 #![cfg(unix)]
 
-mod support;
-
+use crate::support::{RigProcess, TRIBO};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use support::{RigProcess, TRIBO};
 
+/// `tribo ARGS` run to its end in `dir` (the spawner of [`crate::support::command`]).
 fn tribo_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(TRIBO)
+    crate::support::command(args)
         .current_dir(dir)
-        .args(args)
-        .env_remove("TRIBO_CATALOG")
-        .env_remove("TRIBO_STORE")
-        .env_remove("TRIBO_PORT")
         .output()
         .expect("tribo runs")
 }
@@ -784,5 +779,88 @@ fn a_dimensionless_record_is_labelled_in_its_own_units() {
     assert!(
         !cycles.contains("Hz") && !cycles.contains(" m ") && cycles.contains("per unit τ"),
         "{cycles}"
+    );
+}
+
+/// `--json` is one global flag (`cmd::Global`): before or after the subcommand's name, a command
+/// with a JSON output prints the same object; a command without one refuses it (2, `error:`, the
+/// commands that have one named) before doing anything, never accepting and ignoring it.
+#[test]
+fn json_is_one_global_flag_taken_anywhere_and_refused_where_there_is_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = tribo_in(d, &["sim", "--duration-s", "2", "-o", "good.csv", "-q"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    std::fs::create_dir(d.join("st")).unwrap();
+    for lines in [
+        [
+            vec!["fit", "good.csv", "--json"],
+            vec!["--json", "fit", "good.csv"],
+            vec!["fit", "--json", "good.csv"],
+        ],
+        [
+            vec!["runs", "--store", "st", "--json"],
+            vec!["--json", "runs", "--store", "st"],
+            vec!["-q", "runs", "--json", "--store", "st"],
+        ],
+    ] {
+        let outs: Vec<String> = lines
+            .iter()
+            .map(|args| {
+                let o = tribo_in(d, args);
+                assert_eq!(
+                    o.status.code(),
+                    Some(0),
+                    "tribo {args:?}: {}",
+                    text(&o.stderr)
+                );
+                let out = text(&o.stdout);
+                let v: serde_json::Value = serde_json::from_str(&out)
+                    .unwrap_or_else(|e| panic!("tribo {args:?} printed no JSON ({e}): {out}"));
+                assert!(v.is_object(), "tribo {args:?}: {out}");
+                out
+            })
+            .collect();
+        assert!(
+            outs.iter().all(|o| *o == outs[0]),
+            "{lines:?} differ: {outs:#?}"
+        );
+    }
+    for args in [
+        vec!["devices", "--json"],
+        vec!["--json", "devices"],
+        vec!["--json", "sim", "--duration-s", "2", "-o", "refused.csv"],
+        vec![
+            "report",
+            "good.csv",
+            "--no-png",
+            "-o",
+            "refused-report",
+            "--json",
+        ],
+    ] {
+        let o = tribo_in(d, &args);
+        let err = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "tribo {args:?}: {err}");
+        assert!(err.starts_with("error: --json:"), "tribo {args:?}: {err}");
+        assert!(
+            err.contains(
+                "the commands that print one are fit, explain, onboard, runs, selftest, status, sync, table"
+            ),
+            "tribo {args:?}: {err}"
+        );
+        assert!(
+            o.stdout.is_empty(),
+            "tribo {args:?} printed {}",
+            text(&o.stdout)
+        );
+    }
+    assert!(
+        !d.join("refused.csv").exists(),
+        "a refused `sim --json` wrote its record"
+    );
+    assert!(
+        !d.join("refused-report").exists(),
+        "a refused `report --json` wrote its report"
     );
 }

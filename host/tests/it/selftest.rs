@@ -2,55 +2,16 @@
 //! technician runs it: every measured row passes on a sound rig (exit 0), and a broken converter
 //! input (`--fault`) fails its row, named, with a non-zero exit.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Output, Stdio};
+use crate::support::{command, RigProcess};
+use std::process::Output;
 
-const TRIBO: &str = env!("CARGO_BIN_EXE_tribo");
-
-/// A `tribo rig --virtual` process, killed when dropped.
-struct Rig {
-    child: Child,
-    addr: String,
+/// A `tribo rig --virtual --speed 2` process with `extra` flags, killed when dropped.
+fn rig(extra: &[&str]) -> RigProcess {
+    RigProcess::start_with(2.0, extra)
 }
 
-impl Drop for Rig {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn rig(extra: &[&str]) -> Rig {
-    let mut child = Command::new(TRIBO)
-        .args([
-            "rig",
-            "--virtual",
-            "--listen",
-            "127.0.0.1:0",
-            "--speed",
-            "2",
-        ])
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("tribo rig starts");
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let first = lines.next().expect("the rig prints its address").unwrap();
-    let addr = first
-        .split("listening on ")
-        .nth(1)
-        .unwrap_or_else(|| panic!("no address in {first:?}"))
-        .trim()
-        .to_string();
-    // The console goes on: keep reading it so the rig never blocks on a full pipe.
-    std::thread::spawn(move || for _ in lines.by_ref() {});
-    Rig { child, addr }
-}
-
-fn selftest(r: &Rig, extra: &[&str]) -> Output {
-    Command::new(TRIBO)
-        .args(["selftest", "--port", &r.addr, "--seconds", "1"])
+fn selftest(r: &RigProcess, extra: &[&str]) -> Output {
+    command(&["selftest", "--port", &r.addr, "--seconds", "1"])
         .args(extra)
         .output()
         .expect("tribo selftest runs")
@@ -188,7 +149,7 @@ fn a_dead_front_end_fails_as_a_rail_in_the_json_too() {
 
 #[test]
 fn a_fault_flag_that_names_no_channel_is_refused_with_the_forms_it_takes() {
-    let o = Command::new(TRIBO)
+    let o = command(&[])
         .args([
             "rig",
             "--virtual",
