@@ -225,6 +225,9 @@ pub struct App<'a> {
     selftest: Option<selftest::SelfTestRun>,
     /// A deliberate panic or stall the board must carry out (the application never panics).
     deliberate: Option<crate::selftest::Deliberate>,
+    /// A deliberate panic or stall was accepted: the ECR source is at 0 V and its controller no
+    /// longer sets it, until the reset that follows.
+    ecr_parked: bool,
 }
 
 macro_rules! info {
@@ -288,6 +291,7 @@ impl<'a> App<'a> {
             long_press_done: false,
             selftest: None,
             deliberate: None,
+            ecr_parked: false,
         }
     }
 
@@ -467,6 +471,7 @@ impl<'a> App<'a> {
             }
         }
         if self.state != RigState::Running
+            && !self.ecr_parked
             && self
                 .last_ecr_us
                 .is_none_or(|t| now.saturating_sub(t) >= self.cfg.ecr_period_us as u64)

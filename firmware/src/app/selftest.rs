@@ -17,7 +17,8 @@ pub(super) enum SelfTestRun {
 impl App<'_> {
     /// Starts a check: refused while a run is armed, running or ending, while another check runs,
     /// (the flash check) while the last run is still being written to flash, and (a deliberate
-    /// panic or stall) while the heater heats or the magnet holds.
+    /// panic or stall) while the heater heats or the magnet holds; an accepted deliberate act
+    /// first sets the ECR source to 0 V.
     pub(super) fn start_selftest<H: Hardware>(
         &mut self,
         hw: &mut H,
@@ -81,6 +82,11 @@ impl App<'_> {
                 if self.release.is_on() {
                     return Err(ErrorCode::Busy);
                 }
+                // The ECR source is on whenever the rig is idle (the controller keeps measuring
+                // the contact, at most 2 mV and 5 mA): it is not a reason to refuse, but it goes to
+                // 0 V now and stays there until the reset, so that the reset switches nothing off.
+                hw.set_ecr_source(0.0);
+                self.ecr_parked = true;
                 self.deliberate = Some(if check == SelfTestCheck::Panic {
                     Deliberate::Panic
                 } else {

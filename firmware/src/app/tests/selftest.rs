@@ -261,3 +261,17 @@ fn a_deliberate_fault_is_refused_while_the_magnet_holds_and_leaves_it_holding() 
     assert_eq!(b.command(HostMsg::SelfTest(SelfTestCheck::Stall)).0, Ok(()));
     assert_eq!(b.app.take_deliberate(), Some(Deliberate::Stall));
 }
+
+#[test]
+fn an_accepted_deliberate_fault_first_sets_the_ecr_source_to_zero_and_keeps_it_there() {
+    let mut b = Bench::new();
+    b.run_for(500);
+    // Idle, the ECR controller measures the contact: its source is on.
+    assert!(b.hw.ecr_source > 0.0, "{}", b.hw.ecr_source);
+    assert_eq!(b.command(HostMsg::SelfTest(SelfTestCheck::Stall)).0, Ok(()));
+    assert_eq!(b.hw.ecr_source, 0.0, "off before the acknowledgement");
+    assert_eq!(b.app.take_deliberate(), Some(Deliberate::Stall));
+    // A stalled task takes the watchdog's ~300 ms: the controller does not switch it on again.
+    b.run_for(1000);
+    assert_eq!(b.hw.ecr_source, 0.0);
+}
