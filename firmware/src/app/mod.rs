@@ -472,6 +472,7 @@ impl<'a> App<'a> {
         }
         if self.state != RigState::Running
             && !self.ecr_parked
+            && !self.selftest_drives_ecr()
             && self
                 .last_ecr_us
                 .is_none_or(|t| now.saturating_sub(t) >= self.cfg.ecr_period_us as u64)
@@ -535,7 +536,7 @@ impl<'a> App<'a> {
             }
         }
         self.selftest_step(hw);
-        let lamps = self.lamps(now);
+        let lamps = self.selftest_lamps().unwrap_or_else(|| self.lamps(now));
         hw.set_lamps(lamps);
     }
 
