@@ -339,3 +339,25 @@ fn a_stuck_range_pin_fails_only_the_range_output_and_a_live_heater_or_magnet_ref
     );
     assert!(matches!(b.hw.magnet(), MagnetDrive::Hold { .. }));
 }
+
+#[test]
+fn an_arm_during_an_outputs_check_gives_the_ecr_front_end_back_to_its_controller() {
+    let mut b = Bench::new();
+    assert_eq!(
+        b.command(HostMsg::Configure(Configure::real_rig(0.3))).0,
+        Ok(())
+    );
+    b.run_for(300);
+    let before = (b.hw.ecr_range, b.hw.ecr_source);
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Outputs)).0,
+        Ok(())
+    );
+    // Two polls: the probe drives range 0b001 and the 2 mV source.
+    b.run_for(1);
+    assert_eq!(b.hw.ecr_range, 1);
+    assert_ne!((b.hw.ecr_range, b.hw.ecr_source), before);
+    assert_eq!(b.command(HostMsg::Arm).0, Ok(()));
+    assert!(!b.app.selftest_running());
+    assert_eq!((b.hw.ecr_range, b.hw.ecr_source), before);
+}
