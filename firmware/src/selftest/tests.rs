@@ -268,28 +268,28 @@ fn each_input_s_rest_window_holds_at_its_edges_and_fails_just_past_them() {
         at_rail: 0,
     };
     // One count inside each edge passes; a few counts beyond fails.
-    for ch in 0..4 {
+    for (ch, c) in cal.iter().enumerate().take(4) {
         let (lo, hi) = rest_window(ch);
-        let count = cal[ch].gain;
+        let count = c.gain;
         for (edge, inward) in [(lo, 1.0f32), (hi, -1.0)] {
             assert!(
-                judge_identity(&at(ch, edge + inward * 1.5 * count), ch, &cal[ch]).is_ok(),
+                judge_identity(&at(ch, edge + inward * 1.5 * count), ch, c).is_ok(),
                 "channel {ch} at {edge}"
             );
             assert!(
-                judge_identity(&at(ch, edge - inward * 3.0 * count), ch, &cal[ch]).is_err()
+                judge_identity(&at(ch, edge - inward * 3.0 * count), ch, c).is_err()
                     || (ch == 3 && edge == hi),
                 "channel {ch} past {edge}"
             );
         }
     }
     // A grounded input with an offset of 300 counts fails on every channel.
-    for ch in 0..4 {
+    for (ch, c) in cal.iter().enumerate().take(4) {
         let g = ChannelStats {
             mean: 300.0,
             ..at(ch, 0.0)
         };
-        assert!(judge_identity(&g, ch, &cal[ch]).is_err(), "grounded {ch}");
+        assert!(judge_identity(&g, ch, c).is_err(), "grounded {ch}");
     }
     // At rest as the virtual rig reads (x held at x0, v and F at zero, ECR 0.1 V): every swap
     // but velocity <-> force fails some channel.

@@ -809,7 +809,7 @@ mod tests {
 
     #[test]
     fn a_converter_report_reads_as_rows_and_a_stuck_input_is_named() {
-        let rows = converter_rows(&report());
+        let rows = converter_rows(&report(), false);
         let names: Vec<_> = rows.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(
             names,
@@ -832,7 +832,7 @@ mod tests {
             at_rail: 0,
         };
         r.last_index = 19_000;
-        let rows = converter_rows(&r);
+        let rows = converter_rows(&r, false);
         assert_eq!(rows[0].verdict, Verdict::Fail, "{:?}", rows[0]);
         assert_eq!(rows[2].verdict, Verdict::Fail);
         assert!(
