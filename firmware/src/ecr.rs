@@ -25,6 +25,18 @@ pub const MAX_SOURCE_V: f32 = 2e-3;
 pub const MAX_CURRENT_A: f32 = 5e-3;
 /// Source voltage at start-up, before anything is known about the contact, V.
 pub const START_SOURCE_V: f32 = 1e-4;
+/// The source divider between the DAC (0–3.3 V) and the contact: 1000:1.
+pub const SOURCE_DIVIDER: f32 = 1000.0;
+
+/// The 12-bit DAC code that sets the source to `volts` (the divider's input clamped to the DAC's
+/// 0–3.3 V; a NaN sets 0).
+pub fn source_dac_code(volts: f32) -> u16 {
+    let dac_v = (volts * SOURCE_DIVIDER).clamp(0.0, FULL_SCALE_V);
+    if dac_v.is_nan() {
+        return 0;
+    }
+    (dac_v / FULL_SCALE_V * 4095.0) as u16
+}
 /// Output fraction of full scale above which the gain is reduced.
 pub const DOWN_FRACTION: f32 = 0.95;
 /// Output fraction of full scale below which the gain is raised.

@@ -177,6 +177,29 @@ pub trait RunFlash {
     }
 }
 
+/// What the board reads back of its outputs (the self-test's output rows), each `None` where the
+/// board cannot sense it. Pin levels are the pins' input data (IDR on the STM32H7: the pad's level,
+/// not the output register), so a pin held by something else than its driver reads what it is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SensedOutputs {
+    /// The heater MOSFET gate pin (PD12).
+    pub heater_pin: Option<bool>,
+    /// The H-bridge inputs: bit 0 the hold leg (PE9), bit 1 the reverse leg (PE11).
+    pub magnet_pins: Option<u8>,
+    /// The ECR source DAC's output data register (the 12-bit code it converts).
+    pub ecr_dac_code: Option<u16>,
+    /// The ECR range-select pins, PG0..PG2 as bits 0..2.
+    pub ecr_range_pins: Option<u8>,
+    /// The lamp pins: bit 0 green (PB0), 1 amber (PE1), 2 red (PB14).
+    pub lamp_pins: Option<u8>,
+}
+
+/// Reading the outputs back.
+pub trait OutputSense {
+    /// The outputs as they read back now (see [`SensedOutputs`]).
+    fn sense_outputs(&mut self) -> SensedOutputs;
+}
+
 /// A monotonic clock, microseconds.
 pub trait Clock {
     fn now_us(&self) -> u64;
@@ -184,7 +207,16 @@ pub trait Clock {
 
 /// Everything the application drives.
 pub trait Hardware:
-    Magnet + Thermocouple + HeaterOutput + EcrFrontEnd + SampleSource + Button + Led + Link + RunFlash
+    Magnet
+    + Thermocouple
+    + HeaterOutput
+    + EcrFrontEnd
+    + SampleSource
+    + Button
+    + Led
+    + Link
+    + RunFlash
+    + OutputSense
 {
 }
 
@@ -197,7 +229,8 @@ impl<
             + Button
             + Led
             + Link
-            + RunFlash,
+            + RunFlash
+            + OutputSense,
     > Hardware for T
 {
 }

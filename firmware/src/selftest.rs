@@ -18,8 +18,8 @@
 
 use crate::hal::{FlashGeometry, RunFlash, SampleSource, ANALOG_CHANNELS};
 use crate::wire::{
-    filler_byte, BootReport, ChannelStats, ConverterReport, FlashReport, ResetCause, SampleClock,
-    SELFTEST_CHANNELS,
+    filler_byte, BootReport, ChannelStats, ConverterReport, FlashReport, OutputCheck,
+    OutputsReport, ResetCause, SampleClock, SELFTEST_CHANNELS, SELFTEST_OUTPUTS,
 };
 
 const _: () = assert!(SELFTEST_CHANNELS == ANALOG_CHANNELS);
@@ -336,6 +336,133 @@ impl FlashProbe {
     }
 }
 
+/// The ECR range-select patterns an outputs check drives, one per step: every pin high alone, each
+/// pin low while another is high, within the ranges that exist (`0..ecr::RANGES`).
+pub const RANGE_PATTERNS: [u8; 5] = [0b000, 0b001, 0b010, 0b100, 0b011];
+/// The lamp patterns, one per step (green bit 0, amber 1, red 2).
+pub const LAMP_PATTERNS: [u8; 5] = [0b000, 0b001, 0b010, 0b100, 0b111];
+/// The ECR source, V, one per step: off and the largest the source may give, alternately.
+pub const SOURCE_PATTERNS: [f32; 5] = [
+    0.0,
+    crate::ecr::MAX_SOURCE_V,
+    0.0,
+    crate::ecr::MAX_SOURCE_V,
+    crate::ecr::START_SOURCE_V,
+];
+/// The outputs of an outputs check, in the report's order, and the pins the board reads.
+pub const OUTPUT_NAMES: [&str; crate::wire::SELFTEST_OUTPUTS] =
+    ["heater", "magnet", "ecr-source", "ecr-range", "lamps"];
+
+/// An outputs check in progress: at each step (one per application poll) the outputs read back
+/// are compared with what the previous step drove, then the next pattern is driven; the heater and
+/// the magnet stay off throughout (the check is refused while either is on), and their pins must
+/// read low. A pin's input level settles within a few clock cycles of its output; a poll apart
+/// leaves ~0.5 ms.
+#[derive(Debug, Clone)]
+pub struct OutputsProbe {
+    step: usize,
+    report: OutputsReport,
+}
+
+impl Default for OutputsProbe {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl OutputsProbe {
+    pub const fn new() -> Self {
+        OutputsProbe {
+            step: 0,
+            report: OutputsReport {
+                steps: 0,
+                outputs: [OutputCheck {
+                    sensed: false,
+                    mismatches: 0,
+                    driven: 0,
+                    read: 0,
+                }; SELFTEST_OUTPUTS],
+            },
+        }
+    }
+
+    fn note(&mut self, i: usize, driven: u16, read: Option<u16>) {
+        let o = &mut self.report.outputs[i];
+        let Some(read) = read else {
+            o.sensed = false;
+            return;
+        };
+        o.sensed = true;
+        if read != driven {
+            if o.mismatches == 0 {
+                (o.driven, o.read) = (driven, read);
+            }
+            o.mismatches = o.mismatches.saturating_add(1);
+        } else if o.mismatches == 0 {
+            (o.driven, o.read) = (driven, read);
+        }
+    }
+
+    /// One step: compares what reads back with what the last step drove, then drives the next
+    /// pattern (ECR range and source here, the lamps through [`OutputsProbe::lamps`]); the report
+    /// once every pattern was read back. The caller restores the ECR front end afterwards.
+    pub fn step<H: crate::hal::EcrFrontEnd + crate::hal::OutputSense + ?Sized>(
+        &mut self,
+        hw: &mut H,
+    ) -> Option<OutputsReport> {
+        if self.step > 0 {
+            let k = self.step - 1;
+            let s = hw.sense_outputs();
+            self.note(0, 0, s.heater_pin.map(u16::from));
+            self.note(1, 0, s.magnet_pins.map(u16::from));
+            self.note(
+                2,
+                crate::ecr::source_dac_code(SOURCE_PATTERNS[k]),
+                s.ecr_dac_code,
+            );
+            self.note(3, RANGE_PATTERNS[k] as u16, s.ecr_range_pins.map(u16::from));
+            self.note(4, LAMP_PATTERNS[k] as u16, s.lamp_pins.map(u16::from));
+            self.report.steps = self.step as u8;
+        }
+        if self.step >= RANGE_PATTERNS.len() {
+            return Some(self.report);
+        }
+        hw.set_ecr_range(RANGE_PATTERNS[self.step]);
+        hw.set_ecr_source(SOURCE_PATTERNS[self.step]);
+        self.step += 1;
+        None
+    }
+
+    /// The lamps of the pattern out now (the application sets them after its step).
+    pub fn lamps(&self) -> crate::hal::Lamps {
+        let b = LAMP_PATTERNS[self.step.saturating_sub(1).min(LAMP_PATTERNS.len() - 1)];
+        crate::hal::Lamps {
+            green: b & 1 != 0,
+            amber: b & 2 != 0,
+            red: b & 4 != 0,
+        }
+    }
+}
+
+/// An outputs check: `Err` names the outputs that read back wrong (by [`OUTPUT_NAMES`] index).
+pub fn judge_output(r: &OutputsReport, i: usize) -> Option<Result<(), &'static str>> {
+    let o = r.outputs.get(i)?;
+    if !o.sensed {
+        return None;
+    }
+    Some(if r.steps as usize != RANGE_PATTERNS.len() {
+        Err("the check did not drive every pattern")
+    } else if o.mismatches > 0 {
+        Err(match i {
+            0 | 1 => "a pin reads high while the output is off",
+            2 => "the DAC does not convert the code written",
+            _ => "a pin does not read back what was driven",
+        })
+    } else {
+        Ok(())
+    })
+}
+
 /// A throughput check in progress: filler frames `next..frames` still to send.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Throughput {
@@ -414,6 +541,58 @@ pub fn judge_channel(s: &ChannelStats, samples: u32) -> Result<(), ChannelProble
         return Err(ChannelProblem::Stuck);
     }
     Ok(())
+}
+
+/// The held position of the pin on the rig as built (`Configure::real_rig`'s initial amplitude), m.
+pub const REST_X0_M: f32 = 667e-6;
+/// Largest speed of a pin at rest, m/s: 1 % of the velocity channel's ±0.25 m/s.
+pub const REST_SPEED_M_S: f32 = 2.5e-3;
+/// Largest force on a pin at rest, N: static friction, at most μs·N ≈ 0.1 × 0.7 N on this rig;
+/// 10 % of the force channel's ±1 N.
+pub const REST_FORCE_N: f32 = 0.1;
+
+/// Each analog input's signature at rest on the rig as built (front ends connected, the pin held
+/// by the magnet at x0 or come to rest, the contact loaded, the ECR controller measuring it): the
+/// window, in the channel's SI unit, its mean must fall in.
+///
+/// * displacement: within ±1.1·x0 (held at x0, or at rest inside the stick band around 0);
+/// * velocity: within ±[`REST_SPEED_M_S`] (a pin at rest);
+/// * force: within ±[`REST_FORCE_N`] (static friction at most);
+/// * ECR: from the controller's lower switching threshold (`ecr::UP_FRACTION` of full scale:
+///   below it the controller raises the gain, so a conducting contact reads above it) to full
+///   scale. An open contact (unloaded) reads below it, like a grounded input.
+///
+/// Bipolar channels rest at mid-scale and the ECR output above a few tens of mV, so an input
+/// grounded (even through an offset of a few hundred counts) fails its window, and every swap of
+/// two inputs but velocity ↔ force fails the window of one of the two at least (a bipolar input's
+/// mid-scale on the ECR pin reads 1.65 V, a plausible ECR output). Velocity and force both rest at their zero: a swap of those
+/// two is not seen at rest.
+pub fn rest_window(channel: usize) -> (f32, f32) {
+    match channel {
+        0 => (-1.1 * REST_X0_M, 1.1 * REST_X0_M),
+        1 => (-REST_SPEED_M_S, REST_SPEED_M_S),
+        2 => (-REST_FORCE_N, REST_FORCE_N),
+        _ => (
+            crate::ecr::UP_FRACTION * crate::ecr::FULL_SCALE_V,
+            crate::ecr::FULL_SCALE_V,
+        ),
+    }
+}
+
+/// A channel's mean at rest against its [`rest_window`], through its calibration: `Ok(si)` or
+/// `Err(si)` outside it.
+pub fn judge_identity(
+    s: &ChannelStats,
+    channel: usize,
+    cal: &crate::wire::ChannelCal,
+) -> Result<f32, f32> {
+    let si = cal.gain * (s.mean.clamp(0.0, 65535.0) - cal.zero);
+    let (lo, hi) = rest_window(channel);
+    if (lo..=hi).contains(&si) {
+        Ok(si)
+    } else {
+        Err(si)
+    }
 }
 
 /// A flash check: `Err` names the first thing wrong.

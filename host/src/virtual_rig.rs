@@ -9,7 +9,8 @@ use std::path::PathBuf;
 use std::time::Duration;
 use tribo_physics::FrictionLaw;
 use tribo_rig::{
-    ChannelFault, ConverterFault, HostEvent, ServeOptions, TcpRig, VirtualRig, VirtualRigConfig,
+    ChannelFault, ConverterFault, HostEvent, OutputFault, ServeOptions, TcpRig, VirtualRig,
+    VirtualRigConfig,
 };
 
 /// The simulated rig, from a TOML file and/or flags (flags win).
@@ -59,8 +60,9 @@ pub struct VirtualArgs {
     pub speed: f64,
     /// Break an analog input of the simulated converter, to see `tribo selftest` (or a run)
     /// catch it: `stuck:CH` (the channel reads one code, mid-scale, or `stuck:CH=CODE`) or
-    /// `dead:CH` (its front end dead: the bottom rail, code 0). CH: x (displacement), v
-    /// (velocity), f (force), ecr. Repeat the flag for several.
+    /// `dead:CH` (its front end dead: the bottom rail, code 0) or `ground:CH` (the input grounded
+    /// through a small offset: code 300, or `ground:CH=CODE`, plus the converter's noise). CH: x
+    /// (displacement), v (velocity), f (force), ecr. Repeat the flag for several.
     #[arg(long = "fault", value_name = "FAULT", value_parser = parse_fault)]
     pub faults: Vec<(usize, ChannelFault)>,
     /// Break the simulated thermocouple or its converter: `open` (a broken wire: the chip's
@@ -69,6 +71,15 @@ pub struct VirtualArgs {
     /// `cj=C` (the cold junction reads C °C).
     #[arg(long = "tc-fault", value_name = "FAULT", value_parser = parse_tc_fault)]
     pub tc_fault: Option<ConverterFault>,
+    /// Wire two analog inputs to each other's signal, e.g. `x,v` (channels as for --fault): the
+    /// self-test's channel identity must catch it.
+    #[arg(long = "swap-channels", value_name = "A,B", value_parser = parse_swap)]
+    pub swap_channels: Option<(usize, usize)>,
+    /// Make an output read back wrong: `heater` (its pin high while off), `magnet` (the hold leg
+    /// high while off), `ecr-source` (the DAC converts 0), `ecr-range` (PG1 stuck low) or `lamps`
+    /// (the red lamp's pin stuck low).
+    #[arg(long = "stuck-output", value_name = "OUTPUT", value_parser = parse_output_fault)]
+    pub stuck_output: Option<OutputFault>,
     /// Print the rig's console (state-changing commands, faults, resets) on standard output.
     #[arg(skip)]
     pub log_events: bool,
@@ -91,27 +102,62 @@ impl Default for VirtualArgs {
             speed: 1.0,
             faults: Vec::new(),
             tc_fault: None,
+            swap_channels: None,
+            stuck_output: None,
             log_events: false,
         }
     }
 }
 
-/// A `--fault` value: `stuck:CH[=CODE]` or `dead:CH`, CH one of x, v, f, ecr (or their names).
+/// A channel's letter or name: its converter index.
+fn channel_index(ch: &str) -> Option<usize> {
+    Some(match ch {
+        "x" | "displacement" => 0,
+        "v" | "velocity" => 1,
+        "f" | "force" => 2,
+        "ecr" => 3,
+        _ => return None,
+    })
+}
+
+/// A `--swap-channels` value: `A,B`, two different channels of x, v, f, ecr.
+pub fn parse_swap(s: &str) -> Result<(usize, usize), String> {
+    let usage = "expected A,B: two different channels of x, v, f, ecr (e.g. v,f)";
+    let (a, b) = s.split_once(',').ok_or_else(|| format!("{s:?}: {usage}"))?;
+    match (channel_index(a.trim()), channel_index(b.trim())) {
+        (Some(a), Some(b)) if a != b => Ok((a, b)),
+        _ => Err(format!("{s:?}: {usage}")),
+    }
+}
+
+/// A `--stuck-output` value (see [`VirtualArgs::stuck_output`]).
+pub fn parse_output_fault(s: &str) -> Result<OutputFault, String> {
+    Ok(match s {
+        "heater" => OutputFault::Heater,
+        "magnet" => OutputFault::Magnet,
+        "ecr-source" => OutputFault::EcrSource,
+        "ecr-range" => OutputFault::EcrRange,
+        "lamps" => OutputFault::Lamps,
+        _ => {
+            return Err(format!(
+                "{s:?}: expected heater, magnet, ecr-source, ecr-range or lamps"
+            ))
+        }
+    })
+}
+
+/// A `--fault` value: `stuck:CH[=CODE]`, `dead:CH` or `ground:CH[=CODE]`, CH one of x, v, f, ecr
+/// (or their names).
 pub fn parse_fault(s: &str) -> Result<(usize, ChannelFault), String> {
     let usage =
-        "expected stuck:CH, stuck:CH=CODE or dead:CH, CH one of x, v, f, ecr (e.g. stuck:x)";
+        "expected stuck:CH, stuck:CH=CODE, dead:CH, ground:CH or ground:CH=CODE, CH one of \
+                 x, v, f, ecr (e.g. stuck:x)";
     let (kind, rest) = s.split_once(':').ok_or_else(|| format!("{s:?}: {usage}"))?;
     let (ch, code) = match rest.split_once('=') {
         Some((c, code)) => (c, Some(code)),
         None => (rest, None),
     };
-    let channel = match ch {
-        "x" | "displacement" => 0,
-        "v" | "velocity" => 1,
-        "f" | "force" => 2,
-        "ecr" => 3,
-        _ => return Err(format!("{s:?}: no channel {ch:?}; {usage}")),
-    };
+    let channel = channel_index(ch).ok_or_else(|| format!("{s:?}: no channel {ch:?}; {usage}"))?;
     let fault = match (kind, code) {
         ("stuck", None) => ChannelFault::Stuck(32_768),
         ("stuck", Some(c)) => ChannelFault::Stuck(
@@ -119,6 +165,11 @@ pub fn parse_fault(s: &str) -> Result<(usize, ChannelFault), String> {
                 .map_err(|_| format!("{s:?}: the code must be a count 0–65535"))?,
         ),
         ("dead", None) => ChannelFault::Dead,
+        ("ground", None) => ChannelFault::Grounded(300),
+        ("ground", Some(c)) => ChannelFault::Grounded(
+            c.parse()
+                .map_err(|_| format!("{s:?}: the code must be a count 0–65535"))?,
+        ),
         _ => return Err(format!("{s:?}: {usage}")),
     };
     Ok((channel, fault))
@@ -250,6 +301,8 @@ impl VirtualArgs {
             rig.set_channel_fault(channel, Some(fault));
         }
         rig.set_thermocouple_fault(self.tc_fault);
+        rig.swap_channels(self.swap_channels);
+        rig.set_output_fault(self.stuck_output);
         Ok((rig, opts))
     }
 

@@ -151,7 +151,13 @@ impl App<'_> {
             Some(p) => p.reset(&cfg).is_ok(),
             None => false,
         };
-        // A self-test check of the converter or the flash gives way to the run.
+        // A self-test check of the converter or the flash gives way to the run; an outputs check
+        // gives the ECR front end back to its controller first (the run's range track starts
+        // from the controller's range).
+        if self.selftest_drives_ecr() {
+            hw.set_ecr_range(self.ecr.range());
+            hw.set_ecr_source(self.ecr.source_v());
+        }
         self.selftest = None;
         hw.adc_stop();
         // A converter that does not start is caught by the release interlock (NotSampling).

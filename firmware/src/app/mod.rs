@@ -225,6 +225,9 @@ pub struct App<'a> {
     selftest: Option<selftest::SelfTestRun>,
     /// A deliberate panic or stall the board must carry out (the application never panics).
     deliberate: Option<crate::selftest::Deliberate>,
+    /// A deliberate panic or stall was accepted: the ECR source is at 0 V and its controller no
+    /// longer sets it, until the reset that follows.
+    ecr_parked: bool,
 }
 
 macro_rules! info {
@@ -288,6 +291,7 @@ impl<'a> App<'a> {
             long_press_done: false,
             selftest: None,
             deliberate: None,
+            ecr_parked: false,
         }
     }
 
@@ -467,6 +471,8 @@ impl<'a> App<'a> {
             }
         }
         if self.state != RigState::Running
+            && !self.ecr_parked
+            && !self.selftest_drives_ecr()
             && self
                 .last_ecr_us
                 .is_none_or(|t| now.saturating_sub(t) >= self.cfg.ecr_period_us as u64)
@@ -530,7 +536,7 @@ impl<'a> App<'a> {
             }
         }
         self.selftest_step(hw);
-        let lamps = self.lamps(now);
+        let lamps = self.selftest_lamps().unwrap_or_else(|| self.lamps(now));
         hw.set_lamps(lamps);
     }
 

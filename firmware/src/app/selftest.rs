@@ -2,7 +2,9 @@
 //! of [`crate::selftest`], one bounded step per poll.
 
 use super::*;
-use crate::selftest::{ConverterProbe, Deliberate, FlashProbe, Throughput, CONVERTER_MS};
+use crate::selftest::{
+    ConverterProbe, Deliberate, FlashProbe, OutputsProbe, Throughput, CONVERTER_MS,
+};
 use crate::wire::{SelfTestCheck, SelfTestReport, FILLER_MAX};
 
 /// A self-test check in progress.
@@ -10,6 +12,7 @@ pub(super) enum SelfTestRun {
     Converter(ConverterProbe),
     Flash(FlashProbe),
     Throughput(Throughput),
+    Outputs(OutputsProbe),
     /// A report that the link did not take yet.
     Report(SelfTestReport),
 }
@@ -17,7 +20,8 @@ pub(super) enum SelfTestRun {
 impl App<'_> {
     /// Starts a check: refused while a run is armed, running or ending, while another check runs,
     /// (the flash check) while the last run is still being written to flash, and (a deliberate
-    /// panic or stall) while the heater heats or the magnet holds.
+    /// panic or stall) while the heater heats or the magnet holds; an accepted deliberate act
+    /// first sets the ECR source to 0 V.
     pub(super) fn start_selftest<H: Hardware>(
         &mut self,
         hw: &mut H,
@@ -69,6 +73,17 @@ impl App<'_> {
                     },
                 ))
             }
+            SelfTestCheck::Outputs => {
+                // Heater and magnet are checked off (their pins must read low): a live output is
+                // not switched off for a check, nor read while it switches.
+                if self.heater.heating() {
+                    return Err(ErrorCode::Interlock(Interlock::HeaterOn));
+                }
+                if self.release.is_on() {
+                    return Err(ErrorCode::Busy);
+                }
+                SelfTestRun::Outputs(OutputsProbe::new())
+            }
             SelfTestCheck::Panic | SelfTestCheck::Stall => {
                 // The reset it provokes makes the heater safe as well, but a bring-up check must
                 // not be the way a live output goes off: the plate is let cool first.
@@ -81,6 +96,11 @@ impl App<'_> {
                 if self.release.is_on() {
                     return Err(ErrorCode::Busy);
                 }
+                // The ECR source is on whenever the rig is idle (the controller keeps measuring
+                // the contact, at most 2 mV and 5 mA): it is not a reason to refuse, but it goes to
+                // 0 V now and stays there until the reset, so that the reset switches nothing off.
+                hw.set_ecr_source(0.0);
+                self.ecr_parked = true;
                 self.deliberate = Some(if check == SelfTestCheck::Panic {
                     Deliberate::Panic
                 } else {
@@ -97,6 +117,19 @@ impl App<'_> {
     /// What the board must do on purpose now that the command was answered (once).
     pub fn take_deliberate(&mut self) -> Option<Deliberate> {
         self.deliberate.take()
+    }
+
+    /// The lamps an outputs check drives now, if one runs.
+    pub(super) fn selftest_lamps(&self) -> Option<Lamps> {
+        match &self.selftest {
+            Some(SelfTestRun::Outputs(p)) => Some(p.lamps()),
+            _ => None,
+        }
+    }
+
+    /// An outputs check drives the ECR front end: its controller waits.
+    pub(super) fn selftest_drives_ecr(&self) -> bool {
+        matches!(self.selftest, Some(SelfTestRun::Outputs(_)))
     }
 
     /// A self-test check is under way.
@@ -132,6 +165,16 @@ impl App<'_> {
                 SelfTestReport::Converter(r)
             }),
             SelfTestRun::Flash(p) => p.step(hw, now).map(SelfTestReport::Flash),
+            SelfTestRun::Outputs(p) => p.step(hw).map(|r| {
+                // The ECR front end back as its controller left it.
+                hw.set_ecr_range(self.ecr.range());
+                hw.set_ecr_source(if self.ecr_parked {
+                    0.0
+                } else {
+                    self.ecr.source_v()
+                });
+                SelfTestReport::Outputs(r)
+            }),
             // One filler per poll: it is built and encoded here (~12k instructions on the M7 for
             // 256 bytes, `cargo xtask target-test app::selftest_checks`), where a run frame is
             // only copied from the store; two would break the poll's budget. That offers the link

@@ -256,3 +256,85 @@ fn the_thermocouple_row_judges_each_fault_the_chip_can_show() {
         Err(BadRead::Missing { .. })
     ));
 }
+
+#[test]
+fn each_input_s_rest_window_holds_at_its_edges_and_fails_just_past_them() {
+    let cal = crate::wire::Configure::real_rig(0.3).calibration;
+    let at = |ch: usize, si: f32| ChannelStats {
+        min: 0,
+        max: 1,
+        mean: cal[ch].to_count(si) as f32,
+        sd: 1.0,
+        at_rail: 0,
+    };
+    // One count inside each edge passes; a few counts beyond fails.
+    for (ch, c) in cal.iter().enumerate().take(4) {
+        let (lo, hi) = rest_window(ch);
+        let count = c.gain;
+        for (edge, inward) in [(lo, 1.0f32), (hi, -1.0)] {
+            assert!(
+                judge_identity(&at(ch, edge + inward * 1.5 * count), ch, c).is_ok(),
+                "channel {ch} at {edge}"
+            );
+            assert!(
+                judge_identity(&at(ch, edge - inward * 3.0 * count), ch, c).is_err()
+                    || (ch == 3 && edge == hi),
+                "channel {ch} past {edge}"
+            );
+        }
+    }
+    // A grounded input with an offset of 300 counts fails on every channel.
+    for (ch, c) in cal.iter().enumerate().take(4) {
+        let g = ChannelStats {
+            mean: 300.0,
+            ..at(ch, 0.0)
+        };
+        assert!(judge_identity(&g, ch, c).is_err(), "grounded {ch}");
+    }
+    // At rest as the virtual rig reads (x held at x0, v and F at zero, ECR 0.1 V): every swap
+    // but velocity <-> force fails some channel.
+    let rest = [
+        cal[0].to_count(REST_X0_M),
+        cal[1].to_count(0.0),
+        cal[2].to_count(0.0),
+        cal[3].to_count(0.1),
+    ];
+    for a in 0..4 {
+        for b in a + 1..4 {
+            let mut w = rest;
+            w.swap(a, b);
+            let fails = (0..4).any(|ch| {
+                let s = ChannelStats {
+                    mean: w[ch] as f32,
+                    ..at(ch, 0.0)
+                };
+                judge_identity(&s, ch, &cal[ch]).is_err()
+            });
+            assert_eq!(fails, (a, b) != (1, 2), "swap {a},{b}");
+        }
+    }
+}
+
+#[test]
+fn an_output_row_is_judged_only_where_the_board_senses_it_and_only_after_every_pattern() {
+    use crate::wire::{OutputCheck, OutputsReport, SELFTEST_OUTPUTS};
+    let ok = OutputCheck {
+        sensed: true,
+        mismatches: 0,
+        driven: 3,
+        read: 3,
+    };
+    let mut r = OutputsReport {
+        steps: RANGE_PATTERNS.len() as u8,
+        outputs: [ok; SELFTEST_OUTPUTS],
+    };
+    r.outputs[2].sensed = false;
+    r.outputs[4].mismatches = 1;
+    assert_eq!(judge_output(&r, 0), Some(Ok(())));
+    assert_eq!(judge_output(&r, 2), None, "not sensed: no verdict");
+    assert!(matches!(judge_output(&r, 4), Some(Err(_))));
+    assert_eq!(judge_output(&r, SELFTEST_OUTPUTS), None);
+    // Cut short (a step fewer): no sensed output passes.
+    r.steps -= 1;
+    assert!(matches!(judge_output(&r, 0), Some(Err(_))));
+}

@@ -20,7 +20,8 @@ use tribo_firmware::acquisition::clock::BOARD_TIMER_HZ;
 use tribo_firmware::acquisition::{Batch, ConverterModel};
 use tribo_firmware::hal::{
     AnalogSample, Button, ConverterRead, EcrFrontEnd, FlashGeometry, HeaterOutput, Lamps, Led,
-    Link, Magnet, MagnetDrive, RunFlash, SampleSource, Thermocouple, ANALOG_CHANNELS,
+    Link, Magnet, MagnetDrive, OutputSense, RunFlash, SampleSource, SensedOutputs, Thermocouple,
+    ANALOG_CHANNELS,
 };
 use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::wire::SampleClock;
@@ -306,6 +307,13 @@ impl Button for Replay<'_> {
 impl Led for Replay<'_> {
     fn set_lamps(&mut self, lamps: Lamps) {
         self.lamps = lamps;
+    }
+}
+
+impl OutputSense for Replay<'_> {
+    /// The replayed hardware has no pins: nothing reads back.
+    fn sense_outputs(&mut self) -> SensedOutputs {
+        SensedOutputs::default()
     }
 }
 

@@ -41,6 +41,16 @@ fn the_self_test_messages_are_the_last_variants() {
         age_us: 0,
     });
     assert_eq!(body(&DeviceMsg::SelfTest(tc)), [13, 4, 0, 0]);
+    // The outputs check after it: check 6, report 5; the older ones' bytes are as above.
+    assert_eq!(body(&HostMsg::SelfTest(SelfTestCheck::Outputs)), [13, 6]);
+    let o = SelfTestReport::Outputs(OutputsReport {
+        steps: 5,
+        outputs: [OutputCheck::default(); SELFTEST_OUTPUTS],
+    });
+    // Tag 13, report 5, steps 5, then 5 × (sensed, mismatches, driven, read) all zero.
+    let mut want = vec![13, 5, 5];
+    want.extend([0; 4 * SELFTEST_OUTPUTS]);
+    assert_eq!(body(&DeviceMsg::SelfTest(o)), want);
 }
 
 #[test]
@@ -89,6 +99,15 @@ fn every_self_test_message_round_trips_and_the_largest_fits_a_frame() {
             registers: None,
             age_us: 100_000,
         })),
+        DeviceMsg::SelfTest(SelfTestReport::Outputs(OutputsReport {
+            steps: u8::MAX,
+            outputs: [OutputCheck {
+                sensed: true,
+                mismatches: u8::MAX,
+                driven: u16::MAX,
+                read: 4095,
+            }; SELFTEST_OUTPUTS],
+        })),
     ];
     for (seq, m) in msgs.into_iter().enumerate() {
         let bytes = encode_vec(seq as u32, &m).unwrap();
@@ -109,6 +128,7 @@ fn every_self_test_message_round_trips_and_the_largest_fits_a_frame() {
         SelfTestCheck::Panic,
         SelfTestCheck::Stall,
         SelfTestCheck::Thermocouple,
+        SelfTestCheck::Outputs,
     ] {
         let bytes = encode_vec(1, &HostMsg::SelfTest(c)).unwrap();
         assert_eq!(

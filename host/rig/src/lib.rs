@@ -18,7 +18,7 @@ pub mod sim;
 pub use config::{AcquisitionFaults, EcrModel, Noise, ThermalModel, VirtualRigConfig};
 pub use error::RigError;
 pub use serve::{in_process, serve, HostEvent, ServeOptions, TcpRig, HANDOVER};
-pub use sim::{ChannelFault, ConverterFault, HeaterStage, SimHardware};
+pub use sim::{ChannelFault, ConverterFault, HeaterStage, OutputFault, SimHardware};
 
 use std::io::{self, Write};
 use tribo_firmware::app::{App, AppConfig};
@@ -437,6 +437,16 @@ impl VirtualRig {
     /// Makes the thermocouple or its converter misbehave (or heals it with `None`).
     pub fn set_thermocouple_fault(&mut self, fault: Option<ConverterFault>) {
         self.hw.tc_fault = fault;
+    }
+
+    /// Makes an output read back wrong (or heals it with `None`).
+    pub fn set_output_fault(&mut self, fault: Option<OutputFault>) {
+        self.hw.output_fault = fault;
+    }
+
+    /// Wires two converter inputs to each other's signal (or back as built with `None`).
+    pub fn swap_channels(&mut self, pair: Option<(usize, usize)>) {
+        self.hw.swap_channels(pair);
     }
 
     /// Makes the heater's power stage misbehave.

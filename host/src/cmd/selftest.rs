@@ -10,13 +10,15 @@ use anyhow::bail;
 use serde_json::json;
 use std::time::{Duration, Instant};
 use tribo_firmware::selftest::{
-    judge_channel, judge_flash, judge_rate, judge_reset, judge_thermocouple, ChannelProblem,
-    Deliberate, ERASE_MAX_US, MIN_THROUGHPUT_BYTES_S, RATE_TOLERANCE_PPM,
+    judge_channel, judge_flash, judge_identity, judge_output, judge_rate, judge_reset,
+    judge_thermocouple, rest_window, ChannelProblem, Deliberate, ERASE_MAX_US,
+    MIN_THROUGHPUT_BYTES_S, OUTPUT_NAMES, RATE_TOLERANCE_PPM,
 };
 use tribo_firmware::thermocouple::BadRead;
 use tribo_wire::{
     filler_byte, BootReport, Channel, Configure, ConverterReport, DeviceError, DeviceMsg,
-    ErrorCode, FlashReport, HostMsg, SelfTestCheck, SelfTestReport, ThermocoupleReport, FILLER_MAX,
+    ErrorCode, FlashReport, HostMsg, OutputsReport, SelfTestCheck, SelfTestReport,
+    ThermocoupleReport, FILLER_MAX,
 };
 
 /// Arguments of `tribo selftest`.
@@ -24,14 +26,19 @@ use tribo_wire::{
 #[command(
     after_help = "Rows (the README's \"Bring-up on a NUCLEO-H743ZI\" says what to check when one fails):
   sample-rate         samples the ADC delivered (DMA index) against the crystal time base, ppm
-  input-displacement  each analog input on open (or quiet) inputs: not at a rail, not one code
-  input-velocity        (pins PA3, PC0, PB1, PF11)
-  input-force
-  input-ecr
+  input-displacement  each analog input: not at a rail, not one code, and its signature at rest
+  input-velocity        (x within ±1.1·x0, v and F near zero, ECR above the controller's floor:
+  input-force           a grounded or swapped input fails; --open-inputs on a bare board)
+  input-ecr             (pins PA3, PC0, PB1, PF11)
   flash               a bank-2 sector the stored run does not use: erase, program, read back, erase
   flash-flags         the flash controller's error flags after it (hardware only on the virtual rig)
   thermocouple        the MAX31856: answers, configured (type K, open-circuit detection on), no
                         fault flag (open, shorted, ranges), cold junction 5–50 °C
+  output-heater       each output driven through a few patterns and read back where the board
+  output-magnet         can (pin levels, the DAC's output register); each row says what it
+  output-ecr-source     cannot sense (no sense wire on a NUCLEO-H743ZI)
+  output-ecr-range
+  output-lamps
   link-throughput     filler frames from the rig through the link, bytes/s and checked byte for byte
   reset-record        a deliberate panic: the rig resets and its boot report says Panic and why
   watchdog            a deliberately stalled task: outputs safe, reset, the report names the task
@@ -62,6 +69,10 @@ pub struct Args {
     /// Leave out the two checks that reset the rig (reset-record, watchdog).
     #[arg(long)]
     pub no_reset: bool,
+    /// The analog inputs are open (a bare board, no front ends): do not judge each input's
+    /// signature at rest (the channel identity), only that it converts.
+    #[arg(long)]
+    pub open_inputs: bool,
 }
 
 /// A row's outcome.
@@ -114,8 +125,9 @@ impl Row {
     }
 }
 
-/// Rows of a converter report: the rate, then one per analog input.
-pub fn converter_rows(r: &ConverterReport) -> Vec<Row> {
+/// Rows of a converter report: the rate, then one per analog input, each judged by its signature
+/// at rest too unless `open_inputs`.
+pub fn converter_rows(r: &ConverterReport, open_inputs: bool) -> Vec<Row> {
     let (rate, ppm, ok) = judge_rate(r);
     let dt = r.last_us.saturating_sub(r.first_us) as f64 * 1e-6;
     let n = r.last_index.saturating_sub(r.first_index);
@@ -151,11 +163,35 @@ pub fn converter_rows(r: &ConverterReport) -> Vec<Row> {
             Err(ChannelProblem::Stuck) => format!("; stuck at code {}", s.min),
         };
         let si = cal[i].to_si(s.mean.clamp(0.0, 65535.0) as u16);
+        let (lo, hi) = rest_window(i);
+        let identity = if open_inputs {
+            None
+        } else {
+            Some(judge_identity(s, i, &cal[i]).is_ok())
+        };
+        let identity_text =
+            match identity {
+                None => "; identity not judged (--open-inputs)".to_string(),
+                Some(true) => format!("; at rest within {lo:+.3e}…{hi:+.3e} {}", ch.unit()),
+                // Only the judge of the converting comes first: a rail or a stuck code says more.
+                Some(false) if verdict.is_err() => String::new(),
+                Some(false) => format!(
+                "; not the {}'s signature at rest ({lo:+.3e}…{hi:+.3e} {}): {}",
+                ch.name(),
+                ch.unit(),
+                match i {
+                    3 => "the input grounded, another channel's signal on this pin, or the contact \
+                          open (unloaded)",
+                    _ => "the input grounded (a small offset) or another channel's signal on \
+                          this pin (swapped cables)",
+                }
+            ),
+            };
         rows.push(Row::new(
             format!("input-{}", ch.name()),
-            verdict.is_ok(),
+            verdict.is_ok() && identity != Some(false),
             format!(
-                "{}: mean {:.1}, sd {:.1}, {}…{} counts ({:+.4e} {}){why}",
+                "{}: mean {:.1}, sd {:.1}, {}…{} counts ({:+.4e} {}){why}{identity_text}",
                 pins[i],
                 s.mean,
                 s.sd,
@@ -165,10 +201,80 @@ pub fn converter_rows(r: &ConverterReport) -> Vec<Row> {
                 ch.unit()
             ),
             json!({"pin": pins[i], "mean": s.mean, "sd": s.sd, "min": s.min, "max": s.max,
-                   "at_rail": s.at_rail, "samples": r.samples}),
+                   "at_rail": s.at_rail, "samples": r.samples, "si": si,
+                   "rest_window": [lo, hi], "identity": identity}),
         ));
     }
     rows
+}
+
+/// What each output's row reads back on the NUCLEO-H743ZI, and what it cannot sense.
+const OUTPUT_TEXT: [(&str, &str); 5] = [
+    (
+        "PD12 (gate pin) read low with the heater off",
+        "the gate driver, the MOSFET and the element (no sense wire: a dead element or a shorted \
+         MOSFET shows as the heater's faults once it heats)",
+    ),
+    (
+        "PE9/PE11 (bridge inputs) read low with the coil off",
+        "the bridge's outputs and the coil current (no sense wire: a coil that does not hold shows \
+         as the pin not held at x0)",
+    ),
+    (
+        "DAC1 DOR1 converted each code written (0 and 2 mV)",
+        "the DAC pin PA4 (analog mode, no input buffer) and the divider's output (no sense wire)",
+    ),
+    (
+        "PG0–PG2 read back each range address",
+        "the mux's switches and the feedback resistors (no sense wire)",
+    ),
+    (
+        "PB0/PE1/PB14 read back each pattern",
+        "whether the LEDs light (no sense wire)",
+    ),
+];
+
+/// Rows of an outputs report: one per output.
+pub fn outputs_rows(r: &OutputsReport) -> Vec<Row> {
+    OUTPUT_NAMES
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let o = r.outputs[i];
+            let (reads, blind) = OUTPUT_TEXT[i];
+            let name = format!("output-{name}");
+            let fig = json!({"sensed": o.sensed, "steps": r.steps, "mismatches": o.mismatches,
+                             "driven": o.driven, "read": o.read});
+            let width = if i == 2 { 3 } else { 1 };
+            match judge_output(r, i) {
+                None => Row {
+                    name,
+                    verdict: Verdict::HardwareOnly,
+                    summary: format!("not sensed on this rig; on the board: {reads}; not sensed: {blind}"),
+                    figures: fig,
+                },
+                Some(Ok(())) => Row::new(
+                    name,
+                    true,
+                    format!("{reads}, {} steps; not sensed: {blind}", r.steps),
+                    fig,
+                ),
+                Some(Err(e)) => Row::new(
+                    name,
+                    false,
+                    format!(
+                        "{e}: {} of {} steps wrong, first drove {:#0w$x}, read {:#0w$x}; not sensed: {blind}",
+                        o.mismatches,
+                        r.steps,
+                        o.driven,
+                        o.read,
+                        w = width + 2
+                    ),
+                    fig,
+                ),
+            }
+        })
+        .collect()
 }
 
 /// The flash controller's error flags (FLASH_SR2 bits 17–28 on the STM32H743).
@@ -300,8 +406,9 @@ fn refusal(e: &LinkError) -> anyhow::Error {
         ),
         Some(ErrorCode::Busy) => anyhow::anyhow!(
             "the rig is busy (armed, running a run, still writing its last run to flash, its \
-             stored run fills the flash, or, for the reset checks, its magnet still holds): let it \
-             finish or abort it, let the magnet go, then run `tribo selftest` again"
+             stored run fills the flash, or, for the reset and output checks, its magnet still \
+             holds): let it finish or abort it, let the magnet go (it lets go once no host has held \
+             its lease for 3 s), then run `tribo selftest` again"
         ),
         _ => anyhow::anyhow!("{e}"),
     }
@@ -365,6 +472,7 @@ fn check_name(c: &SelfTestCheck) -> &'static str {
         SelfTestCheck::Panic => "panic",
         SelfTestCheck::Stall => "stall",
         SelfTestCheck::Thermocouple => "thermocouple",
+        SelfTestCheck::Outputs => "outputs",
     }
 }
 
@@ -564,7 +672,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         wait,
     ) {
-        Ok(SelfTestReport::Converter(r)) => rows.extend(converter_rows(&r)),
+        Ok(SelfTestReport::Converter(r)) => rows.extend(converter_rows(&r, args.open_inputs)),
         Ok(other) => rows.push(Row::failed(
             "sample-rate",
             format!("unexpected report {other:?}"),
@@ -592,6 +700,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             format!("unexpected report {other:?}"),
         )),
         Err(e) => rows.push(Row::failed("thermocouple", format!("{e:#}"))),
+    }
+    match measure(&mut link, SelfTestCheck::Outputs, Duration::from_secs(5)) {
+        Ok(SelfTestReport::Outputs(r)) => rows.extend(outputs_rows(&r)),
+        Ok(other) => rows.push(Row::failed(
+            "output-heater",
+            format!("unexpected report {other:?}"),
+        )),
+        Err(e) => {
+            for n in OUTPUT_NAMES {
+                rows.push(Row::failed(format!("output-{n}"), format!("{e:#}")));
+            }
+        }
     }
     match throughput(&mut link) {
         Ok(r) => rows.push(r),
@@ -697,7 +817,7 @@ mod tests {
 
     #[test]
     fn a_converter_report_reads_as_rows_and_a_stuck_input_is_named() {
-        let rows = converter_rows(&report());
+        let rows = converter_rows(&report(), false);
         let names: Vec<_> = rows.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(
             names,
@@ -720,7 +840,7 @@ mod tests {
             at_rail: 0,
         };
         r.last_index = 19_000;
-        let rows = converter_rows(&r);
+        let rows = converter_rows(&r, false);
         assert_eq!(rows[0].verdict, Verdict::Fail, "{:?}", rows[0]);
         assert_eq!(rows[2].verdict, Verdict::Fail);
         assert!(

@@ -43,6 +43,11 @@ fn a_sound_virtual_rig_passes_every_measured_row() {
             "flash",
             "flash-flags",
             "thermocouple",
+            "output-heater",
+            "output-magnet",
+            "output-ecr-source",
+            "output-ecr-range",
+            "output-lamps",
             "link-throughput",
             "reset-record",
             "watchdog"
@@ -78,6 +83,34 @@ fn a_sound_virtual_rig_passes_every_measured_row() {
         tc["figures"]["registers"][0], 0x91,
         "CR0 as configured: {tc:#}"
     );
+    // Every output read back at every step, each row saying what the board cannot sense.
+    for o in [
+        "output-heater",
+        "output-magnet",
+        "output-ecr-source",
+        "output-ecr-range",
+        "output-lamps",
+    ] {
+        let f = &row(o)["figures"];
+        assert_eq!(
+            (f["sensed"].as_bool(), f["steps"].as_u64()),
+            (Some(true), Some(5)),
+            "{o}"
+        );
+        assert!(
+            row(o)["summary"].as_str().unwrap().contains("not sensed: "),
+            "{o}"
+        );
+    }
+    // Each input at rest within its window (the identity judged).
+    for i in [
+        "input-displacement",
+        "input-velocity",
+        "input-force",
+        "input-ecr",
+    ] {
+        assert_eq!(row(i)["figures"]["identity"], true, "{:#}", row(i));
+    }
     assert_eq!(row("reset-record")["figures"]["cause"], "Panic");
     assert_eq!(row("watchdog")["figures"]["cause"], "Watchdog");
     assert!(
@@ -233,4 +266,89 @@ fn a_thermocouple_converter_that_lost_its_configuration_or_reads_a_hot_cold_junc
     let (ok, row, ..) = thermocouple_with("ones");
     assert!(!ok);
     assert!(row["summary"].as_str().unwrap().contains("0xFF"), "{row:#}");
+}
+
+/// `tribo selftest --no-reset --json` against a rig started with `flags`: (exit code, the JSON,
+/// the failed rows).
+fn judged(flags: &[&str], extra: &[&str]) -> (Option<i32>, serde_json::Value, Vec<String>) {
+    let r = rig(flags);
+    let mut args = vec!["--no-reset", "--json"];
+    args.extend_from_slice(extra);
+    let o = selftest(&r, &args);
+    let out = text(&o.stdout);
+    let v: serde_json::Value = serde_json::from_str(out.trim())
+        .unwrap_or_else(|e| panic!("{e}: {out}\n{}", text(&o.stderr)));
+    let failed = v["failed"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap().to_string())
+        .collect();
+    (o.status.code(), v, failed)
+}
+
+fn row_of<'a>(v: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    v["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["row"] == name)
+        .unwrap_or_else(|| panic!("no row {name}: {v:#}"))
+}
+
+#[test]
+fn a_stuck_output_fails_its_own_row_only_and_the_exit_status() {
+    for (fault, row, read) in [
+        ("heater", "output-heater", "read 0x1"),
+        ("magnet", "output-magnet", "read 0x1"),
+        ("ecr-source", "output-ecr-source", "read 0x000"),
+        ("ecr-range", "output-ecr-range", "first drove 0x2, read 0x0"),
+        ("lamps", "output-lamps", "first drove 0x4, read 0x0"),
+    ] {
+        let (code, v, failed) = judged(&["--stuck-output", fault], &[]);
+        assert_eq!(code, Some(1), "{fault}: {v:#}");
+        assert_eq!(failed, [row], "{fault}: only its row fails: {v:#}");
+        let s = row_of(&v, row)["summary"].as_str().unwrap();
+        assert!(
+            s.contains(read) && s.contains("not sensed: "),
+            "{fault}: {s}"
+        );
+    }
+}
+
+#[test]
+fn swapped_inputs_and_a_grounded_input_with_a_small_offset_fail_the_inputs_rows() {
+    // Displacement and force swapped: the force reads the held position (+0.33 N), the
+    // displacement reads zero (a rest position): the force row fails.
+    let (code, v, failed) = judged(&["--swap-channels", "x,f"], &[]);
+    assert_eq!(code, Some(1), "{v:#}");
+    assert_eq!(failed, ["input-force"], "{v:#}");
+    assert!(
+        row_of(&v, "input-force")["summary"]
+            .as_str()
+            .unwrap()
+            .contains("not the force's signature at rest"),
+        "{v:#}"
+    );
+    // Velocity and ECR swapped: the velocity reads the ECR's 0.1 V (-0.24 m/s) and fails; the
+    // ECR pin reads mid-scale (1.65 V), a plausible ECR output: a swap fails one row at least.
+    let (code, v, failed) = judged(&["--swap-channels", "v,ecr"], &[]);
+    assert_eq!(code, Some(1));
+    assert_eq!(failed, ["input-velocity"], "{v:#}");
+    // A grounded force input, 300 counts off the rail and moving: the converter's own checks
+    // pass it, its signature does not.
+    let (code, v, failed) = judged(&["--fault", "ground:f"], &[]);
+    assert_eq!(code, Some(1));
+    assert_eq!(failed, ["input-force"], "{v:#}");
+    let f = &row_of(&v, "input-force")["figures"];
+    assert!(f["min"] != f["max"] && f["at_rail"] == 0, "{f}");
+    // On a bare board (--open-inputs) only the converting is judged: the grounded input passes,
+    // and the row says its identity was not judged.
+    let (code, v, failed) = judged(&["--fault", "ground:f"], &["--open-inputs"]);
+    assert_eq!(code, Some(0), "{v:#}");
+    assert!(failed.is_empty());
+    assert!(row_of(&v, "input-force")["summary"]
+        .as_str()
+        .unwrap()
+        .contains("identity not judged"));
 }

@@ -72,9 +72,10 @@ impl HeaterOutput for BoardHw {
 impl EcrFrontEnd for BoardHw {
     fn set_ecr_source(&mut self, volts: f32) {
         let volts = if self.outputs_allowed { volts } else { 0.0 };
-        let dac_v = (volts * ECR_DIVIDER).clamp(0.0, FULL_SCALE_V);
         self.ecr_dac
-            .set(Value::Bit12Right((dac_v / FULL_SCALE_V * 4095.0) as u16));
+            .set(Value::Bit12Right(tribo_firmware::ecr::source_dac_code(
+                volts,
+            )));
     }
     fn set_ecr_range(&mut self, range: u8) {
         for (bit, pin) in self.ecr_range.iter_mut().enumerate() {
@@ -131,6 +132,38 @@ impl Led for BoardHw {
             .zip([lamps.green, lamps.amber, lamps.red])
         {
             pin.set_level(if on { Level::High } else { Level::Low });
+        }
+    }
+}
+
+impl OutputSense for BoardHw {
+    fn sense_outputs(&mut self) -> SensedOutputs {
+        use embassy_stm32::pac::{self, gpio::vals::Idr};
+        let high = |port: pac::gpio::Gpio, pin: usize| port.idr().read().idr(pin) == Idr::HIGH;
+        let bits = |levels: [bool; 3]| {
+            levels
+                .iter()
+                .enumerate()
+                .fold(0u8, |b, (i, &l)| b | (l as u8) << i)
+        };
+        SensedOutputs {
+            // The PWM pins are in alternate-function mode: their input buffer is on, so IDR is the
+            // pad's level (low at duty 0 unless something else pulls it up).
+            heater_pin: Some(high(pac::GPIOD, 12)),
+            magnet_pins: Some(high(pac::GPIOE, 9) as u8 | (high(pac::GPIOE, 11) as u8) << 1),
+            // The DAC converts DOR1; the pin itself (PA4, analog mode) has no input buffer and
+            // the divider's output has no sense wire.
+            ecr_dac_code: Some(pac::DAC1.dor(0).read().dor()),
+            ecr_range_pins: Some(bits([
+                high(pac::GPIOG, 0),
+                high(pac::GPIOG, 1),
+                high(pac::GPIOG, 2),
+            ])),
+            lamp_pins: Some(bits([
+                high(pac::GPIOB, 0),
+                high(pac::GPIOE, 1),
+                high(pac::GPIOB, 14),
+            ])),
         }
     }
 }

@@ -58,7 +58,7 @@ use embassy_time::{Duration, Instant, Ticker, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use static_cell::{ConstStaticCell, StaticCell};
 use tribo_firmware::app::{App, AppConfig};
-use tribo_firmware::ecr::{count_to_volts, FULL_SCALE_V};
+use tribo_firmware::ecr::count_to_volts;
 use tribo_firmware::hal::*;
 use tribo_firmware::link_tx::BusState;
 use tribo_firmware::reset::{self, BootRecovery};
@@ -89,8 +89,6 @@ type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
 
 /// Bytes of frames waiting for the USB sender.
 const TX_PIPE: usize = 4096;
-/// ECR source divider: the DAC's 0..3.3 V become 0..3.3 mV across the contact.
-const ECR_DIVIDER: f32 = 1000.0;
 /// The force channel's analog chain as the rig is built: the charge amplifier's 2-pole 300 Hz
 /// low-pass (`shared/docs/rig-and-physics.md`). Every run states it (`DeviceMsg::Chain`); change
 /// it with the hardware.

@@ -84,6 +84,8 @@ struct Mock {
     lamps: Lamps,
     stop_s: f64,
     flash: MemFlash<Vec<u8>>,
+    /// The range-select pin PG1 reads low whatever is driven (a stuck output).
+    range_bit1_stuck_low: bool,
 }
 
 impl Mock {
@@ -108,6 +110,7 @@ impl Mock {
             lamps: Lamps::default(),
             stop_s: 0.5,
             flash: MemFlash::new(vec![0; 1 << 20], FlashGeometry::H743_BANK2).with_h743_timing(),
+            range_bit1_stuck_low: false,
         }
     }
 
@@ -267,6 +270,31 @@ impl Button for Mock {
 impl Led for Mock {
     fn set_lamps(&mut self, l: Lamps) {
         self.lamps = l;
+    }
+}
+impl OutputSense for Mock {
+    fn sense_outputs(&mut self) -> SensedOutputs {
+        let magnet = match self.magnet() {
+            MagnetDrive::Off => 0,
+            MagnetDrive::Hold { .. } => 1,
+            MagnetDrive::Reverse { .. } => 2,
+        };
+        let range = if self.range_bit1_stuck_low {
+            self.ecr_range & !2
+        } else {
+            self.ecr_range
+        };
+        SensedOutputs {
+            heater_pin: Some(self.heater_duty > 0.0),
+            magnet_pins: Some(magnet),
+            ecr_dac_code: Some(crate::ecr::source_dac_code(self.ecr_source)),
+            ecr_range_pins: Some(range),
+            lamp_pins: Some(
+                self.lamps.green as u8
+                    | (self.lamps.amber as u8) << 1
+                    | (self.lamps.red as u8) << 2,
+            ),
+        }
     }
 }
 impl Link for Mock {

@@ -261,3 +261,103 @@ fn a_deliberate_fault_is_refused_while_the_magnet_holds_and_leaves_it_holding() 
     assert_eq!(b.command(HostMsg::SelfTest(SelfTestCheck::Stall)).0, Ok(()));
     assert_eq!(b.app.take_deliberate(), Some(Deliberate::Stall));
 }
+
+#[test]
+fn an_accepted_deliberate_fault_first_sets_the_ecr_source_to_zero_and_keeps_it_there() {
+    let mut b = Bench::new();
+    b.run_for(500);
+    // Idle, the ECR controller measures the contact: its source is on.
+    assert!(b.hw.ecr_source > 0.0, "{}", b.hw.ecr_source);
+    assert_eq!(b.command(HostMsg::SelfTest(SelfTestCheck::Stall)).0, Ok(()));
+    assert_eq!(b.hw.ecr_source, 0.0, "off before the acknowledgement");
+    assert_eq!(b.app.take_deliberate(), Some(Deliberate::Stall));
+    // A stalled task takes the watchdog's ~300 ms: the controller does not switch it on again.
+    b.run_for(1000);
+    assert_eq!(b.hw.ecr_source, 0.0);
+}
+
+/// Runs an outputs check to its report.
+fn outputs_check(b: &mut Bench) -> crate::wire::OutputsReport {
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Outputs)).0,
+        Ok(())
+    );
+    let got = until_report(b, 100);
+    let [SelfTestReport::Outputs(r)] = &got[..] else {
+        panic!("{got:?}")
+    };
+    *r
+}
+
+#[test]
+fn an_outputs_check_walks_the_patterns_reads_them_back_and_restores_the_ecr_front_end() {
+    use crate::selftest::{judge_output, OUTPUT_NAMES, RANGE_PATTERNS};
+    let mut b = Bench::new();
+    b.run_for(500);
+    let before = (b.hw.ecr_range, b.hw.ecr_source);
+    let r = outputs_check(&mut b);
+    assert_eq!(r.steps as usize, RANGE_PATTERNS.len());
+    for (i, name) in OUTPUT_NAMES.iter().enumerate() {
+        assert_eq!(judge_output(&r, i), Some(Ok(())), "{name}: {r:?}");
+    }
+    // The last step drove range 0b011, lamps 0b111, the start source: read back as driven.
+    assert_eq!((r.outputs[3].driven, r.outputs[3].read), (0b011, 0b011));
+    assert_eq!((r.outputs[4].driven, r.outputs[4].read), (0b111, 0b111));
+    assert_eq!(
+        b.hw.ecr_range, before.0,
+        "the range as the controller left it"
+    );
+    assert_eq!(b.hw.ecr_source, before.1);
+    assert_eq!(
+        b.hw.lamps,
+        b.app.lamps(b.hw.now_us),
+        "lamps back to the state's"
+    );
+}
+
+#[test]
+fn a_stuck_range_pin_fails_only_the_range_output_and_a_live_heater_or_magnet_refuses_the_check() {
+    use crate::selftest::judge_output;
+    let mut b = Bench::new();
+    b.hw.range_bit1_stuck_low = true;
+    let r = outputs_check(&mut b);
+    assert_eq!(judge_output(&r, 3).map(|v| v.is_err()), Some(true), "{r:?}");
+    // Patterns 0b010 and 0b011 drive PG1 high: two mismatches, the first at 0b010.
+    assert_eq!(r.outputs[3].mismatches, 2);
+    assert_eq!((r.outputs[3].driven, r.outputs[3].read), (0b010, 0b000));
+    for i in [0, 1, 2, 4] {
+        assert_eq!(judge_output(&r, i), Some(Ok(())), "{i}: {r:?}");
+    }
+    // Armed, the magnet holds: refused, and the magnet still holds.
+    let mut b = Bench::new();
+    b.ready();
+    assert_eq!(b.command(HostMsg::Disarm).0, Ok(()));
+    b.run_for(10);
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Outputs)).0,
+        Err(ErrorCode::Busy)
+    );
+    assert!(matches!(b.hw.magnet(), MagnetDrive::Hold { .. }));
+}
+
+#[test]
+fn an_arm_during_an_outputs_check_gives_the_ecr_front_end_back_to_its_controller() {
+    let mut b = Bench::new();
+    assert_eq!(
+        b.command(HostMsg::Configure(Configure::real_rig(0.3))).0,
+        Ok(())
+    );
+    b.run_for(300);
+    let before = (b.hw.ecr_range, b.hw.ecr_source);
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Outputs)).0,
+        Ok(())
+    );
+    // Two polls: the probe drives range 0b001 and the 2 mV source.
+    b.run_for(1);
+    assert_eq!(b.hw.ecr_range, 1);
+    assert_ne!((b.hw.ecr_range, b.hw.ecr_source), before);
+    assert_eq!(b.command(HostMsg::Arm).0, Ok(()));
+    assert!(!b.app.selftest_running());
+    assert_eq!((b.hw.ecr_range, b.hw.ecr_source), before);
+}

@@ -698,8 +698,9 @@ pub fn unloaded_run(cx: &mut Cx) -> Outcome {
 }
 
 /// The bring-up self-test's checks between runs (`HostMsg::SelfTest`): the converter's rate and
-/// inputs, a flash sector erased, programmed, read back and erased again, and filler frames
-/// through the link; each polled to its report within the application's budgets.
+/// inputs, a flash sector erased, programmed, read back and erased again, filler frames through
+/// the link, and the outputs' patterns; each polled to its report within the application's
+/// budgets.
 pub fn selftest_checks(cx: &mut Cx) -> Outcome {
     let rec = record(cx, "unloaded")?;
     let mut r0 = [0u8; BOARD_RING_BYTES[0]];
@@ -730,6 +731,7 @@ pub fn selftest_checks(cx: &mut Cx) -> Outcome {
             frames: 64,
             len: FILLER_MAX as u16,
         },
+        SelfTestCheck::Outputs,
     ];
     for check in checks {
         b.host.selftest = None;
@@ -752,6 +754,11 @@ pub fn selftest_checks(cx: &mut Cx) -> Outcome {
             }
             (SelfTestCheck::Throughput { .. }, Some(SelfTestReport::FillerDone { frames, .. })) => {
                 check_eq!((*frames, b.host.fillers), (64, 64));
+            }
+            // The replayed hardware has no pins: every pattern driven, nothing sensed.
+            (SelfTestCheck::Outputs, Some(SelfTestReport::Outputs(r))) => {
+                check_eq!(r.steps, 5);
+                check!(r.outputs.iter().all(|o| !o.sensed), "{r:?}");
             }
             (c, r) => check!(false, "{c:?} answered by {r:?}"),
         }

@@ -39,6 +39,11 @@ wire_type! {
         /// The thermocouple converter's register file as the rig last read it (configuration,
         /// cold junction, plate, fault status). Answered by [`SelfTestReport::Thermocouple`].
         Thermocouple,
+        /// Drive the outputs the rig may drive at rest through a few patterns (ECR range pins,
+        /// lamps, ECR source DAC; heater and magnet held off) and read each back where the board
+        /// can sense it. Refused while the heater heats or the magnet's coil is on. Answered by
+        /// [`SelfTestReport::Outputs`].
+        Outputs,
     }
 }
 
@@ -60,6 +65,36 @@ wire_type! {
         /// waited.
         FillerDone { frames: u32, refused: u32 },
         Thermocouple(ThermocoupleReport),
+        Outputs(OutputsReport),
+    }
+}
+
+/// Outputs an outputs check reports, in this order: heater gate, magnet bridge inputs, ECR
+/// source DAC, ECR range-select pins, lamps.
+pub const SELFTEST_OUTPUTS: usize = 5;
+
+wire_type! {
+    /// One output over an outputs check.
+    #[derive(Copy, Default)]
+    pub struct OutputCheck {
+        /// The board reads this output back (a pin's input level, a DAC's output register);
+        /// false: it cannot, and the other fields mean nothing.
+        pub sensed: bool,
+        /// Steps at which what was read back differed from what was driven.
+        pub mismatches: u8,
+        /// What was driven and what was read back at the first mismatch (at the last step when
+        /// none): pin levels as bits, or the DAC's 12-bit code.
+        pub driven: u16,
+        pub read: u16,
+    }
+}
+
+wire_type! {
+    /// An outputs check: `steps` patterns driven and read back.
+    #[derive(Copy)]
+    pub struct OutputsReport {
+        pub steps: u8,
+        pub outputs: [OutputCheck; SELFTEST_OUTPUTS],
     }
 }
 

@@ -140,6 +140,44 @@ impl Led for SimHardware {
     }
 }
 
+impl OutputSense for SimHardware {
+    /// The pins as the board would read them: what the models were driven to, or what an injected
+    /// [`OutputFault`] makes one read.
+    fn sense_outputs(&mut self) -> SensedOutputs {
+        let f = self.output_fault;
+        let magnet = match self.magnet {
+            MagnetDrive::Off => 0,
+            MagnetDrive::Hold { duty } => u8::from(duty > 0.0),
+            MagnetDrive::Reverse { duty } => u8::from(duty > 0.0) << 1,
+        };
+        let lamps =
+            self.lamps.green as u8 | (self.lamps.amber as u8) << 1 | (self.lamps.red as u8) << 2;
+        SensedOutputs {
+            heater_pin: Some(self.heater_duty > 0.0 || f == Some(OutputFault::Heater)),
+            magnet_pins: Some(if f == Some(OutputFault::Magnet) {
+                magnet | 1
+            } else {
+                magnet
+            }),
+            ecr_dac_code: Some(if f == Some(OutputFault::EcrSource) {
+                0
+            } else {
+                tribo_firmware::ecr::source_dac_code(self.ecr_source_v as f32)
+            }),
+            ecr_range_pins: Some(if f == Some(OutputFault::EcrRange) {
+                self.ecr_range & !2
+            } else {
+                self.ecr_range
+            }),
+            lamp_pins: Some(if f == Some(OutputFault::Lamps) {
+                lamps & !4
+            } else {
+                lamps
+            }),
+        }
+    }
+}
+
 impl Link for SimHardware {
     fn send_frame(&mut self, frame: &[u8]) -> bool {
         if self.connected {

@@ -63,6 +63,27 @@ pub enum ChannelFault {
     Stuck(u16),
     /// The front end is dead: the channel sits at the converter's bottom rail (code 0).
     Dead,
+    /// The input is tied to ground through a small offset (a cable shorted, a sensor unplugged
+    /// with the input grounded): it reads this code plus the converter's own noise (±1 count),
+    /// off the rail, moving, so the rail and stuck checks pass it.
+    Grounded(u16),
+}
+
+/// An output the board drives that reads back wrong (fault injection: `tribo rig --virtual
+/// --stuck-output`): the pin or register as the board's read-back sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputFault {
+    /// The heater gate pin (PD12) reads high with the heater off (shorted to 3V3, a driver
+    /// holding it).
+    Heater,
+    /// The magnet's hold leg (PE9) reads high with the coil off.
+    Magnet,
+    /// The ECR DAC converts 0 whatever is written (the DAC not enabled).
+    EcrSource,
+    /// The range-select pin PG1 reads low whatever is driven.
+    EcrRange,
+    /// The red lamp's pin (PB14) reads low whatever is driven.
+    Lamps,
 }
 
 /// What can go wrong with the heater's power stage (fault injection).
@@ -151,6 +172,10 @@ pub struct SimHardware {
     force_delay: std::collections::VecDeque<f64>,
     /// Faults of the analog channels' front ends, by converter channel.
     channel_faults: [Option<ChannelFault>; ANALOG_CHANNELS],
+    /// Two converter inputs wired to each other's signal (fault injection).
+    swapped: Option<(usize, usize)>,
+    /// An output that reads back wrong (fault injection).
+    pub(crate) output_fault: Option<OutputFault>,
     // User interface.
     pub(crate) button: bool,
     lamps: Lamps,
@@ -197,6 +222,8 @@ impl SimHardware {
             force_lp: Butterworth2::new(cfg.force_cutoff_hz, 10_000.0),
             force_delay: std::collections::VecDeque::new(),
             channel_faults: [None; ANALOG_CHANNELS],
+            swapped: None,
+            output_fault: None,
             button: false,
             lamps: Lamps::default(),
             connected: true,
@@ -232,6 +259,12 @@ impl SimHardware {
         if let Some(f) = self.channel_faults.get_mut(channel) {
             *f = fault;
         }
+    }
+
+    /// Wires converter inputs `a` and `b` to each other's signal (`None`: as built). Out-of-range
+    /// channels or `a == b` leave the wiring as built.
+    pub fn swap_channels(&mut self, pair: Option<(usize, usize)>) {
+        self.swapped = pair.filter(|&(a, b)| a != b && a < ANALOG_CHANNELS && b < ANALOG_CHANNELS);
     }
 
     /// The run store's flash (to inspect or damage it).
@@ -518,10 +551,18 @@ impl SimHardware {
             self.cal[2].to_count(f as f32),
             self.cal[3].to_count(e as f32),
         ];
+        if let Some((a, b)) = self.swapped {
+            s.swap(a, b);
+        }
         for (c, fault) in s.iter_mut().zip(self.channel_faults) {
             match fault {
                 Some(ChannelFault::Stuck(code)) => *c = code,
                 Some(ChannelFault::Dead) => *c = 0,
+                Some(ChannelFault::Grounded(offset)) => {
+                    *c = (offset as f64 + self.rng.normal())
+                        .round()
+                        .clamp(0.0, 65535.0) as u16
+                }
                 None => {}
             }
         }
