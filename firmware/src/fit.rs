@@ -64,6 +64,47 @@ pub fn ln(x: f64) -> f64 {
     out
 }
 
+/// Solves the N×N system `a x = b` (Gaussian elimination with partial pivoting); `None` when `a`
+/// is singular to working precision or anything is not finite.
+pub fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    let scale = a
+        .iter()
+        .flat_map(|r| r.iter())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    if !(scale.is_finite() && scale > 0.0) {
+        return None;
+    }
+    for col in 0..N {
+        let mut piv = col;
+        for r in col + 1..N {
+            if a[r][col].abs() > a[piv][col].abs() {
+                piv = r;
+            }
+        }
+        if !(a[piv][col].abs() > 1e-13 * scale) {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        for r in col + 1..N {
+            let f = a[r][col] / a[col][col];
+            for q in col..N {
+                a[r][q] -= f * a[col][q];
+            }
+            b[r] -= f * b[col];
+        }
+    }
+    let mut x = [0.0f64; N];
+    for r in (0..N).rev() {
+        let mut v = b[r];
+        for q in r + 1..N {
+            v -= a[r][q] * x[q];
+        }
+        x[r] = v / a[r][r];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
 /// Cosine for |φ| ≤ π (Taylor series to full precision); the argument is clamped to that range.
 pub fn cos(phi: f64) -> f64 {
     let p = if phi.is_nan() {

@@ -51,6 +51,7 @@ impl Pipeline {
             scale: 0.0,
             dec: None,
             avg: Averaging::default(),
+            short: false,
         }
     }
 
@@ -144,7 +145,7 @@ impl Pipeline {
                     }
                     let omega_d = PI / *half_period_s;
                     job.out.frequency_hz = (omega_d / (2.0 * PI)) as f32;
-                    if job.out.cycles < MIN_CYCLES {
+                    if n < MIN_HALF_CYCLES {
                         job.out.verdict = Verdict::TooFewCycles;
                         return Some(job.done());
                     }
@@ -170,6 +171,16 @@ impl Pipeline {
                         Pass::Done(fitted) => fitted,
                     };
                     job.dec = fitted.and_then(|f| decrement(&f, job.scale));
+                    if job.out.cycles < MIN_CYCLES {
+                        // Too few half-cycles for the averaging fit's central differences: the
+                        // peaks alone, their ± propagated from each peak's own (see `Short`).
+                        job.i = 0;
+                        job.stage = Stage::Short {
+                            base: None,
+                            var: [0.0; 2],
+                        };
+                        continue;
+                    }
                     if n < 6 {
                         return Some(self.conclude(job));
                     }
@@ -296,6 +307,53 @@ impl Pipeline {
                     }
                     self.next_iteration(job);
                 }
+                Stage::Short { base, var } => {
+                    // The decrement fit is linear in the peaks' regression but the peaks are in
+                    // both its sides: the ± of μ0 and μ1 is propagated from every peak's variance
+                    // (its window's residuals, pooled over the run) through the fit itself, by
+                    // central differences, one peak a step. The textbook ± of a regression with
+                    // 0–5 degrees of freedom means little (with 1 it is 1.8× too small one time
+                    // in four).
+                    let peak_var = if self.st.peak_var_n > 0 {
+                        self.st.peak_var_sum / self.st.peak_var_n as f64
+                    } else {
+                        f64::NAN
+                    };
+                    if !(peak_var.is_finite() && peak_var > 0.0) {
+                        return Some(self.conclude(job));
+                    }
+                    let h = fit::sqrt(peak_var);
+                    let Some(b) = base.or_else(|| self.peaks_fit(None, job.scale)) else {
+                        job.dec = None;
+                        return Some(self.conclude(job));
+                    };
+                    *base = Some(b);
+                    while job.i < n {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        let up = self.peaks_fit(Some((job.i, h)), job.scale);
+                        let down = self.peaks_fit(Some((job.i, -h)), job.scale);
+                        let (Some(up), Some(down)) = (up, down) else {
+                            job.dec = None;
+                            return Some(self.conclude(job));
+                        };
+                        for j in 0..2 {
+                            let d = (up[j] - down[j]) / (2.0 * h);
+                            var[j] += d * d * peak_var;
+                        }
+                        job.i += 1;
+                    }
+                    job.dec = estimate(b[0], b[1], var[0], var[1]).map(|estimate| Fitted {
+                        estimate,
+                        offset: job.dec.as_ref().map_or(f64::NAN, |d| d.offset),
+                        shape: EnvelopeShape::Straight,
+                        curvature: f64::NAN,
+                    });
+                    job.short = true;
+                    return Some(self.conclude(job));
+                }
                 Stage::Done => return Some(job.out),
             }
         }
@@ -358,6 +416,8 @@ impl Pipeline {
         }
         let (verdict, best) = match (&dec, &avg) {
             (None, None) => (Verdict::NoOscillation, NAN_ESTIMATE),
+            // A short run: the peaks' fit is the only one there is (nothing to disagree with).
+            (Some(d), None) if job.short => (Verdict::Ok, d.estimate),
             (Some(d), None) => (Verdict::EstimatorsDisagree, d.estimate),
             (None, Some(a)) => (Verdict::EstimatorsDisagree, a.estimate),
             (Some(d), Some(a)) => combine(&d.estimate, &a.estimate),
@@ -377,6 +437,61 @@ impl Pipeline {
             out.verdict = Verdict::NoOscillation;
         }
         job.done()
+    }
+
+    /// μ0 and μ1 of the decrement fit `X_{n+1} = D X_n − r (1 + D)` over the usable peaks, solved
+    /// directly (normal equations, centred), peak `i` moved by `dx` metres if asked: the short
+    /// run's ± is propagated through this.
+    pub(super) fn peaks_fit(&self, moved: Option<(usize, f64)>, scale: f64) -> Option<[f64; 2]> {
+        let recs = self.usable();
+        let peak = |i: usize| -> f64 {
+            let p = recs[i].peak as f64;
+            match moved {
+                Some((j, dx)) if j == i => p + dx,
+                _ => p,
+            }
+        };
+        let rows = recs.len().checked_sub(1)?;
+        if rows < 3 {
+            return None;
+        }
+        // rows: y = β + D·x1 + γ·x2 with x1 = s_i P_i, x2 = s_{i+1}, y = s_{i+1} P_{i+1}
+        let row = |i: usize| {
+            let (sa, sb) = (self.sign(i), self.sign(i + 1));
+            ([sa * peak(i), sb], sb * peak(i + 1))
+        };
+        let m = rows as f64;
+        let (mut mx, mut my) = ([0.0f64; 2], 0.0f64);
+        for i in 0..rows {
+            let (x, y) = row(i);
+            mx[0] += x[0] / m;
+            mx[1] += x[1] / m;
+            my += y / m;
+        }
+        let (mut a, mut b) = ([[0.0f64; 2]; 2], [0.0f64; 2]);
+        for i in 0..rows {
+            let (x, y) = row(i);
+            let (u, w, z) = (x[0] - mx[0], x[1] - mx[1], y - my);
+            a[0][0] += u * u;
+            a[0][1] += u * w;
+            a[1][1] += w * w;
+            b[0] += u * z;
+            b[1] += w * z;
+        }
+        let det = a[0][0] * a[1][1] - a[0][1] * a[0][1];
+        if !(det.is_finite() && det > 0.0) {
+            return None;
+        }
+        let d = (a[1][1] * b[0] - a[0][1] * b[1]) / det;
+        let gamma = (a[0][0] * b[1] - a[0][1] * b[0]) / det;
+        let beta = my - d * mx[0] - gamma * mx[1];
+        if !(d > 0.0 && d < 2.0) {
+            return None;
+        }
+        let r = -beta / (1.0 + d);
+        let l = -fit::ln(d) / PI;
+        let mu1 = 2.0 * l / fit::sqrt(1.0 + l * l);
+        Some([r * scale, mu1])
     }
 
     /// Peak sign (+1 maximum) of reversal `i`.
@@ -416,6 +531,8 @@ pub struct Finish {
     pub(super) scale: f64,
     pub(super) dec: Option<Fitted>,
     pub(super) avg: Averaging,
+    /// A short run: the peaks' fit alone (see [`Stage::Short`]).
+    pub(super) short: bool,
 }
 
 impl Finish {
@@ -439,6 +556,12 @@ pub(super) enum Stage {
         swd: f64,
     },
     Decrement(OlsPasses<2>),
+    /// A run of [`MIN_HALF_CYCLES`] to `2·MIN_CYCLES − 1` half-cycles: the decrement fit's ±
+    /// propagated from the peaks' (`var`: of μ0, μ1 so far; `base`: the fit's μ0, μ1).
+    Short {
+        base: Option<[f64; 2]>,
+        var: [f64; 2],
+    },
     Offset {
         sum: f64,
     },

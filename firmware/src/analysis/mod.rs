@@ -41,8 +41,12 @@
 //! within ~1.5 σ of a 16-bit vibrometer's noise, counted the noise around zero after the pin stuck as
 //! reversals, never stopped `AtRest`, and both estimators were biased (μ0 low, μ1 high).
 //!
-//! `cycles` is half the number of velocity reversals seen; below [`MIN_CYCLES`] the verdict is
-//! `TooFewCycles` and every estimate is `NaN`. Saturated displacement or velocity samples after release
+//! `cycles` is half the number of velocity reversals seen. Below [`MIN_CYCLES`] the averaging fit
+//! has too few central differences: a run of [`MIN_HALF_CYCLES`] or more half-cycles is then
+//! analysed from its peaks alone (the decrement fit, `best` = `decrement`, `averaging` NaN, verdict
+//! `Ok`: nothing to disagree with), its ± propagated from each peak's variance (its window's
+//! residuals) through the fit; under [`MIN_HALF_CYCLES`] the verdict is `TooFewCycles` and every
+//! estimate is `NaN`. Saturated displacement or velocity samples after release
 //! give the verdict `Saturated` (the numbers are still filled in, to be read with care).
 //!
 //! Cost: per sample, integer sums and one `f32` calibration (175 host instructions, 158 before the
@@ -77,8 +81,13 @@ use core::f64::consts::PI;
 
 /// Capacity of the half-cycle store: 1024 cycles, 39 s at 26 Hz. A run that fills it stops there.
 pub const MAX_HALF_CYCLES: usize = 2048;
-/// Fewer complete cycles than this and no estimate is reported (the thesis's minimum).
+/// Fewer complete cycles than this and the result is the peaks' decrement fit alone, its ±
+/// propagated from the peaks' (the thesis's minimum for its two estimators).
 pub const MIN_CYCLES: u16 = 5;
+/// Fewer half-cycles than this and no estimate is reported: the decrement fit has three
+/// constants (D, the Coulomb shift, the centre) and needs three pairs of peaks after the release
+/// (whose first milliseconds are not free motion on a real bench).
+pub const MIN_HALF_CYCLES: usize = 4;
 /// Stated precision of the method on μ0 (used by the cross-check).
 pub const MU0_PRECISION: f64 = 0.001;
 /// Stated precision of the method on μ1 (used by the cross-check).
@@ -184,6 +193,8 @@ pub struct HalfCycle {
 struct Pending {
     due: u32,
     t: f64,
+    /// Where the reversal lies after the window's centre sample (samples, |delta| ≤ ½).
+    delta: f64,
     moments: HalfCycleMoments,
 }
 
@@ -260,6 +271,9 @@ struct State {
     kept: Option<usize>,
     d2_from: u32,
     pair_from: usize,
+    /// Σ of the fitted peaks' variances (m², from each window's residuals) and their number.
+    peak_var_sum: f64,
+    peak_var_n: u32,
 }
 
 fn positive(v: f32) -> Option<f64> {
@@ -378,6 +392,8 @@ impl Pipeline {
             kept: None,
             d2_from: 2,
             pair_from: 0,
+            peak_var_sum: 0.0,
+            peak_var_n: 0,
         })
     }
 
@@ -647,6 +663,7 @@ impl Pipeline {
         self.st.pending = Some(Pending {
             due,
             t: pos / self.st.rate,
+            delta: pos - centre as f64,
             moments: hm,
         });
     }
@@ -685,8 +702,14 @@ impl Pipeline {
     fn complete_pending(&mut self, p: Pending) {
         self.st.pending = None;
         let xc = self.st.cal[Channel::Displacement as usize];
-        let peak_count = self.fitter.fit_centre().unwrap_or(xc.zero as f64);
+        let fitted = self.fitter.fit(p.delta);
+        let peak_count = fitted.map_or(xc.zero as f64, |f| f.peak);
         let peak = (xc.gain as f64 * (peak_count - xc.zero as f64)) as f32;
+        if let Some(v) = fitted.map(|f| f.variance).filter(|v| v.is_finite()) {
+            let g = xc.gain as f64;
+            self.st.peak_var_sum += v * g * g;
+            self.st.peak_var_n = self.st.peak_var_n.wrapping_add(1);
+        }
         let rec = HalfCycle {
             t: p.t as f32,
             peak,
