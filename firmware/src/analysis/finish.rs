@@ -314,15 +314,15 @@ impl Pipeline {
                     // central differences, one peak a step. The textbook ± of a regression with
                     // 0–5 degrees of freedom means little (with 1 it is 1.8× too small one time
                     // in four).
-                    let peak_var = if self.st.peak_var_n > 0 {
+                    let pooled = if self.st.peak_var_n > 0 {
                         self.st.peak_var_sum / self.st.peak_var_n as f64
                     } else {
                         f64::NAN
                     };
-                    if !(peak_var.is_finite() && peak_var > 0.0) {
+                    if !(pooled.is_finite() && pooled > 0.0) {
                         return Some(self.conclude(job));
                     }
-                    let h = fit::sqrt(peak_var);
+                    let h = fit::sqrt(pooled);
                     let Some(b) = base.or_else(|| self.peaks_fit(None, job.scale)) else {
                         job.dec = None;
                         return Some(self.conclude(job));
@@ -339,6 +339,15 @@ impl Pipeline {
                             job.dec = None;
                             return Some(self.conclude(job));
                         };
+                        // the peak's own variance (a window that went wrong says so in its
+                        // residuals), else the run's
+                        let peak_var = self
+                            .st
+                            .peak_vars
+                            .get(job.i)
+                            .map(|&v| v as f64)
+                            .filter(|v| v.is_finite() && *v > 0.0)
+                            .unwrap_or(pooled);
                         for j in 0..2 {
                             let d = (up[j] - down[j]) / (2.0 * h);
                             var[j] += d * d * peak_var;

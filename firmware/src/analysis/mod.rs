@@ -274,7 +274,12 @@ struct State {
     /// Σ of the fitted peaks' variances (m², from each window's residuals) and their number.
     peak_var_sum: f64,
     peak_var_n: u32,
+    /// The first peaks' own variances (m², NaN when unknown): a short run's ± comes from them.
+    peak_vars: [f32; SHORT_PEAKS],
 }
+
+/// Peaks whose own variance is kept: a short run has fewer than `2·MIN_CYCLES`.
+const SHORT_PEAKS: usize = 2 * MIN_CYCLES as usize;
 
 fn positive(v: f32) -> Option<f64> {
     (v.is_finite() && v > 0.0).then_some(v as f64)
@@ -394,6 +399,7 @@ impl Pipeline {
             pair_from: 0,
             peak_var_sum: 0.0,
             peak_var_n: 0,
+            peak_vars: [f32::NAN; SHORT_PEAKS],
         })
     }
 
@@ -709,6 +715,9 @@ impl Pipeline {
             let g = xc.gain as f64;
             self.st.peak_var_sum += v * g * g;
             self.st.peak_var_n = self.st.peak_var_n.wrapping_add(1);
+            if let Some(slot) = self.st.peak_vars.get_mut(self.records.len()) {
+                *slot = (v * g * g) as f32;
+            }
         }
         let rec = HalfCycle {
             t: p.t as f32,
