@@ -73,7 +73,7 @@
 use crate::calib::{OffsetCapture, ADC_MAX, CHANNELS};
 use crate::envelope::{HalfCycleMoments, Moments};
 use crate::fit::{self, Ols, OlsPasses, Pass};
-use crate::peaks::{PeakFitter, ReversalDetector};
+use crate::peaks::{PeakFit, PeakFitter, ReversalDetector, EVALS_PER_PUSH};
 use crate::wire::{
     Channel, ChannelCal, Configure, EnvelopeShape, Estimate, OnboardResult, Verdict,
 };
@@ -195,6 +195,9 @@ struct Pending {
     t: f64,
     /// Where the reversal lies after the window's centre sample (samples, |delta| ≤ ½).
     delta: f64,
+    /// The peak's fit has started (it runs a few window samples a push: see
+    /// [`crate::peaks::EVALS_PER_PUSH`]).
+    fitting: bool,
     moments: HalfCycleMoments,
 }
 
@@ -280,6 +283,11 @@ struct State {
 
 /// Peaks whose own variance is kept: a short run has fewer than `2·MIN_CYCLES`.
 const SHORT_PEAKS: usize = 2 * MIN_CYCLES as usize;
+
+/// The displacement channel's zero (counts): the peak of a window that holds nothing.
+fn xc_zero(st: &State) -> f64 {
+    st.cal[Channel::Displacement as usize].zero as f64
+}
 
 fn positive(v: f32) -> Option<f64> {
     (v.is_finite() && v > 0.0).then_some(v as f64)
@@ -628,9 +636,23 @@ impl Pipeline {
         self.st
             .moments
             .add(cx as i32 - self.st.x_ref, cv as i32 - self.st.v_ref);
-        if let Some(p) = self.st.pending {
+        if let Some(mut p) = self.st.pending {
             if idx >= p.due {
-                self.complete_pending(p);
+                let done = if p.fitting {
+                    self.fitter.step(EVALS_PER_PUSH)
+                } else {
+                    p.fitting = true;
+                    self.st.pending = Some(p);
+                    match self.fitter.start(p.delta) {
+                        None => Some(None),
+                        Some(Some(raw)) => Some(Some(raw)),
+                        Some(None) => self.fitter.step(EVALS_PER_PUSH).map(Some),
+                    }
+                    .map(|f| f.unwrap_or_else(|| PeakFit::at(xc_zero(&self.st))))
+                };
+                if let Some(fitted) = done {
+                    self.complete_pending(p, fitted);
+                }
             }
         }
         self.check_stop(idx);
@@ -649,8 +671,19 @@ impl Pipeline {
         self.update_noise();
         self.st.moments = Moments::default();
         if let Some(p) = self.st.pending.take() {
-            // Two reversals within one window: only garbage does that; keep the raw peak.
-            self.complete_pending(p);
+            // Two reversals within one window (or its fit): only garbage does that; the fit is
+            // finished now, or made now over what the ring holds.
+            let fitted = if p.fitting {
+                let mut f = None;
+                while f.is_none() && self.fitter.is_fitting() {
+                    f = self.fitter.step(usize::MAX);
+                }
+                f
+            } else {
+                self.fitter.fit(p.delta)
+            };
+            let fitted = fitted.unwrap_or_else(|| PeakFit::at(xc_zero(&self.st)));
+            self.complete_pending(p, fitted);
         }
         let first = self.records.is_empty() && self.st.pending.is_none();
         let hp = pos - self.st.last_rev;
@@ -670,6 +703,7 @@ impl Pipeline {
             due,
             t: pos / self.st.rate,
             delta: pos - centre as f64,
+            fitting: false,
             moments: hm,
         });
     }
@@ -705,10 +739,10 @@ impl Pipeline {
             .set_threshold((ARM_SIGMAS * sv * gain.abs()) as f32);
     }
 
-    fn complete_pending(&mut self, p: Pending) {
+    fn complete_pending(&mut self, p: Pending, fitted: PeakFit) {
         self.st.pending = None;
         let xc = self.st.cal[Channel::Displacement as usize];
-        let fitted = self.fitter.fit(p.delta);
+        let fitted = Some(fitted);
         let peak_count = fitted.map_or(xc.zero as f64, |f| f.peak);
         let peak = (xc.gain as f64 * (peak_count - xc.zero as f64)) as f32;
         if let Some(v) = fitted.map(|f| f.variance).filter(|v| v.is_finite()) {
