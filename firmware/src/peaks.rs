@@ -21,7 +21,7 @@ pub const MAX_HALF_WINDOW: usize = 128;
 /// application) carries a whole fit.
 pub const EVALS_PER_PUSH: usize = 8;
 /// Passes over the window of one fit (Gauss–Newton iterations in the vertex and the decay).
-const PASSES: u8 = 3;
+const PASSES: u8 = 2;
 /// Samples the ring keeps beyond the largest window: a fit started when its window is complete
 /// reads it while that many newer samples arrive.
 const SLACK: usize = (PASSES as usize * (2 * MAX_HALF_WINDOW + 1)).div_ceil(EVALS_PER_PUSH) + 2;
@@ -251,7 +251,7 @@ impl PeakFitter {
     /// arc `f = e^{−aθ}(cos θ + a sin θ)` (a damped oscillation about a different equilibrium each
     /// side: the Coulomb shift changes sides at the vertex, and after the last one the pin may
     /// stick, K_after = 0), least squares over ±1 rad, the vertex and the decay `a` fitted with
-    /// the three linear constants (Gauss–Newton, three passes over the window). A symmetric fit
+    /// the three linear constants (Gauss–Newton, two passes over the window). A symmetric fit
     /// about the nearest sample (the method before) read a peak off by `0.1 δ ω Δt (K_after −
     /// K_before)` and `K (δ ω Δt)²/2` for a vertex δ samples off the sample, and the velocity's
     /// crossing, interpolated across the kink the Coulomb shift puts in the velocity at the
@@ -275,6 +275,7 @@ impl PeakFitter {
         let mut job = Job {
             centre,
             start: self.head,
+            slot: self.head,
             pushed: 0,
             d,
             a: 0.0,
@@ -296,48 +297,72 @@ impl PeakFitter {
     /// (the raw centre sample if the fit failed, or if the window was overwritten before it was
     /// read: more than the ring's slack of samples pushed meanwhile).
     pub fn step(&mut self, evals: usize) -> Option<PeakFit> {
-        let mut job = self.job?;
-        let n = 2 * self.half + 1;
+        let (half, step, (c1, s1)) = (self.half, self.step, self.rot);
+        let ring = &self.ring;
+        let job = self.job.as_mut()?;
+        let n = 2 * half + 1;
         if job.pushed > SLACK {
+            let centre = job.centre;
             self.job = None;
-            return Some(PeakFit::at(job.centre));
+            return Some(PeakFit::at(centre));
         }
-        let (c1, s1) = self.rot;
         let mut budget = evals;
         loop {
+            // ∂f/∂d's constant factor this pass
+            let fd_scale = step * (1.0 + job.a * job.a);
             while job.j < n {
                 if budget == 0 {
-                    self.job = Some(job);
                     return None;
                 }
                 budget -= 1;
-                let slot = (job.start + RING - 1 - job.j) % RING;
-                let y = self.ring.get(slot).copied().unwrap_or(0) as f64 - job.centre;
+                // the window's samples newest first: slots start − 1, start − 2, … (wrapping)
+                job.slot = if job.slot == 0 {
+                    RING - 1
+                } else {
+                    job.slot - 1
+                };
+                let y = ring.get(job.slot).copied().unwrap_or(0) as f64 - job.centre;
                 let (c, sn) = job.cs;
                 let (theta, a) = (job.theta, job.a);
                 // f = e^{−aθ}(cos θ + a sin θ): the damped arc from its vertex, f(0) = 1
                 let f = job.decay * (c + a * sn);
                 // ∂f/∂a = e^{−aθ}(sin θ − θ (cos θ + a sin θ)); ∂f/∂d = ωΔt (1 + a²) e^{−aθ} sin θ
                 let fa = job.decay * (sn - theta * (c + a * sn));
-                let fd = self.step * (1.0 + a * a) * job.decay * sn;
-                let u = [1.0, 1.0 - f, fa, fd];
-                let side = &mut job.sides[usize::from(theta > 0.0)];
-                for (r, ur) in u.iter().enumerate() {
-                    side.b[r] += ur * y;
-                    for (q, uq) in u.iter().enumerate().skip(r) {
-                        side.m[r][q] += ur * uq;
-                    }
-                }
+                let fd = fd_scale * job.decay * sn;
+                let g = 1.0 - f;
+                let side = if theta > 0.0 {
+                    &mut job.sides[1]
+                } else {
+                    &mut job.sides[0]
+                };
+                // the Gram matrix of (1, g, fa, fd), upper triangle, written out
+                let m = &mut side.m;
+                m[0][0] += 1.0;
+                m[0][1] += g;
+                m[0][2] += fa;
+                m[0][3] += fd;
+                m[1][1] += g * g;
+                m[1][2] += g * fa;
+                m[1][3] += g * fd;
+                m[2][2] += fa * fa;
+                m[2][3] += fa * fd;
+                m[3][3] += fd * fd;
+                let b = &mut side.b;
+                b[0] += y;
+                b[1] += g * y;
+                b[2] += fa * y;
+                b[3] += fd * y;
                 job.yy += y * y;
                 // one sample back: θ − ωΔt
-                job.theta -= self.step;
+                job.theta -= step;
                 job.cs = (c * c1 + sn * s1, sn * c1 - c * s1);
                 job.decay *= job.back;
                 job.j += 1;
             }
+            let centre = job.centre;
             let Some(solved) = job.solve() else {
                 self.job = None;
-                return Some(PeakFit::at(job.centre));
+                return Some(PeakFit::at(centre));
             };
             job.pass += 1;
             if job.pass == PASSES {
@@ -349,14 +374,14 @@ impl PeakFitter {
                     f64::NAN
                 };
                 return Some(PeakFit {
-                    peak: job.centre + solved.peak,
+                    peak: centre + solved.peak,
                     variance: residual_variance * solved.inv00,
                     residual_variance,
                 });
             }
             job.a = (job.a + solved.da).clamp(-0.2, 0.2);
             job.d = (job.d + solved.dd).clamp(-1.5, 1.5);
-            job.begin_pass(self.half, self.step);
+            job.begin_pass(half, step);
         }
     }
 }
@@ -374,8 +399,9 @@ struct Side {
 struct Job {
     /// Count of the window's centre sample (the counts are taken relative to it).
     centre: f64,
-    /// Ring slot after the window's newest sample, and samples pushed since.
+    /// Ring slot after the window's newest sample, the slot last read, and samples pushed since.
     start: usize,
+    slot: usize,
     pushed: usize,
     /// Vertex (samples after the centre sample) and decay (a radian) of this pass.
     d: f64,
@@ -404,6 +430,7 @@ struct Solved {
 impl Job {
     fn begin_pass(&mut self, half: usize, step: f64) {
         self.j = 0;
+        self.slot = self.start;
         self.theta = (half as f64 - self.d) * step;
         self.cs = (fit::cos(self.theta), fit::sin(self.theta));
         self.decay = fit::exp(-self.a * self.theta);
