@@ -23,6 +23,7 @@ pub const TESTS: &[Test] = &[
     test!(pipeline::coulomb_viscous),
     test!(pipeline::noisy),
     test!(pipeline::held_20k),
+    test!(pipeline::short),
     test!(pipeline::cubic),
     test!(app::coulomb_viscous_run),
     test!(app::unloaded_run),
