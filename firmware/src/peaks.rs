@@ -19,12 +19,13 @@ pub const MAX_HALF_WINDOW: usize = 128;
 /// Window samples one [`PeakFitter::step`] from the pipeline's push evaluates: the fit of a peak is
 /// spread over the pushes after its window closes, so that no push (and no poll of the
 /// application) carries a whole fit.
-pub const EVALS_PER_PUSH: usize = 8;
+pub const EVALS_PER_PUSH: usize = 2;
 /// Passes over the window of one fit (Gauss–Newton iterations in the vertex and the decay).
-const PASSES: u8 = 2;
+const PASSES: u8 = 1;
 /// Samples the ring keeps beyond the largest window: a fit started when its window is complete
 /// reads it while that many newer samples arrive.
-const SLACK: usize = (PASSES as usize * (2 * MAX_HALF_WINDOW + 1)).div_ceil(EVALS_PER_PUSH) + 2;
+const SLACK: usize =
+    (PASSES as usize * (2 * MAX_HALF_WINDOW + 1)).div_ceil(EVALS_PER_PUSH) + PASSES as usize + 2;
 const RING: usize = 2 * MAX_HALF_WINDOW + 1 + SLACK;
 /// Half-width of the window in radians of phase.
 pub const WINDOW_RAD: f64 = 1.0;
@@ -132,6 +133,8 @@ pub struct PeakFitter {
     rot: (f64, f64),
     /// The fit in progress, if any.
     job: Option<Job>,
+    /// The decay a radian the last fit found: where the next starts (the run's damping).
+    decay: f64,
     /// Angular step `ω Δt` the table was built for.
     step: f64,
 }
@@ -152,6 +155,7 @@ impl PeakFitter {
             half: 0,
             rot: (1.0, 0.0),
             job: None,
+            decay: 0.0,
             step: 0.0,
         }
     }
@@ -169,6 +173,7 @@ impl PeakFitter {
         self.clear();
         self.half = 0;
         self.rot = (1.0, 0.0);
+        self.decay = 0.0;
         self.step = 0.0;
     }
 
@@ -251,7 +256,7 @@ impl PeakFitter {
     /// arc `f = e^{−aθ}(cos θ + a sin θ)` (a damped oscillation about a different equilibrium each
     /// side: the Coulomb shift changes sides at the vertex, and after the last one the pin may
     /// stick, K_after = 0), least squares over ±1 rad, the vertex and the decay `a` fitted with
-    /// the three linear constants (Gauss–Newton, two passes over the window). A symmetric fit
+    /// the three linear constants (one Gauss–Newton pass over the window, from the velocity's crossing and the previous peak's decay). A symmetric fit
     /// about the nearest sample (the method before) read a peak off by `0.1 δ ω Δt (K_after −
     /// K_before)` and `K (δ ω Δt)²/2` for a vertex δ samples off the sample, and the velocity's
     /// crossing, interpolated across the kink the Coulomb shift puts in the velocity at the
@@ -278,7 +283,7 @@ impl PeakFitter {
             slot: self.head,
             pushed: 0,
             d,
-            a: 0.0,
+            a: self.decay,
             pass: 0,
             j: 0,
             theta: 0.0,
@@ -299,6 +304,7 @@ impl PeakFitter {
     pub fn step(&mut self, evals: usize) -> Option<PeakFit> {
         let (half, step, (c1, s1)) = (self.half, self.step, self.rot);
         let ring = &self.ring;
+        let decay = &mut self.decay;
         let job = self.job.as_mut()?;
         let n = 2 * half + 1;
         if job.pushed > SLACK {
@@ -359,13 +365,21 @@ impl PeakFitter {
                 job.decay *= job.back;
                 job.j += 1;
             }
+            // the solve and the next pass's start take a push of their own
+            if budget < evals {
+                return None;
+            }
             let centre = job.centre;
             let Some(solved) = job.solve() else {
                 self.job = None;
                 return Some(PeakFit::at(centre));
             };
             job.pass += 1;
+            let a = job.a + solved.da;
             if job.pass == PASSES {
+                if a.is_finite() && a.abs() < 0.2 {
+                    *decay = a;
+                }
                 self.job = None;
                 let dof = n as f64 - 5.0;
                 let residual_variance = if dof >= 1.0 {
@@ -379,7 +393,7 @@ impl PeakFitter {
                     residual_variance,
                 });
             }
-            job.a = (job.a + solved.da).clamp(-0.2, 0.2);
+            job.a = a.clamp(-0.2, 0.2);
             job.d = (job.d + solved.dd).clamp(-1.5, 1.5);
             job.begin_pass(half, step);
         }
