@@ -93,7 +93,15 @@ pub fn ln(x: f64) -> f64 {
 
 /// Solves the N×N system `a x = b` (Gaussian elimination with partial pivoting); `None` when `a`
 /// is singular to working precision or anything is not finite.
-pub fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+pub fn solve<const N: usize>(a: [[f64; N]; N], b: [f64; N]) -> Option<[f64; N]> {
+    solve_many(a, [b]).map(|[x]| x)
+}
+
+/// Solves `a x = b` for each of `R` right-hand sides with one elimination (see [`solve`]).
+pub fn solve_many<const N: usize, const R: usize>(
+    mut a: [[f64; N]; N],
+    mut b: [[f64; N]; R],
+) -> Option<[[f64; N]; R]> {
     let scale = a
         .iter()
         .flat_map(|r| r.iter())
@@ -112,7 +120,9 @@ pub fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f
             return None;
         }
         a.swap(col, piv);
-        b.swap(col, piv);
+        for rhs in b.iter_mut() {
+            rhs.swap(col, piv);
+        }
         let (top, rest) = a.split_at_mut(col + 1);
         let pivot_row = &top[col];
         for (r, row) in rest.iter_mut().enumerate() {
@@ -120,18 +130,25 @@ pub fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f
             for (x, p) in row.iter_mut().zip(pivot_row.iter()).skip(col) {
                 *x -= f * p;
             }
-            b[col + 1 + r] -= f * b[col];
+            for rhs in b.iter_mut() {
+                rhs[col + 1 + r] -= f * rhs[col];
+            }
         }
     }
-    let mut x = [0.0f64; N];
-    for r in (0..N).rev() {
-        let mut v = b[r];
-        for q in r + 1..N {
-            v -= a[r][q] * x[q];
+    let mut out = [[0.0f64; N]; R];
+    for (x, rhs) in out.iter_mut().zip(b.iter()) {
+        for r in (0..N).rev() {
+            let mut v = rhs[r];
+            for q in r + 1..N {
+                v -= a[r][q] * x[q];
+            }
+            x[r] = v / a[r][r];
         }
-        x[r] = v / a[r][r];
     }
-    x.iter().all(|v| v.is_finite()).then_some(x)
+    out.iter()
+        .flat_map(|x| x.iter())
+        .all(|v| v.is_finite())
+        .then_some(out)
 }
 
 /// Cosine for |φ| ≤ π (Taylor series to full precision); the argument is clamped to that range.

@@ -24,8 +24,9 @@ pub const EVALS_PER_PUSH: usize = 2;
 const PASSES: u8 = 1;
 /// Samples the ring keeps beyond the largest window: a fit started when its window is complete
 /// reads it while that many newer samples arrive.
-const SLACK: usize =
-    (PASSES as usize * (2 * MAX_HALF_WINDOW + 1)).div_ceil(EVALS_PER_PUSH) + PASSES as usize + 2;
+const SLACK: usize = (PASSES as usize * (2 * MAX_HALF_WINDOW + 1)).div_ceil(EVALS_PER_PUSH)
+    + 2 * PASSES as usize
+    + 2;
 const RING: usize = 2 * MAX_HALF_WINDOW + 1 + SLACK;
 /// Half-width of the window in radians of phase.
 pub const WINDOW_RAD: f64 = 1.0;
@@ -292,6 +293,7 @@ impl PeakFitter {
             back: 1.0,
             sides: [Side::default(); 2],
             yy: 0.0,
+            system: None,
         };
         job.begin_pass(half, self.step);
         self.job = Some(job);
@@ -370,7 +372,17 @@ impl PeakFitter {
                 return None;
             }
             let centre = job.centre;
-            let Some(solved) = job.solve() else {
+            // the linear constants and the Gauss–Newton system in one push, its elimination in
+            // the next
+            let Some(system) = job.system.take() else {
+                let Some(system) = job.system() else {
+                    self.job = None;
+                    return Some(PeakFit::at(centre));
+                };
+                job.system = Some(system);
+                return None;
+            };
+            let Some(solved) = system.solve(job.yy) else {
                 self.job = None;
                 return Some(PeakFit::at(centre));
             };
@@ -429,6 +441,31 @@ struct Job {
     back: f64,
     sides: [Side; 2],
     yy: f64,
+    /// The pass's Gauss–Newton system, once assembled.
+    system: Option<System>,
+}
+
+/// The five-constant Gauss–Newton system of a pass: `m x = b`.
+#[derive(Clone, Copy, Debug)]
+struct System {
+    m: [[f64; 5]; 5],
+    b: [f64; 5],
+}
+
+impl System {
+    /// The constants, and `[(XᵀX)⁻¹]₀₀`, from one elimination; the residual sum of squares from
+    /// Σy².
+    fn solve(&self, yy: f64) -> Option<Solved> {
+        let [coef, inv] = fit::solve_many(self.m, [self.b, [1.0, 0.0, 0.0, 0.0, 0.0]])?;
+        let explained: f64 = coef.iter().zip(&self.b).map(|(c, b)| c * b).sum();
+        Some(Solved {
+            peak: coef[0],
+            da: coef[3],
+            dd: coef[4],
+            inv00: inv[0],
+            rss: yy - explained,
+        })
+    }
 }
 
 /// What a pass gives: the peak (counts from the centre), the Gauss–Newton steps in the decay and
@@ -451,12 +488,13 @@ impl Job {
         self.back = fit::exp(self.a * step);
         self.sides = [Side::default(); 2];
         self.yy = 0.0;
+        self.system = None;
     }
 
     /// The pass's least squares: the linear constants (P, −K_before, −K_after) at this vertex and
-    /// decay, then the five-constant Gauss–Newton system with the derivatives scaled by each
-    /// side's K.
-    fn solve(&self) -> Option<Solved> {
+    /// decay, then the five-constant Gauss–Newton system assembled with the derivatives scaled by
+    /// each side's K.
+    fn system(&self) -> Option<System> {
         let [bf, af] = &self.sides;
         let m3 = [
             [bf.m[0][0] + af.m[0][0], bf.m[0][1], af.m[0][1]],
@@ -498,16 +536,7 @@ impl Job {
                 *x = upper[q][r];
             }
         }
-        let coef = fit::solve(m, b)?;
-        let inv = fit::solve(m, [1.0, 0.0, 0.0, 0.0, 0.0])?;
-        let explained: f64 = coef.iter().zip(&b).map(|(c, b)| c * b).sum();
-        Some(Solved {
-            peak: coef[0],
-            da: coef[3],
-            dd: coef[4],
-            inv00: inv[0],
-            rss: self.yy - explained,
-        })
+        Some(System { m, b })
     }
 }
 
