@@ -19,7 +19,7 @@ pub const MAX_HALF_WINDOW: usize = 128;
 /// Window samples one [`PeakFitter::step`] from the pipeline's push evaluates: the fit of a peak is
 /// spread over the pushes after its window closes, so that no push (and no poll of the
 /// application) carries a whole fit.
-pub const EVALS_PER_PUSH: usize = 2;
+pub const EVALS_PER_PUSH: usize = 1;
 /// Passes over the window of one fit (Gauss–Newton iterations in the vertex and the decay).
 const PASSES: u8 = 1;
 /// Samples the ring keeps beyond the largest window: a fit started when its window is complete
