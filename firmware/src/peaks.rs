@@ -22,10 +22,13 @@ pub const MAX_HALF_WINDOW: usize = 128;
 pub const EVALS_PER_PUSH: usize = 1;
 /// Passes over the window of one fit (Gauss–Newton iterations in the vertex and the decay).
 const PASSES: u8 = 1;
+/// Pushes between the two heavier steps of a pass (the system's assembly, its elimination): at
+/// 20 kS/s a poll of the application takes ~10 samples, so the two fall in different polls.
+const HEAVY_GAP: u8 = 10;
 /// Samples the ring keeps beyond the largest window: a fit started when its window is complete
 /// reads it while that many newer samples arrive.
 const SLACK: usize = (PASSES as usize * (2 * MAX_HALF_WINDOW + 1)).div_ceil(EVALS_PER_PUSH)
-    + 2 * PASSES as usize
+    + PASSES as usize * (2 + HEAVY_GAP as usize)
     + 2;
 const RING: usize = 2 * MAX_HALF_WINDOW + 1 + SLACK;
 /// Half-width of the window in radians of phase.
@@ -294,6 +297,7 @@ impl PeakFitter {
             sides: [Side::default(); 2],
             yy: 0.0,
             system: None,
+            wait: 0,
         };
         job.begin_pass(half, self.step);
         self.job = Some(job);
@@ -372,16 +376,23 @@ impl PeakFitter {
                 return None;
             }
             let centre = job.centre;
-            // the linear constants and the Gauss–Newton system in one push, its elimination in
-            // the next
-            let Some(system) = job.system.take() else {
+            // the linear constants and the Gauss–Newton system in one push, its elimination
+            // `HEAVY_GAP` pushes later (not in the same poll of the application), unless the
+            // fit is being finished at once
+            let Some(system) = job.system else {
                 let Some(system) = job.system() else {
                     self.job = None;
                     return Some(PeakFit::at(centre));
                 };
                 job.system = Some(system);
+                job.wait = HEAVY_GAP;
                 return None;
             };
+            if job.wait > 0 && evals != usize::MAX {
+                job.wait -= 1;
+                return None;
+            }
+            job.system = None;
             let Some(solved) = system.solve(job.yy) else {
                 self.job = None;
                 return Some(PeakFit::at(centre));
@@ -443,6 +454,8 @@ struct Job {
     yy: f64,
     /// The pass's Gauss–Newton system, once assembled.
     system: Option<System>,
+    /// Pushes left before the system's elimination.
+    wait: u8,
 }
 
 /// The five-constant Gauss–Newton system of a pass: `m x = b`.
