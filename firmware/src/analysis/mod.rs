@@ -191,6 +191,8 @@ pub struct HalfCycle {
 
 #[derive(Clone, Copy, Debug)]
 struct Pending {
+    /// Index of the window's centre sample: the peak's fit starts there, and reads the window's
+    /// second half as it arrives.
     due: u32,
     t: f64,
     /// Where the reversal lies after the window's centre sample (samples, |delta| ≤ ½).
@@ -643,7 +645,7 @@ impl Pipeline {
                 } else {
                     p.fitting = true;
                     self.st.pending = Some(p);
-                    match self.fitter.start(p.delta) {
+                    match self.fitter.start((idx - p.due) as usize, p.delta) {
                         None => Some(None),
                         Some(Some(raw)) => Some(Some(raw)),
                         Some(None) => self.fitter.step(EVALS_PER_PUSH).map(Some),
@@ -673,15 +675,15 @@ impl Pipeline {
         if let Some(p) = self.st.pending.take() {
             // Two reversals within one window (or its fit): only garbage does that; the fit is
             // finished now, or made now over what the ring holds.
-            let fitted = if p.fitting {
-                let mut f = None;
-                while f.is_none() && self.fitter.is_fitting() {
-                    f = self.fitter.step(usize::MAX);
-                }
-                f
-            } else {
-                self.fitter.fit(p.delta)
-            };
+            if !p.fitting {
+                let _ = self
+                    .fitter
+                    .start(idx.saturating_sub(p.due) as usize, p.delta);
+            }
+            let mut fitted = None;
+            while fitted.is_none() && self.fitter.is_fitting() {
+                fitted = self.fitter.step(usize::MAX);
+            }
             let fitted = fitted.unwrap_or_else(|| PeakFit::at(xc_zero(&self.st)));
             self.complete_pending(p, fitted);
         }
@@ -697,10 +699,10 @@ impl Pipeline {
         self.st.last_rev = pos;
         let wait = 1.5 * self.st.half_period + self.fitter.half_window() as f64 + 2.0;
         self.st.deadline = (pos + wait) as u32;
-        let centre = (pos + 0.5) as u32;
-        let due = centre.saturating_add(self.fitter.half_window() as u32);
+        // the peak's fit starts at once: it reads its window as the second half arrives
+        let centre = ((pos + 0.5) as u32).min(idx);
         self.st.pending = Some(Pending {
-            due,
+            due: centre,
             t: pos / self.st.rate,
             delta: pos - centre as f64,
             fitting: false,

@@ -19,6 +19,7 @@ pub const TESTS: &[Test] = &[
     test!(store::wraps_and_reads_back_and_recovers),
     test!(parts::block_path),
     test!(parts::analysis_setup),
+    test!(parts::peak_fit),
     test!(pipeline::unloaded),
     test!(pipeline::coulomb_viscous),
     test!(pipeline::noisy),
