@@ -44,8 +44,11 @@
 //! `cycles` is half the number of velocity reversals seen. Below [`MIN_CYCLES`] the averaging fit
 //! has too few central differences: a run of [`MIN_HALF_CYCLES`] or more half-cycles is then
 //! analysed from its peaks alone (the decrement fit, `best` = `decrement`, `averaging` NaN, verdict
-//! `Ok`: nothing to disagree with), its ± propagated from each peak's variance (its window's
-//! residuals) through the fit; under [`MIN_HALF_CYCLES`] the verdict is `TooFewCycles` and every
+//! `Ok`: nothing to disagree with), its ± propagated from each peak's variance through the fit.
+//! Those peaks are fitted again at the end of the run, from the windows the pipeline keeps for the
+//! first [`SHORT_PEAKS`] of them, with the motion's own model ([`crate::peaks::arc`]: the vertex
+//! and the decay fitted, each peak's variance from its window's residuals); under
+//! [`MIN_HALF_CYCLES`] the verdict is `TooFewCycles` and every
 //! estimate is `NaN`. Saturated displacement or velocity samples after release
 //! give the verdict `Saturated` (the numbers are still filled in, to be read with care).
 //!
@@ -73,7 +76,8 @@
 use crate::calib::{OffsetCapture, ADC_MAX, CHANNELS};
 use crate::envelope::{HalfCycleMoments, Moments};
 use crate::fit::{self, Ols, OlsPasses, Pass};
-use crate::peaks::{PeakFit, PeakFitter, ReversalDetector, EVALS_PER_PUSH};
+use crate::peaks::arc::ArcFitter;
+use crate::peaks::{PeakFitter, ReversalDetector};
 use crate::wire::{
     Channel, ChannelCal, Configure, EnvelopeShape, Estimate, OnboardResult, Verdict,
 };
@@ -88,6 +92,11 @@ pub const MIN_CYCLES: u16 = 5;
 /// constants (D, the Coulomb shift, the centre) and needs three pairs of peaks after the release
 /// (whose first milliseconds are not free motion on a real bench).
 pub const MIN_HALF_CYCLES: usize = 4;
+/// Peaks whose windows the pipeline keeps for the end of the run: a short run has fewer than
+/// `2·MIN_CYCLES`.
+pub const SHORT_PEAKS: usize = 2 * MIN_CYCLES as usize;
+/// Counts of a kept window, at most.
+const WINDOW_LEN: usize = 2 * crate::peaks::MAX_HALF_WINDOW + 1;
 /// Stated precision of the method on μ0 (used by the cross-check).
 pub const MU0_PRECISION: f64 = 0.001;
 /// Stated precision of the method on μ1 (used by the cross-check).
@@ -191,15 +200,10 @@ pub struct HalfCycle {
 
 #[derive(Clone, Copy, Debug)]
 struct Pending {
-    /// Index of the window's centre sample: the peak's fit starts there, and reads the window's
-    /// second half as it arrives.
     due: u32,
     t: f64,
     /// Where the reversal lies after the window's centre sample (samples, |delta| ≤ ½).
     delta: f64,
-    /// The peak's fit has started (it runs a few window samples a push: see
-    /// [`crate::peaks::EVALS_PER_PUSH`]).
-    fitting: bool,
     moments: HalfCycleMoments,
 }
 
@@ -211,6 +215,24 @@ pub struct Pipeline {
     /// The peak fitter (1.5 KiB of ring and table: reset in place, never rebuilt by value).
     fitter: PeakFitter,
     records: heapless::Vec<HalfCycle, MAX_HALF_CYCLES>,
+    /// The first peaks' windows, for the end of a short run (5 KiB).
+    windows: Windows,
+    /// The fitter of a short run's peaks at its end (see `finish::Refit`).
+    arc: core::cell::RefCell<ArcFitter>,
+}
+
+/// The windows of the first [`SHORT_PEAKS`] peaks, in order (uninitialised storage until a
+/// window is kept: built in place, never on a stack).
+pub(crate) type Windows = heapless::Vec<Window, SHORT_PEAKS>;
+
+/// A kept window: its counts (oldest first; `len` of them), where the reversal lies after the
+/// centre sample, and the phase step the window was cut with.
+#[derive(Clone, Debug)]
+pub(crate) struct Window {
+    pub(crate) counts: [u16; WINDOW_LEN],
+    pub(crate) len: u16,
+    pub(crate) delta: f32,
+    pub(crate) step: f64,
 }
 
 /// Everything but the half-cycle store (small: rebuilt in place by [`Pipeline::reset`]).
@@ -276,19 +298,6 @@ struct State {
     kept: Option<usize>,
     d2_from: u32,
     pair_from: usize,
-    /// Σ of the fitted peaks' variances (m², from each window's residuals) and their number.
-    peak_var_sum: f64,
-    peak_var_n: u32,
-    /// The first peaks' own variances (m², NaN when unknown): a short run's ± comes from them.
-    peak_vars: [f32; SHORT_PEAKS],
-}
-
-/// Peaks whose own variance is kept: a short run has fewer than `2·MIN_CYCLES`.
-const SHORT_PEAKS: usize = 2 * MIN_CYCLES as usize;
-
-/// The displacement channel's zero (counts): the peak of a window that holds nothing.
-fn xc_zero(st: &State) -> f64 {
-    st.cal[Channel::Displacement as usize].zero as f64
 }
 
 fn positive(v: f32) -> Option<f64> {
@@ -309,6 +318,8 @@ impl Pipeline {
             st,
             fitter,
             records: heapless::Vec::new(),
+            windows: heapless::Vec::new(),
+            arc: core::cell::RefCell::new(ArcFitter::new()),
         })
     }
 
@@ -407,9 +418,6 @@ impl Pipeline {
             kept: None,
             d2_from: 2,
             pair_from: 0,
-            peak_var_sum: 0.0,
-            peak_var_n: 0,
-            peak_vars: [f32::NAN; SHORT_PEAKS],
         })
     }
 
@@ -420,6 +428,7 @@ impl Pipeline {
         self.fitter.reset();
         self.fitter.set_step(PI / self.st.half_period);
         self.records.clear();
+        self.windows.clear();
         Ok(())
     }
 
@@ -638,23 +647,9 @@ impl Pipeline {
         self.st
             .moments
             .add(cx as i32 - self.st.x_ref, cv as i32 - self.st.v_ref);
-        if let Some(mut p) = self.st.pending {
+        if let Some(p) = self.st.pending {
             if idx >= p.due {
-                let done = if p.fitting {
-                    self.fitter.step(EVALS_PER_PUSH)
-                } else {
-                    p.fitting = true;
-                    self.st.pending = Some(p);
-                    match self.fitter.start((idx - p.due) as usize, p.delta) {
-                        None => Some(None),
-                        Some(Some(raw)) => Some(Some(raw)),
-                        Some(None) => self.fitter.step(EVALS_PER_PUSH).map(Some),
-                    }
-                    .map(|f| f.unwrap_or_else(|| PeakFit::at(xc_zero(&self.st))))
-                };
-                if let Some(fitted) = done {
-                    self.complete_pending(p, fitted);
-                }
+                self.complete_pending(p);
             }
         }
         self.check_stop(idx);
@@ -673,19 +668,8 @@ impl Pipeline {
         self.update_noise();
         self.st.moments = Moments::default();
         if let Some(p) = self.st.pending.take() {
-            // Two reversals within one window (or its fit): only garbage does that; the fit is
-            // finished now, or made now over what the ring holds.
-            if !p.fitting {
-                let _ = self
-                    .fitter
-                    .start(idx.saturating_sub(p.due) as usize, p.delta);
-            }
-            let mut fitted = None;
-            while fitted.is_none() && self.fitter.is_fitting() {
-                fitted = self.fitter.step(usize::MAX);
-            }
-            let fitted = fitted.unwrap_or_else(|| PeakFit::at(xc_zero(&self.st)));
-            self.complete_pending(p, fitted);
+            // Two reversals within one window: only garbage does that; keep the raw peak.
+            self.complete_pending(p);
         }
         let first = self.records.is_empty() && self.st.pending.is_none();
         let hp = pos - self.st.last_rev;
@@ -699,13 +683,12 @@ impl Pipeline {
         self.st.last_rev = pos;
         let wait = 1.5 * self.st.half_period + self.fitter.half_window() as f64 + 2.0;
         self.st.deadline = (pos + wait) as u32;
-        // the peak's fit starts at once: it reads its window as the second half arrives
-        let centre = ((pos + 0.5) as u32).min(idx);
+        let centre = (pos + 0.5) as u32;
+        let due = centre.saturating_add(self.fitter.half_window() as u32);
         self.st.pending = Some(Pending {
-            due: centre,
+            due,
             t: pos / self.st.rate,
             delta: pos - centre as f64,
-            fitting: false,
             moments: hm,
         });
     }
@@ -741,19 +724,21 @@ impl Pipeline {
             .set_threshold((ARM_SIGMAS * sv * gain.abs()) as f32);
     }
 
-    fn complete_pending(&mut self, p: Pending, fitted: PeakFit) {
+    fn complete_pending(&mut self, p: Pending) {
         self.st.pending = None;
         let xc = self.st.cal[Channel::Displacement as usize];
-        let fitted = Some(fitted);
-        let peak_count = fitted.map_or(xc.zero as f64, |f| f.peak);
+        let peak_count = self.fitter.fit_centre().unwrap_or(xc.zero as f64);
         let peak = (xc.gain as f64 * (peak_count - xc.zero as f64)) as f32;
-        if let Some(v) = fitted.map(|f| f.variance).filter(|v| v.is_finite()) {
-            let g = xc.gain as f64;
-            self.st.peak_var_sum += v * g * g;
-            self.st.peak_var_n = self.st.peak_var_n.wrapping_add(1);
-            if let Some(slot) = self.st.peak_vars.get_mut(self.records.len()) {
-                *slot = (v * g * g) as f32;
-            }
+        if self.windows.len() == self.records.len() && !self.windows.is_full() {
+            // kept for the end of a short run (len 0 when the window is not full)
+            let mut w = Window {
+                counts: [0; WINDOW_LEN],
+                len: 0,
+                delta: p.delta as f32,
+                step: self.fitter.step(),
+            };
+            w.len = self.fitter.window(&mut w.counts) as u16;
+            let _ = self.windows.push(w);
         }
         let rec = HalfCycle {
             t: p.t as f32,

@@ -28,6 +28,7 @@ pub const TESTS: &[Test] = &[
     test!(pipeline::cubic),
     test!(app::coulomb_viscous_run),
     test!(app::unloaded_run),
+    test!(app::short_run),
     test!(app::selftest_checks),
     test!(failsafe::thermocouple_words),
     test!(failsafe::bad_reads_in_a_row_fault_the_heater),

@@ -5,6 +5,7 @@ use crate::{check, Cx, Outcome};
 use tribo_firmware::acquisition::BlockBuilder;
 use tribo_firmware::analysis::Pipeline;
 use tribo_firmware::hal::ANALOG_CHANNELS;
+use tribo_firmware::peaks::arc::ArcFitter;
 use tribo_firmware::peaks::PeakFitter;
 use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::runstore::{RunStore, MAX_RUN_BLOCKS};
@@ -171,13 +172,12 @@ pub fn analysis_setup(cx: &mut Cx) -> Outcome {
     r1.and(r2)
 }
 
-/// What one peak's fit costs on the pushes that carry it (a 10 kS/s, 27 Hz window: 117 samples):
-/// a window sample read into the fit's moments (mean over the window), the heaviest of the
-/// later stages, each in a push of its own, and the whole fit done at once (what a reversal
-/// arriving before the fit is done costs).
+/// What a short run's peak refit costs (`peaks::arc`, a 10 kS/s, 27 Hz window: 117 samples): a
+/// window sample read into the fit's moments (mean over the window), the heaviest of the later
+/// stages, and the whole fit done at once.
 pub fn peak_fit(cx: &mut Cx) -> Outcome {
     let step = 0.017;
-    let mut f = PeakFitter::new();
+    let mut f = ArcFitter::new();
     f.set_step(step);
     let half = f.half_window() as i32;
     let arc = |k: i32| {
