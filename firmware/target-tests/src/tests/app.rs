@@ -20,7 +20,7 @@ use tribo_firmware::wire::{
     OnboardResult, RigState, RunEnd, RunHeader, SampleBlock, Verdict, CHANNELS, PROTOCOL_VERSION,
 };
 
-/// Budget of one `App::poll` or `App::on_bytes`, instructions (≈ 40 µs of a 480 MHz M7).
+/// Budget of one `App::poll` or `App::on_bytes`, instructions (≈ 50 µs of the M7 at its 400 MHz, one instruction a cycle).
 pub const CALL_BUDGET: u64 = 20_000;
 /// Budget of the stack one call may use, bytes.
 pub const STACK_BUDGET: u64 = 16 * 1024;
