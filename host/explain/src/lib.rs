@@ -749,7 +749,7 @@ fn search(
             } else {
                 f64::INFINITY
             };
-            if !(se[o] >= s_prof) {
+            if se[o].is_nan() || se[o] < s_prof {
                 se[o] = s_prof;
             }
             if evp.value < ev.value {
