@@ -647,11 +647,15 @@ fn search(
         // effect of a pair in the first round (quadratic velocity's evidence was 0.0 beside a
         // cubic stiffness of evidence 3.6e5, grid #415), and the first effect can take the model
         // under 1.5 × its floor with the second still missing. When the force channel's level
-        // drifts over the motion against the current model (the drift check, significant), every
-        // candidate is tried again, under the same tests.
-        let settled = round > 1
-            && cur.adequate(data)
-            && !mu0_trend_of(data, &cur).is_some_and(|t| t.significant);
+        // drifts over the motion against the current model (the drift check, significant), the
+        // effects that drift points to are tried again, under the same tests: a drift in time
+        // (running-in, thermal drift) or a law that misses how the force follows the speed
+        // (quadratic velocity, Stribeck). Not the lags or a cubic term, which that check does not
+        // point to (tried on every candidate, a sensor lag of 46 µs was named beside a
+        // frictional lag, grid #105, and beside a cubic stiffness and a lag, #349).
+        let at_floor = round > 1 && cur.adequate(data);
+        let drift_points = at_floor && mu0_trend_of(data, &cur).is_some_and(|t| t.significant);
+        let settled = at_floor && !drift_points;
         let todo: Vec<Effect> = opts
             .candidates
             .iter()
@@ -661,6 +665,16 @@ fn search(
             // force channel's zero it is the zero offsets themselves (fitted in every model).
             .filter(|&e| e != Effect::DirectionAsymmetry || data.force_zero.is_some())
             .filter(|&e| !settled || (e == Effect::ThermalDrift && diagnostics.temperature_moves()))
+            .filter(|&e| {
+                !drift_points
+                    || matches!(
+                        e,
+                        Effect::RunningIn
+                            | Effect::ThermalDrift
+                            | Effect::QuadraticVelocity
+                            | Effect::Stribeck
+                    )
+            })
             // A Coulomb level that moves while the plate's temperature moves is read as thermal
             // drift first; running-in is what a drift in time leaves beside it.
             .filter(|&e| {
