@@ -153,6 +153,14 @@ fn main() {
                         );
                     }
                 }
+                for s in &e.steps {
+                    for ch in &s.evidence.channels {
+                        println!(
+                            "  step {:<20} {:<8} rss {:.4e} -> {:.4e}, n {}, n_eff {:.0}, noise var {:.3e}, evidence {:.1}",
+                            s.effect, ch.channel, ch.rss_before, ch.rss_after, ch.n, ch.n_eff, ch.noise_var, ch.evidence
+                        );
+                    }
+                }
             }
             Err(e) => println!("error: {e}"),
         }

@@ -41,6 +41,52 @@ pub fn fit_spec(
     best
 }
 
+/// [`fit_spec`] with the parameters at the indices `held` held at their values in each start
+/// (a profile of the misfit over them: the rest refitted at every held value).
+pub fn fit_spec_held(
+    data: &Prepared,
+    spec: &Spec,
+    starts: &[Vec<f64>],
+    held: &[usize],
+    max_iter: usize,
+) -> Option<FittedModel> {
+    let mut best: Option<FittedModel> = None;
+    let all_scales = spec.scales();
+    for p0 in starts {
+        let free: Vec<usize> = (0..p0.len()).filter(|i| !held.contains(i)).collect();
+        let full = |q: &[f64]| {
+            let mut p = p0.clone();
+            for (&i, &v) in free.iter().zip(q) {
+                p[i] = v;
+            }
+            p
+        };
+        let q0: Vec<f64> = free.iter().map(|&i| p0[i]).collect();
+        let lm = levenberg_marquardt_with(
+            |q| {
+                let s = simulate_spec(data, spec, &full(q)).ok()?;
+                let (e, f) = residuals(data, &s);
+                Some(weighted(data, &e, &f))
+            },
+            &q0,
+            &LmOptions {
+                max_iter,
+                tol: 1e-5,
+                rel_step: 1e-3,
+                scales: free.iter().map(|&i| all_scales[i]).collect(),
+            },
+        );
+        let Some(lm) = lm else { continue };
+        let Some(m) = evaluate(data, spec, &full(&lm.p)) else {
+            continue;
+        };
+        if best.as_ref().is_none_or(|b| m.gap < b.gap) {
+            best = Some(m);
+        }
+    }
+    best
+}
+
 /// Simulates and scores a model with given parameters.
 pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> {
     let s = simulate_spec(data, spec, p).ok()?;

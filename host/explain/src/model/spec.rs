@@ -90,6 +90,9 @@ impl Effect {
 /// oscillation frequency; a charge amplifier filters far above it).
 pub const LOWPASS_TAU_MAX: f64 = 1.0;
 
+/// The shortest memory time of frictional lag the model simulates (rad; 64 µs at 25 Hz).
+pub const MEMORY_TAU_MIN: f64 = 0.01;
+
 /// Model structure: base polynomial powers plus effects.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Spec {
@@ -224,7 +227,7 @@ impl Spec {
             let q = self.effect_params(e, p).unwrap_or(&[]);
             match e {
                 Effect::Stribeck => q[0] > 0.0 && (0.02..=10.0).contains(&q[1]),
-                Effect::FrictionalLag => (0.01..=3.0).contains(&q[0]),
+                Effect::FrictionalLag => (MEMORY_TAU_MIN..=3.0).contains(&q[0]),
                 Effect::CubicStiffness => q[0].abs() <= 0.05,
                 Effect::SensorLag => (0.0..=3.0).contains(&q[0]),
                 Effect::QuadraticVelocity
