@@ -443,6 +443,16 @@ pub fn fit(rec: &Record, spec: LawSpec, opts: &FitOptions) -> Result<FitResult, 
     Ok(r)
 }
 
+/// [`fit`] of every record on every core ([`map_on_every_core`]), the results in input order,
+/// each what [`fit`] gives for it alone.
+pub fn fit_many(
+    recs: &[Record],
+    spec: LawSpec,
+    opts: &FitOptions,
+) -> Vec<Result<FitResult, FitError>> {
+    map_on_every_core(recs, |r| fit(r, spec, opts), || {})
+}
+
 /// Screens ([`screen`]) and fits `spec` to dimensionless samples.
 pub fn fit_dimensionless(
     tau: &[f64],

@@ -256,6 +256,63 @@ fn fit_threads() -> usize {
     }
 }
 
+/// `items.map(f)` on every core, for many independent fits (records, stored runs): workers take
+/// the next item as they finish one, each fitting on its own thread ([`set_fit_threads`]`(1)`);
+/// the results in input order. `done` is called (on the worker) after each item, e.g. to move a
+/// progress bar. Each result is what `f` gives serially.
+pub fn map_on_every_core<T: Sync, U: Send>(
+    items: &[T],
+    f: impl Fn(&T) -> U + Sync,
+    done: impl Fn() + Sync,
+) -> Vec<U> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let n = items.len();
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |c| c.get())
+        .min(n);
+    if workers <= 1 {
+        return items
+            .iter()
+            .map(|it| {
+                let u = f(it);
+                done();
+                u
+            })
+            .collect();
+    }
+    let next = AtomicUsize::new(0);
+    let out: Mutex<Vec<Option<U>>> = Mutex::new((0..n).map(|_| None).collect());
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                s.spawn(|| {
+                    set_fit_threads(1);
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        if i >= n {
+                            break;
+                        }
+                        let u = f(&items[i]);
+                        out.lock().unwrap_or_else(|p| p.into_inner())[i] = Some(u);
+                        done();
+                    }
+                })
+            })
+            .collect();
+        for h in handles {
+            if let Err(e) = h.join() {
+                std::panic::resume_unwind(e);
+            }
+        }
+    });
+    out.into_inner()
+        .unwrap_or_else(|p| p.into_inner())
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
 /// `items.map(f)` in order, spread over up to [`fit_threads`] threads (scoped; the calling thread
 /// takes the first share). Each item is computed exactly as it would be serially.
 pub(crate) fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec<U> {
