@@ -23,3 +23,4 @@ mod panel_browser;
 mod panel_http;
 mod run_identity;
 mod selftest;
+mod table_refit;

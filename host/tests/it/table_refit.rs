@@ -4,8 +4,7 @@
 //! table of as many runs; a run that is no longer whole is left out as the stored table leaves it
 //! out; the rig's own values are refused with what to do.
 
-mod support;
-
+use crate::support;
 use serde_json::Value;
 use std::path::Path;
 
