@@ -8,8 +8,9 @@ use super::*;
 pub struct ChannelEvidence {
     /// `envelope` or `force`.
     pub channel: String,
-    /// Residual sum of squares before and after adding the effect.
+    /// Residual sum of squares before adding the effect.
     pub rss_before: f64,
+    /// Residual sum of squares after adding it.
     pub rss_after: f64,
     /// Compared points.
     pub n: usize,

@@ -123,8 +123,9 @@ pub struct Explanation {
     pub gap_final: f64,
     /// The gap a model that describes the record leaves (the channels' measurement noise).
     pub noise_floor: f64,
-    /// Envelope and force parts of the noise floor.
+    /// Envelope part of the noise floor.
     pub noise_floor_envelope: f64,
+    /// Force part of the noise floor (none without a force channel).
     pub noise_floor_force: Option<f64>,
     /// Share of the base model's excess misfit (gap² − floor², as a gap) the final model leaves.
     pub unexplained_fraction: f64,

@@ -47,6 +47,8 @@
 //! println!("{}", e.to_json().unwrap());
 //! ```
 
+#![warn(missing_docs)]
+
 pub mod diag;
 pub mod model;
 pub mod report;

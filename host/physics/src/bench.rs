@@ -10,7 +10,7 @@
 //! - mains pickup on the force channel (50 Hz and its third harmonic);
 //! - a thermocouple ramp.
 //!
-//! [`BenchGrid`] is the grid every estimator is checked over: noise levels × contacts (friction
+//! [`grid`] is the grid every estimator is checked over: noise levels × contacts (friction
 //! laws and loads) × rigs × sample rates × seeds.
 
 use crate::integrate::{Method, SimError};

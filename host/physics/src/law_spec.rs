@@ -33,10 +33,13 @@ pub const LUGRE_FIXED: (f64, f64, f64, f64) = (200.0, 2.0, 1.0, 2.0);
 /// Why a law name was not understood.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum UnknownLaw {
+    /// `poly:N` whose N is not a whole number.
     #[error("bad polynomial order in {0:?}: write poly:N with N a whole number, e.g. poly:3")]
     BadOrder(String),
+    /// `poly:N` above the highest order fitted.
     #[error("polynomial order {0} too high (max {MAX_POLY_ORDER})")]
     OrderTooHigh(usize),
+    /// A name that is no law.
     #[error(
         "unknown law {0:?}: use coulomb, viscous, coulomb-viscous, quadratic, poly:N or lugre"
     )]

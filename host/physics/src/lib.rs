@@ -10,12 +10,14 @@
 //! - [`model`]: [`model::Model`], the oscillator (law, apparatus damping, cubic spring).
 //! - [`integrate`]: RK4 / Dormand–Prince with velocity-reversal events; [`integrate::Simulator`]
 //!   is a stepping API, [`integrate::simulate`] a batch one.
-//! - [`bench`]: records made the way a lab bench makes them, and the grid every estimator is checked over.
+//! - [`bench`](mod@bench): records made the way a lab bench makes them, and the grid every estimator is checked over.
 //! - [`sensor`]: noise, 16-bit quantisation, 300 Hz force channel, lag, temperature, ECR.
 //! - [`stats`]: least-squares line, mean ± sd, the seeded random generator (defined once).
 //! - [`record`]: [`record::Record`] and its CSV formats.
 //! - [`envelope`]: Mark & Crandall, Hilbert, averaging envelopes, closed forms, shape.
 //! - [`identify`]: Levenberg–Marquardt fits, fast estimators, windowed fits.
+
+#![warn(missing_docs)]
 
 pub mod bench;
 pub mod envelope;

@@ -85,20 +85,28 @@ pub enum RecordError {
     Io {
         /// `read` or `write`.
         verb: &'static str,
+        /// The file.
         path: PathBuf,
+        /// What the system said.
         #[source]
         source: std::io::Error,
     },
     /// The text is not a record (encoding, header, a field that is not a number, a repeated key…).
     #[error("line {line}, column {col}: {what}")]
     Syntax {
+        /// Line, from 1.
         line: usize,
+        /// Column, from 1.
         col: usize,
+        /// What is wrong there.
         what: String,
     },
     /// A sample is NaN or infinite: the record is readable but cannot be analysed.
     #[error("{what}")]
-    NonFinite { what: String },
+    NonFinite {
+        /// Which sample of which channel.
+        what: String,
+    },
     /// The values are inconsistent (lengths, time not increasing, a setting out of range).
     #[error("{0}")]
     Invalid(String),
@@ -108,7 +116,9 @@ pub enum RecordError {
     /// An error in the record `path`.
     #[error("cannot use the record {}", path.display())]
     In {
+        /// The record's file.
         path: PathBuf,
+        /// What is wrong in it.
         #[source]
         source: Box<RecordError>,
     },

@@ -130,7 +130,9 @@ pub enum ExplainError {
     /// The report could not be written.
     #[error("{}: {source}", path.display())]
     Io {
+        /// The file that could not be written.
         path: std::path::PathBuf,
+        /// What the system said.
         #[source]
         source: std::io::Error,
     },

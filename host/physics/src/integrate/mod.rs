@@ -65,8 +65,11 @@ impl Method {
 /// underflow, a request it cannot meet).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SimError {
+    /// A constant of the rig, law, model or sensor chain is out of its range.
     #[error("simulation refused: {0}")]
     Invalid(#[from] InvalidParameter),
+    /// The integration itself failed (non-finite state, step-size underflow, a request it
+    /// cannot meet).
     #[error("simulation failed: {0}")]
     Run(String),
 }
