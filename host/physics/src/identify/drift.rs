@@ -603,14 +603,13 @@ fn cluster_variance(
 /// The trend of μ0 of a record with a force channel, over the motion `fit` compared, for a law
 /// with a Coulomb level (`None` otherwise: nothing to trend, or no channel to read it from).
 pub fn mu0_trend(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
-    let ft = rec.ft.as_ref()?;
-    if rec.apparatus || !fit.law.powers().contains(&0) || rec.units != crate::record::Units::Si {
-        return None;
-    }
-    let rig = rec.rig().ok()?;
-    let (tau, _, ydot) = rec.dimensionless().ok()?;
-    let f: Vec<f64> = ft.iter().map(|v| v / rig.load_n).collect();
-    let rate = 1.0 / rec.dt();
+    let TrendInputs {
+        rig,
+        tau,
+        ydot,
+        f,
+        rate,
+    } = TrendInputs::of(rec, fit)?;
     if let Some(fc) = rec.force_cutoff_hz {
         return mu0_trend_of(
             &tau,
@@ -629,14 +628,13 @@ pub fn mu0_trend(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
 /// selected sample): the reference the fast search is checked against (`tests/drift_search.rs`).
 #[doc(hidden)]
 pub fn mu0_trend_exhaustive(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
-    let ft = rec.ft.as_ref()?;
-    if rec.apparatus || !fit.law.powers().contains(&0) || rec.units != crate::record::Units::Si {
-        return None;
-    }
-    let rig = rec.rig().ok()?;
-    let (tau, _, ydot) = rec.dimensionless().ok()?;
-    let f: Vec<f64> = ft.iter().map(|v| v / rig.load_n).collect();
-    let rate = 1.0 / rec.dt();
+    let TrendInputs {
+        rig,
+        tau,
+        ydot,
+        f,
+        rate,
+    } = TrendInputs::of(rec, fit)?;
     if let Some(fc) = rec.force_cutoff_hz {
         let prep = Prepared::new(&tau, &ydot, &f, &fit.mu, fit.span.range())?;
         let through = butterworth_or_none(Some((fc, rate)));
@@ -647,6 +645,39 @@ pub fn mu0_trend_exhaustive(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
             .map(|(t, _)| t);
     }
     mu0_trend_unstated(rec, fit, &tau, &ydot, &f, rate, Search::Exhaustive)
+}
+
+/// What both searches of [`mu0_trend`] read from a record: the rig, the dimensionless time and
+/// velocity, the friction channel over the load, the sample rate (`None` when there is nothing to
+/// trend: no force channel, an apparatus run, a law without a Coulomb level, a dimensionless
+/// record).
+struct TrendInputs {
+    rig: crate::rig::Rig,
+    tau: Vec<f64>,
+    ydot: Vec<f64>,
+    f: Vec<f64>,
+    rate: f64,
+}
+
+impl TrendInputs {
+    fn of(rec: &Record, fit: &FitResult) -> Option<Self> {
+        let ft = rec.ft.as_ref()?;
+        if rec.apparatus || !fit.law.powers().contains(&0) || rec.units != crate::record::Units::Si
+        {
+            return None;
+        }
+        let rig = rec.rig().ok()?;
+        let (tau, _, ydot) = rec.dimensionless().ok()?;
+        let f: Vec<f64> = ft.iter().map(|v| v / rig.load_n).collect();
+        let rate = 1.0 / rec.dt();
+        Some(Self {
+            rig,
+            tau,
+            ydot,
+            f,
+            rate,
+        })
+    }
 }
 
 /// The trend through the filter, of those a bench's channel may have, that fits best.
