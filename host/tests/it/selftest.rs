@@ -396,3 +396,36 @@ fn an_hse_off_by_more_than_the_lsi_spread_fails_the_hse_row_only_and_the_exit_st
     let s = row_of(&v, "hse-vs-lsi")["summary"].as_str().unwrap();
     assert!(s.contains("the HSE is within"), "{s}");
 }
+
+#[test]
+fn a_velocity_force_swap_passes_the_self_test_at_rest_and_the_first_run_flags_it() {
+    // At rest both read their zero: the self-test cannot see this swap (the README says so) ...
+    let (code, v, failed) = judged(&["--swap-channels", "v,f"], &[]);
+    assert_eq!(code, Some(0), "{v:#}");
+    assert!(failed.is_empty(), "{v:#}");
+    // ... the first run does: its velocity is not the displacement's derivative. A sound rig's
+    // run says it is.
+    let dir = tempfile::tempdir().unwrap();
+    for (flags, want) in [
+        (&["--swap-channels", "v,f"][..], "CHANNELS SWAPPED?"),
+        (
+            &[][..],
+            "velocity is the displacement's derivative (gain 1.0",
+        ),
+    ] {
+        let r = RigProcess::start_with(f64::INFINITY, flags);
+        let store = dir.path().join(format!("runs{}", flags.len()));
+        let o = command(&[
+            "run", "--quiet", "--port", &r.addr, "--load", "0.3", "--store",
+        ])
+        .arg(&store)
+        .output()
+        .expect("tribo run runs");
+        let out = text(&o.stdout);
+        let line = out
+            .lines()
+            .find(|l| l.starts_with("channels"))
+            .unwrap_or_else(|| panic!("{flags:?}: no channels line: {out}{}", text(&o.stderr)));
+        assert!(line.contains(want), "{flags:?}: {line}");
+    }
+}
