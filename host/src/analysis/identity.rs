@@ -67,7 +67,7 @@ impl VelocityCheck {
 /// `None` when the record has too little motion to judge (under one half cycle, or none).
 pub fn velocity_check(t: &[f64], x: &[f64], v: &[f64], span: f64) -> Option<VelocityCheck> {
     let n = t.len().min(x.len()).min(v.len());
-    if n < 16 || !(span > 0.0) {
+    if n < 16 || span.is_nan() || span <= 0.0 {
         return None;
     }
     let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
@@ -87,7 +87,7 @@ pub fn velocity_check(t: &[f64], x: &[f64], v: &[f64], span: f64) -> Option<Velo
     };
     let d: Vec<Option<f64>> = (0..n).map(deriv).collect();
     let peak = d.iter().flatten().fold(0.0f64, |m, s| m.max(s.abs()));
-    if !(peak > 0.0) {
+    if peak.is_nan() || peak <= 0.0 {
         return None;
     }
     let start = d
@@ -128,7 +128,7 @@ pub fn velocity_check(t: &[f64], x: &[f64], v: &[f64], span: f64) -> Option<Velo
             cdv += (s - md) * (v[i] - mv);
         }
     }
-    if !(cdd > 0.0) {
+    if cdd.is_nan() || cdd <= 0.0 {
         return None;
     }
     let gain = cdv / cdd;
