@@ -54,7 +54,7 @@ displacement's derivative: `gain`, `r2`, `samples`, `half_cycles`, `consistent`;
 swapped input cables, printed as `CHANNELS SWAPPED?`; `null` for too little motion), `record`,
 `rig` (the constants used and where each came from: record, flag, default) and `defaults` (the
 constants a default stood in for). A record
-that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"message\", …}`, any
+that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"message\", \"channels\", …}`, any
 other failure `{\"record\", \"verdict\": \"error\", \"status\", \"message\"}`: one object on every
 outcome.
 
@@ -265,8 +265,14 @@ fn run_inner(a: &Args, path: &std::path::Path, out: &mut String) -> Result<()> {
     let f = match fit_law(&name, &mut rec, &opened.defaults, opened.run.as_ref(), &req)? {
         FitOutcome::Fitted(f) => f,
         FitOutcome::NotAnalysable { rig, why } => {
+            // Swapped input cables can be why nothing is fitted: the check is said here too.
+            let channels = crate::analysis::identity::record_velocity_check(&rec);
             if a.json {
-                let _ = writeln!(out, "{}", not_analysable_json(&name, &rig, &why));
+                let mut j = not_analysable_json(&name, &rig, &why);
+                j["channels"] = serde_json::to_value(channels)?;
+                let _ = writeln!(out, "{j}");
+            } else if let Some(c) = channels.filter(|c| !c.consistent) {
+                let _ = writeln!(out, "channels   {}", c.text());
             }
             return Err(Incomplete(format!(
                 "{name}: not analysable: {why}; no constant is fitted"

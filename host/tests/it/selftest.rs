@@ -427,5 +427,19 @@ fn a_velocity_force_swap_passes_the_self_test_at_rest_and_the_first_run_flags_it
             .find(|l| l.starts_with("channels"))
             .unwrap_or_else(|| panic!("{flags:?}: no channels line: {out}{}", text(&o.stderr)));
         assert!(line.contains(want), "{flags:?}: {line}");
+        // `tribo fit --json` on the stored run says the same, fitted or not.
+        let run_dir = std::fs::read_dir(&store)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.is_dir() && p.join("meta.toml").exists())
+            .expect("the run's folder");
+        let o = command(&["fit", "--json"]).arg(&run_dir).output().unwrap();
+        let v: serde_json::Value = serde_json::from_str(text(&o.stdout).trim())
+            .unwrap_or_else(|e| panic!("{e}: {}{}", text(&o.stdout), text(&o.stderr)));
+        assert_eq!(
+            v["channels"]["consistent"],
+            flags.is_empty(),
+            "{flags:?}: {v:#}"
+        );
     }
 }
