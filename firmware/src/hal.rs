@@ -200,6 +200,50 @@ pub trait OutputSense {
     fn sense_outputs(&mut self) -> SensedOutputs;
 }
 
+/// The timer that measures the LSI against the HSE, as the board configured it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LsiTimer {
+    /// The timer's tick rate as configured from the HSE's nominal frequency, Hz: what it would
+    /// tick at if the HSE were what the firmware assumes.
+    pub timer_hz: u32,
+    /// LSI periods between two captures (the input-capture prescaler).
+    pub periods_per_capture: u8,
+}
+
+/// One measurement of [`ClockCheck::lsi_interval`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LsiInterval {
+    /// Timer ticks between two consecutive captures, no capture lost in between.
+    Ticks(u32),
+    /// A capture overwrote one not yet read (the overcapture flag): the interval would span an
+    /// unknown number of captures, so it is not a measurement.
+    Overcapture,
+    /// No capture came within the wait (a few capture periods): the LSI does not reach the timer.
+    Timeout,
+}
+
+/// An independent clock against the crystal: the LSI (an RC oscillator inside the chip, not
+/// derived from the HSE) measured by a timer clocked from the HSE. The board implements it; hardware
+/// without such a path (an emulator, replayed hardware) keeps the defaults, which say so.
+pub trait ClockCheck {
+    /// Switches the LSI on (if it is not already) and starts the capture; `None`: this hardware
+    /// has no timer input on the LSI.
+    fn lsi_start(&mut self) -> Option<LsiTimer> {
+        None
+    }
+    /// The LSI is ready (its RDY flag).
+    fn lsi_ready(&mut self) -> bool {
+        false
+    }
+    /// One interval between two consecutive captures (the board may wait for them: at most a
+    /// few capture periods, bounded).
+    fn lsi_interval(&mut self) -> LsiInterval {
+        LsiInterval::Timeout
+    }
+    /// Stops the capture and leaves the LSI as [`ClockCheck::lsi_start`] found it.
+    fn lsi_stop(&mut self) {}
+}
+
 /// A monotonic clock, microseconds.
 pub trait Clock {
     fn now_us(&self) -> u64;
@@ -217,6 +261,7 @@ pub trait Hardware:
     + Link
     + RunFlash
     + OutputSense
+    + ClockCheck
 {
 }
 
@@ -230,7 +275,8 @@ impl<
             + Led
             + Link
             + RunFlash
-            + OutputSense,
+            + OutputSense
+            + ClockCheck,
     > Hardware for T
 {
 }

@@ -10,15 +10,19 @@
 //!   checked erased, programmed with a pattern, read back, erased again; with the times and the
 //!   flash controller's flags.
 //! * [`Throughput`]: filler frames as fast as the link takes them (the host times them).
+//! * [`ClockProbe`]: the LSI (an RC oscillator inside the chip, independent of the crystal)
+//!   measured by a timer clocked from the HSE, one capture interval per poll.
 //! * [`Deliberate`]: a panic or a stalled task on purpose, carried out by the board's task (or
 //!   the virtual rig's emulation of it), never by the application, which cannot panic on any input.
 //!
-//! Judging ([`judge_rate`], [`judge_channel`], [`judge_flash`], [`judge_reset`]) is pure: a
+//! Judging ([`judge_rate`], [`judge_channel`], [`judge_flash`], [`judge_clock`], [`judge_reset`]) is pure: a
 //! report in, a verdict and its reason out.
 
-use crate::hal::{FlashGeometry, RunFlash, SampleSource, ANALOG_CHANNELS};
+use crate::hal::{
+    ClockCheck, FlashGeometry, LsiInterval, LsiTimer, RunFlash, SampleSource, ANALOG_CHANNELS,
+};
 use crate::wire::{
-    filler_byte, BootReport, ChannelStats, ConverterReport, FlashReport, OutputCheck,
+    filler_byte, BootReport, ChannelStats, ClockReport, ConverterReport, FlashReport, OutputCheck,
     OutputsReport, ResetCause, SampleClock, SELFTEST_CHANNELS, SELFTEST_OUTPUTS,
 };
 
@@ -463,6 +467,98 @@ pub fn judge_output(r: &OutputsReport, i: usize) -> Option<Result<(), &'static s
     })
 }
 
+/// Longest wait for the LSI's ready flag, µs. The LSI starts within about a hundred µs (DS12110's
+/// start-up time); on the board it already runs (the IWDG, started at reset, forces it on), so
+/// this only bounds a chip that does not start it.
+pub const LSI_READY_US: u64 = 5_000;
+/// Most intervals one clock check measures (one per poll).
+pub const CLOCK_MAX_INTERVALS: u16 = 2_000;
+/// Waits without a capture after which a clock check gives up: the LSI does not reach the timer.
+pub const CLOCK_MAX_TIMEOUTS: u16 = 3;
+
+/// A clock check in progress: the LSI switched on (if it was not), its ready flag awaited, then
+/// one capture interval measured per poll until `want` are, or the LSI is not there; the LSI and
+/// the timer are left as they were found.
+#[derive(Debug, Clone)]
+pub struct ClockProbe {
+    want: u16,
+    started_us: u64,
+    timer: Option<LsiTimer>,
+    report: ClockReport,
+}
+
+impl ClockProbe {
+    /// Starts a check of `intervals` intervals (at least 1, at most [`CLOCK_MAX_INTERVALS`]).
+    pub fn start<H: ClockCheck + ?Sized>(hw: &mut H, intervals: u16, now_us: u64) -> Self {
+        let timer = hw.lsi_start();
+        ClockProbe {
+            want: intervals.clamp(1, CLOCK_MAX_INTERVALS),
+            started_us: now_us,
+            timer,
+            report: ClockReport {
+                available: timer.is_some(),
+                timer_hz: timer.map_or(0, |t| t.timer_hz),
+                periods_per_capture: timer.map_or(0, |t| t.periods_per_capture),
+                ticks_min: u32::MAX,
+                ..ClockReport::default()
+            },
+        }
+    }
+
+    fn finish<H: ClockCheck + ?Sized>(&mut self, hw: &mut H) -> Option<ClockReport> {
+        if self.timer.is_some() {
+            hw.lsi_stop();
+        }
+        if self.report.intervals == 0 {
+            self.report.ticks_min = 0;
+        }
+        Some(self.report)
+    }
+
+    /// Stops the timer (a check cancelled before its report).
+    pub fn cancel<H: ClockCheck + ?Sized>(&mut self, hw: &mut H) {
+        if self.timer.take().is_some() {
+            hw.lsi_stop();
+        }
+    }
+
+    /// One step at `now_us`; the report once the check is over.
+    pub fn step<H: ClockCheck + ?Sized>(&mut self, hw: &mut H, now_us: u64) -> Option<ClockReport> {
+        if self.timer.is_none() {
+            return self.finish(hw);
+        }
+        let r = &mut self.report;
+        if !r.lsi_ready {
+            if hw.lsi_ready() {
+                r.lsi_ready = true;
+                return None;
+            }
+            if now_us.saturating_sub(self.started_us) > LSI_READY_US {
+                return self.finish(hw);
+            }
+            return None;
+        }
+        match hw.lsi_interval() {
+            LsiInterval::Ticks(t) => {
+                r.intervals += 1;
+                r.ticks_sum += t as u64;
+                r.ticks_min = r.ticks_min.min(t);
+                r.ticks_max = r.ticks_max.max(t);
+            }
+            LsiInterval::Overcapture => r.overcaptures = r.overcaptures.saturating_add(1),
+            LsiInterval::Timeout => r.timeouts = r.timeouts.saturating_add(1),
+        }
+        let tries = r.intervals as u32 + r.overcaptures as u32 + r.timeouts as u32;
+        if r.intervals >= self.want
+            || r.timeouts >= CLOCK_MAX_TIMEOUTS
+            || tries >= 2 * self.want as u32 + 8
+        {
+            return self.finish(hw);
+        }
+        None
+    }
+}
+
 /// A throughput check in progress: filler frames `next..frames` still to send.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Throughput {
@@ -592,6 +688,71 @@ pub fn judge_identity(
         Ok(si)
     } else {
         Err(si)
+    }
+}
+
+/// The LSI's frequency limits over the part's whole range (junction −40…110 °C, VDD 1.62–3.6 V),
+/// Hz: DS12110 (STM32H742xI/G, STM32H743xI/G datasheet), table "LSI oscillator characteristics":
+/// 29.76 kHz min, 32 kHz typical, 33.6 kHz max (at 3.3 V and 25 °C it gives 31.4–32.6 kHz).
+pub const LSI_MIN_HZ: f64 = 29_760.0;
+pub const LSI_TYP_HZ: f64 = 32_000.0;
+pub const LSI_MAX_HZ: f64 = 33_600.0;
+
+/// A clock check's figures.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockFigures {
+    /// The LSI's frequency as the HSE-clocked timer measures it (timer ticks read at the rate the
+    /// firmware assumes), Hz: the LSI's true frequency divided by the HSE's error factor.
+    pub lsi_hz: f64,
+    /// Mean timer ticks per capture interval.
+    pub ticks_mean: f64,
+    /// The HSE's frequency over its nominal that the measurement allows, given the LSI anywhere
+    /// in [`LSI_MIN_HZ`]…[`LSI_MAX_HZ`]: (least, most). The check passes when 1 is inside.
+    pub hse_ratio: (f64, f64),
+    /// The HSE's frequency over its nominal if the LSI ran at its typical [`LSI_TYP_HZ`] (a
+    /// figure for the eye, not the judge).
+    pub hse_ratio_typ: f64,
+}
+
+/// Why a clock check has no verdict, or what is wrong.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ClockProblem {
+    /// This rig has no timer input on the LSI (an emulator, replayed hardware): not measurable
+    /// here, neither pass nor fail.
+    NotAvailable,
+    /// The LSI's ready flag did not come within [`LSI_READY_US`]: not measurable.
+    LsiNotReady,
+    /// No interval was measured (every wait timed out or every interval was overwritten): not
+    /// measurable.
+    NoInterval,
+    /// The LSI, measured through the HSE, is outside the LSI's datasheet limits: the HSE (or the
+    /// clock tree from it) is not what the firmware assumes.
+    OutOfRange(ClockFigures),
+}
+
+/// A clock check judged: the LSI measured through the HSE against the LSI's own limits.
+pub fn judge_clock(r: &ClockReport) -> Result<ClockFigures, ClockProblem> {
+    if !r.available {
+        return Err(ClockProblem::NotAvailable);
+    }
+    if !r.lsi_ready {
+        return Err(ClockProblem::LsiNotReady);
+    }
+    if r.intervals == 0 || r.ticks_sum == 0 || r.timer_hz == 0 || r.periods_per_capture == 0 {
+        return Err(ClockProblem::NoInterval);
+    }
+    let ticks_mean = r.ticks_sum as f64 / r.intervals as f64;
+    let lsi_hz = r.timer_hz as f64 * r.periods_per_capture as f64 / ticks_mean;
+    let f = ClockFigures {
+        lsi_hz,
+        ticks_mean,
+        hse_ratio: (LSI_MIN_HZ / lsi_hz, LSI_MAX_HZ / lsi_hz),
+        hse_ratio_typ: LSI_TYP_HZ / lsi_hz,
+    };
+    if (LSI_MIN_HZ..=LSI_MAX_HZ).contains(&lsi_hz) {
+        Ok(f)
+    } else {
+        Err(ClockProblem::OutOfRange(f))
     }
 }
 

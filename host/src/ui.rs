@@ -356,6 +356,17 @@ pub fn print_outcome(o: &Outcome) -> anyhow::Result<()> {
         let _ = writeln!(s, "aborted: what was received is kept (status: aborted)");
     }
     s.push_str(&result_table(run));
+    // The velocity input against the displacement's derivative over the first cycles: the one
+    // swap of input cables the self-test cannot see at rest (velocity ↔ force).
+    if run.block_count() > 0 && run.gaps().next().is_none() {
+        if let Some(c) = run
+            .record()
+            .ok()
+            .and_then(|r| crate::analysis::identity::record_velocity_check(&r))
+        {
+            let _ = writeln!(s, "{:<10}{}", "channels", c.text());
+        }
+    }
     crate::out::text(&s)
 }
 

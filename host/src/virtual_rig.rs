@@ -80,6 +80,11 @@ pub struct VirtualArgs {
     /// (the red lamp's pin stuck low).
     #[arg(long = "stuck-output", value_name = "OUTPUT", value_parser = parse_output_fault)]
     pub stuck_output: Option<OutputFault>,
+    /// Run the simulated HSE this many ppm off its 8 MHz (e.g. 100000: 10 % fast; a negative
+    /// value as --hse-error=-60000): the self-test's hse-vs-lsi row must catch an error beyond the
+    /// LSI's spread.
+    #[arg(long = "hse-error", value_name = "PPM", allow_hyphen_values = true)]
+    pub hse_error_ppm: Option<f64>,
     /// Print the rig's console (state-changing commands, faults, resets) on standard output.
     #[arg(skip)]
     pub log_events: bool,
@@ -104,6 +109,7 @@ impl Default for VirtualArgs {
             tc_fault: None,
             swap_channels: None,
             stuck_output: None,
+            hse_error_ppm: None,
             log_events: false,
         }
     }
@@ -303,6 +309,13 @@ impl VirtualArgs {
         rig.set_thermocouple_fault(self.tc_fault);
         rig.swap_channels(self.swap_channels);
         rig.set_output_fault(self.stuck_output);
+        if let Some(ppm) = self.hse_error_ppm {
+            // ±50 % is far past any error the check must show (the LSI's spread is ~±6 %).
+            if !(ppm.is_finite() && (-500_000.0..=500_000.0).contains(&ppm)) {
+                bail!("--hse-error takes -500000 to 500000 ppm (±50 %)");
+            }
+            rig.set_hse_error_ppm(ppm);
+        }
         Ok((rig, opts))
     }
 

@@ -272,8 +272,9 @@ class Fit(_Result):
     dimensionless constants and their standard errors), ``p_si`` and ``p_si_se`` (SI
     coefficients of μ(v) = Σ p_j v^j), ``gap`` and ``noise_floor`` (relative to the initial
     amplitude), ``half_cycles``, ``converged``, ``record``, ``rig`` (the constants used and where
-    each came from), ``defaults``, ``cross_check`` (the on-board result beside it), an apparatus
-    record's ``mu_a``, ``windows`` when asked for; ``span`` and the rest as in the JSON.
+    each came from), ``defaults``, ``cross_check`` (the on-board result beside it), ``channels``
+    (whether the velocity is the displacement's derivative), an apparatus record's ``mu_a``,
+    ``windows`` when asked for; ``span`` and the rest as in the JSON.
     """
 
     #: The law fitted (``coulomb-viscous``, ``quadratic``, …).
@@ -305,6 +306,10 @@ class Fit(_Result):
     #: The on-board result beside the host's, ``{"unavailable": why}``, or None for a law the rig
     #: does not fit.
     cross_check: Optional[Dict[str, Any]]
+    #: The velocity column against the displacement's derivative over the first cycles:
+    #: ``gain``, ``r2``, ``samples``, ``half_cycles``, ``consistent`` (False: swapped input
+    #: cables suspected); None for too little motion (or in an explanation's ``base_fit``).
+    channels: Optional[Dict[str, Any]]
     #: An apparatus record's (load 0) damping μ_a and its standard error, else None.
     mu_a: Optional[float]
     mu_a_se: Optional[float]
@@ -328,6 +333,7 @@ class Fit(_Result):
         self.rig = d.get("rig")
         self.defaults = list(d.get("defaults", []))
         self.cross_check = d.get("cross_check")
+        self.channels = d.get("channels")
         self.mu_a = _opt_float(d.get("mu_a"))
         self.mu_a_se = _opt_float(d.get("mu_a_se"))
         self.windows = d.get("windows")

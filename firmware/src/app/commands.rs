@@ -158,7 +158,7 @@ impl App<'_> {
             hw.set_ecr_range(self.ecr.range());
             hw.set_ecr_source(self.ecr.source_v());
         }
-        self.selftest = None;
+        self.selftest_cancel(hw);
         hw.adc_stop();
         // A converter that does not start is caught by the release interlock (NotSampling).
         self.clock = hw.adc_start(cfg.sample_rate_hz);

@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::selftest::{
-    ConverterProbe, Deliberate, FlashProbe, OutputsProbe, Throughput, CONVERTER_MS,
+    ClockProbe, ConverterProbe, Deliberate, FlashProbe, OutputsProbe, Throughput, CONVERTER_MS,
 };
 use crate::wire::{SelfTestCheck, SelfTestReport, FILLER_MAX};
 
@@ -13,6 +13,7 @@ pub(super) enum SelfTestRun {
     Flash(FlashProbe),
     Throughput(Throughput),
     Outputs(OutputsProbe),
+    Clock(ClockProbe),
     /// A report that the link did not take yet.
     Report(SelfTestReport),
 }
@@ -84,6 +85,11 @@ impl App<'_> {
                 }
                 SelfTestRun::Outputs(OutputsProbe::new())
             }
+            // Switches nothing the rig drives: the LSI (already on while the IWDG runs) and a
+            // timer with no pin.
+            SelfTestCheck::Clock { intervals } => {
+                SelfTestRun::Clock(ClockProbe::start(hw, intervals, self.now_us))
+            }
             SelfTestCheck::Panic | SelfTestCheck::Stall => {
                 // The reset it provokes makes the heater safe as well, but a bring-up check must
                 // not be the way a live output goes off: the plate is let cool first.
@@ -132,6 +138,15 @@ impl App<'_> {
         matches!(self.selftest, Some(SelfTestRun::Outputs(_)))
     }
 
+    /// Ends the check under way without its report (a run armed meanwhile): the clock check's
+    /// timer is stopped.
+    pub(super) fn selftest_cancel<H: Hardware>(&mut self, hw: &mut H) {
+        if let Some(SelfTestRun::Clock(p)) = &mut self.selftest {
+            p.cancel(hw);
+        }
+        self.selftest = None;
+    }
+
     /// A self-test check is under way.
     pub fn selftest_running(&self) -> bool {
         self.selftest.is_some()
@@ -165,6 +180,7 @@ impl App<'_> {
                 SelfTestReport::Converter(r)
             }),
             SelfTestRun::Flash(p) => p.step(hw, now).map(SelfTestReport::Flash),
+            SelfTestRun::Clock(p) => p.step(hw, now).map(SelfTestReport::Clock),
             SelfTestRun::Outputs(p) => p.step(hw).map(|r| {
                 // The ECR front end back as its controller left it.
                 hw.set_ecr_range(self.ecr.range());

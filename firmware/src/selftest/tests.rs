@@ -338,3 +338,187 @@ fn an_output_row_is_judged_only_where_the_board_senses_it_and_only_after_every_p
     r.steps -= 1;
     assert!(matches!(judge_output(&r, 0), Some(Err(_))));
 }
+
+/// A clock report of `n` intervals of `ticks` each from a 25 MHz timer capturing every 8 LSI
+/// periods.
+fn clock_report(n: u16, ticks: u32) -> ClockReport {
+    ClockReport {
+        available: true,
+        lsi_ready: true,
+        timer_hz: 25_000_000,
+        periods_per_capture: 8,
+        intervals: n,
+        overcaptures: 0,
+        timeouts: 0,
+        ticks_sum: n as u64 * ticks as u64,
+        ticks_min: ticks,
+        ticks_max: ticks,
+    }
+}
+
+/// Timer ticks per interval (fractional: a mean) for an LSI at `hz` through a true HSE.
+fn ticks_for(hz: f64) -> f64 {
+    25e6 * 8.0 / hz
+}
+
+#[test]
+fn the_clock_is_judged_at_the_lsi_limits_just_inside_and_just_outside_each() {
+    // Means just inside and just outside each limit: 1000 intervals, so the sum carries the mean
+    // to a thousandth of a tick.
+    let at = |hz: f64| {
+        let n = 1000u16;
+        let mut r = clock_report(n, 0);
+        r.ticks_sum = (ticks_for(hz) * n as f64).round() as u64;
+        judge_clock(&r)
+    };
+    for hz in [LSI_MIN_HZ + 0.5, LSI_TYP_HZ, LSI_MAX_HZ - 0.5] {
+        let f = at(hz).unwrap_or_else(|e| panic!("{hz}: {e:?}"));
+        assert!((f.lsi_hz - hz).abs() < 0.01, "{hz}: {f:?}");
+        assert!(f.hse_ratio.0 <= 1.0 && 1.0 <= f.hse_ratio.1, "{f:?}");
+    }
+    for hz in [LSI_MIN_HZ - 0.5, LSI_MAX_HZ + 0.5] {
+        assert!(
+            matches!(at(hz), Err(ClockProblem::OutOfRange(f)) if (f.lsi_hz - hz).abs() < 0.01),
+            "{hz}: {:?}",
+            at(hz)
+        );
+    }
+    // The HSE 5 % slow: the typical LSI reads 33.68 kHz, above the maximum; the ratio it allows
+    // does not hold 1, and at the typical LSI it says 0.95.
+    let mut r = clock_report(1, 0);
+    r.ticks_sum = (ticks_for(LSI_TYP_HZ) * 0.95).round() as u64;
+    let Err(ClockProblem::OutOfRange(f)) = judge_clock(&r) else {
+        panic!("{r:?}")
+    };
+    assert!(
+        f.hse_ratio.1 < 1.0 && (f.hse_ratio_typ - 0.95).abs() < 1e-4,
+        "{f:?}"
+    );
+}
+
+#[test]
+fn a_clock_check_without_the_timer_input_the_lsi_or_an_interval_is_not_measurable() {
+    let ok = clock_report(16, 6250);
+    assert!(judge_clock(&ok).is_ok());
+    let mut r = ok;
+    r.available = false;
+    assert_eq!(judge_clock(&r), Err(ClockProblem::NotAvailable));
+    let mut r = ok;
+    r.lsi_ready = false;
+    assert_eq!(judge_clock(&r), Err(ClockProblem::LsiNotReady));
+    // Every interval overwritten (or every wait timed out): nothing measured, no verdict.
+    let mut r = clock_report(0, 0);
+    r.overcaptures = 40;
+    assert_eq!(judge_clock(&r), Err(ClockProblem::NoInterval));
+    let mut r = clock_report(0, 0);
+    r.timeouts = CLOCK_MAX_TIMEOUTS;
+    assert_eq!(judge_clock(&r), Err(ClockProblem::NoInterval));
+    // Some intervals overwritten: thrown away, the others judged.
+    let mut r = ok;
+    r.overcaptures = 3;
+    assert!(judge_clock(&r).is_ok());
+}
+
+/// An LSI path for the probe: a script of what each interval gives.
+struct Lsi {
+    present: bool,
+    ready_after: u32,
+    polls: u32,
+    script: Vec<LsiInterval>,
+    running: bool,
+    stopped: u32,
+}
+
+impl ClockCheck for Lsi {
+    fn lsi_start(&mut self) -> Option<LsiTimer> {
+        self.running = self.present;
+        self.present.then_some(LsiTimer {
+            timer_hz: 25_000_000,
+            periods_per_capture: 8,
+        })
+    }
+    fn lsi_ready(&mut self) -> bool {
+        self.polls += 1;
+        self.polls > self.ready_after
+    }
+    fn lsi_interval(&mut self) -> LsiInterval {
+        if self.script.is_empty() {
+            LsiInterval::Timeout
+        } else {
+            self.script.remove(0)
+        }
+    }
+    fn lsi_stop(&mut self) {
+        self.running = false;
+        self.stopped += 1;
+    }
+}
+
+fn lsi(script: Vec<LsiInterval>) -> Lsi {
+    Lsi {
+        present: true,
+        ready_after: 2,
+        polls: 0,
+        script,
+        running: false,
+        stopped: 0,
+    }
+}
+
+/// Steps a probe every 500 µs until its report.
+fn run_clock(hw: &mut Lsi, n: u16) -> ClockReport {
+    let mut p = ClockProbe::start(hw, n, 0);
+    for k in 1..10_000u64 {
+        if let Some(r) = p.step(hw, k * 500) {
+            return r;
+        }
+    }
+    panic!("no report")
+}
+
+#[test]
+fn the_clock_probe_waits_for_the_lsi_drops_overcaptured_intervals_and_stops_the_timer() {
+    use LsiInterval::*;
+    let mut hw = lsi(vec![
+        Ticks(6250),
+        Overcapture,
+        Ticks(6252),
+        Timeout,
+        Ticks(6248),
+    ]);
+    let r = run_clock(&mut hw, 3);
+    assert_eq!(
+        (r.intervals, r.overcaptures, r.timeouts),
+        (3, 1, 1),
+        "{r:?}"
+    );
+    assert_eq!(
+        (r.ticks_sum, r.ticks_min, r.ticks_max),
+        (18_750, 6248, 6252)
+    );
+    assert!(!hw.running && hw.stopped == 1);
+    // The LSI never ready: the report after LSI_READY_US, not ready, the timer stopped.
+    let mut hw = lsi(vec![]);
+    hw.ready_after = u32::MAX;
+    let r = run_clock(&mut hw, 3);
+    assert!(r.available && !r.lsi_ready && r.intervals == 0, "{r:?}");
+    assert_eq!(hw.stopped, 1);
+    // No capture ever: gives up after CLOCK_MAX_TIMEOUTS waits.
+    let mut hw = lsi(vec![]);
+    let r = run_clock(&mut hw, 100);
+    assert_eq!(
+        (r.intervals, r.timeouts, r.ticks_min),
+        (0, CLOCK_MAX_TIMEOUTS, 0)
+    );
+    // Overcaptures only: gives up after 2n + 8 tries, nothing measured.
+    let mut hw = lsi(vec![Overcapture; 100]);
+    let r = run_clock(&mut hw, 4);
+    assert_eq!((r.intervals, r.overcaptures), (0, 16));
+    assert_eq!(judge_clock(&r), Err(ClockProblem::NoInterval));
+    // No timer input: reported at the first step, not available, nothing stopped.
+    let mut hw = lsi(vec![]);
+    hw.present = false;
+    let r = run_clock(&mut hw, 4);
+    assert!(!r.available);
+    assert_eq!(hw.stopped, 0);
+}

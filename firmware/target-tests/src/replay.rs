@@ -19,9 +19,9 @@ use crate::bundle::Record;
 use tribo_firmware::acquisition::clock::BOARD_TIMER_HZ;
 use tribo_firmware::acquisition::{Batch, ConverterModel};
 use tribo_firmware::hal::{
-    AnalogSample, Button, ConverterRead, EcrFrontEnd, FlashGeometry, HeaterOutput, Lamps, Led,
-    Link, Magnet, MagnetDrive, OutputSense, RunFlash, SampleSource, SensedOutputs, Thermocouple,
-    ANALOG_CHANNELS,
+    AnalogSample, Button, ClockCheck, ConverterRead, EcrFrontEnd, FlashGeometry, HeaterOutput,
+    Lamps, Led, Link, Magnet, MagnetDrive, OutputSense, RunFlash, SampleSource, SensedOutputs,
+    Thermocouple, ANALOG_CHANNELS,
 };
 use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::wire::SampleClock;
@@ -316,6 +316,10 @@ impl OutputSense for Replay<'_> {
         SensedOutputs::default()
     }
 }
+
+/// The emulated Cortex-M7 has no RCC, LSI or TIM16 (QEMU's mps2-an500): the defaults, which
+/// say the clock check is not available here.
+impl ClockCheck for Replay<'_> {}
 
 impl Link for Replay<'_> {
     fn send_frame(&mut self, frame: &[u8]) -> bool {

@@ -51,6 +51,18 @@ fn the_self_test_messages_are_the_last_variants() {
     let mut want = vec![13, 5, 5];
     want.extend([0; 4 * SELFTEST_OUTPUTS]);
     assert_eq!(body(&DeviceMsg::SelfTest(o)), want);
+    // The clock check after it: check 7 (intervals 16 as a varint), report 6; the older ones'
+    // bytes are as above.
+    assert_eq!(
+        body(&HostMsg::SelfTest(SelfTestCheck::Clock { intervals: 16 })),
+        [13, 7, 16]
+    );
+    let c = SelfTestReport::Clock(ClockReport::default());
+    // Tag 13, report 6, then 10 fields all zero (bools, u8 and varints: one byte each).
+    assert_eq!(
+        body(&DeviceMsg::SelfTest(c)),
+        [13, 6, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+    );
 }
 
 #[test]
@@ -108,6 +120,18 @@ fn every_self_test_message_round_trips_and_the_largest_fits_a_frame() {
                 read: 4095,
             }; SELFTEST_OUTPUTS],
         })),
+        DeviceMsg::SelfTest(SelfTestReport::Clock(ClockReport {
+            available: true,
+            lsi_ready: true,
+            timer_hz: u32::MAX,
+            periods_per_capture: u8::MAX,
+            intervals: u16::MAX,
+            overcaptures: u16::MAX,
+            timeouts: u16::MAX,
+            ticks_sum: u64::MAX,
+            ticks_min: u32::MAX,
+            ticks_max: u32::MAX,
+        })),
     ];
     for (seq, m) in msgs.into_iter().enumerate() {
         let bytes = encode_vec(seq as u32, &m).unwrap();
@@ -129,6 +153,9 @@ fn every_self_test_message_round_trips_and_the_largest_fits_a_frame() {
         SelfTestCheck::Stall,
         SelfTestCheck::Thermocouple,
         SelfTestCheck::Outputs,
+        SelfTestCheck::Clock {
+            intervals: u16::MAX,
+        },
     ] {
         let bytes = encode_vec(1, &HostMsg::SelfTest(c)).unwrap();
         assert_eq!(

@@ -444,6 +444,12 @@ impl VirtualRig {
         self.hw.output_fault = fault;
     }
 
+    /// Makes the HSE run `ppm` off its nominal (0: as built): the clock check's timer ticks that
+    /// much fast (positive) or slow.
+    pub fn set_hse_error_ppm(&mut self, ppm: f64) {
+        self.hw.hse_error_ppm = if ppm.is_finite() { ppm } else { 0.0 };
+    }
+
     /// Wires two converter inputs to each other's signal (or back as built with `None`).
     pub fn swap_channels(&mut self, pair: Option<(usize, usize)>) {
         self.hw.swap_channels(pair);

@@ -1,8 +1,10 @@
 //! The analysis both the command line and the Python package give: the on-board cross-check of a
 //! host fit, an apparatus record's damping, and the JSON of a fit and of an explanation; and the
-//! checks between opening a record and analysing it (`plausible.rs`). Every refusal is an
+//! checks between opening a record and analysing it (`plausible.rs`); whether the velocity column is
+//! the displacement's derivative (`identity.rs`: swapped input cables). Every refusal is an
 //! [`AnalysisError`]; `cmd::exit` maps it to an exit status, the Python package to an exception.
 
+pub mod identity;
 mod plausible;
 
 pub use plausible::{
@@ -236,6 +238,8 @@ impl Fitted {
         if let Some(w) = &self.windows {
             j["windows"] = serde_json::to_value(w)?;
         }
+        // The velocity column against the displacement's derivative (`null`: too little motion).
+        j["channels"] = serde_json::to_value(identity::record_velocity_check(rec))?;
         Ok(j)
     }
 }

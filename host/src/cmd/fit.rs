@@ -49,9 +49,12 @@ coefficients of μ(v) = Σ p_j v^j, v in m/s), `params`, `params_se`, `iteration
 compared: `start`, `end`, `samples`, the noise of y and y' read from the record, `rest_level`,
 `spikes` and `clipped` samples left out), `cross_check` (the on-board result beside the host's:
 `onboard_mu`, `onboard_mu_se`, `z`, `agree`, `usable`, `suspect`; `null` for a law the rig does not fit,
-`{\"unavailable\": why}` when there is none), `record`, `rig` (the constants used and where each
-came from: record, flag, default) and `defaults` (the constants a default stood in for). A record
-that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"message\", …}`, any
+`{\"unavailable\": why}` when there is none), `channels` (is the velocity column the
+displacement's derivative: `gain`, `r2`, `samples`, `half_cycles`, `consistent`; false flags
+swapped input cables, printed as `CHANNELS SWAPPED?`; `null` for too little motion), `record`,
+`rig` (the constants used and where each came from: record, flag, default) and `defaults` (the
+constants a default stood in for). A record
+that cannot be analysed gives `{\"record\", \"verdict\": \"not-analysable\", \"message\", \"channels\", …}`, any
 other failure `{\"record\", \"verdict\": \"error\", \"status\", \"message\"}`: one object on every
 outcome.
 
@@ -262,8 +265,14 @@ fn run_inner(a: &Args, path: &std::path::Path, out: &mut String) -> Result<()> {
     let f = match fit_law(&name, &mut rec, &opened.defaults, opened.run.as_ref(), &req)? {
         FitOutcome::Fitted(f) => f,
         FitOutcome::NotAnalysable { rig, why } => {
+            // Swapped input cables can be why nothing is fitted: the check is said here too.
+            let channels = crate::analysis::identity::record_velocity_check(&rec);
             if a.json {
-                let _ = writeln!(out, "{}", not_analysable_json(&name, &rig, &why));
+                let mut j = not_analysable_json(&name, &rig, &why);
+                j["channels"] = serde_json::to_value(channels)?;
+                let _ = writeln!(out, "{j}");
+            } else if let Some(c) = channels.filter(|c| !c.consistent) {
+                let _ = writeln!(out, "channels   {}", c.text());
             }
             return Err(Incomplete(format!(
                 "{name}: not analysable: {why}; no constant is fitted"
@@ -285,6 +294,9 @@ fn run_inner(a: &Args, path: &std::path::Path, out: &mut String) -> Result<()> {
         out.push_str(&table(&name, &f.rig, r, &rec));
         if let Some(line) = cross_check_text(&f.check) {
             let _ = writeln!(out, "{line}");
+        }
+        if let Some(c) = crate::analysis::identity::record_velocity_check(&rec) {
+            let _ = writeln!(out, "channels   {}", c.text());
         }
         if let Some(w) = &f.windows {
             out.push_str(&window_table(w));

@@ -44,6 +44,9 @@ fn describe(cfg: &VirtualRigConfig, a: &VirtualArgs) -> String {
     if let Some(f) = a.tc_fault {
         faults.push_str(&format!(", thermocouple {f:?}"));
     }
+    if let Some(ppm) = a.hse_error_ppm {
+        faults.push_str(&format!(", HSE {ppm:+.0} ppm"));
+    }
     format!(
         "m = {} kg, k = {} N/m, load {} N{}, contact {}, apparatus μ1 {}, seed {}, speed ×{}{faults}",
         cfg.mass_kg,

@@ -10,14 +10,14 @@ use anyhow::bail;
 use serde_json::json;
 use std::time::{Duration, Instant};
 use tribo_firmware::selftest::{
-    judge_channel, judge_flash, judge_identity, judge_output, judge_rate, judge_reset,
-    judge_thermocouple, rest_window, ChannelProblem, Deliberate, ERASE_MAX_US,
-    MIN_THROUGHPUT_BYTES_S, OUTPUT_NAMES, RATE_TOLERANCE_PPM,
+    judge_channel, judge_clock, judge_flash, judge_identity, judge_output, judge_rate, judge_reset,
+    judge_thermocouple, rest_window, ChannelProblem, ClockProblem, Deliberate, ERASE_MAX_US,
+    LSI_MAX_HZ, LSI_MIN_HZ, LSI_READY_US, MIN_THROUGHPUT_BYTES_S, OUTPUT_NAMES, RATE_TOLERANCE_PPM,
 };
 use tribo_firmware::thermocouple::BadRead;
 use tribo_wire::{
-    filler_byte, BootReport, Channel, Configure, ConverterReport, DeviceError, DeviceMsg,
-    ErrorCode, FlashReport, HostMsg, OutputsReport, SelfTestCheck, SelfTestReport,
+    filler_byte, BootReport, Channel, ClockReport, Configure, ConverterReport, DeviceError,
+    DeviceMsg, ErrorCode, FlashReport, HostMsg, OutputsReport, SelfTestCheck, SelfTestReport,
     ThermocoupleReport, FILLER_MAX,
 };
 
@@ -26,6 +26,8 @@ use tribo_wire::{
 #[command(
     after_help = "Rows (the README's \"Bring-up on a NUCLEO-H743ZI\" says what to check when one fails):
   sample-rate         samples the ADC delivered (DMA index) against the crystal time base, ppm
+  hse-vs-lsi          the LSI (an RC oscillator independent of the crystal) measured by a timer
+                        clocked from the HSE, against the LSI's datasheet limits: a wrong HSE
   input-displacement  each analog input: not at a rail, not one code, and its signature at rest
   input-velocity        (x within ±1.1·x0, v and F near zero, ECR above the controller's floor:
   input-force           a grounded or swapped input fails; --open-inputs on a bare board)
@@ -206,6 +208,95 @@ pub fn converter_rows(r: &ConverterReport, open_inputs: bool) -> Vec<Row> {
         ));
     }
     rows
+}
+
+/// Intervals a clock check measures (one per poll of the rig: ~16 ms on the board).
+pub const CLOCK_INTERVALS: u16 = 32;
+
+/// The clock row: the LSI as the HSE-clocked timer measures it, against the LSI's limits.
+pub fn clock_row(r: &ClockReport) -> Row {
+    let name = "hse-vs-lsi";
+    let figures = json!({"available": r.available, "lsi_ready": r.lsi_ready,
+        "timer_hz": r.timer_hz, "periods_per_capture": r.periods_per_capture,
+        "intervals": r.intervals, "overcaptures": r.overcaptures, "timeouts": r.timeouts,
+        "ticks_sum": r.ticks_sum, "ticks_min": r.ticks_min, "ticks_max": r.ticks_max,
+        "lsi_limits_hz": [LSI_MIN_HZ, LSI_MAX_HZ]});
+    let khz = |hz: f64| hz * 1e-3;
+    let limits = format!(
+        "DS12110's {:.2}–{:.2} kHz",
+        khz(LSI_MIN_HZ),
+        khz(LSI_MAX_HZ)
+    );
+    let measured = |f: &tribo_firmware::selftest::ClockFigures| {
+        format!(
+            "LSI {:.3} kHz through the HSE-clocked timer ({:.1} ticks of {:.3} MHz per {} periods, \
+             {}…{}; {} intervals, {} overwritten and dropped)",
+            khz(f.lsi_hz),
+            f.ticks_mean,
+            r.timer_hz as f64 * 1e-6,
+            r.periods_per_capture,
+            r.ticks_min,
+            r.ticks_max,
+            r.intervals,
+            r.overcaptures
+        )
+    };
+    let pct = |x: f64| (x - 1.0) * 100.0;
+    match judge_clock(r) {
+        Ok(f) => Row::new(
+            name,
+            true,
+            format!(
+                "{}; within {limits}: the HSE is within {:+.1}…{:+.1} % of its 8 MHz ({:+.2} % if \
+                 the LSI is typical)",
+                measured(&f),
+                pct(f.hse_ratio.0),
+                pct(f.hse_ratio.1),
+                pct(f.hse_ratio_typ)
+            ),
+            figures,
+        ),
+        Err(ClockProblem::OutOfRange(f)) => Row::new(
+            name,
+            false,
+            format!(
+                "{}; outside {limits}: the HSE is {:+.1}…{:+.1} % off its 8 MHz ({:+.2} % if the \
+                 LSI is typical): not the clock the firmware assumes",
+                measured(&f),
+                pct(f.hse_ratio.0),
+                pct(f.hse_ratio.1),
+                pct(f.hse_ratio_typ)
+            ),
+            figures,
+        ),
+        Err(ClockProblem::NotAvailable) => Row {
+            name: name.into(),
+            verdict: Verdict::HardwareOnly,
+            summary: "not measurable on this rig: it has no timer input on the LSI (an emulator \
+                      or replayed hardware)"
+                .into(),
+            figures,
+        },
+        Err(ClockProblem::LsiNotReady) => Row::new(
+            name,
+            false,
+            format!(
+                "not measurable: the LSI did not report ready within {} ms (RCC_CSR LSIRDY)",
+                LSI_READY_US / 1000
+            ),
+            figures,
+        ),
+        Err(ClockProblem::NoInterval) => Row::new(
+            name,
+            false,
+            format!(
+                "not measurable: no interval measured ({} waits without a capture, {} intervals \
+                 overwritten): the LSI does not reach TIM16 (TISEL) or the timer does not count",
+                r.timeouts, r.overcaptures
+            ),
+            figures,
+        ),
+    }
 }
 
 /// What each output's row reads back on the NUCLEO-H743ZI, and what it cannot sense.
@@ -473,6 +564,7 @@ fn check_name(c: &SelfTestCheck) -> &'static str {
         SelfTestCheck::Stall => "stall",
         SelfTestCheck::Thermocouple => "thermocouple",
         SelfTestCheck::Outputs => "outputs",
+        SelfTestCheck::Clock { .. } => "clock",
     }
 }
 
@@ -682,6 +774,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     match measure(
         &mut link,
+        SelfTestCheck::Clock {
+            intervals: CLOCK_INTERVALS,
+        },
+        Duration::from_secs(5),
+    ) {
+        Ok(SelfTestReport::Clock(r)) => rows.insert(1, clock_row(&r)),
+        Ok(other) => rows.insert(
+            1,
+            Row::failed("hse-vs-lsi", format!("unexpected report {other:?}")),
+        ),
+        Err(e) => rows.insert(1, Row::failed("hse-vs-lsi", format!("{e:#}"))),
+    }
+    match measure(
+        &mut link,
         SelfTestCheck::Flash { bytes: 4096 },
         Duration::from_secs(15),
     ) {
@@ -879,5 +985,46 @@ mod tests {
             "{}",
             rows[1].summary
         );
+    }
+
+    #[test]
+    fn the_clock_row_says_not_measurable_without_the_timer_input_or_the_lsi_and_never_passes_then()
+    {
+        let ok = ClockReport {
+            available: true,
+            lsi_ready: true,
+            timer_hz: 25_000_000,
+            periods_per_capture: 8,
+            intervals: 32,
+            overcaptures: 2,
+            timeouts: 0,
+            ticks_sum: 32 * 6250,
+            ticks_min: 6249,
+            ticks_max: 6251,
+        };
+        let r = clock_row(&ok);
+        assert_eq!(r.verdict, Verdict::Pass, "{r:?}");
+        assert!(r.summary.contains("LSI 32.000 kHz") && r.summary.contains("2 overwritten"));
+        // An emulator or replayed hardware: not measurable, neither pass nor fail.
+        let r = clock_row(&ClockReport::default());
+        assert_eq!(r.verdict, Verdict::HardwareOnly);
+        assert!(r.summary.starts_with("not measurable on this rig"), "{r:?}");
+        // A board whose LSI or capture does not come: not measurable, and a failure.
+        let mut bad = ok;
+        bad.lsi_ready = false;
+        let r = clock_row(&bad);
+        assert_eq!(r.verdict, Verdict::Fail);
+        assert!(r.summary.starts_with("not measurable: the LSI"), "{r:?}");
+        let mut bad = ok;
+        (bad.intervals, bad.ticks_sum, bad.timeouts) = (0, 0, 3);
+        let r = clock_row(&bad);
+        assert_eq!(r.verdict, Verdict::Fail);
+        assert!(r.summary.contains("3 waits without a capture"), "{r:?}");
+        // 7 % fewer ticks: the HSE 7 % slow, the LSI reads 34.4 kHz.
+        let mut bad = ok;
+        bad.ticks_sum = 32 * 5812;
+        let r = clock_row(&bad);
+        assert_eq!(r.verdict, Verdict::Fail);
+        assert!(r.summary.contains("outside DS12110's"), "{r:?}");
     }
 }

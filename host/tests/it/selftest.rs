@@ -36,6 +36,7 @@ fn a_sound_virtual_rig_passes_every_measured_row() {
         names,
         [
             "sample-rate",
+            "hse-vs-lsi",
             "input-displacement",
             "input-velocity",
             "input-force",
@@ -66,6 +67,16 @@ fn a_sound_virtual_rig_passes_every_measured_row() {
     let rate = &row("sample-rate")["figures"];
     assert!(rate["ppm"].as_f64().unwrap().abs() < 200.0, "{rate}");
     assert!(rate["samples"].as_u64().unwrap() > 9_000, "{rate}");
+    // The simulated LSI (31.84 kHz) through a timer on a sound HSE: 25 MHz × 8 / 31 840 Hz =
+    // 6281.4 ticks per interval.
+    let clock = &row("hse-vs-lsi")["figures"];
+    let (n, sum) = (
+        clock["intervals"].as_u64().unwrap(),
+        clock["ticks_sum"].as_u64().unwrap(),
+    );
+    assert!(n >= 32 && clock["overcaptures"] == 0, "{clock}");
+    let lsi = 25e6 * 8.0 / (sum as f64 / n as f64);
+    assert!((lsi - 31_840.0).abs() < 1.0, "{lsi} Hz: {clock}");
     let flash = &row("flash")["figures"];
     assert_eq!(flash["mismatches"], 0);
     // The simulated flash erases a sector in the STM32H743's typical 1.1 s (device time).
@@ -351,4 +362,84 @@ fn swapped_inputs_and_a_grounded_input_with_a_small_offset_fail_the_inputs_rows(
         .as_str()
         .unwrap()
         .contains("identity not judged"));
+}
+
+/// The LSI's frequency the hse-vs-lsi row's figures give, Hz.
+fn lsi_hz(v: &serde_json::Value) -> f64 {
+    let f = &row_of(v, "hse-vs-lsi")["figures"];
+    let mean = f["ticks_sum"].as_f64().unwrap() / f["intervals"].as_f64().unwrap();
+    f["timer_hz"].as_f64().unwrap() * f["periods_per_capture"].as_f64().unwrap() / mean
+}
+
+#[test]
+fn an_hse_off_by_more_than_the_lsi_spread_fails_the_hse_row_only_and_the_exit_status() {
+    // 10 % fast: the LSI (31.84 kHz) reads 28.95 kHz through the timer, below DS12110's
+    // 29.76 kHz; 6 % slow: 33.87 kHz, above its 33.6 kHz. Every other row runs from the same
+    // HSE and cannot see it.
+    for (ppm, lsi) in [("100000", 31_840.0 / 1.10), ("-60000", 31_840.0 / 0.94)] {
+        let (code, v, failed) = judged(&[&format!("--hse-error={ppm}")], &[]);
+        assert_eq!(code, Some(1), "{ppm}: {v:#}");
+        assert_eq!(failed, ["hse-vs-lsi"], "{ppm}: only its row fails: {v:#}");
+        assert!((lsi_hz(&v) - lsi).abs() < 1.0, "{ppm}: {} Hz", lsi_hz(&v));
+        let s = row_of(&v, "hse-vs-lsi")["summary"].as_str().unwrap();
+        assert!(
+            s.contains("outside DS12110's 29.76–33.60 kHz"),
+            "{ppm}: {s}"
+        );
+    }
+    // 3 % fast is inside the LSI's spread: the check cannot tell it (the LSI reads 30.91 kHz),
+    // and the row says how far the HSE may be off.
+    let (code, v, failed) = judged(&["--hse-error", "30000"], &[]);
+    assert_eq!(code, Some(0), "{v:#}");
+    assert!(failed.is_empty());
+    assert!((lsi_hz(&v) - 31_840.0 / 1.03).abs() < 1.0, "{}", lsi_hz(&v));
+    let s = row_of(&v, "hse-vs-lsi")["summary"].as_str().unwrap();
+    assert!(s.contains("the HSE is within"), "{s}");
+}
+
+#[test]
+fn a_velocity_force_swap_passes_the_self_test_at_rest_and_the_first_run_flags_it() {
+    // At rest both read their zero: the self-test cannot see this swap (the README says so) ...
+    let (code, v, failed) = judged(&["--swap-channels", "v,f"], &[]);
+    assert_eq!(code, Some(0), "{v:#}");
+    assert!(failed.is_empty(), "{v:#}");
+    // ... the first run does: its velocity is not the displacement's derivative. A sound rig's
+    // run says it is.
+    let dir = tempfile::tempdir().unwrap();
+    for (flags, want) in [
+        (&["--swap-channels", "v,f"][..], "CHANNELS SWAPPED?"),
+        (
+            &[][..],
+            "velocity is the displacement's derivative (gain 1.0",
+        ),
+    ] {
+        let r = RigProcess::start_with(f64::INFINITY, flags);
+        let store = dir.path().join(format!("runs{}", flags.len()));
+        let o = command(&[
+            "run", "--quiet", "--port", &r.addr, "--load", "0.3", "--store",
+        ])
+        .arg(&store)
+        .output()
+        .expect("tribo run runs");
+        let out = text(&o.stdout);
+        let line = out
+            .lines()
+            .find(|l| l.starts_with("channels"))
+            .unwrap_or_else(|| panic!("{flags:?}: no channels line: {out}{}", text(&o.stderr)));
+        assert!(line.contains(want), "{flags:?}: {line}");
+        // `tribo fit --json` on the stored run says the same, fitted or not.
+        let run_dir = std::fs::read_dir(&store)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.is_dir() && p.join("meta.toml").exists())
+            .expect("the run's folder");
+        let o = command(&["fit", "--json"]).arg(&run_dir).output().unwrap();
+        let v: serde_json::Value = serde_json::from_str(text(&o.stdout).trim())
+            .unwrap_or_else(|e| panic!("{e}: {}{}", text(&o.stdout), text(&o.stderr)));
+        assert_eq!(
+            v["channels"]["consistent"],
+            flags.is_empty(),
+            "{flags:?}: {v:#}"
+        );
+    }
 }

@@ -22,6 +22,8 @@ pub(super) struct BoardHw {
     pub(super) outputs_allowed: bool,
     /// The boot recovery is reading bank 2: each read is marked first (`flash_read`).
     pub(super) recovering: bool,
+    /// TIM16 on the LSI (the self-test's clock check).
+    pub(super) lsi: super::lsi::LsiCapture,
 }
 
 pub(super) fn fraction(duty: f32) -> u32 {
@@ -165,6 +167,21 @@ impl OutputSense for BoardHw {
                 high(pac::GPIOB, 14),
             ])),
         }
+    }
+}
+
+impl ClockCheck for BoardHw {
+    fn lsi_start(&mut self) -> Option<LsiTimer> {
+        self.lsi.lsi_start()
+    }
+    fn lsi_ready(&mut self) -> bool {
+        self.lsi.lsi_ready()
+    }
+    fn lsi_interval(&mut self) -> LsiInterval {
+        self.lsi.lsi_interval()
+    }
+    fn lsi_stop(&mut self) {
+        self.lsi.lsi_stop()
     }
 }
 

@@ -30,7 +30,8 @@
 //!
 //! Here: the shared state, the app, thermocouple and watchdog tasks, and `main`, which takes the
 //! peripherals and hands them out. Beside it: `hw` ([`BoardHw`], the hardware traits on this
-//! board), `flash` (bank 2 and its task), `host_link` (the USB tasks), `clocks` (the clock tree).
+//! board), `flash` (bank 2 and its task), `host_link` (the USB tasks), `clocks` (the clock tree),
+//! `lsi` (TIM16 capturing the LSI: the HSE against an independent clock, for the self-test).
 use core::cell::Cell;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
@@ -79,6 +80,7 @@ mod clocks;
 mod flash;
 mod host_link;
 mod hw;
+mod lsi;
 use clocks::*;
 use flash::*;
 use host_link::*;
@@ -488,6 +490,7 @@ async fn main(spawner: Spawner) {
         ],
         outputs_allowed,
         recovering: false,
+        lsi: lsi::LsiCapture::new(p.TIM16),
     };
 
     // MAX31856 on SPI1 (mode 1, 1 MHz), chip select PD14.

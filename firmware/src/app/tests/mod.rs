@@ -86,6 +86,11 @@ struct Mock {
     flash: MemFlash<Vec<u8>>,
     /// The range-select pin PG1 reads low whatever is driven (a stuck output).
     range_bit1_stuck_low: bool,
+    /// The LSI path: `None` no timer input on the LSI; `Some(f)` an LSI at 32 kHz read by a
+    /// 25 MHz timer whose HSE runs at `f` times its nominal.
+    lsi_hse_ratio: Option<f64>,
+    /// The LSI timer is running (between `lsi_start` and `lsi_stop`).
+    lsi_running: bool,
 }
 
 impl Mock {
@@ -111,6 +116,8 @@ impl Mock {
             stop_s: 0.5,
             flash: MemFlash::new(vec![0; 1 << 20], FlashGeometry::H743_BANK2).with_h743_timing(),
             range_bit1_stuck_low: false,
+            lsi_hse_ratio: Some(1.0),
+            lsi_running: false,
         }
     }
 
@@ -295,6 +302,30 @@ impl OutputSense for Mock {
                     | (self.lamps.red as u8) << 2,
             ),
         }
+    }
+}
+impl ClockCheck for Mock {
+    fn lsi_start(&mut self) -> Option<LsiTimer> {
+        self.lsi_hse_ratio?;
+        self.lsi_running = true;
+        Some(LsiTimer {
+            timer_hz: 25_000_000,
+            periods_per_capture: 8,
+        })
+    }
+    fn lsi_ready(&mut self) -> bool {
+        self.lsi_running
+    }
+    fn lsi_interval(&mut self) -> LsiInterval {
+        match self.lsi_hse_ratio {
+            Some(f) if self.lsi_running => {
+                LsiInterval::Ticks((25e6 * f * 8.0 / 32_000.0).round() as u32)
+            }
+            _ => LsiInterval::Timeout,
+        }
+    }
+    fn lsi_stop(&mut self) {
+        self.lsi_running = false;
     }
 }
 impl Link for Mock {

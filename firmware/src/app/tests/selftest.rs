@@ -361,3 +361,62 @@ fn an_arm_during_an_outputs_check_gives_the_ecr_front_end_back_to_its_controller
     assert!(!b.app.selftest_running());
     assert_eq!((b.hw.ecr_range, b.hw.ecr_source), before);
 }
+
+/// Runs a clock check of `n` intervals to its report.
+fn clock_check(b: &mut Bench, n: u16) -> crate::wire::ClockReport {
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Clock { intervals: n }))
+            .0,
+        Ok(())
+    );
+    let got = until_report(b, 100);
+    let [SelfTestReport::Clock(r)] = &got[..] else {
+        panic!("{got:?}")
+    };
+    *r
+}
+
+#[test]
+fn a_clock_check_measures_the_lsi_one_interval_per_poll_and_stops_the_timer() {
+    use crate::selftest::{judge_clock, ClockProblem};
+    let mut b = Bench::new();
+    let r = clock_check(&mut b, 16);
+    assert!(r.available && r.lsi_ready, "{r:?}");
+    assert_eq!((r.intervals, r.overcaptures, r.timeouts), (16, 0, 0));
+    assert_eq!((r.ticks_min, r.ticks_max), (6250, 6250));
+    let f = judge_clock(&r).unwrap();
+    assert!((f.lsi_hz - 32_000.0).abs() < 1e-6, "{f:?}");
+    assert!(!b.hw.lsi_running, "the timer stopped after the report");
+    // The HSE 10 % fast: the LSI reads 29.09 kHz through it, below its 29.76 kHz minimum.
+    b.hw.lsi_hse_ratio = Some(1.10);
+    let r = clock_check(&mut b, 4);
+    assert!(
+        matches!(judge_clock(&r), Err(ClockProblem::OutOfRange(_))),
+        "{r:?}"
+    );
+    // No timer input on the LSI: reported at once, not measurable.
+    b.hw.lsi_hse_ratio = None;
+    let r = clock_check(&mut b, 4);
+    assert!(!r.available);
+    assert_eq!(judge_clock(&r), Err(ClockProblem::NotAvailable));
+}
+
+#[test]
+fn arming_during_a_clock_check_stops_its_timer() {
+    let mut b = Bench::new();
+    let mut c = Configure::real_rig(0.3);
+    c.max_duration_s = 2.0;
+    assert_eq!(b.command(HostMsg::Configure(c)).0, Ok(()));
+    assert_eq!(
+        b.command(HostMsg::SelfTest(SelfTestCheck::Clock { intervals: 1000 }))
+            .0,
+        Ok(())
+    );
+    b.run_for(5);
+    assert!(b.hw.lsi_running);
+    assert_eq!(b.command(HostMsg::Arm).0, Ok(()));
+    assert!(
+        !b.hw.lsi_running,
+        "the check gave way to the run and stopped its timer"
+    );
+}

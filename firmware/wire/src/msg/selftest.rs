@@ -44,6 +44,10 @@ wire_type! {
         /// can sense it. Refused while the heater heats or the magnet's coil is on. Answered by
         /// [`SelfTestReport::Outputs`].
         Outputs,
+        /// Measure the low-speed internal RC oscillator (LSI) with a timer clocked from the HSE:
+        /// `intervals` capture intervals, one per poll (an independent clock against the crystal
+        /// every other rate derives from). Answered by [`SelfTestReport::Clock`].
+        Clock { intervals: u16 },
     }
 }
 
@@ -66,6 +70,34 @@ wire_type! {
         FillerDone { frames: u32, refused: u32 },
         Thermocouple(ThermocoupleReport),
         Outputs(OutputsReport),
+        Clock(ClockReport),
+    }
+}
+
+wire_type! {
+    /// A clock check: the LSI (an RC oscillator independent of the crystal) measured in ticks of a
+    /// timer clocked from the HSE, as the intervals between two consecutive input captures.
+    #[derive(Copy, Default)]
+    pub struct ClockReport {
+        /// The rig has such a timer input (false: not on this rig, e.g. an emulator or replayed
+        /// hardware; the other fields mean nothing).
+        pub available: bool,
+        /// The LSI was ready (its RDY flag) within the check's timeout.
+        pub lsi_ready: bool,
+        /// The timer's tick rate as the firmware configured it from the HSE's nominal frequency, Hz.
+        pub timer_hz: u32,
+        /// LSI periods per capture (the input-capture prescaler).
+        pub periods_per_capture: u8,
+        /// Intervals measured (two consecutive captures, none overwritten in between).
+        pub intervals: u16,
+        /// Intervals thrown away because a capture overwrote an unread one (overcapture flag).
+        pub overcaptures: u16,
+        /// Waits in which no capture came (the LSI does not reach the timer).
+        pub timeouts: u16,
+        /// Timer ticks per interval over the measured intervals: sum, least, most.
+        pub ticks_sum: u64,
+        pub ticks_min: u32,
+        pub ticks_max: u32,
     }
 }
 

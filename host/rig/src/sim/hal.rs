@@ -178,6 +178,35 @@ impl OutputSense for SimHardware {
     }
 }
 
+impl ClockCheck for SimHardware {
+    /// The board's TIM16 on the LSI, simulated: a 25 MHz timer from the HSE (off by the injected
+    /// error) capturing every 8 periods of an LSI at [`SIM_LSI_HZ`].
+    fn lsi_start(&mut self) -> Option<LsiTimer> {
+        self.lsi_running = true;
+        Some(LsiTimer {
+            timer_hz: SIM_LSI_TIMER_HZ,
+            periods_per_capture: 8,
+        })
+    }
+    fn lsi_ready(&mut self) -> bool {
+        self.lsi_running
+    }
+    fn lsi_interval(&mut self) -> LsiInterval {
+        if !self.lsi_running {
+            return LsiInterval::Timeout;
+        }
+        let exact = SIM_LSI_TIMER_HZ as f64 * (1.0 + self.hse_error_ppm * 1e-6) * 8.0 / SIM_LSI_HZ;
+        let t = exact + self.lsi_phase;
+        let ticks = t.floor();
+        self.lsi_phase = t - ticks;
+        // A 16-bit counter: an interval past its wrap reads modulo 65 536, as on the board.
+        LsiInterval::Ticks(ticks as u32 % 65_536)
+    }
+    fn lsi_stop(&mut self) {
+        self.lsi_running = false;
+    }
+}
+
 impl Link for SimHardware {
     fn send_frame(&mut self, frame: &[u8]) -> bool {
         if self.connected {

@@ -86,6 +86,11 @@ pub enum OutputFault {
     Lamps,
 }
 
+/// The simulated LSI, Hz: a part 0.5 % slow (inside DS12110's 31.4–32.6 kHz at 3.3 V and 25 °C).
+pub const SIM_LSI_HZ: f64 = 31_840.0;
+/// The clock check's timer as the board runs it: 200 MHz / 8, a capture every 8 LSI periods.
+pub const SIM_LSI_TIMER_HZ: u32 = 25_000_000;
+
 /// What can go wrong with the heater's power stage (fault injection).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HeaterStage {
@@ -176,6 +181,13 @@ pub struct SimHardware {
     swapped: Option<(usize, usize)>,
     /// An output that reads back wrong (fault injection).
     pub(crate) output_fault: Option<OutputFault>,
+    /// The HSE's error, ppm (fault injection: the crystal or the clock tree not what the firmware
+    /// assumes): the clock check's timer ticks that much fast.
+    pub(crate) hse_error_ppm: f64,
+    /// The clock check's timer is running, and the fraction of a tick carried between intervals
+    /// (a counter's quantisation).
+    pub(crate) lsi_running: bool,
+    pub(crate) lsi_phase: f64,
     // User interface.
     pub(crate) button: bool,
     lamps: Lamps,
@@ -224,6 +236,9 @@ impl SimHardware {
             channel_faults: [None; ANALOG_CHANNELS],
             swapped: None,
             output_fault: None,
+            hse_error_ppm: 0.0,
+            lsi_running: false,
+            lsi_phase: 0.0,
             button: false,
             lamps: Lamps::default(),
             connected: true,
