@@ -581,23 +581,9 @@ pub(super) struct Refit {
     peaks: [f64; SHORT_PEAKS],
     pub(super) vars: [f64; SHORT_PEAKS],
     fitted: usize,
-    /// The window's fit being re-centred: passes made, and the centre sample's offset from the
-    /// window's middle (see [`RECENTRE_PASSES`]).
-    pass: u8,
-    offset: i32,
     /// The phase step ω_d Δt of the run (0 until known: each window's own then).
     pub(super) step: f64,
 }
-
-/// Fits of one window re-centred on the vertex the previous fit found, at most. Where the pin
-/// stops at a vertex (the last of a Coulomb-dominated run), the velocity reaches zero without
-/// changing sign, and the noise about zero crosses it later, a sample to tens of samples after
-/// the vertex: the window is centred there, the Gauss–Newton step in the vertex (made for half a
-/// sample) falls short, and the peak came out off by up to 0.9 µm, 3–5 σ of the short runs'
-/// results on a 20 Hz rig. Each pass re-centres the window on the vertex found (narrower: what
-/// the kept window holds either side of it) until the vertex is within half a sample of the
-/// centre.
-const RECENTRE_PASSES: u8 = 4;
 
 impl Refit {
     fn new() -> Self {
@@ -607,8 +593,6 @@ impl Refit {
             peaks: [f64::NAN; SHORT_PEAKS],
             vars: [f64::NAN; SHORT_PEAKS],
             fitted: 0,
-            pass: 0,
-            offset: 0,
             step: 0.0,
         }
     }
@@ -887,7 +871,7 @@ impl Pipeline {
                 };
                 fitter.set_step(step);
                 fitter.set_half(len / 2);
-                if len == 0 || 2 * fitter.half_window() + 1 > len || len % 2 == 0 {
+                if len == 0 || 2 * fitter.half_window() + 1 > len {
                     // no window kept (two reversals within one: the record's peak stands)
                     r.vars[i] = f64::NAN;
                     r.peaks[i] = f64::NAN;
@@ -924,31 +908,6 @@ impl Pipeline {
             }
             let done = fitter.step_unpaced(if at_once { usize::MAX } else { REFIT_UNIT });
             if let Some(f) = done {
-                if r.pass < RECENTRE_PASSES && f.vertex.is_finite() && f.vertex.abs() > 0.5 {
-                    // the vertex is not where the window was centred: fit again about it
-                    let at = r.offset as f64 + f.vertex;
-                    // the nearest sample (`as` truncates toward zero)
-                    let centre = if at >= 0.0 {
-                        (at + 0.5) as i64
-                    } else {
-                        -((0.5 - at) as i64)
-                    };
-                    let half = (len / 2) as i64 - centre.abs();
-                    if half >= (len / 4) as i64 && half >= 2 {
-                        r.pass += 1;
-                        r.offset = centre as i32;
-                        fitter.set_half(half as usize);
-                        let age = (len / 2) as i64 - centre as i64;
-                        if let Some(None) = fitter.start(age as usize, at - centre as f64) {
-                            if !at_once {
-                                return false;
-                            }
-                            continue;
-                        }
-                    }
-                }
-                r.pass = 0;
-                r.offset = 0;
                 r.peaks[i] = gain * (f.peak - zero);
                 r.vars[i] = quantised(f) * gain * gain;
                 r.fed = 0;

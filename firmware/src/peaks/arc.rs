@@ -26,10 +26,6 @@ pub struct PeakFit {
     pub variance: f64,
     /// The residual variance of one sample about the fit (counts²; NaN when unknown).
     pub residual_variance: f64,
-    /// Where the fit put the vertex: samples after the window's centre sample (the starting
-    /// vertex plus the Gauss–Newton step; NaN when not fitted). More than half a sample off
-    /// means the window was not centred on the vertex (see [`ArcFitter::set_half`]).
-    pub vertex: f64,
 }
 
 /// Ring of displacement counts and the damped-arc peak fit.
@@ -103,11 +99,9 @@ impl ArcFitter {
         self.rot = (fit::cos(step), fit::sin(step));
     }
 
-    /// Narrows the window to `half` samples either side (at most the step's own half-width, at
-    /// least 1), the step unchanged, for a fit re-centred inside a window already stored: where
-    /// the velocity's crossing was not the vertex (the pin stopped there and the noise about
-    /// zero crossed later), the first fit's vertex is several samples before the centre, and the
-    /// samples the stored window holds either side of that vertex are fewer.
+    /// Sets the window to `half` samples either side (at most the step's own half-width, at least
+    /// 1), the step unchanged: a window kept with one step and fitted with another (the run's,
+    /// known at its end) takes what it holds.
     pub fn set_half(&mut self, half: usize) {
         if self.step > 0.0 {
             let full = (WINDOW_RAD / self.step).clamp(1.0, MAX_HALF_WINDOW as f64) as usize;
@@ -339,7 +333,7 @@ impl ArcFitter {
                 Stage::Solve => {
                     let centre = job.centre;
                     let solved = job.system.and_then(|s| s.solve(job.yy));
-                    let (a, d) = (job.a, job.d);
+                    let a = job.a;
                     self.job = None;
                     let Some(solved) = solved else {
                         return Some(PeakFit::at(centre));
@@ -358,7 +352,6 @@ impl ArcFitter {
                         peak: centre + solved.peak,
                         variance: residual_variance * solved.inv00,
                         residual_variance,
-                        vertex: d + solved.dd,
                     });
                 }
             }
@@ -529,7 +522,6 @@ impl System {
         Some(Solved {
             peak: coef[0],
             da: coef[3],
-            dd: coef[4],
             inv00: inv[0],
             rss: yy - explained,
         })
@@ -541,7 +533,6 @@ impl System {
 struct Solved {
     peak: f64,
     da: f64,
-    dd: f64,
     inv00: f64,
     rss: f64,
 }
@@ -658,7 +649,6 @@ impl PeakFit {
             peak: count,
             variance: f64::NAN,
             residual_variance: f64::NAN,
-            vertex: f64::NAN,
         }
     }
 }

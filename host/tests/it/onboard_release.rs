@@ -230,9 +230,8 @@ fn speckle_dropouts_in_the_hold_and_the_motion() {
 /// Short runs (4–6 half cycles: μ0 0.1 at 0.7 N on the 20 Hz rig), with and without a hold, at
 /// every rate, released at the rig's instant and read from the data: the peaks alone carry the
 /// result, so their ± is the result's. Before: every one read μ0 3–4 σ high and μ1 3–5 σ low (the
-/// first peak was fitted with the half period from the release, 0.8 % off, and its arc of fixed
-/// frequency put it 20–60 nm off, 4–10 of its σ; and the stop at the last vertex was fitted about
-/// the noise's later zero crossing).
+/// first peak was fitted with the half period from the release, 0.8 % off on this rig, and its arc
+/// of fixed frequency put it 20–60 nm off, 4–10 of its σ).
 #[test]
 fn short_runs_hold_their_sigma() {
     let mut zs = Vec::new();
