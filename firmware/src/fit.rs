@@ -27,6 +27,33 @@ pub fn sqrt(x: f64) -> f64 {
     y * scale
 }
 
+/// Exponential; `NaN` for `NaN`, 0 below −708, `inf` above 709.
+pub fn exp(x: f64) -> f64 {
+    if x.is_nan() {
+        return x;
+    }
+    if x > 709.0 {
+        return f64::INFINITY;
+    }
+    if x < -708.0 {
+        return 0.0;
+    }
+    const LN2: f64 = core::f64::consts::LN_2;
+    // x = k ln2 + r, |r| ≤ ln2/2: the series in r converges by a factor ≥ 2.9 per term.
+    let kf = x / LN2;
+    let k = if kf >= 0.0 { kf + 0.5 } else { kf - 0.5 } as i64;
+    // ln 2 in two parts (fdlibm's): k·LN2_HI is exact, so r keeps its precision at any k
+    const LN2_HI: f64 = 6.931_471_803_691_238e-1;
+    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+    let r = (x - k as f64 * LN2_HI) - k as f64 * LN2_LO;
+    let (mut term, mut sum) = (1.0f64, 1.0f64);
+    for n in 1..20 {
+        term *= r / n as f64;
+        sum += term;
+    }
+    sum * f64::from_bits(((k + 1023) as u64) << 52)
+}
+
 /// Natural logarithm; `NaN` for non-positive or `NaN` input, `inf` for `inf`.
 pub fn ln(x: f64) -> f64 {
     if x.is_nan() || x <= 0.0 {
@@ -62,6 +89,66 @@ pub fn ln(x: f64) -> f64 {
         out -= 300.0 * core::f64::consts::LN_10;
     }
     out
+}
+
+/// Solves the N×N system `a x = b` (Gaussian elimination with partial pivoting); `None` when `a`
+/// is singular to working precision or anything is not finite.
+pub fn solve<const N: usize>(a: [[f64; N]; N], b: [f64; N]) -> Option<[f64; N]> {
+    solve_many(a, [b]).map(|[x]| x)
+}
+
+/// Solves `a x = b` for each of `R` right-hand sides with one elimination (see [`solve`]).
+pub fn solve_many<const N: usize, const R: usize>(
+    mut a: [[f64; N]; N],
+    mut b: [[f64; N]; R],
+) -> Option<[[f64; N]; R]> {
+    let scale = a
+        .iter()
+        .flat_map(|r| r.iter())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    if !(scale.is_finite() && scale > 0.0) {
+        return None;
+    }
+    for col in 0..N {
+        let mut piv = col;
+        for r in col + 1..N {
+            if a[r][col].abs() > a[piv][col].abs() {
+                piv = r;
+            }
+        }
+        if a[piv][col].abs() <= 1e-13 * scale || a[piv][col].is_nan() {
+            return None;
+        }
+        a.swap(col, piv);
+        for rhs in b.iter_mut() {
+            rhs.swap(col, piv);
+        }
+        let (top, rest) = a.split_at_mut(col + 1);
+        let pivot_row = &top[col];
+        for (r, row) in rest.iter_mut().enumerate() {
+            let f = row[col] / pivot_row[col];
+            for (x, p) in row.iter_mut().zip(pivot_row.iter()).skip(col) {
+                *x -= f * p;
+            }
+            for rhs in b.iter_mut() {
+                rhs[col + 1 + r] -= f * rhs[col];
+            }
+        }
+    }
+    let mut out = [[0.0f64; N]; R];
+    for (x, rhs) in out.iter_mut().zip(b.iter()) {
+        for r in (0..N).rev() {
+            let mut v = rhs[r];
+            for q in r + 1..N {
+                v -= a[r][q] * x[q];
+            }
+            x[r] = v / a[r][r];
+        }
+    }
+    out.iter()
+        .flat_map(|x| x.iter())
+        .all(|v| v.is_finite())
+        .then_some(out)
 }
 
 /// Cosine for |φ| ≤ π (Taylor series to full precision); the argument is clamped to that range.
@@ -587,6 +674,18 @@ fn invert<const P: usize>(a: [[f64; P]; P]) -> Option<[[f64; P]; P]> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn exp_matches_std() {
+        for x in [
+            -700.0, -20.0, -1.5, -0.3, -1e-9, 0.0, 1e-9, 0.25, 0.3466, 1.0, 7.7, 300.0, 709.0,
+        ] {
+            let (got, want) = (exp(x), x.exp());
+            assert!(((got - want) / want).abs() < 4e-15, "{x}: {got} vs {want}");
+        }
+        assert!(exp(f64::NAN).is_nan());
+    }
+
     use super::*;
 
     #[test]

@@ -14,6 +14,8 @@
 //! sample.
 use crate::fit;
 
+pub mod arc;
+
 /// Largest half-width of the peak window, in samples.
 pub const MAX_HALF_WINDOW: usize = 128;
 const RING: usize = 2 * MAX_HALF_WINDOW + 1;
@@ -183,6 +185,11 @@ impl PeakFitter {
         self.sgg = sgg;
     }
 
+    /// The phase step `ω Δt` the window is cut for (0 before [`PeakFitter::set_step`]).
+    pub fn step(&self) -> f64 {
+        self.step
+    }
+
     /// Half-width of the window in samples (0 before [`PeakFitter::set_step`]).
     pub fn half_window(&self) -> usize {
         self.half
@@ -206,6 +213,26 @@ impl PeakFitter {
             return None;
         }
         self.ring.get((self.head + RING - 1 - age) % RING).copied()
+    }
+
+    /// Copies the window about the sample `half_window()` samples before the newest (its
+    /// `2·half_window() + 1` counts, oldest first) into `out`; the number copied, 0 when the
+    /// window is not full or `out` too short.
+    pub fn window(&self, out: &mut [u16]) -> usize {
+        let n = 2 * self.half + 1;
+        if self.half == 0 || self.len < n || out.len() < n {
+            return 0;
+        }
+        // the oldest at `head − n` (wrapping), as two slices of the ring
+        let start = (self.head + RING - n) % RING;
+        let first = self.ring.get(start..(start + n).min(RING)).unwrap_or(&[]);
+        let second = self.ring.get(..n - first.len()).unwrap_or(&[]);
+        let (a, b) = out.split_at_mut(first.len());
+        a.copy_from_slice(first);
+        if let Some(b) = b.get_mut(..second.len()) {
+            b.copy_from_slice(second);
+        }
+        n
     }
 
     /// Fitted peak count at the sample `half_window()` samples before the newest, i.e. the window's

@@ -51,6 +51,8 @@ impl Pipeline {
             scale: 0.0,
             dec: None,
             avg: Averaging::default(),
+            short: false,
+            refit: Refit::new(),
         }
     }
 
@@ -144,13 +146,32 @@ impl Pipeline {
                     }
                     let omega_d = PI / *half_period_s;
                     job.out.frequency_hz = (omega_d / (2.0 * PI)) as f32;
-                    if job.out.cycles < MIN_CYCLES {
+                    if n < MIN_HALF_CYCLES {
                         job.out.verdict = Verdict::TooFewCycles;
                         return Some(job.done());
                     }
                     job.omega_d = omega_d;
                     job.scale = self.st.stiffness / self.st.load; // metres → y
-                    job.stage = Stage::Decrement(OlsPasses::new());
+                    job.refit.step = omega_d / self.st.rate;
+                    job.stage = if job.out.cycles < MIN_CYCLES {
+                        Stage::Refit
+                    } else {
+                        Stage::Decrement(OlsPasses::new())
+                    };
+                }
+                Stage::Refit => {
+                    // A short run's result rests on its few peaks and their ±: each is fitted
+                    // again from its kept window with the motion's own model, one piece of one
+                    // window a step (a few thousand instructions on the M7).
+                    let at_once = rows == u32::MAX;
+                    let done = self.refit_step(&mut job.refit, at_once);
+                    if done {
+                        job.stage = Stage::Decrement(OlsPasses::new());
+                    }
+                    if !at_once {
+                        // the regressions start in a step of their own
+                        return None;
+                    }
                 }
                 Stage::Decrement(f) => {
                     while job.i + 1 < n {
@@ -159,9 +180,9 @@ impl Pipeline {
                         }
                         budget -= 1;
                         let i = job.i;
-                        let (a, b) = (&recs[i], &recs[i + 1]);
+                        let (a, b) = (job.refit.peak(recs, i), job.refit.peak(recs, i + 1));
                         let (sa, sb) = (self.sign(i), self.sign(i + 1));
-                        f.row([sa * a.peak as f64, sb], sb * b.peak as f64, 1.0);
+                        f.row([sa * a, sb], sb * b, 1.0);
                         job.i += 1;
                     }
                     job.i = 0;
@@ -170,6 +191,16 @@ impl Pipeline {
                         Pass::Done(fitted) => fitted,
                     };
                     job.dec = fitted.and_then(|f| decrement(&f, job.scale));
+                    if job.out.cycles < MIN_CYCLES {
+                        // Too few half-cycles for the averaging fit's central differences: the
+                        // peaks alone, their ± propagated from each peak's own (see `Short`).
+                        job.i = 0;
+                        job.stage = Stage::Short {
+                            base: None,
+                            var: [0.0; 2],
+                        };
+                        continue;
+                    }
                     if n < 6 {
                         return Some(self.conclude(job));
                     }
@@ -296,6 +327,58 @@ impl Pipeline {
                     }
                     self.next_iteration(job);
                 }
+                Stage::Short { base, var } => {
+                    // The decrement fit is linear in the peaks' regression but the peaks are in
+                    // both its sides: the ± of μ0 and μ1 is propagated from every peak's variance
+                    // (its window's residuals, pooled over the run) through the fit itself, by
+                    // central differences, one peak a step. The textbook ± of a regression with
+                    // 0–5 degrees of freedom means little (with 1 it is 1.8× too small one time
+                    // in four).
+                    let pooled = job.refit.pooled_variance();
+                    if !(pooled.is_finite() && pooled > 0.0) {
+                        return Some(self.conclude(job));
+                    }
+                    let h = fit::sqrt(pooled);
+                    let refit = &job.refit;
+                    let Some(b) = base.or_else(|| self.peaks_fit(refit, None, job.scale)) else {
+                        job.dec = None;
+                        return Some(self.conclude(job));
+                    };
+                    *base = Some(b);
+                    while job.i < n {
+                        if budget == 0 {
+                            return None;
+                        }
+                        budget -= 1;
+                        let up = self.peaks_fit(refit, Some((job.i, h)), job.scale);
+                        let down = self.peaks_fit(refit, Some((job.i, -h)), job.scale);
+                        let (Some(up), Some(down)) = (up, down) else {
+                            job.dec = None;
+                            return Some(self.conclude(job));
+                        };
+                        // the peak's own variance (a window that went wrong says so in its
+                        // residuals), else the run's
+                        let peak_var = refit
+                            .vars
+                            .get(job.i)
+                            .copied()
+                            .filter(|v| v.is_finite() && *v > 0.0)
+                            .unwrap_or(pooled);
+                        for j in 0..2 {
+                            let d = (up[j] - down[j]) / (2.0 * h);
+                            var[j] += d * d * peak_var;
+                        }
+                        job.i += 1;
+                    }
+                    job.dec = estimate(b[0], b[1], var[0], var[1]).map(|estimate| Fitted {
+                        estimate,
+                        offset: job.dec.as_ref().map_or(f64::NAN, |d| d.offset),
+                        shape: EnvelopeShape::Straight,
+                        curvature: f64::NAN,
+                    });
+                    job.short = true;
+                    return Some(self.conclude(job));
+                }
                 Stage::Done => return Some(job.out),
             }
         }
@@ -358,6 +441,8 @@ impl Pipeline {
         }
         let (verdict, best) = match (&dec, &avg) {
             (None, None) => (Verdict::NoOscillation, NAN_ESTIMATE),
+            // A short run: the peaks' fit is the only one there is (nothing to disagree with).
+            (Some(d), None) if job.short => (Verdict::Ok, d.estimate),
             (Some(d), None) => (Verdict::EstimatorsDisagree, d.estimate),
             (None, Some(a)) => (Verdict::EstimatorsDisagree, a.estimate),
             (Some(d), Some(a)) => combine(&d.estimate, &a.estimate),
@@ -377,6 +462,66 @@ impl Pipeline {
             out.verdict = Verdict::NoOscillation;
         }
         job.done()
+    }
+
+    /// μ0 and μ1 of the decrement fit `X_{n+1} = D X_n − r (1 + D)` over the usable peaks, solved
+    /// directly (normal equations, centred), peak `i` moved by `dx` metres if asked: the short
+    /// run's ± is propagated through this.
+    pub(super) fn peaks_fit(
+        &self,
+        refit: &Refit,
+        moved: Option<(usize, f64)>,
+        scale: f64,
+    ) -> Option<[f64; 2]> {
+        let recs = self.usable();
+        let peak = |i: usize| -> f64 {
+            let p = refit.peak(recs, i);
+            match moved {
+                Some((j, dx)) if j == i => p + dx,
+                _ => p,
+            }
+        };
+        let rows = recs.len().checked_sub(1)?;
+        if rows < 3 {
+            return None;
+        }
+        // rows: y = β + D·x1 + γ·x2 with x1 = s_i P_i, x2 = s_{i+1}, y = s_{i+1} P_{i+1}
+        let row = |i: usize| {
+            let (sa, sb) = (self.sign(i), self.sign(i + 1));
+            ([sa * peak(i), sb], sb * peak(i + 1))
+        };
+        let m = rows as f64;
+        let (mut mx, mut my) = ([0.0f64; 2], 0.0f64);
+        for i in 0..rows {
+            let (x, y) = row(i);
+            mx[0] += x[0] / m;
+            mx[1] += x[1] / m;
+            my += y / m;
+        }
+        let (mut a, mut b) = ([[0.0f64; 2]; 2], [0.0f64; 2]);
+        for i in 0..rows {
+            let (x, y) = row(i);
+            let (u, w, z) = (x[0] - mx[0], x[1] - mx[1], y - my);
+            a[0][0] += u * u;
+            a[0][1] += u * w;
+            a[1][1] += w * w;
+            b[0] += u * z;
+            b[1] += w * z;
+        }
+        let det = a[0][0] * a[1][1] - a[0][1] * a[0][1];
+        if !(det.is_finite() && det > 0.0) {
+            return None;
+        }
+        let d = (a[1][1] * b[0] - a[0][1] * b[1]) / det;
+        let gamma = (a[0][0] * b[1] - a[0][1] * b[0]) / det;
+        let beta = my - d * mx[0] - gamma * mx[1];
+        if !(d > 0.0 && d < 2.0) {
+            return None;
+        }
+        let r = -beta / (1.0 + d);
+        let l = -fit::ln(d) / PI;
+        let mu1 = 2.0 * l / fit::sqrt(1.0 + l * l);
+        Some([r * scale, mu1])
     }
 
     /// Peak sign (+1 maximum) of reversal `i`.
@@ -416,6 +561,65 @@ pub struct Finish {
     pub(super) scale: f64,
     pub(super) dec: Option<Fitted>,
     pub(super) avg: Averaging,
+    /// A short run: the peaks' fit alone (see [`Stage::Short`]).
+    pub(super) short: bool,
+    /// A short run's peaks fitted again from their windows (see [`Stage::Refit`]).
+    pub(super) refit: Refit,
+}
+
+/// Window samples pushed, or read into the fit, in one step of [`Stage::Refit`].
+const REFIT_UNIT: usize = 32;
+
+/// A short run's peaks fitted again from the windows the pipeline kept (see [`Stage::Refit`]).
+#[derive(Clone, Debug)]
+pub(super) struct Refit {
+    /// Window being fitted and its counts pushed into the fitter so far.
+    i: usize,
+    fed: usize,
+    /// The peaks (metres from the zero) and their variances (m², NaN when unknown) of the
+    /// windows fitted so far (`fitted` of them).
+    peaks: [f64; SHORT_PEAKS],
+    pub(super) vars: [f64; SHORT_PEAKS],
+    fitted: usize,
+    /// The phase step ω_d Δt of the run (0 until known: each window's own then).
+    pub(super) step: f64,
+}
+
+impl Refit {
+    fn new() -> Self {
+        Self {
+            i: 0,
+            fed: 0,
+            peaks: [f64::NAN; SHORT_PEAKS],
+            vars: [f64::NAN; SHORT_PEAKS],
+            fitted: 0,
+            step: 0.0,
+        }
+    }
+
+    /// Peak `i` (metres): refitted if it was, else as recorded during the run.
+    pub(super) fn peak(&self, recs: &[HalfCycle], i: usize) -> f64 {
+        match self.peaks.get(i) {
+            Some(&p) if i < self.fitted && p.is_finite() => p,
+            _ => recs.get(i).map_or(f64::NAN, |r| r.peak as f64),
+        }
+    }
+
+    /// The mean of the refitted peaks' variances (m²; NaN when none is known).
+    pub(super) fn pooled_variance(&self) -> f64 {
+        let (mut sum, mut n) = (0.0, 0u32);
+        for &v in self.vars.iter().take(self.fitted) {
+            if v.is_finite() && v > 0.0 {
+                sum += v;
+                n += 1;
+            }
+        }
+        if n > 0 {
+            sum / n as f64
+        } else {
+            f64::NAN
+        }
+    }
 }
 
 impl Finish {
@@ -438,7 +642,15 @@ pub(super) enum Stage {
         sw: f64,
         swd: f64,
     },
+    /// A short run's peaks fitted again from their windows ([`Refit`]).
+    Refit,
     Decrement(OlsPasses<2>),
+    /// A run of [`MIN_HALF_CYCLES`] to `2·MIN_CYCLES − 1` half-cycles: the decrement fit's ±
+    /// propagated from the peaks' (`var`: of μ0, μ1 so far; `base`: the fit's μ0, μ1).
+    Short {
+        base: Option<[f64; 2]>,
+        var: [f64; 2],
+    },
     Offset {
         sum: f64,
     },
@@ -623,4 +835,106 @@ pub(super) fn combine(d: &Estimate, a: &Estimate) -> (Verdict, Estimate) {
         },
         *a,
     )
+}
+
+impl Pipeline {
+    /// One piece of [`Stage::Refit`] (all of it when `at_once`): pushes or reads
+    /// [`REFIT_UNIT`] window samples, or takes one of the fit's later stages. True once every
+    /// kept window is fitted.
+    fn refit_step(&self, r: &mut Refit, at_once: bool) -> bool {
+        let xc = self.st.cal[Channel::Displacement as usize];
+        let (gain, zero) = (xc.gain as f64, xc.zero as f64);
+        let recs = self.usable();
+        let m = recs.len().min(SHORT_PEAKS);
+        let w = &self.windows;
+        // the fitter lives in the pipeline (a `&self` step, and no 2 KiB in the job the
+        // application keeps); nothing else borrows it
+        let Ok(mut fitter) = self.arc.try_borrow_mut() else {
+            r.fitted = 0;
+            return true;
+        };
+        while r.i < m {
+            let i = r.i;
+            let win = w.get(i);
+            let len = win.map_or(0, |w| w.len as usize);
+            let counts = win.and_then(|w| w.counts.get(..len)).unwrap_or(&[]);
+            if r.fed == 0 {
+                fitter.reset();
+                // the run's own frequency (every reversal's time), not the window's: the
+                // window was cut with the half period before it, and the first one's runs from
+                // the release (0.8 % off on a 20 Hz rig), which an arc of fixed frequency turns
+                // into a peak off by several of its σ
+                let step = if r.step > 0.0 {
+                    r.step
+                } else {
+                    win.map_or(0.0, |w| w.step)
+                };
+                fitter.set_step(step);
+                fitter.set_half(len / 2);
+                if len == 0 || 2 * fitter.half_window() + 1 > len {
+                    // no window kept (two reversals within one: the record's peak stands)
+                    r.vars[i] = f64::NAN;
+                    r.peaks[i] = f64::NAN;
+                    r.i += 1;
+                    r.fitted = r.i;
+                    continue;
+                }
+            }
+            if r.fed < len {
+                let end = if at_once {
+                    len
+                } else {
+                    (r.fed + REFIT_UNIT).min(len)
+                };
+                for &c in counts.get(r.fed..end).unwrap_or(&[]) {
+                    fitter.push(c);
+                }
+                r.fed = end;
+                if r.fed == len {
+                    let delta = win.map_or(0.0, |w| w.delta as f64);
+                    if let Some(Some(raw)) = fitter.start(len / 2, delta) {
+                        r.peaks[i] = gain * (raw.peak - zero);
+                        r.vars[i] = f64::NAN;
+                        r.fed = 0;
+                        r.i += 1;
+                        r.fitted = r.i;
+                        continue;
+                    }
+                }
+                if !at_once {
+                    return false;
+                }
+                continue;
+            }
+            let done = fitter.step_unpaced(if at_once { usize::MAX } else { REFIT_UNIT });
+            if let Some(f) = done {
+                r.peaks[i] = gain * (f.peak - zero);
+                r.vars[i] = quantised(f) * gain * gain;
+                r.fed = 0;
+                r.i += 1;
+                r.fitted = r.i;
+            }
+            if !at_once {
+                return r.i >= m;
+            }
+        }
+        true
+    }
+}
+
+/// A peak's variance (counts²) with what quantisation leaves when the noise does not dither it.
+/// Without dither (noise under half a count) the counts' rounding errors near the vertex follow
+/// the signal, not chance: they do not average out over the window, and the residuals' variance
+/// (≈ 1/12) says nothing of them. Floor: the variance of the rounding error's first harmonic with
+/// a Gaussian dither of the noise σ the residuals leave beyond the rounding itself,
+/// `e^{−4π²σ²} / (2π²)` (0.051 without noise, 0.003 at σ = 0.3, nothing from σ = 0.6 on).
+fn quantised(f: crate::peaks::arc::PeakFit) -> f64 {
+    let sigma2 = (f.residual_variance - 1.0 / 12.0).max(0.0);
+    let pi2 = core::f64::consts::PI * core::f64::consts::PI;
+    let floor = fit::exp(-4.0 * pi2 * sigma2) / (2.0 * pi2);
+    if f.variance.is_finite() {
+        f.variance.max(floor)
+    } else {
+        f.variance
+    }
 }

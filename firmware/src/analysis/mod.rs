@@ -41,8 +41,15 @@
 //! within ~1.5 σ of a 16-bit vibrometer's noise, counted the noise around zero after the pin stuck as
 //! reversals, never stopped `AtRest`, and both estimators were biased (μ0 low, μ1 high).
 //!
-//! `cycles` is half the number of velocity reversals seen; below [`MIN_CYCLES`] the verdict is
-//! `TooFewCycles` and every estimate is `NaN`. Saturated displacement or velocity samples after release
+//! `cycles` is half the number of velocity reversals seen. Below [`MIN_CYCLES`] the averaging fit
+//! has too few central differences: a run of [`MIN_HALF_CYCLES`] or more half-cycles is then
+//! analysed from its peaks alone (the decrement fit, `best` = `decrement`, `averaging` NaN, verdict
+//! `Ok`: nothing to disagree with), its ± propagated from each peak's variance through the fit.
+//! Those peaks are fitted again at the end of the run, from the windows the pipeline keeps for the
+//! first [`SHORT_PEAKS`] of them, with the motion's own model ([`crate::peaks::arc`]: the vertex
+//! and the decay fitted, each peak's variance from its window's residuals); under
+//! [`MIN_HALF_CYCLES`] the verdict is `TooFewCycles` and every
+//! estimate is `NaN`. Saturated displacement or velocity samples after release
 //! give the verdict `Saturated` (the numbers are still filled in, to be read with care).
 //!
 //! Cost: per sample, integer sums and one `f32` calibration (175 host instructions, 158 before the
@@ -69,6 +76,7 @@
 use crate::calib::{OffsetCapture, ADC_MAX, CHANNELS};
 use crate::envelope::{HalfCycleMoments, Moments};
 use crate::fit::{self, Ols, OlsPasses, Pass};
+use crate::peaks::arc::ArcFitter;
 use crate::peaks::{PeakFitter, ReversalDetector};
 use crate::wire::{
     Channel, ChannelCal, Configure, EnvelopeShape, Estimate, OnboardResult, Verdict,
@@ -77,8 +85,18 @@ use core::f64::consts::PI;
 
 /// Capacity of the half-cycle store: 1024 cycles, 39 s at 26 Hz. A run that fills it stops there.
 pub const MAX_HALF_CYCLES: usize = 2048;
-/// Fewer complete cycles than this and no estimate is reported (the thesis's minimum).
+/// Fewer complete cycles than this and the result is the peaks' decrement fit alone, its ±
+/// propagated from the peaks' (the thesis's minimum for its two estimators).
 pub const MIN_CYCLES: u16 = 5;
+/// Fewer half-cycles than this and no estimate is reported: the decrement fit has three
+/// constants (D, the Coulomb shift, the centre) and needs three pairs of peaks after the release
+/// (whose first milliseconds are not free motion on a real bench).
+pub const MIN_HALF_CYCLES: usize = 4;
+/// Peaks whose windows the pipeline keeps for the end of the run: a short run has fewer than
+/// `2·MIN_CYCLES`.
+pub const SHORT_PEAKS: usize = 2 * MIN_CYCLES as usize;
+/// Counts of a kept window, at most.
+const WINDOW_LEN: usize = 2 * crate::peaks::MAX_HALF_WINDOW + 1;
 /// Stated precision of the method on μ0 (used by the cross-check).
 pub const MU0_PRECISION: f64 = 0.001;
 /// Stated precision of the method on μ1 (used by the cross-check).
@@ -184,6 +202,8 @@ pub struct HalfCycle {
 struct Pending {
     due: u32,
     t: f64,
+    /// Where the reversal lies after the window's centre sample (samples, |delta| ≤ ½).
+    delta: f64,
     moments: HalfCycleMoments,
 }
 
@@ -195,6 +215,24 @@ pub struct Pipeline {
     /// The peak fitter (1.5 KiB of ring and table: reset in place, never rebuilt by value).
     fitter: PeakFitter,
     records: heapless::Vec<HalfCycle, MAX_HALF_CYCLES>,
+    /// The first peaks' windows, for the end of a short run (5 KiB).
+    windows: Windows,
+    /// The fitter of a short run's peaks at its end (see `finish::Refit`).
+    arc: core::cell::RefCell<ArcFitter>,
+}
+
+/// The windows of the first [`SHORT_PEAKS`] peaks, in order (uninitialised storage until a
+/// window is kept: built in place, never on a stack).
+pub(crate) type Windows = heapless::Vec<Window, SHORT_PEAKS>;
+
+/// A kept window: its counts (oldest first; `len` of them), where the reversal lies after the
+/// centre sample, and the phase step the window was cut with.
+#[derive(Clone, Debug)]
+pub(crate) struct Window {
+    pub(crate) counts: [u16; WINDOW_LEN],
+    pub(crate) len: u16,
+    pub(crate) delta: f32,
+    pub(crate) step: f64,
 }
 
 /// Everything but the half-cycle store (small: rebuilt in place by [`Pipeline::reset`]).
@@ -280,6 +318,8 @@ impl Pipeline {
             st,
             fitter,
             records: heapless::Vec::new(),
+            windows: heapless::Vec::new(),
+            arc: core::cell::RefCell::new(ArcFitter::new()),
         })
     }
 
@@ -388,6 +428,7 @@ impl Pipeline {
         self.fitter.reset();
         self.fitter.set_step(PI / self.st.half_period);
         self.records.clear();
+        self.windows.clear();
         Ok(())
     }
 
@@ -647,6 +688,7 @@ impl Pipeline {
         self.st.pending = Some(Pending {
             due,
             t: pos / self.st.rate,
+            delta: pos - centre as f64,
             moments: hm,
         });
     }
@@ -687,6 +729,17 @@ impl Pipeline {
         let xc = self.st.cal[Channel::Displacement as usize];
         let peak_count = self.fitter.fit_centre().unwrap_or(xc.zero as f64);
         let peak = (xc.gain as f64 * (peak_count - xc.zero as f64)) as f32;
+        if self.windows.len() == self.records.len() && !self.windows.is_full() {
+            // kept for the end of a short run (len 0 when the window is not full)
+            let mut w = Window {
+                counts: [0; WINDOW_LEN],
+                len: 0,
+                delta: p.delta as f32,
+                step: self.fitter.step(),
+            };
+            w.len = self.fitter.window(&mut w.counts) as u16;
+            let _ = self.windows.push(w);
+        }
         let rec = HalfCycle {
             t: p.t as f32,
             peak,

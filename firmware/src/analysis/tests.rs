@@ -97,6 +97,11 @@ const RATE: u32 = 20_000;
 /// A configuration whose displacement and velocity converters span ±1.2 x0 and ±1.2 x0 Ω over
 /// 16 bits, with zeros that the capture must correct (offset by a few hundred counts).
 fn configure(load: f64, max_s: f32) -> Configure {
+    configure_at(load, max_s, RATE)
+}
+
+/// As [`configure`], at `rate` samples a second.
+fn configure_at(load: f64, max_s: f32, rate: u32) -> Configure {
     let omega = (K / M).sqrt();
     let mut calibration = [ChannelCal {
         gain: 1.0,
@@ -111,7 +116,7 @@ fn configure(load: f64, max_s: f32) -> Configure {
             stiffness_n_per_m: K as f32,
             load_n: load as f32,
         },
-        sample_rate_hz: RATE,
+        sample_rate_hz: rate,
         channels: ChannelSet(0b111),
         initial_amplitude_m: X0 as f32,
         max_duration_s: max_s,
@@ -142,7 +147,25 @@ fn simulate_into(
     noise_lsb: f64,
     seed: u64,
 ) -> Run {
-    let cfg = configure(load, 40.0);
+    simulate_into_at(p, load, mu0, mu1, noise_lsb, seed, RATE)
+}
+
+/// As [`simulate`], at `rate` samples a second.
+fn simulate_at(load: f64, mu0: f64, mu1: f64, noise_lsb: f64, seed: u64, rate: u32) -> Run {
+    let mut p = Pipeline::new(&configure_at(load, 40.0, rate)).unwrap();
+    simulate_into_at(&mut p, load, mu0, mu1, noise_lsb, seed, rate)
+}
+
+fn simulate_into_at(
+    p: &mut Pipeline,
+    load: f64,
+    mu0: f64,
+    mu1: f64,
+    noise_lsb: f64,
+    seed: u64,
+    rate: u32,
+) -> Run {
+    let cfg = configure_at(load, 40.0, rate);
     let mut truth = Exact::new(K, M, load, mu0, mu1, X0);
     let mut noise = Noise(seed | 1);
     // the converters' real zeros differ from the configured ones
@@ -164,7 +187,7 @@ fn simulate_into(
     p.release();
     let mut i = 0u64;
     while !p.is_finished() {
-        let t = i as f64 / RATE as f64;
+        let t = i as f64 / rate as f64;
         let (x, v) = truth.at(t);
         let f = -load * mu0 * v.signum() - mu1 * M * truth.omega * v;
         let s = [
@@ -311,13 +334,25 @@ fn accuracy_over_the_rig_grid() {
                 let r = run.result;
                 let true_cycles = run.true_half_cycles / 2;
                 let tag = format!("N={load} mu0={mu0} mu1={mu1} noise={noise} LSB: {r:?} true cycles {true_cycles}, pipeline half-cycles {}", run.pipeline_half_cycles);
-                if true_cycles < MIN_CYCLES as u32 {
+                if run.true_half_cycles < MIN_HALF_CYCLES as u32 {
                     assert_eq!(r.verdict, Verdict::TooFewCycles, "{tag}");
                     assert!(r.best.mu0.is_nan(), "{tag}");
                     continue;
                 }
-                if true_cycles < MIN_CYCLES as u32 + 1 && r.verdict == Verdict::TooFewCycles {
+                if run.true_half_cycles < MIN_HALF_CYCLES as u32 + 1
+                    && r.verdict == Verdict::TooFewCycles
+                {
                     continue; // on the boundary: the final sticking reversal may go undetected
+                }
+                if true_cycles < MIN_CYCLES as u32 {
+                    // a short run: the peaks' fit alone, within the method's precision
+                    assert_eq!(r.verdict, Verdict::Ok, "{tag}");
+                    let (d0, d1) = (
+                        (r.best.mu0 as f64 - mu0).abs(),
+                        (r.best.mu1 as f64 - mu1).abs(),
+                    );
+                    assert!(d0 <= 0.001 && d1 <= 0.0002, "{tag}");
+                    continue;
                 }
                 assert_eq!(r.verdict, Verdict::Ok, "{tag}");
                 fitted += 1;
@@ -444,11 +479,74 @@ fn curvature_recovers_a_quadratic_friction_term() {
     assert_eq!(r.shape, EnvelopeShape::Convex, "{r:?}");
 }
 
+/// Runs of 4 to 9 half-cycles (too short for the averaging fit) are analysed from their peaks
+/// alone, with a ± that means it: over rates of 2–20 kS/s, noise of 0–50 converter steps (0 and
+/// 0.3: the rounding not dithered), and contacts from Coulomb-only to viscous, z = (estimate −
+/// truth)/σ has an sd near 1 and 90 % or more of the estimates lie within 2σ. Fails if the peaks
+/// keep their vertex-offset bias (sd(z) of μ1 ≫ 1 at 2 kS/s), if the ± is the regression's
+/// textbook one, if an undithered peak's ± is its residuals' alone (sd(z) 1.56, 86 % at 0–0.3
+/// steps), or if such runs are refused.
 #[test]
-fn fewer_than_five_cycles_is_refused() {
-    // r = 0.2·0.7/1150 = 122 µm: 667 µm lasts under 2 cycles
+fn short_runs_are_analysed_from_their_peaks_with_a_true_error() {
+    let mut z: [std::vec::Vec<f64>; 2] = Default::default();
+    let mut analysed = 0;
+    let mut seed = 500u64;
+    for &rate in &[2_000u32, 5_000, 20_000] {
+        for &noise in &[0.0, 0.3, 1.0, 5.0, 15.0, 50.0] {
+            // r = μ0 N / k against x0 = 667 µm: 4–9 half-cycles
+            for &(mu0, mu1) in &[(0.13, 0.002), (0.1, 0.01), (0.08, 0.0), (0.06, 0.02)] {
+                for _ in 0..6 {
+                    seed += 2; // the noise takes `seed | 1`
+                    let run = simulate_at(0.7, mu0, mu1, noise, seed, rate);
+                    let r = run.result;
+                    let tag = format!(
+                        "{rate}/s noise {noise} μ0 {mu0} μ1 {mu1}: {r:?}, {} half-cycles",
+                        run.true_half_cycles
+                    );
+                    if run.true_half_cycles < MIN_HALF_CYCLES as u32 + 1 {
+                        continue;
+                    }
+                    assert!(run.true_half_cycles < 2 * MIN_CYCLES as u32, "{tag}");
+                    assert_eq!(r.verdict, Verdict::Ok, "{tag}");
+                    assert!(r.averaging.mu0.is_nan(), "{tag}");
+                    analysed += 1;
+                    for (j, (est, se, truth)) in [
+                        (r.best.mu0, r.best.mu0_se, mu0),
+                        (r.best.mu1, r.best.mu1_se, mu1),
+                    ]
+                    .into_iter()
+                    .enumerate()
+                    {
+                        z[j].push((est as f64 - truth) / se as f64);
+                    }
+                }
+            }
+        }
+    }
+    for (name, z) in ["mu0", "mu1"].iter().zip(&z) {
+        let n = z.len() as f64;
+        let sd = (z.iter().map(|z| z * z).sum::<f64>() / n).sqrt();
+        let within = z.iter().filter(|z| z.abs() <= 2.0).count() as f64 / n;
+        eprintln!(
+            "short runs: {name}: {n} runs, sd(z) {sd:.2}, within 2σ {:.0} %",
+            100.0 * within
+        );
+        // measured: sd(z) 0.93 / 0.91, 95 / 97 % (1.26 and 89 % with the vertex but not the
+        // decay fitted, 2.2 and 65 % with the symmetric peak fit about the nearest sample)
+        assert!(
+            (0.8..=1.2).contains(&sd) && within >= 0.9,
+            "{name}: sd(z) {sd:.2}, {:.0} % within 2σ",
+            100.0 * within
+        );
+    }
+    assert!(analysed >= 200, "{analysed}");
+}
+
+#[test]
+fn fewer_than_four_half_cycles_is_refused() {
+    // r = 0.2·0.7/1150 = 122 µm: 667 µm lasts 3 half-cycles
     let run = simulate(0.7, 0.2, 0.01, 1.0, 3);
-    assert!(run.true_half_cycles < 10);
+    assert!(run.true_half_cycles < MIN_HALF_CYCLES as u32);
     assert_eq!(
         run.result.verdict,
         Verdict::TooFewCycles,

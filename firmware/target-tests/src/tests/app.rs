@@ -641,6 +641,7 @@ fn figures(cx: &mut Cx<'_>, name: &str, w: Worst, gap: u64, per_sample: u64) -> 
     let on = |v: u64| counting.then_some(v);
     let [poll, bytes, stack, ring, sample] = match name {
         "coulomb_viscous" => names!("coulomb_viscous"),
+        "short" => names!("short"),
         _ => names!("unloaded"),
     };
     let r0 = cx.figure(sample, on(per_sample), "instructions/sample", None);
@@ -669,6 +670,22 @@ pub fn coulomb_viscous_run(cx: &mut Cx) -> Outcome {
     whole_run(
         cx,
         "coulomb_viscous",
+        rec.configure,
+        Expect {
+            analysed: true,
+            outage_us: 0,
+            stall_us: 30_000,
+        },
+    )
+}
+
+/// A run of five half-cycles (the `short` record, 5 kS/s): analysed from its peaks, each fitted
+/// again at the end of the run from its kept window, within the application's budgets.
+pub fn short_run(cx: &mut Cx) -> Outcome {
+    let rec = record(cx, "short")?;
+    whole_run(
+        cx,
+        "short",
         rec.configure,
         Expect {
             analysed: true,

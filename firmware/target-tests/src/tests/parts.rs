@@ -5,6 +5,7 @@ use crate::{check, Cx, Outcome};
 use tribo_firmware::acquisition::BlockBuilder;
 use tribo_firmware::analysis::Pipeline;
 use tribo_firmware::hal::ANALOG_CHANNELS;
+use tribo_firmware::peaks::arc::ArcFitter;
 use tribo_firmware::peaks::PeakFitter;
 use tribo_firmware::runstore::memflash::MemFlash;
 use tribo_firmware::runstore::{RunStore, MAX_RUN_BLOCKS};
@@ -169,4 +170,69 @@ pub fn analysis_setup(cx: &mut Cx) -> Outcome {
         None,
     );
     r1.and(r2)
+}
+
+/// What a short run's peak refit costs (`peaks::arc`, a 10 kS/s, 27 Hz window: 117 samples): a
+/// window sample read into the fit's moments (mean over the window), the heaviest of the later
+/// stages, and the whole fit done at once.
+pub fn peak_fit(cx: &mut Cx) -> Outcome {
+    let step = 0.017;
+    let mut f = ArcFitter::new();
+    f.set_step(step);
+    let half = f.half_window() as i32;
+    let arc = |k: i32| {
+        let th = (k as f64 - 0.23) * step;
+        let kk = if th > 0.0 { 9000.0 } else { 11000.0 };
+        let x = 30000.0 - kk * (1.0 - tribo_firmware::fit::cos(th)) + ((k * 7919) % 5) as f64;
+        x as u16
+    };
+    for k in -half - 3..=half {
+        f.push(arc(k));
+    }
+    let mut whole_fit = f.clone();
+    check!(f.start(half as usize, 0.23) == Some(None));
+    let (mut read, mut reads, mut worst_stage, mut stages) = (0u64, 0u64, 0u64, 0u64);
+    let mut k = half;
+    let mut done = None;
+    while done.is_none() && k < 20 * half {
+        k += 1;
+        f.push(arc(k));
+        let reading = f.is_reading();
+        let c = cx.count(|| done = f.step(1));
+        if let Some(c) = c {
+            if reading {
+                read += c;
+                reads += 1;
+            } else if c > 100 {
+                worst_stage = worst_stage.max(c);
+                stages += 1;
+                cx.note(format_args!("stage {stages}: {c} instructions"));
+            }
+        }
+    }
+    check!(done.is_some(), "the fit never finished");
+    let mut once = None;
+    let whole = cx.count(|| {
+        once = whole_fit.fit(0.23);
+    });
+    check!(once.is_some() && once == done, "{once:?} vs {done:?}");
+    let counting = cx.counting();
+    cx.note(format_args!(
+        "{} window samples read, {} later stages (pushes that did more than 100 instructions)",
+        reads, stages
+    ));
+    let r1 = cx.figure(
+        "parts.peak_fit_per_window_sample",
+        counting.then(|| read / reads.max(1)),
+        "instructions",
+        None,
+    );
+    let r2 = cx.figure(
+        "parts.peak_fit_worst_stage",
+        counting.then_some(worst_stage),
+        "instructions",
+        None,
+    );
+    let r3 = cx.figure("parts.peak_fit_at_once", whole, "instructions", None);
+    r1.and(r2).and(r3)
 }

@@ -198,3 +198,9 @@ pub fn held_20k(cx: &mut Cx) -> Outcome {
 pub fn cubic(cx: &mut Cx) -> Outcome {
     on_record(cx, "cubic", names!("cubic"))
 }
+
+/// Five half-cycles (Coulomb-dominated, 5 kS/s): the peaks' decrement fit alone, the peak fit
+/// spread over the pushes after each window.
+pub fn short(cx: &mut Cx) -> Outcome {
+    on_record(cx, "short", names!("short"))
+}
