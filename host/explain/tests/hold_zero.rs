@@ -112,7 +112,8 @@ fn a_held_record_measures_its_force_zero_and_names_a_direction_asymmetry() {
         } else {
             match got {
                 Some((d, se)) if e.missing_effects == ["direction-asymmetry"] => {
-                    if !((d - a * MU0).abs() <= 3.0 * se) {
+                    let within = (d - a * MU0).abs() <= 3.0 * se;
+                    if !within {
                         failures.push(format!("{a} {offset}: dmu0 {d} ± {se} for {}", a * MU0));
                     }
                 }
