@@ -138,6 +138,9 @@ fn main() {
         match tribo_explain::explain(&c.record(), &tribo_explain::ExplainOptions::default()) {
             Ok(e) => {
                 println!("{}", e.to_text());
+                if let Some(t) = &e.mu0_trend {
+                    println!("the force channel's μ0 trend (final model): {}", t.text());
+                }
                 if let Some(p) = &e.position_dependence {
                     println!("position check: {}", p.text());
                 }

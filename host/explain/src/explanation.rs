@@ -335,10 +335,13 @@ pub struct MeasurementChain {
     /// What the force channel reads at zero force (N): stated, or fitted (then it is the zero
     /// offset plus any direction asymmetry `δ N`, which cannot be told apart).
     pub force_zero_n: Option<f64>,
-    /// Its standard error when fitted.
+    /// Its standard error when fitted or measured over the hold.
     pub force_zero_n_se: Option<f64>,
-    /// `record`, `option` or `fitted`.
+    /// `record`, `option`, `hold` (measured over the magnet's hold before the release: no
+    /// tangential force acts on the contact then, [`Prepared::hold_zero`]) or `fitted`.
     pub force_zero_source: Option<String>,
+    /// The number of held samples the zero was measured from (`hold` only).
+    pub force_zero_hold_samples: Option<usize>,
     /// When fitted: the evidence for a non-zero offset (χ²₁ units, as the effects').
     pub force_zero_evidence: Option<f64>,
     /// When fitted: whether that evidence passes an effect's threshold. The record then has a
@@ -394,9 +397,14 @@ impl MeasurementChain {
             force_zero_n: has_force.then_some(cf.zero * load),
             force_zero_n_se: if zero_fitted {
                 finite(z_se * load)
+            } else if zero_source == "hold" {
+                finite(data.force_zero_se * load)
             } else {
                 None
             },
+            force_zero_hold_samples: (zero_source == "hold")
+                .then(|| data.hold_zero.map(|h| h.2))
+                .flatten(),
             force_zero_source: has_force.then(|| zero_source.to_string()),
             force_zero_evidence: ev,
             force_zero_significant: significant,
@@ -443,6 +451,13 @@ impl MeasurementChain {
                     } else {
                         ", not significant"
                     }
+                ),
+                "hold" => format!(
+                    "force channel zero = {} N (measured over the magnet's hold before the \
+                     release, {} samples: no tangential force acts on the contact then; held in \
+                     every model, its ± carried into a direction asymmetry's)",
+                    pm_fixed(z, self.force_zero_n_se.unwrap_or(f64::NAN)),
+                    self.force_zero_hold_samples.unwrap_or(0)
                 ),
                 src => format!(
                     "force channel zero = {z} N (stated by the {})",

@@ -176,6 +176,12 @@ pub fn explain_with_progress(
         "option"
     } else if data.force_zero.is_some() {
         "record"
+    } else if let Some((z, se, _)) = data.hold_zero {
+        // Measured over the magnet's hold, with its ±: held in every model like a stated zero,
+        // its ± carried into a direction asymmetry's (below, in the search).
+        data.force_zero = Some(z);
+        data.force_zero_se = se;
+        "hold"
     } else {
         "fitted"
     };
@@ -791,6 +797,34 @@ fn search(
                     continue;
                 }
                 _ => break,
+            }
+        }
+        // A direction asymmetry is the force channel's offset while sliding against its zero:
+        // a zero measured over the magnet's hold brings its own ± (`σ_z`, the asymmetry's
+        // `δ = offset / gain`), which the fit with the zero held does not see. It is added to
+        // the asymmetry's ± in quadrature, and the evidence, `(δ / σ_δ)²` for one constant,
+        // is scaled to the wider ±.
+        if e == Effect::DirectionAsymmetry && data.force_zero_se > 0.0 {
+            if let Some(i) = m.spec.effects.iter().position(|&x| x == e) {
+                let o = m.spec.offset(i);
+                let gain = simulate_spec(data, &m.spec, &m.p)
+                    .ok()
+                    .map(|s| model::chain::fit(data, &s, data.force_zero).gain)
+                    .filter(|g| g.is_finite() && *g > 0.0)
+                    .unwrap_or(1.0);
+                let s_fit = se[o];
+                let s_tot = s_fit.hypot(data.force_zero_se / gain);
+                if s_fit.is_finite() && s_tot > 0.0 {
+                    let shrink = (s_fit / s_tot).powi(2);
+                    ev.value *= shrink;
+                    for c in &mut ev.channels {
+                        c.evidence *= shrink;
+                    }
+                }
+                se[o] = s_tot;
+            }
+            if !ev.significant(opts) {
+                break;
             }
         }
         let mut m = m;

@@ -53,9 +53,10 @@ sensor-lag, running-in (μ0 drifting in time at constant temperature). The force
 low-pass is the record's (`# force_cutoff_hz=`) or `--force-cutoff-hz` (a stated cut-off is a 2-pole
 filter); when neither states it, its order (1-pole or 2-pole) and time constant are fitted with
 everything else in every model and printed with its ±. The force channel's zero is the record's
-(`# force_zero_n=`) or `--force-zero-n`; only with it stated can a constant force while sliding be
-named direction-asymmetry (without, it is as much a zero offset of the channel, and the answer is
-ambiguous). An effect is named only if adding it shrinks the misfit by more than chance would,
+(`# force_zero_n=`) or `--force-zero-n`, else, on a record held by the magnet before its release,
+measured over the hold (no tangential force acts then; printed with its ±); only with it known can
+a constant force while sliding be named direction-asymmetry (without, it is as much a zero offset
+of the channel, and the answer is ambiguous). An effect is named only if adding it shrinks the misfit by more than chance would,
 judged with a noise model of the residuals that includes their correlation (an effective sample
 count per channel), and removes a material part of the misfit above the noise floor. The best one
 is added, the model refitted, and the search repeats. If a misfit well above the noise floor
@@ -110,7 +111,8 @@ pub struct Args {
     pub force_cutoff_hz: Option<f64>,
     /// The force channel's zero (N: what it reads with no friction force), if the record does not
     /// state it (`# force_zero_n=`); with it stated, a constant force while sliding is named
-    /// direction-asymmetry, without it the channel's zero is fitted and such a force is ambiguous.
+    /// direction-asymmetry; without it a held record's zero is measured over the magnet's hold,
+    /// any other's is fitted and such a force is ambiguous.
     #[arg(long, value_parser = finite_newtons, allow_negative_numbers = true)]
     pub force_zero_n: Option<f64>,
     /// No progress messages: set by `tribo -q`/`--quiet`.

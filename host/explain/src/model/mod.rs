@@ -61,6 +61,17 @@ pub struct Prepared {
     /// held there and a direction asymmetry of μ0 can be measured; not stated, the offset is a
     /// fitted nuisance that a direction asymmetry cannot be told from ([`chain`]).
     pub force_zero: Option<f64>,
+    /// The standard error of [`Prepared::force_zero`] (`F/N`): 0 when stated, the hold's ± when
+    /// measured over the magnet's hold ([`Prepared::hold_zero`]).
+    pub force_zero_se: f64,
+    /// What the force channel reads while the magnet holds the head before the release (`F/N`),
+    /// with its standard error and the number of samples: the magnet carries the spring, so no
+    /// tangential force acts on the contact and the channel reads its zero. The mean of the held
+    /// samples up to [`FORCE_SETTLE_S`] before the first moving one (at least
+    /// [`HOLD_ZERO_MIN_SAMPLES`]), its ± from their scatter with their correlation
+    /// ([`tribo_physics::uncertainty::effective_count`]: a slow drift of the zero widens it).
+    /// `None` for a record that starts in motion, or without a force channel.
+    pub hold_zero: Option<(f64, f64, usize)>,
     /// Whether the force channel's low-pass is known (from the record or the caller); if not,
     /// [`crate::explain_prepared`] picks the better of none and [`RIG_FORCE_CUTOFF_HZ`] and says so.
     pub force_cutoff_known: bool,
@@ -152,6 +163,9 @@ impl ExplainError {
 /// The comparison stops where the measured envelope first falls below this fraction of its
 /// initial value.
 pub const CUT_FRACTION: f64 = 0.1;
+
+/// Fewest held samples the force channel's zero is measured from ([`Prepared::hold_zero`]).
+pub const HOLD_ZERO_MIN_SAMPLES: usize = 32;
 
 fn stride(n: usize, max: usize) -> usize {
     n.div_ceil(max.max(1)).max(1)
@@ -270,6 +284,27 @@ impl Prepared {
             }
             out
         });
+        // The force channel during the magnet's hold reads its zero (no tangential force acts on
+        // the contact while the magnet carries the spring); the samples closer to the release
+        // than the force channel's settling time are left out.
+        let hold_zero = match (&rec.ft, s0) {
+            (Some(ft), s0) if s0 > 0 => {
+                let margin = (FORCE_SETTLE_S / dt).ceil() as usize;
+                let held = &ft[..s0.saturating_sub(margin)];
+                (held.len() >= HOLD_ZERO_MIN_SAMPLES && held.iter().all(|v| v.is_finite())).then(
+                    || {
+                        let n = held.len() as f64;
+                        let mean = held.iter().sum::<f64>() / n;
+                        let dev: Vec<f64> = held.iter().map(|v| v - mean).collect();
+                        let var = dev.iter().map(|d| d * d).sum::<f64>() / (n - 1.0);
+                        let n_eff = tribo_physics::uncertainty::effective_count(&dev).max(1.0);
+                        let load = rig.load_n;
+                        (mean / load, (var / n_eff).sqrt() / load, held.len())
+                    },
+                )
+            }
+            _ => None,
+        };
         let env_noise = noise_sigma(&a_all).unwrap_or(0.0) / a0;
         let force_noise = f_meas.as_ref().and_then(|f| noise_sigma(f)).unwrap_or(0.0) / a0;
         let dtau = rig.tau_of_t(dt);
@@ -295,6 +330,8 @@ impl Prepared {
                 (true, true, Some(z)) => Some(z / rig.load_n),
                 _ => None,
             },
+            force_zero_se: 0.0,
+            hold_zero: if si { hold_zero } else { None },
             force_cutoff_known: !si || stated.is_some() || rec.ft.is_none(),
             env_noise,
             force_noise,
