@@ -103,12 +103,66 @@ impl ReversalDetector {
     }
 }
 
+/// The newest `N` displacement counts (a ring: `buf[head − 1]` the newest, `len` stored).
+#[derive(Clone, Debug)]
+pub(crate) struct Counts<const N: usize> {
+    pub(crate) buf: [u16; N],
+    pub(crate) head: usize,
+    pub(crate) len: usize,
+}
+
+impl<const N: usize> Counts<N> {
+    pub(crate) const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            head: 0,
+            len: 0,
+        }
+    }
+
+    /// Forgets the stored counts.
+    pub(crate) fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+    }
+
+    /// Stores the newest count.
+    pub(crate) fn push(&mut self, count: u16) {
+        if let Some(slot) = self.buf.get_mut(self.head) {
+            *slot = count;
+        }
+        self.head += 1;
+        if self.head == N {
+            self.head = 0;
+        }
+        self.len = (self.len + 1).min(N);
+    }
+
+    /// Count `age` samples before the newest (0 = newest).
+    pub(crate) fn at(&self, age: usize) -> Option<u16> {
+        if age >= self.len {
+            return None;
+        }
+        self.buf.get((self.head + N - 1 - age) % N).copied()
+    }
+}
+
+/// The window's half-width in samples for the phase step `ω Δt`: ±[`WINDOW_RAD`], at most
+/// [`MAX_HALF_WINDOW`], at least 1.
+pub(crate) fn window_half(step: f64) -> usize {
+    (WINDOW_RAD / step).clamp(1.0, MAX_HALF_WINDOW as f64) as usize
+}
+
+/// Whether a fitter set for the step `old` must be set again for `new`: `new` is a step (finite,
+/// positive) and differs from `old` by 0.1 % or more (or nothing was set).
+pub(crate) fn step_changes(old: f64, new: f64) -> bool {
+    new.is_finite() && new > 0.0 && !(old > 0.0 && ((new - old) / old).abs() < 1e-3)
+}
+
 /// Ring of recent displacement counts and the symmetric cosine-window peak fit.
 #[derive(Clone, Debug)]
 pub struct PeakFitter {
-    ring: [u16; RING],
-    head: usize,
-    len: usize,
+    counts: Counts<RING>,
     half: usize,
     /// `g_k = 1 − cos(ω k Δt)` for k = 0..=half
     g: [f64; MAX_HALF_WINDOW + 1],
@@ -128,9 +182,7 @@ impl PeakFitter {
     /// An empty fitter; call [`PeakFitter::set_step`] before fitting.
     pub fn new() -> Self {
         Self {
-            ring: [0; RING],
-            head: 0,
-            len: 0,
+            counts: Counts::new(),
             half: 0,
             g: [0.0; MAX_HALF_WINDOW + 1],
             sg: 0.0,
@@ -141,8 +193,7 @@ impl PeakFitter {
 
     /// Forgets the stored samples.
     pub fn clear(&mut self) {
-        self.head = 0;
-        self.len = 0;
+        self.counts.clear();
     }
 
     /// As new, in place: no samples, no window until the next [`PeakFitter::set_step`] (which then
@@ -159,14 +210,11 @@ impl PeakFitter {
     /// [`MAX_HALF_WINDOW`] samples, at least 1) and the regressor table. Only rebuilds the table
     /// when the step changed by more than 0.1 %.
     pub fn set_step(&mut self, step: f64) {
-        if !(step.is_finite() && step > 0.0) {
-            return;
-        }
-        if self.step > 0.0 && ((step - self.step) / self.step).abs() < 1e-3 {
+        if !step_changes(self.step, step) {
             return;
         }
         self.step = step;
-        let half = (WINDOW_RAD / step).clamp(1.0, MAX_HALF_WINDOW as f64) as usize;
+        let half = window_half(step);
         self.half = half;
         let (mut sg, mut sgg) = (0.0, 0.0);
         // cos(k·step) by rotating (cos, sin) one step at a time: one series evaluation for the whole
@@ -197,22 +245,12 @@ impl PeakFitter {
 
     /// Stores the newest displacement count.
     pub fn push(&mut self, count: u16) {
-        if let Some(slot) = self.ring.get_mut(self.head) {
-            *slot = count;
-        }
-        self.head += 1;
-        if self.head == RING {
-            self.head = 0;
-        }
-        self.len = (self.len + 1).min(RING);
+        self.counts.push(count);
     }
 
     /// Count `age` samples before the newest (0 = newest).
     fn at(&self, age: usize) -> Option<u16> {
-        if age >= self.len {
-            return None;
-        }
-        self.ring.get((self.head + RING - 1 - age) % RING).copied()
+        self.counts.at(age)
     }
 
     /// Copies the window about the sample `half_window()` samples before the newest (its
@@ -220,13 +258,15 @@ impl PeakFitter {
     /// window is not full or `out` too short.
     pub fn window(&self, out: &mut [u16]) -> usize {
         let n = 2 * self.half + 1;
-        if self.half == 0 || self.len < n || out.len() < n {
+        let Counts { buf, head, len } = &self.counts;
+        let (head, len) = (*head, *len);
+        if self.half == 0 || len < n || out.len() < n {
             return 0;
         }
         // the oldest at `head − n` (wrapping), as two slices of the ring
-        let start = (self.head + RING - n) % RING;
-        let first = self.ring.get(start..(start + n).min(RING)).unwrap_or(&[]);
-        let second = self.ring.get(..n - first.len()).unwrap_or(&[]);
+        let start = (head + RING - n) % RING;
+        let first = buf.get(start..(start + n).min(RING)).unwrap_or(&[]);
+        let second = buf.get(..n - first.len()).unwrap_or(&[]);
         let (a, b) = out.split_at_mut(first.len());
         a.copy_from_slice(first);
         if let Some(b) = b.get_mut(..second.len()) {
@@ -242,13 +282,13 @@ impl PeakFitter {
         let half = self.half;
         let centre = self
             .at(half)
-            .or_else(|| self.at(self.len.checked_sub(1)?))? as f64;
-        if half == 0 || self.len < 2 * half + 1 {
+            .or_else(|| self.at(self.counts.len.checked_sub(1)?))? as f64;
+        if half == 0 || self.counts.len < 2 * half + 1 {
             return Some(centre);
         }
         let (mut sx, mut sxg) = (0.0, 0.0);
         // Newest to oldest, as `at(age)` for age = 0..=2·half, without an index modulo per sample.
-        let (newer, older) = self.ring.split_at(self.head.min(RING));
+        let (newer, older) = self.counts.buf.split_at(self.counts.head.min(RING));
         let window = newer
             .iter()
             .rev()

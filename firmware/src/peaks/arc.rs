@@ -15,7 +15,7 @@ pub const EVALS_PER_PUSH: usize = 1;
 /// Samples the ring keeps: the largest window, and a few more (a fit reads its window oldest
 /// first from the reversal on, a sample a push, so it is never more than a window behind).
 const RING: usize = 2 * MAX_HALF_WINDOW + 8;
-use super::WINDOW_RAD;
+use super::{step_changes, window_half, Counts};
 
 /// A fitted peak (counts).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,9 +31,7 @@ pub struct PeakFit {
 /// Ring of displacement counts and the damped-arc peak fit.
 #[derive(Clone, Debug)]
 pub struct ArcFitter {
-    ring: [u16; RING],
-    head: usize,
-    len: usize,
+    counts: Counts<RING>,
     half: usize,
     /// `cos(ω Δt)`, `sin(ω Δt)`: one sample's rotation.
     rot: (f64, f64),
@@ -55,9 +53,7 @@ impl ArcFitter {
     /// An empty fitter; call [`ArcFitter::set_step`] before fitting.
     pub fn new() -> Self {
         Self {
-            ring: [0; RING],
-            head: 0,
-            len: 0,
+            counts: Counts::new(),
             half: 0,
             rot: (1.0, 0.0),
             job: None,
@@ -68,8 +64,7 @@ impl ArcFitter {
 
     /// Forgets the stored samples.
     pub fn clear(&mut self) {
-        self.head = 0;
-        self.len = 0;
+        self.counts.clear();
         self.job = None;
     }
 
@@ -87,15 +82,11 @@ impl ArcFitter {
     /// [`MAX_HALF_WINDOW`] samples, at least 1) and the regressor table. Only rebuilds the table
     /// when the step changed by more than 0.1 %.
     pub fn set_step(&mut self, step: f64) {
-        if !(step.is_finite() && step > 0.0) {
-            return;
-        }
-        if self.step > 0.0 && ((step - self.step) / self.step).abs() < 1e-3 {
+        if !step_changes(self.step, step) {
             return;
         }
         self.step = step;
-        let half = (WINDOW_RAD / step).clamp(1.0, MAX_HALF_WINDOW as f64) as usize;
-        self.half = half;
+        self.half = window_half(step);
         self.rot = (fit::cos(step), fit::sin(step));
     }
 
@@ -104,8 +95,7 @@ impl ArcFitter {
     /// known at its end) takes what it holds.
     pub fn set_half(&mut self, half: usize) {
         if self.step > 0.0 {
-            let full = (WINDOW_RAD / self.step).clamp(1.0, MAX_HALF_WINDOW as f64) as usize;
-            self.half = half.clamp(1, full);
+            self.half = half.clamp(1, window_half(self.step));
         }
     }
 
@@ -116,14 +106,7 @@ impl ArcFitter {
 
     /// Stores the newest displacement count.
     pub fn push(&mut self, count: u16) {
-        if let Some(slot) = self.ring.get_mut(self.head) {
-            *slot = count;
-        }
-        self.head += 1;
-        if self.head == RING {
-            self.head = 0;
-        }
-        self.len = (self.len + 1).min(RING);
+        self.counts.push(count);
         if let Some(job) = &mut self.job {
             job.unread += 1;
         }
@@ -131,10 +114,7 @@ impl ArcFitter {
 
     /// Count `age` samples before the newest (0 = newest).
     fn at(&self, age: usize) -> Option<u16> {
-        if age >= self.len {
-            return None;
-        }
-        self.ring.get((self.head + RING - 1 - age) % RING).copied()
+        self.counts.at(age)
     }
 
     /// Fitted peak count at the sample `half_window()` samples before the newest (see
@@ -196,11 +176,11 @@ impl ArcFitter {
         let half = self.half;
         let centre = self
             .at(centre_age)
-            .or_else(|| self.at(self.len.checked_sub(1)?))? as f64;
+            .or_else(|| self.at(self.counts.len.checked_sub(1)?))? as f64;
         self.job = None;
         // the window's oldest sample, `unread` samples back from the newest
         let unread = centre_age + half + 1;
-        if half == 0 || self.len < unread || unread > RING {
+        if half == 0 || self.counts.len < unread || unread > RING {
             return Some(Some(PeakFit::at(centre)));
         }
         let d = if delta.is_finite() {
@@ -215,7 +195,7 @@ impl ArcFitter {
         let on = fit::exp(-a * h);
         self.job = Some(Job {
             centre,
-            slot: (self.head + RING - unread) % RING,
+            slot: (self.counts.head + RING - unread) % RING,
             unread,
             d,
             a,
@@ -252,7 +232,7 @@ impl ArcFitter {
     /// samples have not arrived).
     pub fn step(&mut self, evals: usize) -> Option<PeakFit> {
         let (half, h) = (self.half, self.step);
-        let ring = &self.ring;
+        let ring = &self.counts.buf;
         let decay = &mut self.decay;
         let job = self.job.as_mut()?;
         let n = 2 * half + 1;
