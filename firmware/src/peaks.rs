@@ -366,19 +366,32 @@ mod tests {
     /// side, as with Coulomb friction) is the true peak, far closer than the neighbouring samples.
     #[test]
     fn peak_fit_is_unbiased_for_asymmetric_coulomb_peaks() {
-        let step = 0.01;
         let mut f = PeakFitter::new();
-        f.set_step(step);
+        f.set_step(ASYMMETRIC_STEP);
         assert_eq!(f.half_window(), 100);
-        let (peak, r1, r2) = (40000.25, 20000.0, 19000.0); // counts
-        for k in -150i32..=100 {
-            let g = 1.0 - (k as f64 * step).cos();
-            let x = if k < 0 { peak - r1 * g } else { peak - r2 * g };
-            // a 0.4-count ripple with odd symmetry does not matter either
-            let x = x + 0.4 * (k as f64 * 0.37).sin();
-            f.push(x.round().clamp(0.0, 65535.0) as u16);
-        }
+        asymmetric_coulomb_peak().for_each(|c| f.push(c));
         let p = f.fit_centre().unwrap();
-        assert!((p - peak).abs() < 0.1, "{p}");
+        assert!((p - ASYMMETRIC_PEAK).abs() < 0.1, "{p}");
+    }
+
+    /// Phase step and peak (counts) of [`asymmetric_coulomb_peak`].
+    pub(crate) const ASYMMETRIC_STEP: f64 = 0.01;
+    pub(crate) const ASYMMETRIC_PEAK: f64 = 40000.25;
+
+    /// A noiseless peak with a different curvature and equilibrium either side (as with Coulomb
+    /// friction), a 0.4-count ripple of odd symmetry on it, rounded to counts: its vertex is the
+    /// `half_window()`-th sample before the last at [`ASYMMETRIC_STEP`] (100 samples of ±1 rad).
+    pub(crate) fn asymmetric_coulomb_peak() -> impl Iterator<Item = u16> {
+        let (r1, r2) = (20000.0, 19000.0);
+        (-150i32..=100).map(move |k| {
+            let g = 1.0 - (k as f64 * ASYMMETRIC_STEP).cos();
+            let x = if k < 0 {
+                ASYMMETRIC_PEAK - r1 * g
+            } else {
+                ASYMMETRIC_PEAK - r2 * g
+            };
+            let x = x + 0.4 * (k as f64 * 0.37).sin();
+            x.round().clamp(0.0, 65535.0) as u16
+        })
     }
 }

@@ -807,19 +807,12 @@ mod tests {
     /// side, as with Coulomb friction) is the true peak, far closer than the neighbouring samples.
     #[test]
     fn peak_fit_is_unbiased_for_asymmetric_coulomb_peaks() {
-        let step = 0.01;
+        use crate::peaks::tests::{asymmetric_coulomb_peak, ASYMMETRIC_PEAK, ASYMMETRIC_STEP};
         let mut f = ArcFitter::new();
-        f.set_step(step);
+        f.set_step(ASYMMETRIC_STEP);
         assert_eq!(f.half_window(), 100);
-        let (peak, r1, r2) = (40000.25, 20000.0, 19000.0); // counts
-        for k in -150i32..=100 {
-            let g = 1.0 - (k as f64 * step).cos();
-            let x = if k < 0 { peak - r1 * g } else { peak - r2 * g };
-            // a 0.4-count ripple with odd symmetry does not matter either
-            let x = x + 0.4 * (k as f64 * 0.37).sin();
-            f.push(x.round().clamp(0.0, 65535.0) as u16);
-        }
+        asymmetric_coulomb_peak().for_each(|c| f.push(c));
         let p = f.fit_centre().unwrap();
-        assert!((p - peak).abs() < 0.1, "{p}");
+        assert!((p - ASYMMETRIC_PEAK).abs() < 0.1, "{p}");
     }
 }
