@@ -349,7 +349,10 @@ impl Prepared {
         let runs: Vec<Vec<(usize, usize)>> =
             blocks.iter().map(|(o, _, r)| row_runs(r, *o)).collect();
         let ff: f64 = rows.iter().map(|&i| f[i] * f[i]).sum();
-        let max_shift = self.grid.last().map_or(0, |&d| (d / self.dtau).floor() as usize);
+        let max_shift = self
+            .grid
+            .last()
+            .map_or(0, |&d| (d / self.dtau).floor() as usize);
         let from_sums = |im: usize, ids: &[usize]| -> Vec<Option<f64>> {
             let sums: Vec<Sums> = filtered
                 .iter()
