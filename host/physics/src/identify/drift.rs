@@ -569,6 +569,8 @@ struct Sums {
     data: Vec<f64>,
 }
 
+// The Gram matrix's entries are indexed by two columns at once.
+#[allow(clippy::needless_range_loop)]
 impl Sums {
     /// The sums of `cols` from sample `off`.
     fn new(cols: Vec<Vec<f64>>, off: usize) -> Sums {
@@ -688,6 +690,7 @@ impl Sums {
 
 /// The residual sum of squares of the least squares whose normal equations are `gram` (upper
 /// triangle filled) and `xty`, `ff` the data's sum of squares (`f'f − 2β'X'f + β'X'Xβ`).
+#[allow(clippy::needless_range_loop)]
 fn rss_of_normal_equations(gram: &[Vec<f64>], xty: &[f64], ff: f64) -> Option<f64> {
     let k = xty.len();
     let mut full = gram.to_vec();
