@@ -97,6 +97,7 @@ impl Source {
     }
 }
 
+#[derive(Clone, Copy)]
 struct FitArgs {
     law: LawSpec,
     flags: RigFlags,
@@ -197,6 +198,96 @@ pub(crate) fn fit(
         holes: holes(longest_clean_stretch),
     };
     py.detach(|| fit_json(src, a)).map_err(|f| f.into_py(py))
+}
+
+/// [`fit`] of each source of a list (dicts of [`fit`]'s record arguments: `path`, or `t`, `x`,
+/// `v`, `ft`, `temp`, `ecr`, `rig`, `dimensionless`, `name`, `stated_cutoff_hz`) with the same
+/// law and flags, on every core with the GIL released (the pool of
+/// `tribo_physics::identify::fit_many`: each fit on one thread, the results in input order):
+/// for each, its JSON text or the exception [`fit`] raises for it alone.
+#[pyfunction]
+#[pyo3(signature = (sources, *, law="coulomb-viscous", mass_kg=None, stiffness=None, load_n=None,
+    apparatus_mu1=0.0, windows=0, longest_clean_stretch=false))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fit_many(
+    py: Python<'_>,
+    sources: Vec<Bound<'_, pyo3::types::PyDict>>,
+    law: &str,
+    mass_kg: Option<f64>,
+    stiffness: Option<f64>,
+    load_n: Option<f64>,
+    apparatus_mu1: f64,
+    windows: usize,
+    longest_clean_stretch: bool,
+) -> PyResult<Vec<Py<PyAny>>> {
+    let law: LawSpec = law
+        .parse()
+        .map_err(|e| PyValueError::new_err(format!("law {law:?}: {e}")))?;
+    let mut items: Vec<std::sync::Mutex<Option<Source>>> = Vec::with_capacity(sources.len());
+    for (i, d) in sources.iter().enumerate() {
+        let get = |k: &str| -> PyResult<Option<Bound<'_, PyAny>>> {
+            Ok(d.get_item(k)?.filter(|o| !o.is_none()))
+        };
+        let arr = |k: &str| -> PyResult<Option<PyReadonlyArray1<'_, f64>>> {
+            get(k)?
+                .map(|o| {
+                    use numpy::PyArrayMethods;
+                    o.cast_into::<numpy::PyArray1<f64>>().map(|a| a.readonly())
+                })
+                .transpose()
+                .map_err(|e| PyValueError::new_err(format!("record {i}: {k}: {e}")))
+        };
+        let src = source_of(
+            get("path")?.map(|o| o.extract()).transpose()?,
+            arr("t")?,
+            arr("x")?,
+            arr("v")?,
+            arr("ft")?,
+            arr("temp")?,
+            arr("ecr")?,
+            get("rig")?.map(|o| o.extract()).transpose()?,
+            get("dimensionless")?
+                .map(|o| o.extract())
+                .transpose()?
+                .unwrap_or(false),
+            get("name")?.map(|o| o.extract()).transpose()?,
+            get("stated_cutoff_hz")?.map(|o| o.extract()).transpose()?,
+        )
+        .map_err(|e| PyValueError::new_err(format!("record {i}: {e}")))?;
+        items.push(std::sync::Mutex::new(Some(src)));
+    }
+    let a = FitArgs {
+        law,
+        flags: RigFlags {
+            mass_kg,
+            stiffness_n_per_m: stiffness,
+            load_n,
+        },
+        apparatus_mu1,
+        windows,
+        holes: holes(longest_clean_stretch),
+    };
+    let out = py.detach(|| {
+        tribo_physics::identify::map_on_every_core(
+            &items,
+            |m| {
+                let src = m
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .take()
+                    .ok_or_else(|| Failure::Tribo("a record was fitted twice".into()))?;
+                fit_json(src, a)
+            },
+            || {},
+        )
+    });
+    Ok(out
+        .into_iter()
+        .map(|r| match r {
+            Ok(j) => pyo3::types::PyString::new(py, &j).into_any().unbind(),
+            Err(f) => f.into_py(py).into_value(py).into_any(),
+        })
+        .collect())
 }
 
 /// `tribo explain --json`'s object, made as the command makes it.

@@ -30,6 +30,7 @@ fn _tribo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(runs::read_record, m)?)?;
     m.add_function(wrap_pyfunction!(runs::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(fits::fit, m)?)?;
+    m.add_function(wrap_pyfunction!(fits::fit_many, m)?)?;
     m.add_function(wrap_pyfunction!(fits::explain, m)?)?;
     m.add_function(wrap_pyfunction!(catalog::catalog_runs, m)?)?;
     m.add_function(wrap_pyfunction!(catalog::export_parquet, m)?)?;

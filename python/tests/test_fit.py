@@ -4,6 +4,7 @@ import json
 import threading
 import time
 
+import numpy as np
 import pytest
 
 import tribo
@@ -160,3 +161,41 @@ def test_typed_errors_reach_python_as_their_exceptions(cli, run_dir, tmp_path):
     with pytest.raises(tribo.NotAnalysable) as e:
         tribo.fit(nan)
     assert e.value.reason == "non-finite" and "not analysable" in str(e.value)
+
+
+def test_fit_of_a_list_is_each_records_own_fit(store, tmp_path):
+    """A list of runs, paths and in-memory records, fitted on every core: each result is the
+    record's own fit to the last digit, in the list's order; a record that cannot be fitted
+    raises its own error, or with errors="keep" stands in its place."""
+    from conftest import runs_of
+
+    runs = runs_of(store)
+    sims = [
+        tribo.simulate(law="quadratic", mu=[0.02, 0.01, 0.004], noise=True, seed=s)
+        for s in (1, 2)
+    ]
+    items = [runs[2], tribo.open_run(runs[1]), sims[0], str(runs[0]), sims[1]]
+    one_by_one = [tribo.fit(r, law="quadratic").json for r in items]
+    many = tribo.fit(items, law="quadratic")
+    assert [f.json for f in many] == one_by_one
+    # Not every record the same: the order is the list's.
+    assert len({json.dumps(j["mu"]) for j in one_by_one}) == len(items)
+    # A tuple, another law.
+    assert [f.json for f in tribo.fit(tuple(items[:2]), law="viscous")] == [
+        tribo.fit(r, law="viscous").json for r in items[:2]
+    ]
+    assert tribo.fit([], law="quadratic") == []
+    # A record at rest: nothing to fit.
+    rest = tribo.simulate(duration_s=0.5)
+    rest.x = np.zeros_like(rest.x)
+    rest.v = np.zeros_like(rest.v)
+    with pytest.raises(tribo.TriboError) as alone:
+        tribo.fit(rest)
+    with pytest.raises(tribo.TriboError) as in_list:
+        tribo.fit([items[0], rest])
+    assert type(in_list.value) is type(alone.value) and str(in_list.value) == str(alone.value)
+    kept = tribo.fit([items[0], rest, items[2]], law="quadratic", errors="keep")
+    assert kept[0].json == one_by_one[0] and kept[2].json == one_by_one[2]
+    assert type(kept[1]) is type(alone.value) and str(kept[1]) == str(alone.value)
+    with pytest.raises(tribo.UsageError):
+        tribo.fit([items[0]], errors="ignore")

@@ -22,7 +22,18 @@ from __future__ import annotations
 import datetime
 import json
 import os
-from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import (
+    Any,
+    Dict,
+    Iterator,
+    List,
+    Literal,
+    Optional,
+    Sequence,
+    Tuple,
+    Union,
+    overload,
+)
 
 import numpy as np
 
@@ -586,9 +597,51 @@ def _source(src: Source) -> Dict[str, Any]:
     return {"path": os.fspath(src)}
 
 
-@_usage
+Sources = Union[List[Source], Tuple[Source, ...]]
+
+
+@overload
 def fit(
     record: Source,
+    law: str = ...,
+    *,
+    mass_kg: Optional[float] = ...,
+    stiffness: Optional[float] = ...,
+    load_n: Optional[float] = ...,
+    apparatus_mu1: float = ...,
+    windows: int = ...,
+    longest_clean_stretch: bool = ...,
+    errors: Literal["raise", "keep"] = ...,
+) -> Fit: ...
+@overload
+def fit(
+    record: Sources,
+    law: str = ...,
+    *,
+    mass_kg: Optional[float] = ...,
+    stiffness: Optional[float] = ...,
+    load_n: Optional[float] = ...,
+    apparatus_mu1: float = ...,
+    windows: int = ...,
+    longest_clean_stretch: bool = ...,
+    errors: Literal["raise"] = ...,
+) -> List[Fit]: ...
+@overload
+def fit(
+    record: Sources,
+    law: str = ...,
+    *,
+    mass_kg: Optional[float] = ...,
+    stiffness: Optional[float] = ...,
+    load_n: Optional[float] = ...,
+    apparatus_mu1: float = ...,
+    windows: int = ...,
+    longest_clean_stretch: bool = ...,
+    errors: Literal["keep"],
+) -> List[Union[Fit, Exception]]: ...
+@_usage
+def fit(
+    record: Union[Source, Sources],
     law: str = "coulomb-viscous",
     *,
     mass_kg: Optional[float] = None,
@@ -597,7 +650,8 @@ def fit(
     apparatus_mu1: float = 0.0,
     windows: int = 0,
     longest_clean_stretch: bool = False,
-) -> Fit:
+    errors: str = "raise",
+) -> Any:
     """Fits a friction law (coulomb, viscous, coulomb-viscous, quadratic, poly:N, lugre) to a
     record or run, as ``tribo fit --json`` does: the same estimator, the same numbers.
 
@@ -605,7 +659,30 @@ def fit(
     :class:`NotAnalysable` when nothing can be fitted, :class:`IncompleteRun` for a run with
     holes (``longest_clean_stretch=True`` fits the longest stretch without one). The GIL is
     released while fitting.
+
+    ``record`` may also be a list (or tuple) of them: they are fitted on every core, each on one
+    thread, and a list of :class:`Fit` comes back in the same order, each what ``fit`` of that
+    record alone gives. A record that cannot be fitted raises its error (the first in the list's
+    order, after all are fitted) unless ``errors="keep"``, which puts the exception in its place.
     """
+    if errors not in ("raise", "keep"):
+        raise ValueError(f'errors must be "raise" or "keep", got {errors!r}')
+    if isinstance(record, (list, tuple)):
+        out = _tribo.fit_many(
+            [_source(r) for r in record],
+            law=law,
+            mass_kg=mass_kg,
+            stiffness=stiffness,
+            load_n=load_n,
+            apparatus_mu1=apparatus_mu1,
+            windows=windows,
+            longest_clean_stretch=longest_clean_stretch,
+        )
+        if errors == "raise":
+            for r in out:
+                if isinstance(r, BaseException):
+                    raise r
+        return [r if isinstance(r, BaseException) else Fit(r) for r in out]
     return Fit(
         _tribo.fit(
             **_source(record),

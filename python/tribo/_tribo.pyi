@@ -2,7 +2,7 @@
 package's API. `fit` and `explain` return the CLI's `--json` text, which the package wraps in its
 typed `Fit` and `Explanation` (with `Step`) classes."""
 
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -54,6 +54,17 @@ def fit(
     name: Optional[str] = None,
     stated_cutoff_hz: Optional[float] = None,
 ) -> str: ...
+def fit_many(
+    sources: List[Dict[str, Any]],
+    *,
+    law: str = "coulomb-viscous",
+    mass_kg: Optional[float] = None,
+    stiffness: Optional[float] = None,
+    load_n: Optional[float] = None,
+    apparatus_mu1: float = 0.0,
+    windows: int = 0,
+    longest_clean_stretch: bool = False,
+) -> List[Union[str, Exception]]: ...
 def explain(
     path: Optional[str] = None,
     *,

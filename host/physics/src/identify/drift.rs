@@ -158,6 +158,10 @@ const SEARCH_BLOCKS: usize = 4;
 const SETTLE_TAU: f64 = 40.0;
 /// The step of the coarse memory grid (in grid points).
 const COARSE: usize = 2;
+/// How near the best rss (relative to the fitted samples' `f'f`) a pair's rss from sums must be
+/// for it to be fitted on its design: far above what the normal equations lose (measured in the
+/// module's tests: at most about 1e-13 of `f'f` on the test records).
+const SUMS_MARGIN: f64 = 1e-8;
 
 /// What every filter's search shares: the selected samples, the regressors before any filter,
 /// the grid.
@@ -308,7 +312,9 @@ impl Prepared {
             .collect();
         let g = self.grid.len();
         let mut x = vec![0.0; rows.len() * k];
-        let mut fit_memory = |im: usize, ids: &[usize]| -> Vec<Option<f64>> {
+        // The rss of (memory, delay) on every sample of the blocks, from the regression's design
+        // itself: the reference, and what the fast search's rss from sums is checked against.
+        let mut exact = |im: usize, ids: &[usize]| -> Vec<Option<f64>> {
             let relaxed: Vec<Vec<Vec<f64>>> = filtered
                 .iter()
                 .map(|cols| {
@@ -334,26 +340,103 @@ impl Prepared {
                 })
                 .collect()
         };
-        // rss of every pair fitted so far, by (memory, delay).
-        let mut done: Vec<Option<Option<f64>>> = vec![None; g * g];
-        let mut fit_pairs = |pairs: &[(usize, usize)], done: &mut Vec<Option<Option<f64>>>| {
-            let mut by_memory: Vec<Vec<usize>> = vec![Vec::new(); g];
-            for &(im, id) in pairs {
-                if done[im * g + id].is_none() && !by_memory[im].contains(&id) {
-                    by_memory[im].push(id);
-                }
-            }
-            for (im, ids) in by_memory.iter().enumerate().filter(|(_, v)| !v.is_empty()) {
-                for (id, rss) in ids.iter().zip(fit_memory(im, ids)) {
-                    done[im * g + id] = Some(rss);
-                }
-            }
+        // The fast search's rss of (memory, delay): the normal equations from per-run prefix
+        // sums of the column products (O(runs) a delay, not O(rows)), the rss from them
+        // (`f'f − 2β'X'f + β'X'Xβ`). It loses what the normal equations lose (about 1e-16 of
+        // `f'f` times the design's conditioning): every pair whose rss from sums is within
+        // [`SUMS_MARGIN`] of `f'f` of the best is then fitted on its design ([`exact`]), so the
+        // pair chosen is the one the design's rss chooses.
+        let runs: Vec<Vec<(usize, usize)>> =
+            blocks.iter().map(|(o, _, r)| row_runs(r, *o)).collect();
+        let ff: f64 = rows.iter().map(|&i| f[i] * f[i]).sum();
+        let max_shift = self
+            .grid
+            .last()
+            .map_or(0, |&d| (d / self.dtau).floor() as usize);
+        let from_sums = |im: usize, ids: &[usize]| -> Vec<Option<f64>> {
+            let sums: Vec<Sums> = filtered
+                .iter()
+                .zip(&runs)
+                .map(|(cols, rr)| {
+                    let relaxed: Vec<Vec<f64>> = cols
+                        .iter()
+                        .map(|c| first_order(c, self.grid[im], self.dtau))
+                        .collect();
+                    // The earliest sample a delay of the grid reads (the held ones read only the
+                    // first), less one for the sums one sample apart.
+                    let first = rr.first().map_or(0, |r| r.0);
+                    Sums::new(relaxed, first.saturating_sub(max_shift + 1))
+                })
+                .collect();
+            ids.iter()
+                .map(|&id| {
+                    let d = self.grid[id] / self.dtau;
+                    let mut gram = vec![vec![0.0; k]; k];
+                    let mut xty = vec![0.0; k];
+                    for (((o, _, r), s), rr) in blocks.iter().zip(&sums).zip(&runs) {
+                        s.add_gram(&mut gram, d, rr);
+                        s.add_xty(&mut xty, d, r, *o, f);
+                    }
+                    rss_of_normal_equations(&gram, &xty, ff)
+                })
+                .collect()
         };
+        // rss of every pair fitted so far, by (memory, delay), and whether it is the design's
+        // (else from sums).
+        let mut done: Vec<Option<(Option<f64>, bool)>> = vec![None; g * g];
+        let margin = SUMS_MARGIN * ff;
+        let mut fit_pairs =
+            |pairs: &[(usize, usize)], done: &mut Vec<Option<(Option<f64>, bool)>>| {
+                let mut by_memory: Vec<Vec<usize>> = vec![Vec::new(); g];
+                for &(im, id) in pairs {
+                    if done[im * g + id].is_none() && !by_memory[im].contains(&id) {
+                        by_memory[im].push(id);
+                    }
+                }
+                for (im, ids) in by_memory.iter().enumerate().filter(|(_, v)| !v.is_empty()) {
+                    let rss = if search == Search::Exhaustive {
+                        exact(im, ids)
+                    } else {
+                        from_sums(im, ids)
+                    };
+                    #[cfg(test)]
+                    if tests::CHECK_SUMS.load(std::sync::atomic::Ordering::Relaxed) {
+                        tests::record_sums_error(&rss, &exact(im, ids), ff);
+                    }
+                    for (id, rss) in ids.iter().zip(rss) {
+                        done[im * g + id] = Some((rss, search == Search::Exhaustive));
+                    }
+                }
+                // The pairs from sums near the best (or singular there) fitted on their design,
+                // until the best and all within the margin of it are the design's.
+                loop {
+                    let best = done
+                        .iter()
+                        .filter_map(|v| v.and_then(|(r, _)| r))
+                        .fold(f64::INFINITY, f64::min);
+                    let mut todo: Vec<Vec<usize>> = vec![Vec::new(); g];
+                    for (at, v) in done.iter().enumerate() {
+                        if let Some((r, false)) = v {
+                            if r.is_none_or(|r| r <= best + margin) {
+                                todo[at / g].push(at % g);
+                            }
+                        }
+                    }
+                    if todo.iter().all(|v| v.is_empty()) {
+                        break;
+                    }
+                    for (im, ids) in todo.iter().enumerate().filter(|(_, v)| !v.is_empty()) {
+                        for (id, rss) in ids.iter().zip(exact(im, ids)) {
+                            done[im * g + id] = Some((rss, true));
+                        }
+                    }
+                }
+            };
         // Best so far, ties to the lowest (memory, delay) as the exhaustive order has it.
-        let best_of = |done: &[Option<Option<f64>>]| -> Option<(f64, usize, usize)> {
+        let best_of = |done: &[Option<(Option<f64>, bool)>]| -> Option<(f64, usize, usize)> {
             let mut best: Option<(f64, usize, usize)> = None;
             for (at, v) in done.iter().enumerate() {
-                if let Some(Some(rss)) = v {
+                if let Some((Some(rss), _)) = v {
                     if best.is_none_or(|b| *rss < b.0) {
                         best = Some((*rss, at / g, at % g));
                     }
@@ -459,6 +542,175 @@ fn trend_and_rss(
     let blocks = prep.blocks(Search::Fast);
     let (_, im, id) = prep.search(filter, &blocks, f, Search::Fast)?;
     prep.trend_at(filter, im, id, f, tau, time_per_tau)
+}
+
+/// The maximal runs of consecutive samples among `rows` (sorted), as `[first, end)` indices from
+/// `start`.
+fn row_runs(rows: &[usize], start: usize) -> Vec<(usize, usize)> {
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for &i in rows {
+        let li = i - start;
+        match runs.last_mut() {
+            Some((_, e)) if *e == li => *e = li + 1,
+            _ => runs.push((li, li + 1)),
+        }
+    }
+    runs
+}
+
+/// Prefix sums of a block's regressors and of their products (same sample, and one sample apart
+/// both ways): the Gram matrix of the delayed design over any run of samples from a few
+/// differences. Row `u − off` of `data` holds, for the samples `off ≤ u' < u`, `Σ c_a` by column,
+/// then `Σ c_a c_b` and `Σ (c_a[u'−1] c_b[u'] + c_b[u'−1] c_a[u'])` by `a ≤ b`.
+struct Sums {
+    cols: Vec<Vec<f64>>,
+    off: usize,
+    width: usize,
+    data: Vec<f64>,
+}
+
+// The Gram matrix's entries are indexed by two columns at once.
+#[allow(clippy::needless_range_loop)]
+impl Sums {
+    /// The sums of `cols` from sample `off`.
+    fn new(cols: Vec<Vec<f64>>, off: usize) -> Sums {
+        let kk = cols.len();
+        let n = cols.first().map_or(0, Vec::len);
+        let off = off.min(n);
+        let tri = kk * (kk + 1) / 2;
+        let width = kk + 2 * tri;
+        let mut data = vec![0.0; (n - off + 1) * width];
+        let mut acc = vec![0.0; width];
+        let mut cur = vec![0.0; kk];
+        let mut prev = vec![0.0; kk];
+        for u in off..n {
+            for a in 0..kk {
+                cur[a] = cols[a][u];
+                prev[a] = if u == 0 { 0.0 } else { cols[a][u - 1] };
+            }
+            let mut t = 0;
+            for a in 0..kk {
+                acc[a] += cur[a];
+                for b in a..kk {
+                    acc[kk + t] += cur[a] * cur[b];
+                    acc[kk + tri + t] += prev[a] * cur[b] + prev[b] * cur[a];
+                    t += 1;
+                }
+            }
+            data[(u - off + 1) * width..(u - off + 2) * width].copy_from_slice(&acc);
+        }
+        Sums {
+            cols,
+            off,
+            width,
+            data,
+        }
+    }
+
+    /// Where a delay of `d` samples reads: `(m, φ)`, the value at sample `u` being
+    /// `φ c[u−m−1] + (1−φ) c[u−m]` for `u > m` and `c[0]` for `u ≤ m` (as [`design`] has it).
+    fn split(d: f64) -> (usize, f64) {
+        if d <= 0.0 {
+            return (0, 0.0);
+        }
+        let m = d.floor();
+        (m as usize, d - m)
+    }
+
+    /// Adds the Gram matrix (`k` = columns + the constant) of the design delayed by `d` samples
+    /// over the runs `runs`.
+    fn add_gram(&self, gram: &mut [Vec<f64>], d: f64, runs: &[(usize, usize)]) {
+        let kk = self.cols.len();
+        let (m, phi) = Self::split(d);
+        let (w11, w10, w00) = (phi * phi, phi * (1.0 - phi), (1.0 - phi) * (1.0 - phi));
+        for &(r0, r1) in runs {
+            // Samples that read the first value.
+            let held = r1.min(m + 1).saturating_sub(r0);
+            if held > 0 {
+                let h = held as f64;
+                for a in 0..kk {
+                    let ca = self.cols[a][0];
+                    gram[a][kk] += h * ca;
+                    for b in a..kk {
+                        gram[a][b] += h * ca * self.cols[b][0];
+                    }
+                }
+                gram[kk][kk] += h;
+            }
+            let s0 = r0.max(m + 1);
+            if s0 >= r1 {
+                continue;
+            }
+            // The sums over u = sample − m in [u0, u1) (u0 − 1 ≥ off: see `Sums::new`'s caller).
+            let (u0, u1) = (s0 - m, r1 - m);
+            let w = self.width;
+            let tri = kk * (kk + 1) / 2;
+            let row = |u: usize| &self.data[(u - self.off) * w..(u - self.off + 1) * w];
+            let (hi0, lo0, hi1, lo1) = (row(u1), row(u0), row(u1 - 1), row(u0 - 1));
+            let diff0 = |j: usize| hi0[j] - lo0[j];
+            let diff1 = |j: usize| hi1[j] - lo1[j];
+            let mut t = 0;
+            for a in 0..kk {
+                gram[a][kk] += phi * diff1(a) + (1.0 - phi) * diff0(a);
+                for b in a..kk {
+                    let mut v = w00 * diff0(kk + t);
+                    if phi != 0.0 {
+                        v += w11 * diff1(kk + t) + w10 * diff0(kk + tri + t);
+                    }
+                    gram[a][b] += v;
+                    t += 1;
+                }
+            }
+            gram[kk][kk] += (r1 - s0) as f64;
+        }
+    }
+
+    /// Adds `X'f` of the design delayed by `d` samples at the samples `rows` (block from `start`).
+    fn add_xty(&self, xty: &mut [f64], d: f64, rows: &[usize], start: usize, f: &[f64]) {
+        let kk = self.cols.len();
+        let (m, phi) = Self::split(d);
+        for (a, c) in self.cols.iter().enumerate() {
+            let mut acc = 0.0;
+            for &i in rows {
+                let li = i - start;
+                let x = if li <= m {
+                    c[0]
+                } else if phi == 0.0 {
+                    c[li - m]
+                } else {
+                    phi * c[li - m - 1] + (1.0 - phi) * c[li - m]
+                };
+                acc += x * f[i];
+            }
+            xty[a] += acc;
+        }
+        xty[kk] += rows.iter().map(|&i| f[i]).sum::<f64>();
+    }
+}
+
+/// The residual sum of squares of the least squares whose normal equations are `gram` (upper
+/// triangle filled) and `xty`, `ff` the data's sum of squares (`f'f − 2β'X'f + β'X'Xβ`).
+#[allow(clippy::needless_range_loop)]
+fn rss_of_normal_equations(gram: &[Vec<f64>], xty: &[f64], ff: f64) -> Option<f64> {
+    let k = xty.len();
+    let mut full = gram.to_vec();
+    for a in 0..k {
+        for b in 0..a {
+            full[a][b] = full[b][a];
+        }
+    }
+    let inv = invert(&full)?;
+    let beta: Vec<f64> = (0..k)
+        .map(|a| (0..k).map(|b| inv[a][b] * xty[b]).sum())
+        .collect();
+    let mut rss = ff;
+    for a in 0..k {
+        rss -= 2.0 * beta[a] * xty[a];
+        for b in 0..k {
+            rss += beta[a] * full[a][b] * beta[b];
+        }
+    }
+    Some(rss)
 }
 
 /// A first-order lag of time constant `t` (τ units; 0 = none) of a signal sampled every `h`,
@@ -763,4 +1015,97 @@ fn invert(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
         }
     }
     Some(m.into_iter().map(|r| r[n..].to_vec()).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrate::Method;
+    use crate::sensor::{generate, RecordSpec, SensorModel};
+    use crate::{FrictionLaw, Model, Rig};
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+    /// Whether the fast search also fits every pair on its design and records how far its rss
+    /// from sums was ([`SUMS_ERROR`]: the largest `|from sums − design| / f'f`, as f64 bits).
+    pub(super) static CHECK_SUMS: AtomicBool = AtomicBool::new(false);
+    static SUMS_ERROR: AtomicU64 = AtomicU64::new(0);
+    static SUMS_PAIRS: AtomicU64 = AtomicU64::new(0);
+
+    pub(super) fn record_sums_error(sums: &[Option<f64>], design: &[Option<f64>], ff: f64) {
+        for (a, b) in sums.iter().zip(design) {
+            let e = match (a, b) {
+                (Some(a), Some(b)) => (a - b).abs() / ff,
+                (None, None) => 0.0,
+                // One singular and not the other: as far as it can be.
+                _ => f64::INFINITY,
+            };
+            SUMS_PAIRS.fetch_add(1, Ordering::Relaxed);
+            let _ = SUMS_ERROR.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |v| {
+                Some(f64::from_bits(v).max(e).to_bits())
+            });
+        }
+    }
+
+    /// The rss from sums stays far inside [`SUMS_MARGIN`] of the design's on records at the
+    /// edges of what the search sees: a noiseless light contact (its rss near 0, where the
+    /// normal equations lose most), a noisy one, blocks and one span, a sensor lag (the rss
+    /// sharp in the delay), the filter stated and not.
+    #[test]
+    fn the_rss_from_sums_is_the_designs() {
+        CHECK_SUMS.store(true, Ordering::Relaxed);
+        for (secs, light, noise, lag_s, stated) in [
+            (2.0, false, true, 0.003, false),
+            (2.0, false, false, 0.0, true),
+            (8.0, true, false, 0.0, false),
+            (8.0, true, true, 0.001, true),
+        ] {
+            let rig = Rig {
+                load_n: if light { 0.05 } else { 0.3 },
+                ..Rig::REAL
+            };
+            let spec = RecordSpec {
+                rig,
+                x0_m: 667e-6,
+                v0_m_s: 0.0,
+                duration_s: secs,
+                rate_hz: 10_000.0,
+            };
+            let law = if light {
+                FrictionLaw::quadratic(0.0008, 0.0011, 0.0005)
+            } else {
+                FrictionLaw::quadratic(0.01, 0.01, 0.002)
+            };
+            let sensor = SensorModel {
+                force_lag_s: lag_s,
+                force_noise_n: if light { 1e-5 } else { 2e-4 },
+                ..SensorModel::default()
+            };
+            let mut rec = generate(
+                &spec,
+                &Model::new(law),
+                Method::default(),
+                noise.then_some(&sensor),
+            )
+            .unwrap();
+            if !stated {
+                rec.force_cutoff_hz = None;
+            }
+            SUMS_ERROR.store(0, Ordering::Relaxed);
+            SUMS_PAIRS.store(0, Ordering::Relaxed);
+            let r = crate::identify::fit(
+                &rec,
+                crate::identify::LawSpec::Quadratic,
+                &crate::identify::FitOptions::default(),
+            )
+            .unwrap();
+            assert!(r.mu0_trend.is_some(), "{secs} s: a trend");
+            let e = f64::from_bits(SUMS_ERROR.load(Ordering::Relaxed));
+            let n = SUMS_PAIRS.load(Ordering::Relaxed);
+            eprintln!(
+                "{secs} s light {light} noise {noise} lag {lag_s}: {n} pairs, error {e:.2e} of f'f"
+            );
+            assert!(n > 100, "{n} pairs compared");
+            assert!(e < 1e-3 * SUMS_MARGIN, "rss from sums off by {e:e} of f'f");
+        }
+    }
 }
