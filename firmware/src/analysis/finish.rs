@@ -581,7 +581,7 @@ pub(super) struct Refit {
     peaks: [f64; SHORT_PEAKS],
     pub(super) vars: [f64; SHORT_PEAKS],
     fitted: usize,
-    /// The phase step ω_d Δt of the run (0 until known: each window's own then).
+    /// The phase step ω_d Δt of the run (set by the frequency stage, before this one).
     pub(super) step: f64,
 }
 
@@ -860,16 +860,11 @@ impl Pipeline {
             let counts = win.and_then(|w| w.counts.get(..len)).unwrap_or(&[]);
             if r.fed == 0 {
                 fitter.reset();
-                // the run's own frequency (every reversal's time), not the window's: the
-                // window was cut with the half period before it, and the first one's runs from
-                // the release (0.8 % off on a 20 Hz rig), which an arc of fixed frequency turns
-                // into a peak off by several of its σ
-                let step = if r.step > 0.0 {
-                    r.step
-                } else {
-                    win.map_or(0.0, |w| w.step)
-                };
-                fitter.set_step(step);
+                // the run's own frequency (every reversal's time, set before this stage), not
+                // the one each window was cut with: the first window's half period runs from the
+                // release (0.8 % off on a 20 Hz rig), which an arc of fixed frequency turns into
+                // a peak off by several of its σ
+                fitter.set_step(r.step);
                 fitter.set_half(len / 2);
                 if len == 0 || 2 * fitter.half_window() + 1 > len {
                     // no window kept (two reversals within one: the record's peak stands)

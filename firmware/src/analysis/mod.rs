@@ -225,14 +225,13 @@ pub struct Pipeline {
 /// window is kept: built in place, never on a stack).
 pub(crate) type Windows = heapless::Vec<Window, SHORT_PEAKS>;
 
-/// A kept window: its counts (oldest first; `len` of them), where the reversal lies after the
-/// centre sample, and the phase step the window was cut with.
+/// A kept window: its counts (oldest first; `len` of them) and where the reversal lies after the
+/// centre sample (it is fitted with the run's phase step, known at the run's end).
 #[derive(Clone, Debug)]
 pub(crate) struct Window {
     pub(crate) counts: [u16; WINDOW_LEN],
     pub(crate) len: u16,
     pub(crate) delta: f32,
-    pub(crate) step: f64,
 }
 
 /// Everything but the half-cycle store (small: rebuilt in place by [`Pipeline::reset`]).
@@ -735,7 +734,6 @@ impl Pipeline {
                 counts: [0; WINDOW_LEN],
                 len: 0,
                 delta: p.delta as f32,
-                step: self.fitter.step(),
             };
             w.len = self.fitter.window(&mut w.counts) as u16;
             let _ = self.windows.push(w);
