@@ -652,3 +652,62 @@ fn a_rig_that_stops_hearing_is_not_said_to_have_lost_the_blocks() {
     assert_bit_identical(&o.run, &truth);
     assert_eq!(o.pulled_blocks, 10);
 }
+
+/// The frames a packed run opens with, right after its header (the ECR range at sample 0, the
+/// analog chain), lost live: the pulls fetch them, on a clean line and on lossy ones. (The soak
+/// found runs ending incomplete, "run events missing before block 0", with the rig holding the
+/// chain: the run being written did not know its protocol, so it did not miss the chain and never
+/// asked for it; read back, the run did.)
+#[test]
+fn the_frames_after_the_header_lost_live_are_pulled() {
+    let first_range = |m: &DeviceMsg| matches!(m, DeviceMsg::EcrRange(e) if e.first_sample == 0);
+    let chain = |m: &DeviceMsg| matches!(m, DeviceMsg::Chain(_));
+    let lines = [
+        Faults::default(),
+        Faults::lossy(71, 1_000),
+        Faults::lossy(72, 5_000),
+    ];
+    for (i, line) in lines.into_iter().enumerate() {
+        for (what, lost) in [
+            ("the first ECR range", first_range as fn(&DeviceMsg) -> bool),
+            ("the chain", chain),
+        ] {
+            let mut bench = Bench::new(rig(0.01, 60 + i as u64));
+            let store = tempfile::tempdir().unwrap();
+            let faults = Faults {
+                drop_once: vec![lost],
+                ..line.clone()
+            };
+            let (o, stats) = bench.session(faults, |link| {
+                let info = link.hello()?;
+                record_run(
+                    link,
+                    &info,
+                    store.path(),
+                    &plan(),
+                    &AtomicBool::new(false),
+                    &mut |_| {},
+                )
+            });
+            let o = o.expect("the run finishes");
+            assert!(stats.damaged_rig_frames() >= 1, "{what} was dropped");
+            assert!(
+                o.not_held.is_none(),
+                "line {i}, {what} lost: {:?}",
+                o.not_held
+            );
+            assert!(
+                o.incomplete().is_none(),
+                "line {i}, {what} lost: {:?}",
+                o.incomplete()
+            );
+            let id = o.run.header().unwrap().run_id;
+            let truth = bench.rig_frames(id);
+            assert!(
+                truth.iter().any(|f| lost(&msg(f))),
+                "the rig's run holds {what}"
+            );
+            assert_bit_identical(&o.run, &truth);
+        }
+    }
+}

@@ -52,11 +52,18 @@ impl RunWriter {
             &dir.join(LOG_FILE),
             meta.device.as_ref().map(|d| d.protocol),
         )?;
+        // The run as assembled while it is written knows the protocol the log states, as a
+        // reader of the log will: what the run must hold (the analog chain of a v3 rig) is judged
+        // the same way while it is pulled and when it is read back.
+        let data = Assembled {
+            protocol: log.header().protocol,
+            ..Assembled::default()
+        };
         Ok(RunWriter {
             dir,
             meta,
             log,
-            data: Assembled::default(),
+            data,
             last_sync: Instant::now(),
         })
     }
