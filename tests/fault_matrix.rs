@@ -23,11 +23,12 @@
 mod faulty_line;
 mod host_common;
 
-use faulty_line::{Bench, Faults};
+use faulty_line::{Bench, Faults, LineStats};
 use host_common::plan;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use tribo::link::session::{pull_run, record_run, Outcome};
 use tribo::link::Link;
 use tribo_rig::{AcquisitionFaults, VirtualRig, VirtualRigConfig};
@@ -47,19 +48,26 @@ fn rig(mu0: f64, seed: u64) -> VirtualRig {
 
 /// Takes a run of [`plan`] through a line with `faults`.
 fn record(bench: &mut Bench, faults: Faults, store: &Path) -> anyhow::Result<Outcome> {
-    bench
-        .session(faults, |link| {
-            let info = link.hello()?;
-            record_run(
-                link,
-                &info,
-                store,
-                &plan(),
-                &AtomicBool::new(false),
-                &mut |_| {},
-            )
-        })
-        .0
+    record_seen(bench, faults, store).0
+}
+
+/// [`record`], with what the line saw.
+fn record_seen(
+    bench: &mut Bench,
+    faults: Faults,
+    store: &Path,
+) -> (anyhow::Result<Outcome>, Arc<LineStats>) {
+    bench.session(faults, |link| {
+        let info = link.hello()?;
+        record_run(
+            link,
+            &info,
+            store,
+            &plan(),
+            &AtomicBool::new(false),
+            &mut |_| {},
+        )
+    })
 }
 
 /// `tribo pull [target]` (with `--salvage`) through a line with `faults`.
@@ -333,17 +341,7 @@ fn cable_pulled_mid_stream() {
 fn lossy_row(seed: u64, per_100k: u32) {
     let mut bench = Bench::new(rig(0.01, seed));
     let store = tempfile::tempdir().unwrap();
-    let (o, stats) = bench.session(Faults::lossy(seed, per_100k), |link| {
-        let info = link.hello()?;
-        record_run(
-            link,
-            &info,
-            store.path(),
-            &plan(),
-            &AtomicBool::new(false),
-            &mut |_| {},
-        )
-    });
+    let (o, stats) = record_seen(&mut bench, Faults::lossy(seed, per_100k), store.path());
     let o = o.expect("the run finishes");
     let damaged = stats.damaged_rig_frames();
     let frames = stats.rig_frames.load(std::sync::atomic::Ordering::Relaxed);
@@ -399,17 +397,7 @@ fn lost_header_events_result_and_end() {
         ],
         ..Faults::default()
     };
-    let (o, stats) = bench.session(faults, |link| {
-        let info = link.hello()?;
-        record_run(
-            link,
-            &info,
-            store.path(),
-            &plan(),
-            &AtomicBool::new(false),
-            &mut |_| {},
-        )
-    });
+    let (o, stats) = record_seen(&mut bench, faults, store.path());
     let o = o.expect("the run finishes");
     assert!(
         stats.damaged_rig_frames() >= 5,
@@ -678,17 +666,7 @@ fn the_frames_after_the_header_lost_live_are_pulled() {
                 drop_once: vec![lost],
                 ..line.clone()
             };
-            let (o, stats) = bench.session(faults, |link| {
-                let info = link.hello()?;
-                record_run(
-                    link,
-                    &info,
-                    store.path(),
-                    &plan(),
-                    &AtomicBool::new(false),
-                    &mut |_| {},
-                )
-            });
+            let (o, stats) = record_seen(&mut bench, faults, store.path());
             let o = o.expect("the run finishes");
             assert!(stats.damaged_rig_frames() >= 1, "{what} was dropped");
             assert!(
