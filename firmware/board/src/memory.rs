@@ -174,8 +174,8 @@ core::arch::global_asm!(
 );
 
 /// The watchdog at boot: IWDG1 (RM0433: 0x5800_4800; KR at +0, PR at +4, RLR at +8), prescaler
-/// /256 (PR = 6), reload 0xFFF: 4096 × 256 ticks of the LSI (32 kHz nominal, 29.5–34 kHz over the
-/// part's range), 30.8–35.5 s. Long enough for a boot that works (the recovery reads at most the
+/// /256 (PR = 6), reload 0xFFF: 4096 × 256 ticks of the LSI (32 kHz nominal; the part's range is
+/// the self-test's, `tribo_firmware::selftest::LSI_MIN_HZ`…`LSI_MAX_HZ`, 29.76–33.6 kHz), 31.2–35.2 s. Long enough for a boot that works (the recovery reads at most the
 /// 1 MiB bank, an erase-first step is one sector, ≤ 2.2 s), short enough that a stuck one resets.
 /// The base is checked against the PAC at boot ([`boot_watchdog_matches_pac`]).
 pub struct BootWatchdog {
