@@ -258,19 +258,20 @@ fn inv_fifth_root_without_pow(x: f64) -> Option<f64> {
     // c_i is a double, and m − c_i is exact (both in [1, 2)).
     let c = 1.0 + (i as f64 + 0.5) / 64.0;
     let t = (m - c) * INV_C[i];
-    // (1 + t)^(−1/5) − 1.
-    let pm1 = t
-        * (-0.2
-            + t * (0.12
-                + t * (-0.088
-                    + t * (0.0704
-                        + t * (-0.059136
-                            + t * (0.0512512 + t * (-0.04539392 + t * 0.040854528)))))));
+    // (1 + t)^(−1/5) − 1 = t P(t), P by Estrin's scheme (a shorter chain than Horner's: this
+    // result decides the next step's length, so every step waits for it).
+    let t2 = t * t;
+    let p01 = -0.2 + 0.12 * t;
+    let p23 = -0.088 + 0.0704 * t;
+    let p45 = -0.059136 + 0.0512512 * t;
+    let p67 = -0.04539392 + 0.040854528 * t;
+    let pm1 = t * ((p01 + t2 * p23) + (t2 * t2) * (p45 + t2 * p67));
     let (q, r) = (e.div_euclid(5), e.rem_euclid(5));
     let (kh, kl) = K_POW[r as usize][i];
-    // (1 + pm1)(1 + gap) − 1: the cross term is 0.07 ulp at the ends of f64's range.
+    // (1 + pm1)(1 + gap) − 1 (the cross term is 0.07 ulp at the ends of f64's range), with the
+    // parts that do not wait for pm1 computed beside it.
     let gap = POW_GAP * q as f64;
-    let s = kl + kh * (pm1 + gap * (1.0 + pm1));
+    let s = (kl + kh * gap) + (kh * (1.0 + gap)) * pm1;
     let u = kh + s;
     // The rounding error of u (Fast2Sum: |s| < |kh|), exact; ulp(u) = 2^-53 on (½, 1).
     let rounding = s - (u - kh);
