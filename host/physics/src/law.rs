@@ -307,7 +307,7 @@ impl fmt::Display for FrictionLaw {
 /// Sign used on a branch: the branch direction `dir` if it is non-zero (so that the law stays
 /// smooth while an integrator stage overshoots the reversal), else `sgn(v)`.
 #[inline]
-fn sgn_on(v: f64, dir: f64) -> f64 {
+pub(crate) fn sgn_on(v: f64, dir: f64) -> f64 {
     if dir != 0.0 {
         dir.signum()
     } else if v > 0.0 {

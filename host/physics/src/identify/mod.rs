@@ -551,7 +551,9 @@ pub fn fit_envelope(
     let a_lo = data.a.iter().copied().fold(f64::INFINITY, f64::min);
     // Standard errors from the Jacobian at the optimum (a coarser step than the search's, well
     // above the integrator's resolution).
-    let r_opt = resid(&lm.p);
+    // The residuals at the optimum are the last accepted evaluation's (`resid` is deterministic:
+    // evaluating it again gave the same bits for one more simulation).
+    let r_opt = Some(lm.residuals.clone());
     let scales = vec![1e-2; q0.len()];
     let mut se: Vec<f64> = r_opt
         .as_ref()

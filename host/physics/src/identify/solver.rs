@@ -54,6 +54,8 @@ pub struct LmResult {
     pub iterations: usize,
     /// Tolerance met.
     pub converged: bool,
+    /// The residuals `r(p)` at `p` (what the last accepted evaluation returned).
+    pub residuals: Vec<f64>,
 }
 
 /// How [`levenberg_marquardt_with`] differentiates and when it stops.
@@ -233,6 +235,7 @@ fn lm_core(
         cost: c,
         iterations: it,
         converged,
+        residuals: res,
     })
 }
 

@@ -11,6 +11,7 @@
 //! helper [`simulate`] samples a whole grid.
 
 use crate::invalid::InvalidParameter;
+use crate::law::FrictionLaw;
 use crate::model::Model;
 
 mod dopri;
@@ -365,114 +366,60 @@ impl Simulator {
                 "Dormand–Prince tolerances and h_max must be > 0".into(),
             ));
         }
-        let m = &self.model;
         let d = self.dir;
         let s = self.s;
         let k1 = match self.k1 {
             Some(k) => k,
-            None => m.rhs(&s, d),
+            None => self.model.rhs(&s, d),
         };
-        let mut h = self.h.min(h_max);
-        let mut rejects = 0;
-        loop {
-            if h < 1e-13 * (1.0 + self.t.abs()) {
-                return Err(SimError::Run(format!(
-                    "step size underflow at τ = {} (stiff or singular)",
-                    self.t
-                )));
-            }
-            let k2 = m.rhs(&comb(&s, &[(A21, &k1)], h), d);
-            let k3 = m.rhs(&comb(&s, &[(A31, &k1), (A32, &k2)], h), d);
-            let k4 = m.rhs(&comb(&s, &[(A41, &k1), (A42, &k2), (A43, &k3)], h), d);
-            let k5 = m.rhs(
-                &comb(&s, &[(A51, &k1), (A52, &k2), (A53, &k3), (A54, &k4)], h),
-                d,
-            );
-            let k6 = m.rhs(
-                &comb(
-                    &s,
-                    &[(A61, &k1), (A62, &k2), (A63, &k3), (A64, &k4), (A65, &k5)],
-                    h,
-                ),
-                d,
-            );
-            let s1 = comb(
-                &s,
-                &[(A71, &k1), (A73, &k3), (A74, &k4), (A75, &k5), (A76, &k6)],
-                h,
-            );
-            let k7 = m.rhs(&s1, d);
-            let mut err = 0.0;
-            let mut finite = true;
-            for i in 0..3 {
-                let e = h
-                    * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
-                let sc = atol + rtol * s[i].abs().max(s1[i].abs());
-                err += (e / sc).powi(2);
-                finite &= s1[i].is_finite();
-            }
-            let err = (err / 3.0).sqrt();
-            if !finite || !err.is_finite() {
-                h *= 0.25;
-                rejects += 1;
-                if rejects > 60 {
-                    return Err(SimError::Run(format!("non-finite state at τ = {}", self.t)));
+        let (h0, t) = (self.h.min(h_max), self.t);
+        // The law's dispatch is taken once a step: a pseudo-polynomial law of up to four constants
+        // (every fitted one but poly:N ≥ 4) is inlined into the stages, with the same arithmetic
+        // as `Model::rhs`, so the steps are the same to the last bit.
+        let (mu_a, cubic) = (self.model.apparatus_mu1, self.model.cubic);
+        let st = match &self.model.law {
+            FrictionLaw::Polynomial { mu } => match *mu.as_slice() {
+                [a] => PolyRhs::new([a], mu_a, cubic).step(s, k1, d, h0, t, rtol, atol),
+                [a, b] => PolyRhs::new([a, b], mu_a, cubic).step(s, k1, d, h0, t, rtol, atol),
+                [a, b, c] => PolyRhs::new([a, b, c], mu_a, cubic).step(s, k1, d, h0, t, rtol, atol),
+                [a, b, c, e] => {
+                    PolyRhs::new([a, b, c, e], mu_a, cubic).step(s, k1, d, h0, t, rtol, atol)
                 }
-                continue;
-            }
-            if err > 1.0 {
-                h *= (0.9 * err.powf(-0.2)).max(0.2);
-                rejects += 1;
-                continue;
-            }
-            // Accepted.
-            let fac = if err == 0.0 {
-                5.0
-            } else {
-                (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
-            };
-            let mut rc = [[0.0; 3]; 5];
-            for i in 0..3 {
-                let dy = s1[i] - s[i];
-                let bspl = h * k1[i] - dy;
-                rc[0][i] = s[i];
-                rc[1][i] = dy;
-                rc[2][i] = bspl;
-                rc[3][i] = dy - h * k7[i] - bspl;
-                rc[4][i] = h
-                    * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i] + D7 * k7[i]);
-            }
-            let t0 = self.t;
-            self.steps += 1;
-            self.h = (h * fac).min(h_max);
-            if self.events && d * s1[1] < 0.0 {
-                let th = find_reversal(&rc, d);
-                let mut se = dense_eval(&rc, th);
-                se[1] = 0.0;
-                self.seg = Some(Segment::Dense {
-                    t0,
-                    h,
-                    t1: t0 + th * h,
-                    rc,
-                    dir: d,
-                });
-                self.t = t0 + th * h;
-                self.s = se;
-                self.reversal();
-            } else {
-                self.seg = Some(Segment::Dense {
-                    t0,
-                    h,
-                    t1: t0 + h,
-                    rc,
-                    dir: d,
-                });
-                self.t = t0 + h;
-                self.s = s1;
-                self.k1 = Some(k7);
-            }
-            return Ok(());
+                _ => dopri_step(|x| self.model.rhs(x, d), s, k1, h0, t, rtol, atol),
+            },
+            _ => dopri_step(|x| self.model.rhs(x, d), s, k1, h0, t, rtol, atol),
+        }?;
+        let DopriStep { h, fac, s1, k7, rc } = st;
+        let t0 = self.t;
+        self.steps += 1;
+        self.h = (h * fac).min(h_max);
+        if self.events && d * s1[1] < 0.0 {
+            let th = find_reversal(&rc, d);
+            let mut se = dense_eval(&rc, th);
+            se[1] = 0.0;
+            self.seg = Some(Segment::Dense {
+                t0,
+                h,
+                t1: t0 + th * h,
+                rc,
+                dir: d,
+            });
+            self.t = t0 + th * h;
+            self.s = se;
+            self.reversal();
+        } else {
+            self.seg = Some(Segment::Dense {
+                t0,
+                h,
+                t1: t0 + h,
+                rc,
+                dir: d,
+            });
+            self.t = t0 + h;
+            self.s = s1;
+            self.k1 = Some(k7);
         }
+        Ok(())
     }
 }
 
