@@ -32,7 +32,7 @@ pub struct Evidence {
     /// Parameters the effect adds.
     pub k: usize,
     /// Fraction of the excess misfit the effect removes (1 if there was none): the evidence over
-    /// `Σ_c w_c max(RSS_c − n_c floor_c² (1 + 2 u_c), 0)` of the model without it, in the same
+    /// `Σ_c n_eff_c max(g(r_c) − g(1 + 2 u_c), 0)` of the model without it, in the same
     /// likelihood's units ([`crate::model::NoiseModel`]); `u_c = √(2 / n_eff_c + ε_c²)` is how well
     /// a right model's mean square residual and the floor² (to ±`ε_c`,
     /// [`Prepared::floor_rel_se`]) are known, so a misfit within 2 of them is not an excess.
@@ -44,10 +44,12 @@ pub struct Evidence {
 impl Evidence {
     /// Evidence of `after` (the current model plus one effect) against `before`, both fitted
     /// under the same noise model ([`Prepared::noise`], [`crate::model::NoiseModel`]): twice the
-    /// log-likelihood ratio `Σ_c w_c (RSS_c(before) − RSS_c(after))` with the weights the fits
-    /// minimised, and the share of `before`'s excess misfit (its `−2 ln L` above what noise at
-    /// each channel's floor leaves, `Σ_c w_c max(RSS_c − n_c floor_c² (1 + 2 u_c), 0)`, with `u_c` how
-    /// well a right model's mean square and the floor² are known) that the same sum is.
+    /// log-likelihood ratio of the profile likelihood, `Σ_c n_eff_c (g(r_c(before)) −
+    /// g(r_c(after)))` with `r_c = RSS_c / (n_c floor_c²)` and `g(r) = r` up to the floor, `1 + ln r`
+    /// above, whose gradient is the weighted least squares the fits minimise; and the share of
+    /// `before`'s excess misfit (its deviance above what noise at each channel's floor leaves,
+    /// `Σ_c n_eff_c max(g(r_c) − g(1 + 2 u_c), 0)`, with `u_c` how well a right model's mean
+    /// square and the floor² are known) that the same sum is.
     pub fn of(
         data: &Prepared,
         before: &FittedModel,
@@ -55,23 +57,20 @@ impl Evidence {
         opts: &ExplainOptions,
     ) -> Evidence {
         let k = after.p.len().saturating_sub(before.p.len()).max(1);
-        let (we, wf) = data.channel_weights(after.env_resid.len(), after.force_resid.len());
         let mut channels = Vec::new();
         let mut excess = 0.0;
-        for (name, rb, ra, floor, w) in [
+        for (name, rb, ra, floor) in [
             (
                 "envelope",
                 &before.env_resid,
                 &after.env_resid,
                 data.env_floor(),
-                we,
             ),
             (
                 "force",
                 &before.force_resid,
                 &after.force_resid,
                 data.force_floor(),
-                wf,
             ),
         ] {
             if ra.is_empty() {
@@ -87,6 +86,12 @@ impl Evidence {
                 (Some(m), _) => (m.force_var, m.force_n_eff.min(n as f64)),
                 (None, _) => (floor * floor, n as f64),
             };
+            // The profile likelihood's deviance of the channel at `r = RSS / (n floor²)`, its
+            // variance fitted (never below the floor²): `n_eff · g(r)`, g(r) = r up to the floor,
+            // 1 + ln r above ([`crate::model::NoiseModel`]).
+            let g = |r: f64| if r <= 1.0 { r } else { 1.0 + r.ln() };
+            let unit = n as f64 * floor * floor;
+            let evidence = n_eff * (g(rss_b / unit) - g(rss_a / unit));
             // The misfit above the noise counts where it stands out of what noise at the floor
             // leaves, as well as the two are known: the floor² read from the record to
             // ±`floor_rel_se`, the mean square residual of a right model to ±√(2 / n_eff), at 2σ
@@ -94,7 +99,7 @@ impl Evidence {
             // floor's own ±0.7 %, made 452 units of "excess" no effect could remove).
             let rel =
                 2.0 * (2.0 / n_eff.max(1.0) + data.floor_rel_se(name == "force").powi(2)).sqrt();
-            excess += w * (rss_b - n as f64 * floor * floor * (1.0 + rel)).max(0.0);
+            excess += n_eff * (g(rss_b / unit) - g(1.0 + rel)).max(0.0);
             channels.push(ChannelEvidence {
                 channel: name.into(),
                 rss_before: rss_b,
@@ -102,7 +107,7 @@ impl Evidence {
                 n,
                 n_eff,
                 noise_var,
-                evidence: w * (rss_b - rss_a),
+                evidence,
             });
         }
         let value: f64 = channels.iter().map(|c| c.evidence).sum();

@@ -18,12 +18,14 @@
 //!   `w = n_eff / (n · s²)`, with `s²` and `n_eff` measured on the current model's residuals at
 //!   the start of each round and held while the candidates are fitted (Levenberg–Marquardt
 //!   minimises `Σ_channels w · RSS`) and scored;
-//! - the evidence is `Σ_channels w · (RSS_before − RSS_after)`, twice the log-likelihood ratio, a χ²
-//!   with as many degrees of freedom as the effect adds parameters when the effect is absent; it
-//!   must exceed the χ² quantile of a 10⁻³ false-alarm rate per round, shared among the candidates
-//!   (Bonferroni);
+//! - the evidence is twice the log-likelihood ratio of that likelihood with each channel's
+//!   variance profiled (never below its floor): `Σ_channels w · (RSS_before − RSS_after)` near the
+//!   floor, `n_eff · ln(RSS_before / RSS_after)` far above it; a χ² with as many degrees of freedom
+//!   as the effect adds parameters when the effect is absent; it must exceed the χ² quantile of a
+//!   10⁻³ false-alarm rate per round, shared among the candidates (Bonferroni);
 //! - the effect must also remove a material part (by default 30 %) of the misfit in excess of the
-//!   noise floor (`Σ_channels w · max(RSS − n · floor², 0)`, the same likelihood's units), so that
+//!   noise floor (the deviance above the floor's, as well as the floor is known: the same
+//!   likelihood's units), so that
 //!   a systematic misfit from outside the vocabulary is not partly soaked up by a wrong name; and
 //!   beat the runner-up by a likelihood ratio of e⁵ (evidence margin 10).
 //!

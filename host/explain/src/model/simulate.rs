@@ -190,30 +190,39 @@ pub fn gap_of(env: &[f64], force: &[f64]) -> f64 {
 ///
 /// Model the residuals `r_c` of channel `c` (envelope, force; `n_c` compared points) as Gaussian
 /// noise of variance `s_c²` whose correlation makes `n_c` points carry the information of `n_eff_c`
-/// independent ones. The log-likelihood of a parameter vector θ, up to constants, is then
+/// independent ones. The log-likelihood of a parameter vector θ and the variances, up to
+/// constants, is then
 ///
-/// `−2 ln L(θ) = Σ_c w_c · RSS_c(θ)`,  `w_c = n_eff_c / (n_c · s_c²)`,
+/// `−2 ln L(θ, s) = Σ_c n_eff_c · (RSS_c(θ) / (n_c s_c²) + ln s_c²)`
 ///
 /// (each channel's χ² `RSS_c / s_c²` deflated by `n_c / n_eff_c`, the variance inflation of a mean
-/// of correlated residuals). The noise parameters are nuisances, fitted, never guessed: `s_c²` is
-/// the reference model's mean square residual, never below the channel's measured noise floor²
-/// (`s_c² = max(RSS_c / n_c, floor_c²)`: a misfit above the noise is counted as noise, which makes
-/// the evidence conservative), and `n_eff_c` the effective count of its residuals
-/// ([`tribo_physics::uncertainty::effective_count`]). Held within a comparison, the same `w_c`
-/// give
+/// of correlated residuals). The variances are nuisances, fitted, never guessed, but never below
+/// the channel's measured noise floor: `s_c² = max(RSS_c / n_c, floor_c²)`. Profiled over them,
+/// with `r_c = RSS_c / (n_c floor_c²)`, the deviance is
+///
+/// `D(θ) = Σ_c n_eff_c · g(r_c(θ))`,  `g(r) = r` for `r ≤ 1`, `1 + ln r` above
+///
+/// (up to constants; `g` is continuous with its slope at the floor). Its gradient is
+/// `Σ_c w_c ∇RSS_c` with `w_c = n_eff_c / (n_c s_c²)`: minimising `D` is least squares with these
+/// weights, re-measured at the solution (iteratively reweighted least squares). The search holds
+/// `w_c` (from the current model's residuals: its `s_c²` and `n_eff_c`) through a round, and the
+/// same noise model gives
 ///
 /// - **the fit**: Levenberg–Marquardt minimises `Σ_c w_c RSS_c` ([`weighted`] returns
-///   `√w_c · r_c`), so an effect's constants are the maximum-likelihood ones and a fit cannot
-///   trade misfit of a channel the likelihood weighs heavily for misfit of one it weighs lightly;
+///   `√w_c · r_c`; the current model is refitted under the round's weights first, one
+///   reweighting step), so a fit cannot trade misfit of a channel the likelihood weighs heavily
+///   for misfit of one it weighs lightly (grid #213: the running-in fit lowered the envelope's
+///   RSS and raised the force channel's, which the old evidence then rated a loss);
 /// - **the evidence** of a model `a` (the reference `b` plus an effect of `k` constants):
-///   `Σ_c w_c (RSS_c(b) − RSS_c(a))`, twice the log-likelihood ratio, χ²_k when the effect is
-///   absent (with `s_c` from the model without the effect, the null hypothesis: a score-test form);
-/// - **the excess misfit** of `b`: `Σ_c w_c · max(RSS_c(b) − n_c floor_c² (1 + 2 u_c), 0)` — the
-///   χ² in excess of what noise at the floor would leave (`n_eff_c (1 − floor_c² / s_c²)` for a
-///   floor known exactly), counted beyond 2 of `u_c = √(2 / n_eff_c + ε_c²)`, how well a right
-///   model's mean square residual (`√(2 / n_eff_c)`) and the floor² read from the record (`ε_c`,
-///   [`Prepared::floor_rel_se`]) are known: over every force sample, 0.5 % of the floor² is
-///   hundreds of units of χ², and within the floor's own ± — so the share an effect removes is
+///   `D(b) − D(a)` with `n_eff_c` held, twice the log-likelihood ratio, χ²_k when the effect is
+///   absent; near the floor it is `Σ_c w_c (RSS_c(b) − RSS_c(a))`, and far above it the
+///   logarithm keeps a strong effect's evidence from being capped at `n_eff_c` (an envelope
+///   4500 × its floor with `n_eff` 9: a quadratic term that removes it all);
+/// - **the excess misfit** of `b`: `Σ_c n_eff_c max(g(r_c(b)) − g(1 + 2 u_c), 0)` — its deviance
+///   above what noise at the floor leaves, counted beyond 2 of `u_c = √(2 / n_eff_c + ε_c²)`, how
+///   well a right model's mean square residual (`√(2 / n_eff_c)`) and the floor² read from the
+///   record (`ε_c`, [`Prepared::floor_rel_se`]) are known: over every force sample, 0.5 % of the
+///   floor² is hundreds of units, and within the floor's own ± — so the share an effect removes is
 ///   its evidence over that excess, in the same units.
 ///
 /// `None` in [`Prepared::noise`] (before any model is fitted) is noise at the floor with
