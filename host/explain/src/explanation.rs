@@ -50,6 +50,10 @@ pub struct FittedModel {
     pub gap_envelope: f64,
     /// Force part of the gap (`null` without a force channel).
     pub gap_force: Option<f64>,
+    /// `−2 ln L` of its residuals under the noise model it was fitted with ([`Prepared::chi2`]);
+    /// comparable only between models evaluated under the same [`Prepared::noise`].
+    #[serde(skip)]
+    pub chi2: f64,
     /// Structure.
     #[serde(skip)]
     pub spec: Spec,
@@ -65,7 +69,10 @@ pub struct FittedModel {
 }
 
 impl FittedModel {
-    /// True if every channel's misfit is within [`ADEQUATE_RATIO`] × its noise floor.
+    /// True if every channel's misfit is within [`ADEQUATE_RATIO`] × its noise floor. A test of
+    /// each channel against its own noise, so no weighting between the channels enters it: in the
+    /// likelihood's terms ([`crate::model::NoiseModel`]) it asks that no channel's `RSS_c / n_c`
+    /// exceed `ADEQUATE_RATIO² floor_c²`, whatever `w_c` the comparisons use.
     pub fn adequate(&self, data: &Prepared) -> bool {
         self.gap_envelope <= ADEQUATE_RATIO * data.env_floor()
             && self

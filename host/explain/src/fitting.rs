@@ -3,7 +3,8 @@
 
 use super::*;
 
-/// Fits `spec` from each starting point, keeping the best.
+/// Fits `spec` from each starting point, keeping the best: the smallest `−2 ln L` under the
+/// data's noise model ([`Prepared::chi2`]), the objective the fit minimises.
 pub fn fit_spec(
     data: &Prepared,
     spec: &Spec,
@@ -34,7 +35,7 @@ pub fn fit_spec(
         let Some(m) = evaluate(data, spec, &lm.p) else {
             continue;
         };
-        if best.as_ref().is_none_or(|b| m.gap < b.gap) {
+        if best.as_ref().is_none_or(|b| m.chi2 < b.chi2) {
             best = Some(m);
         }
     }
@@ -80,7 +81,7 @@ pub fn fit_spec_held(
         let Some(m) = evaluate(data, spec, &full(&lm.p)) else {
             continue;
         };
-        if best.as_ref().is_none_or(|b| m.gap < b.gap) {
+        if best.as_ref().is_none_or(|b| m.chi2 < b.chi2) {
             best = Some(m);
         }
     }
@@ -92,7 +93,8 @@ pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> 
     let s = simulate_spec(data, spec, p).ok()?;
     let (e, f) = residuals(data, &s);
     let gap = gap_of(&e, &f);
-    if !gap.is_finite() {
+    let chi2 = data.chi2(&e, &f);
+    if !gap.is_finite() || !chi2.is_finite() {
         return None;
     }
     Some(FittedModel {
@@ -102,6 +104,7 @@ pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> 
         gap,
         gap_envelope: rms(&e),
         gap_force: data.has_force().then(|| rms(&f)),
+        chi2,
         spec: spec.clone(),
         p: p.to_vec(),
         env_resid: e,

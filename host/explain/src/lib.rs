@@ -13,12 +13,21 @@
 //!   correlation, as an effective sample count `n_eff` (the residuals of a slightly wrong model are
 //!   smooth curves, not independent numbers; counting them as independent is what made ΔBIC reach
 //!   hundreds for effects that are not there);
-//! - the evidence is `Σ_channels (RSS_before − RSS_after) / (s² · n / n_eff)`, a χ² with as many
-//!   degrees of freedom as the effect adds parameters when the effect is absent; it must exceed the
-//!   χ² quantile of a 10⁻³ false-alarm rate per round, shared among the candidates (Bonferroni);
+//! - the fits, the evidence and the excess-misfit rule are **one likelihood**
+//!   ([`model::NoiseModel`], derived there): each channel's squared residuals weighted by
+//!   `w = n_eff / (n · s²)`, with `s²` and `n_eff` measured on the current model's residuals at
+//!   the start of each round and held while the candidates are fitted (Levenberg–Marquardt
+//!   minimises `Σ_channels w · RSS`) and scored;
+//! - the evidence is twice the log-likelihood ratio of that likelihood with each channel's
+//!   variance profiled (never below its floor): `Σ_channels w · (RSS_before − RSS_after)` near the
+//!   floor, `n_eff · ln(RSS_before / RSS_after)` far above it; a χ² with as many degrees of freedom
+//!   as the effect adds parameters when the effect is absent; it must exceed the χ² quantile of a
+//!   10⁻³ false-alarm rate per round, shared among the candidates (Bonferroni);
 //! - the effect must also remove a material part (by default 30 %) of the misfit in excess of the
-//!   noise floor, so that a systematic misfit from outside the vocabulary is not partly soaked up
-//!   by a wrong name; and beat the runner-up by a likelihood ratio of e⁵ (evidence margin 10).
+//!   noise floor (the deviance above the floor's, as well as the floor is known: the same
+//!   likelihood's units), so that
+//!   a systematic misfit from outside the vocabulary is not partly soaked up by a wrong name; and
+//!   beat the runner-up by a likelihood ratio of e⁵ (evidence margin 10).
 //!
 //! The force channel's low-pass, when the record does not state it, is a nuisance parameter of
 //! every model (its time constant, [`model::lowpass`]), fitted with the law and the effect being
@@ -90,13 +99,18 @@ pub struct ExplainOptions {
     pub max_steps: usize,
     /// False-alarm rate of one round of the search (shared among the candidates).
     pub false_alarm: f64,
-    /// Smallest fraction of the excess misfit (gap² − floor²) an effect must remove to be named.
+    /// Smallest fraction of the excess misfit (the `−2 ln L` above what noise at each channel's
+    /// floor leaves, [`Evidence::excess_removed`]) an effect must remove to be named.
     pub min_excess_reduction: f64,
     /// Evidence margin the best candidate needs over the runner-up to be named.
     pub min_margin: f64,
     /// Compared envelope points.
     pub max_env_points: usize,
-    /// Compared force points.
+    /// Compared force points (at most; every sample of the compared motion up to this many, one
+    /// in `⌈n / max⌉` above). The likelihood is of every sample the record has: a subsample
+    /// throws away what the force channel says about a slow drift of the level (grid #213, a
+    /// running-in of 7 % over the motion at 6σ in the force channel's trend, was 0.5 units of
+    /// evidence from 2859 force points of 31 k).
     pub max_force_points: usize,
     /// Levenberg–Marquardt iterations per fit.
     pub max_iter: usize,
@@ -121,7 +135,7 @@ impl Default for ExplainOptions {
             min_excess_reduction: 0.3,
             min_margin: 10.0,
             max_env_points: 400,
-            max_force_points: 3000,
+            max_force_points: 100_000,
             max_iter: 15,
             force_cutoff_hz: None,
             force_zero_n: None,
@@ -238,7 +252,7 @@ pub fn explain_with_progress(
             ..spec.clone()
         };
         match (fit_base(&spec), fit_base(&one)) {
-            (Some(a), Some(b)) => Some(if b.gap < a.gap { b } else { a }),
+            (Some(a), Some(b)) => Some(if b.chi2 < a.chi2 { b } else { a }),
             (a, b) => a.or(b),
         }
     } else {
@@ -258,7 +272,7 @@ pub fn explain_with_progress(
         let refit = fit_spec(&d, &base.spec, std::slice::from_ref(&base.p), opts.max_iter)
             .into_iter()
             .chain(fit_base_on(&d, &base.spec))
-            .min_by(|a, b| a.gap.total_cmp(&b.gap));
+            .min_by(|a, b| a.chi2.total_cmp(&b.chi2));
         match refit {
             Some(b) => {
                 let se = release_shift_se(&d, &b);
@@ -269,11 +283,15 @@ pub fn explain_with_progress(
     } else {
         (data, base, None)
     };
+    // The one likelihood's noise model (each channel's residual variance and correlation) is
+    // measured on the base model's residuals, and the base law refitted under it: the search
+    // starts from the maximiser of the likelihood its first comparisons are made under.
+    let (data, base) = reweigh(&data, &base, opts.max_iter);
     let fit_base = |spec: &Spec| fit_base_on(&data, spec);
     let base = with_standard_errors(&data, base);
     progress("diagnostics", 0, 1);
     let diagnostics = diag::diagnose(&data, &base, opts.base);
-    let (mut base, (mut cur, mut steps, mut rounds, mut ambiguous)) = {
+    let (mut base, (mut cur, mut steps, mut rounds, mut ambiguous, mut used)) = {
         let r = search(&data, opts, &diagnostics, &base, progress);
         (base, r)
     };
@@ -282,9 +300,9 @@ pub fn explain_with_progress(
     // the search is run again with that order from its base law (once: no going back and forth).
     let mut order_evidence = None;
     if cur.spec.lowpass {
-        let other = other_order(&data, &cur, opts.max_iter);
+        let other = other_order(&used, &cur, opts.max_iter);
         if let Some(o) = &other {
-            let ev = Evidence::of(&data, &cur, o, opts);
+            let ev = Evidence::of(&used, &cur, o, opts);
             order_evidence = Some(-ev.value);
             if ev.value >= ev.threshold {
                 let spec2 = Spec {
@@ -292,12 +310,13 @@ pub fn explain_with_progress(
                     ..base.spec.clone()
                 };
                 if let Some(b2) = fit_base(&spec2) {
-                    let b2 = with_standard_errors(&data, b2);
-                    let r = search(&data, opts, &diagnostics, &b2, progress);
+                    let (d2, b2) = reweigh(&data, &b2, opts.max_iter);
+                    let b2 = with_standard_errors(&d2, b2);
+                    let r = search(&d2, opts, &diagnostics, &b2, progress);
                     base = b2;
-                    (cur, steps, rounds, ambiguous) = r;
-                    order_evidence = other_order(&data, &cur, opts.max_iter)
-                        .map(|o| -Evidence::of(&data, &cur, &o, opts).value);
+                    (cur, steps, rounds, ambiguous, used) = r;
+                    order_evidence = other_order(&used, &cur, opts.max_iter)
+                        .map(|o| -Evidence::of(&used, &cur, &o, opts).value);
                 }
             }
         }
@@ -394,7 +413,7 @@ pub fn explain_with_progress(
         final_model: cur,
         diagnostics,
     };
-    Ok((ex, data))
+    Ok((ex, used))
 }
 
 /// The force channel's trend of μ0 over the motion against the model `m`'s law (`tribo fit`'s
@@ -621,29 +640,74 @@ fn settle(data: &Prepared, m: FittedModel, e: Effect, max_iter: usize) -> Fitted
         }
     }
     match fit_spec(data, &m.spec, &starts, max_iter) {
-        Some(b) if b.gap < m.gap => b,
+        Some(b) if b.chi2 < m.chi2 => b,
         _ => m,
     }
 }
 
+/// The record's noise model ([`model::NoiseModel`]) set from the residuals of `m`, and `m`
+/// refitted under it from its own constants (kept if its `−2 ln L` under the new weights is
+/// smaller; `m`'s standard errors are kept): one step of iteratively reweighted least squares,
+/// so that the model the next comparison is made against maximises the likelihood that
+/// comparison uses.
+fn reweigh(data: &Prepared, m: &FittedModel, max_iter: usize) -> (Prepared, FittedModel) {
+    let mut d = data.clone();
+    d.noise = Some(model::NoiseModel::of(data, &m.env_resid, &m.force_resid));
+    let old = evaluate(&d, &m.spec, &m.p);
+    let refit = fit_spec(&d, &m.spec, std::slice::from_ref(&m.p), max_iter);
+    let best = match (old, refit) {
+        (Some(o), Some(r)) if r.chi2 < o.chi2 => r,
+        (Some(o), _) => o,
+        (None, Some(r)) => r,
+        (None, None) => {
+            // Not evaluable under the new weights (cannot happen for a model that was): its
+            // likelihood there is that of its own residuals.
+            let mut c = m.clone();
+            c.chi2 = d.chi2(&m.env_resid, &m.force_resid);
+            c
+        }
+    };
+    let best = FittedModel {
+        params_se: m.params_se.clone(),
+        ..best
+    };
+    (d, best)
+}
+
 /// The stepwise search from the base model: in each round every candidate effect is fitted and
-/// scored against the current model, and the best one that passes every test is added. Returns
-/// the final model, the steps, the rounds' candidates and the ambiguous pair (if any).
+/// scored against the current model, and the best one that passes every test is added. Every
+/// comparison of a round is made under one likelihood ([`model::NoiseModel`]), measured on the
+/// current model's residuals at the start of the round (for the first round, `data`'s, set from
+/// the base model by the caller). Returns the final model, the steps, the rounds' candidates, the
+/// ambiguous pair (if any) and the data with the last round's noise model.
 fn search(
     data: &Prepared,
     opts: &ExplainOptions,
     diagnostics: &diag::Diagnostics,
     base: &FittedModel,
     progress: Progress,
-) -> (FittedModel, Vec<Step>, Vec<Vec<Candidate>>, Vec<String>) {
+) -> (
+    FittedModel,
+    Vec<Step>,
+    Vec<Vec<Candidate>>,
+    Vec<String>,
+    Prepared,
+) {
     let mut cur = base.clone();
     let mut steps = Vec::new();
     let mut rounds = Vec::new();
     let mut ambiguous = Vec::new();
     let mut redo = 0;
     let mut round = 0;
+    let mut d = data.clone();
+    let mut fresh = true;
     while round < opts.max_steps {
         round += 1;
+        if !fresh {
+            (d, cur) = reweigh(&d, &cur, opts.max_iter);
+        }
+        fresh = false;
+        let data = &d;
         // Once the model is at the noise floor, the envelope and the force have nothing left to
         // point at: an effect is still tried only where another channel points to it (thermal
         // drift when the temperature column moves over the motion), and it must still pass the
@@ -749,7 +813,7 @@ fn search(
         let (e, m, _) = best.clone();
         // Polish the winner (candidates are screened with a short iteration budget).
         let m = fit_spec(data, &m.spec, std::slice::from_ref(&m.p), 3 * opts.max_iter)
-            .filter(|p| p.gap <= m.gap)
+            .filter(|p| p.chi2 <= m.chi2)
             .unwrap_or(m);
         let m = settle(data, m, e, opts.max_iter);
         let mut ev = Evidence::of(data, &cur, &m, opts);
@@ -781,11 +845,11 @@ fn search(
             // the current model sat in a hollow that the effect's fit left (grid #331, a cubic
             // stiffness fitted: frictional lag at its bound, thermal drift and sensor lag then
             // all "significant" by thousands), the search goes on from the better model.
-            if prof.gap < cur.gap {
+            if prof.chi2 < cur.chi2 {
                 let mut start = prof.p.clone();
                 start.remove(o);
-                better_without =
-                    fit_spec(data, &cur.spec, &[start], opts.max_iter).filter(|b| b.gap < cur.gap);
+                better_without = fit_spec(data, &cur.spec, &[start], opts.max_iter)
+                    .filter(|b| b.chi2 < cur.chi2);
             }
         }
         if !ev.significant(opts) {
@@ -860,7 +924,7 @@ fn search(
         });
         cur = m;
     }
-    (cur, steps, rounds, ambiguous)
+    (cur, steps, rounds, ambiguous, d)
 }
 
 /// The final model `m` refitted with the other order of its fitted low-pass (1 ↔ 2 poles), from
@@ -900,6 +964,7 @@ mod tests {
             gap: 1.0,
             gap_envelope: 1.0,
             gap_force: None,
+            chi2: 1.0,
             spec: spec.clone(),
             // μ0, μ1, start correction, μs, vs
             p: vec![0.02, 0.01, 0.0, mu_s, 0.5],

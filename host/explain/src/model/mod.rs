@@ -75,11 +75,18 @@ pub struct Prepared {
     /// Whether the force channel's low-pass is known (from the record or the caller); if not,
     /// [`crate::explain_prepared`] picks the better of none and [`RIG_FORCE_CUTOFF_HZ`] and says so.
     pub force_cutoff_known: bool,
+    /// The noise model of the likelihood the fits, the evidence and the excess rule share
+    /// ([`NoiseModel`]; `None`: every channel's noise at its floor, residuals independent — the
+    /// model before any fit).
+    pub noise: Option<NoiseModel>,
     /// Measurement noise of the envelope (every sample of the compared part) / `a0`.
     pub env_noise: f64,
     /// Measurement noise of the force channel (`F/N`, every sample of the compared part) / `a0`;
     /// 0 without a force channel.
     pub force_noise: f64,
+    /// How many samples [`Prepared::env_noise`] and [`Prepared::force_noise`] were read from
+    /// (their own uncertainty: [`Prepared::floor_rel_se`]).
+    pub noise_samples: (usize, usize),
     /// Whether the record holds still before the release (the motion starts after its first
     /// sample): the release then falls between two samples, at [`Prepared::release_shift`].
     pub held: bool,
@@ -307,6 +314,7 @@ impl Prepared {
         };
         let env_noise = noise_sigma(&a_all).unwrap_or(0.0) / a0;
         let force_noise = f_meas.as_ref().and_then(|f| noise_sigma(f)).unwrap_or(0.0) / a0;
+        let noise_samples = (a_all.len(), f_meas.as_ref().map_or(0, |f| f.len()));
         let dtau = rig.tau_of_t(dt);
         let rate_hz = 1.0 / dt;
         let si = rec.units == Units::Si;
@@ -331,10 +339,12 @@ impl Prepared {
                 _ => None,
             },
             force_zero_se: 0.0,
+            noise: None,
             hold_zero: if si { hold_zero } else { None },
             force_cutoff_known: !si || stated.is_some() || rec.ft.is_none(),
             env_noise,
             force_noise,
+            noise_samples,
             held: s0 > 0,
             release_shift: 0.0,
             method: Method::dopri(1e-8),
@@ -353,6 +363,23 @@ impl Prepared {
             self.force_noise.max(NUMERICAL_FLOOR)
         } else {
             0.0
+        }
+    }
+
+    /// The relative standard error of a channel's noise floor² (`force`: the force channel's,
+    /// else the envelope's), as [`noise_sigma`] reads it from `N` samples: the mean square of
+    /// third differences, whose neighbours are correlated (−3/4, 3/10, −1/20), so that for white
+    /// noise its relative variance is `2 (1 + 2 (0.75² + 0.3² + 0.05²)) / N = 4.62 / N`.
+    pub fn floor_rel_se(&self, force: bool) -> f64 {
+        let n = if force {
+            self.noise_samples.1
+        } else {
+            self.noise_samples.0
+        };
+        if n == 0 {
+            f64::INFINITY
+        } else {
+            (4.62 / n as f64).sqrt()
         }
     }
 

@@ -182,14 +182,133 @@ pub fn gap_of(env: &[f64], force: &[f64]) -> f64 {
     rms(env).hypot(rms(force))
 }
 
-/// Weighted residual vector minimised by the fits: each channel divided by its own noise floor
-/// (the likelihood of Gaussian noise: a channel counts by how far its misfit stands above its
-/// noise, so a noisy vibrometer does not drown the force channel where lag and drift show), and by
-/// `√n`, so that every channel weighs by its misfit-to-noise ratio whatever the number of points
-/// compared.
+/// The noise model of the one likelihood explain's search works with: each channel's residual
+/// variance `s_c²` and its effective count of independent residuals `n_eff_c`, measured from a
+/// reference model's residuals and then **held** while models are compared against it.
+///
+/// # Derivation
+///
+/// Model the residuals `r_c` of channel `c` (envelope, force; `n_c` compared points) as Gaussian
+/// noise of variance `s_c²` whose correlation makes `n_c` points carry the information of `n_eff_c`
+/// independent ones. The log-likelihood of a parameter vector θ and the variances, up to
+/// constants, is then
+///
+/// `−2 ln L(θ, s) = Σ_c n_eff_c · (RSS_c(θ) / (n_c s_c²) + ln s_c²)`
+///
+/// (each channel's χ² `RSS_c / s_c²` deflated by `n_c / n_eff_c`, the variance inflation of a mean
+/// of correlated residuals). The variances are nuisances, fitted, never guessed, but never below
+/// the channel's measured noise floor: `s_c² = max(RSS_c / n_c, floor_c²)`. Profiled over them,
+/// with `r_c = RSS_c / (n_c floor_c²)`, the deviance is
+///
+/// `D(θ) = Σ_c n_eff_c · g(r_c(θ))`,  `g(r) = r` for `r ≤ 1`, `1 + ln r` above
+///
+/// (up to constants; `g` is continuous with its slope at the floor). Its gradient is
+/// `Σ_c w_c ∇RSS_c` with `w_c = n_eff_c / (n_c s_c²)`: minimising `D` is least squares with these
+/// weights, re-measured at the solution (iteratively reweighted least squares). The search holds
+/// `w_c` (from the current model's residuals: its `s_c²` and `n_eff_c`) through a round, and the
+/// same noise model gives
+///
+/// - **the fit**: Levenberg–Marquardt minimises `Σ_c w_c RSS_c` ([`weighted`] returns
+///   `√w_c · r_c`; the current model is refitted under the round's weights first, one
+///   reweighting step), so a fit cannot trade misfit of a channel the likelihood weighs heavily
+///   for misfit of one it weighs lightly (grid #213: the running-in fit lowered the envelope's
+///   RSS and raised the force channel's, which the old evidence then rated a loss);
+/// - **the evidence** of a model `a` (the reference `b` plus an effect of `k` constants):
+///   `D(b) − D(a)` with `n_eff_c` held, twice the log-likelihood ratio, χ²_k when the effect is
+///   absent; near the floor it is `Σ_c w_c (RSS_c(b) − RSS_c(a))`, and far above it the
+///   logarithm keeps a strong effect's evidence from being capped at `n_eff_c` (an envelope
+///   4500 × its floor with `n_eff` 9: a quadratic term that removes it all);
+/// - **the excess misfit** of `b`: `Σ_c n_eff_c max(g(r_c(b)) − g(1 + 2 u_c), 0)` — its deviance
+///   above what noise at the floor leaves, counted beyond 2 of `u_c = √(2 / n_eff_c + ε_c²)`, how
+///   well a right model's mean square residual (`√(2 / n_eff_c)`) and the floor² read from the
+///   record (`ε_c`, [`Prepared::floor_rel_se`]) are known: over every force sample, 0.5 % of the
+///   floor² is hundreds of units, and within the floor's own ± — so the share an effect removes is
+///   its evidence over that excess, in the same units.
+///
+/// `None` in [`Prepared::noise`] (before any model is fitted) is noise at the floor with
+/// independent residuals, `w_c = 1 / floor_c²`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseModel {
+    /// Residual variance of the envelope channel (`a0` units²).
+    pub env_var: f64,
+    /// Effective count of independent envelope residuals.
+    pub env_n_eff: f64,
+    /// Residual variance of the force channel (`F/N / a0` units²; 0 without a force channel).
+    pub force_var: f64,
+    /// Effective count of independent force residuals.
+    pub force_n_eff: f64,
+}
+
+impl NoiseModel {
+    /// The noise model of a model's residuals: each channel's mean square residual (never below
+    /// its noise floor²) and their effective count (between 1 and the number of points).
+    pub fn of(data: &Prepared, env: &[f64], force: &[f64]) -> NoiseModel {
+        let part = |r: &[f64], floor: f64| -> (f64, f64) {
+            if r.is_empty() {
+                return (floor * floor, 1.0);
+            }
+            let n = r.len() as f64;
+            let var = (r.iter().map(|x| x * x).sum::<f64>() / n).max(floor * floor);
+            let n_eff = tribo_physics::uncertainty::effective_count(r);
+            let n_eff = if n_eff.is_finite() {
+                n_eff.clamp(1.0, n)
+            } else {
+                n
+            };
+            (var, n_eff)
+        };
+        let (env_var, env_n_eff) = part(env, data.env_floor());
+        let (force_var, force_n_eff) = part(force, data.force_floor());
+        NoiseModel {
+            env_var,
+            env_n_eff,
+            force_var,
+            force_n_eff,
+        }
+    }
+}
+
+impl Prepared {
+    /// The likelihood's weight of one squared residual of each channel, `(w_env, w_force)` with
+    /// `w_c = n_eff_c / (n_c s_c²)` ([`NoiseModel`]), for `n_env` and `n_force` compared points.
+    pub fn channel_weights(&self, n_env: usize, n_force: usize) -> (f64, f64) {
+        let w = |var: f64, n_eff: f64, n: usize| {
+            if n == 0 || var.is_nan() || var <= 0.0 {
+                0.0
+            } else {
+                n_eff.min(n as f64) / (n as f64 * var)
+            }
+        };
+        match &self.noise {
+            Some(m) => (
+                w(m.env_var, m.env_n_eff, n_env),
+                w(m.force_var, m.force_n_eff, n_force),
+            ),
+            None => {
+                let (fe, ff) = (self.env_floor(), self.force_floor());
+                (
+                    w(fe * fe, n_env as f64, n_env),
+                    w(ff * ff, n_force as f64, n_force),
+                )
+            }
+        }
+    }
+
+    /// `−2 ln L` of residuals under [`Prepared::noise`]: `Σ_c w_c RSS_c`.
+    pub fn chi2(&self, env: &[f64], force: &[f64]) -> f64 {
+        let (we, wf) = self.channel_weights(env.len(), force.len());
+        let ss = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+        we * ss(env) + wf * ss(force)
+    }
+}
+
+/// Weighted residual vector minimised by the fits: each channel's residuals times `√w_c`, the
+/// square root of its weight in the likelihood ([`NoiseModel`]: its noise variance and the
+/// correlation of its residuals), so that `Σ` of the squares is the `−2 ln L` the evidence and the
+/// excess rule use ([`Prepared::chi2`]).
 pub fn weighted(data: &Prepared, env: &[f64], force: &[f64]) -> Vec<f64> {
-    let we = 1.0 / ((env.len().max(1) as f64).sqrt() * data.env_floor());
-    let wf = 1.0 / ((force.len().max(1) as f64).sqrt() * data.force_floor().max(1e-300));
+    let (we, wf) = data.channel_weights(env.len(), force.len());
+    let (we, wf) = (we.sqrt(), wf.sqrt());
     env.iter()
         .map(|r| r * we)
         .chain(force.iter().map(|r| r * wf))
