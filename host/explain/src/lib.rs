@@ -291,10 +291,14 @@ pub fn explain_with_progress(
     let base = with_standard_errors(&data, base);
     progress("diagnostics", 0, 1);
     let diagnostics = diag::diagnose(&data, &base, opts.base);
-    let (mut base, (mut cur, mut steps, mut rounds, mut ambiguous, mut used)) = {
-        let r = search(&data, opts, &diagnostics, &base, progress);
-        (base, r)
-    };
+    let Searched {
+        start: mut base,
+        mut cur,
+        mut steps,
+        mut rounds,
+        mut ambiguous,
+        data: mut used,
+    } = search(&data, opts, &diagnostics, &base, progress);
     // The other order against the final model, with its effects: the same constants refitted
     // with the other filter. If it explains the record better by the evidence an effect needs,
     // the search is run again with that order from its base law (once: no going back and forth).
@@ -313,8 +317,8 @@ pub fn explain_with_progress(
                     let (d2, b2) = reweigh(&data, &b2, opts.max_iter);
                     let b2 = with_standard_errors(&d2, b2);
                     let r = search(&d2, opts, &diagnostics, &b2, progress);
-                    base = b2;
-                    (cur, steps, rounds, ambiguous, used) = r;
+                    (base, cur, steps, rounds, ambiguous, used) =
+                        (r.start, r.cur, r.steps, r.rounds, r.ambiguous, r.data);
                     order_evidence = other_order(&used, &cur, opts.max_iter)
                         .map(|o| -Evidence::of(&used, &cur, &o, opts).value);
                 }
@@ -674,37 +678,64 @@ fn reweigh(data: &Prepared, m: &FittedModel, max_iter: usize) -> (Prepared, Fitt
     (d, best)
 }
 
+/// What [`search`] found.
+struct Searched {
+    /// The base model the steps start from (the one given, or a better fit of its law found on
+    /// the way).
+    start: FittedModel,
+    /// The final model.
+    cur: FittedModel,
+    steps: Vec<Step>,
+    /// The rounds' candidates.
+    rounds: Vec<Vec<Candidate>>,
+    /// The ambiguous pair, if any.
+    ambiguous: Vec<String>,
+    /// The data with the last round's noise model.
+    data: Prepared,
+}
+
 /// The stepwise search from the base model: in each round every candidate effect is fitted and
 /// scored against the current model, and the best one that passes every test is added. Every
 /// comparison of a round is made under one likelihood ([`model::NoiseModel`]), measured on the
 /// current model's residuals at the start of the round (for the first round, `data`'s, set from
-/// the base model by the caller). Returns the final model, the steps, the rounds' candidates, the
-/// ambiguous pair (if any) and the data with the last round's noise model.
+/// the base model by the caller). Each round's refit under its noise model is the outcome of the
+/// step before it (its gap and constants), so that the steps' gaps run from the base's to the
+/// final model's without a jump.
 fn search(
     data: &Prepared,
     opts: &ExplainOptions,
     diagnostics: &diag::Diagnostics,
     base: &FittedModel,
     progress: Progress,
-) -> (
-    FittedModel,
-    Vec<Step>,
-    Vec<Vec<Candidate>>,
-    Vec<String>,
-    Prepared,
-) {
+) -> Searched {
     let mut cur = base.clone();
-    let mut steps = Vec::new();
+    let mut steps: Vec<Step> = Vec::new();
     let mut rounds = Vec::new();
     let mut ambiguous = Vec::new();
     let mut redo = 0;
     let mut round = 0;
     let mut d = data.clone();
     let mut fresh = true;
+    let mut start = base.clone();
     while round < opts.max_steps {
         round += 1;
         if !fresh {
             (d, cur) = reweigh(&d, &cur, opts.max_iter);
+            // The model the last step left, refitted under the new noise model, is that step's
+            // outcome: its gap and its effect's constants (their ± are the step's own).
+            if steps.is_empty() {
+                // A better fit of the base law than the one the search was given (the profile's
+                // "better without" in the first round): the base the steps start from.
+                start = cur.clone();
+            }
+            if let Some(last) = steps.last_mut() {
+                last.gap_after = cur.gap;
+                if let Some(e) = Effect::from_name(&last.effect) {
+                    let mut params = effect_params(&d, &cur.spec, &cur.p, e);
+                    relative_asymmetry(&cur, e, &mut params, None);
+                    last.params = params;
+                }
+            }
         }
         fresh = false;
         let data = &d;
@@ -903,17 +934,7 @@ fn search(
         }
         let mut params = effect_params(data, &m.spec, &m.p, e);
         let mut params_se = effect_params(data, &m.spec, &se, e);
-        if e == Effect::DirectionAsymmetry {
-            // (μ0f − μ0b) / μ0: relative to the mean Coulomb level (its own ± is far smaller).
-            let mu0 = m.spec.mu(&m.p).first().copied().unwrap_or(f64::NAN);
-            if let (Some(d), Some(d_se)) = (
-                params.get("dmu0_forward_minus_backward").copied(),
-                params_se.get("dmu0_forward_minus_backward").copied(),
-            ) {
-                params.insert("asymmetry_relative".into(), d / mu0);
-                params_se.insert("asymmetry_relative".into(), d_se / mu0.abs());
-            }
-        }
+        relative_asymmetry(&m, e, &mut params, Some(&mut params_se));
         steps.push(Step {
             effect: e.name().into(),
             gap_before: cur.gap,
@@ -924,7 +945,38 @@ fn search(
         });
         cur = m;
     }
-    (cur, steps, rounds, ambiguous, d)
+    Searched {
+        start,
+        cur,
+        steps,
+        rounds,
+        ambiguous,
+        data: d,
+    }
+}
+
+/// A direction asymmetry's (μ0f − μ0b) / μ0 beside its constant (and its ±, if given): relative to
+/// the mean Coulomb level of `m` (whose own ± is far smaller). Nothing for another effect.
+fn relative_asymmetry(
+    m: &FittedModel,
+    e: Effect,
+    params: &mut BTreeMap<String, f64>,
+    params_se: Option<&mut BTreeMap<String, f64>>,
+) {
+    const KEY: &str = "dmu0_forward_minus_backward";
+    if e != Effect::DirectionAsymmetry {
+        return;
+    }
+    let mu0 = m.spec.mu(&m.p).first().copied().unwrap_or(f64::NAN);
+    let Some(d) = params.get(KEY).copied() else {
+        return;
+    };
+    params.insert("asymmetry_relative".into(), d / mu0);
+    if let Some(se) = params_se {
+        if let Some(d_se) = se.get(KEY).copied() {
+            se.insert("asymmetry_relative".into(), d_se / mu0.abs());
+        }
+    }
 }
 
 /// The final model `m` refitted with the other order of its fitted low-pass (1 ↔ 2 poles), from
