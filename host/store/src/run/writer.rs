@@ -55,10 +55,7 @@ impl RunWriter {
         // The run as assembled while it is written knows the protocol the log states, as a
         // reader of the log will: what the run must hold (the analog chain of a v3 rig) is judged
         // the same way while it is pulled and when it is read back.
-        let data = Assembled {
-            protocol: log.header().protocol,
-            ..Assembled::default()
-        };
+        let data = Assembled::from_records(&[], log.header().protocol);
         Ok(RunWriter {
             dir,
             meta,
