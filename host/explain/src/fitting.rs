@@ -123,11 +123,18 @@ pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> 
 /// [`lowpass_bound`]. Its standard error is `NaN`.
 pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
     match covariance_of(data, m) {
-        Some(c) => (0..m.p.len())
-            .map(|i| c[i][i].max(0.0).sqrt())
-            .map(|v| if v.is_finite() { v } else { f64::NAN })
-            .collect(),
+        Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
         None => vec![f64::NAN; m.p.len()],
+    }
+}
+
+/// The standard error of a variance from a covariance's diagonal: `NaN` for a held parameter
+/// (its row is `NaN`; `f64::max` would turn that into 0) or a variance that is not finite.
+pub fn variance_se(v: f64) -> f64 {
+    if v.is_finite() {
+        v.max(0.0).sqrt()
+    } else {
+        f64::NAN
     }
 }
 
@@ -245,10 +252,7 @@ pub fn lowpass_bound(data: &Prepared, m: &FittedModel) -> Option<f64> {
 pub fn with_standard_errors(data: &Prepared, mut m: FittedModel) -> FittedModel {
     let cov = covariance_of(data, &m);
     let se: Vec<f64> = match &cov {
-        Some(c) => (0..m.p.len())
-            .map(|i| c[i][i].max(0.0).sqrt())
-            .map(|v| if v.is_finite() { v } else { f64::NAN })
-            .collect(),
+        Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
         None => vec![f64::NAN; m.p.len()],
     };
     m.params_se = named_params_se(data, &m.spec, &m.p, &se, cov.as_deref());

@@ -913,10 +913,7 @@ fn search(
         let mut ev = Evidence::of(data, &cur, &m, opts);
         let cov = covariance_of(data, &m);
         let mut se: Vec<f64> = match &cov {
-            Some(c) => (0..m.p.len())
-                .map(|i| c[i][i].max(0.0).sqrt())
-                .map(|v| if v.is_finite() { v } else { f64::NAN })
-                .collect(),
+            Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
             None => vec![f64::NAN; m.p.len()],
         };
         // The profile of the effect's constant at its absence (the rest refitted there, from the
