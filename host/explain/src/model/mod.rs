@@ -86,6 +86,9 @@ pub struct Prepared {
     pub f_meas: Option<Vec<f64>>,
     /// Indices of the compared force points.
     pub f_idx: Vec<usize>,
+    /// Every force point of the compared motion [`Prepared::f_idx`] is chosen from (it leaves out
+    /// the samples at a reference model's velocity reversals: `crate::without_reversal_samples`).
+    pub f_idx_all: Vec<usize>,
     /// Linear fit of the temperature channel: `T(τ) = t0 + slope · τ` (°C, °C per unit τ).
     pub temp: Option<(f64, f64)>,
     /// Mean temperature of each [`THERMAL_SEGMENT`] of τ (°C), if the record has `temp_c`.
@@ -371,6 +374,7 @@ impl Prepared {
             env_idx,
             a_meas,
             f_meas,
+            f_idx_all: f_idx.clone(),
             f_idx,
             temp,
             temp_smooth: temp_seg.as_deref().map(smooth_temperature),
