@@ -332,6 +332,13 @@ pub fn explain_with_progress(
         }
     }
     let base = base;
+    // The final model's residuals are over the force samples its last round compared (the
+    // reversal samples are chosen again each round): its ± and diagnostics are over the same.
+    let data = {
+        let mut d = data.clone();
+        d.f_idx = used.f_idx.clone();
+        d
+    };
     let floor = data.noise_floor();
     let excess = |g: f64| (g * g - floor * floor).max(0.0).sqrt();
     let unexplained_fraction = if excess(base.gap) > 0.0 {
@@ -794,7 +801,9 @@ fn search(
         round += 1;
         if !fresh {
             if let Some((d2, c2)) = without_reversal_samples(&d, &cur) {
-                (d, cur) = (d2, c2);
+                // (The model's ± are its fit's, kept as `reweigh` keeps them.)
+                let params_se = std::mem::take(&mut cur.params_se);
+                (d, cur) = (d2, FittedModel { params_se, ..c2 });
             }
             (d, cur) = reweigh(&d, &cur, opts.max_iter);
             // The model the last step left, refitted under the new noise model, is that step's
