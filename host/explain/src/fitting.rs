@@ -122,6 +122,25 @@ pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> 
 /// at a bound would spread that confusion onto the lag's ±. Its own bound comes from
 /// [`lowpass_bound`]. Its standard error is `NaN`.
 pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
+    match covariance_of(data, m) {
+        Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
+        None => vec![f64::NAN; m.p.len()],
+    }
+}
+
+/// The standard error of a variance from a covariance's diagonal: `NaN` for a held parameter
+/// (its row is `NaN`; `f64::max` would turn that into 0) or a variance that is not finite.
+pub fn variance_se(v: f64) -> f64 {
+    if v.is_finite() {
+        v.max(0.0).sqrt()
+    } else {
+        f64::NAN
+    }
+}
+
+/// The covariance of a fitted model's parameter vector behind [`standard_errors_of`] (rows and
+/// columns of a held parameter `NaN`); `None` where it cannot be determined.
+pub fn covariance_of(data: &Prepared, m: &FittedModel) -> Option<Vec<Vec<f64>>> {
     let r = weighted(data, &m.env_resid, &m.force_resid);
     let ne = m.env_resid.len();
     let blocks = [0..ne, ne..r.len()];
@@ -139,7 +158,7 @@ pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
     let q0: Vec<f64> = free.iter().map(|&i| m.p[i]).collect();
     let all_scales = m.spec.scales();
     let scales: Vec<f64> = free.iter().map(|&i| all_scales[i]).collect();
-    let se = jacobian(
+    let c = jacobian(
         |q| {
             let s = simulate_spec(data, &m.spec, &full(q)).ok()?;
             let (e, f) = residuals(data, &s);
@@ -150,14 +169,15 @@ pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
         1e-3,
         &scales,
     )
-    .and_then(|j| hac_covariance_blocks(&j, &r, &blocks))
-    .map(|c| standard_errors(&c))
-    .unwrap_or_else(|| vec![f64::NAN; q0.len()]);
-    let mut out = vec![f64::NAN; m.p.len()];
-    for (&i, v) in free.iter().zip(se) {
-        out[i] = v;
+    .and_then(|j| hac_covariance_blocks(&j, &r, &blocks))?;
+    let n = m.p.len();
+    let mut out = vec![vec![f64::NAN; n]; n];
+    for (a, &i) in free.iter().enumerate() {
+        for (b, &j) in free.iter().enumerate() {
+            out[i][j] = c[a][b];
+        }
     }
-    out
+    Some(out)
 }
 
 /// Whether a fitted force low-pass sits at its bound: a time constant below a quarter of the
@@ -230,13 +250,34 @@ pub fn lowpass_bound(data: &Prepared, m: &FittedModel) -> Option<f64> {
 
 /// Fills `params_se` of a fitted model.
 pub fn with_standard_errors(data: &Prepared, mut m: FittedModel) -> FittedModel {
-    let se = standard_errors_of(data, &m);
-    m.params_se = named_params(data, &m.spec, &se);
+    let cov = covariance_of(data, &m);
+    let se: Vec<f64> = match &cov {
+        Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
+        None => vec![f64::NAN; m.p.len()],
+    };
+    m.params_se = named_params_se(data, &m.spec, &m.p, &se, cov.as_deref());
     m
 }
 
-/// Parameters by name, with SI equivalents. (Every conversion is linear, so the same map of a
-/// vector of standard errors gives the standard errors of the named parameters.)
+/// The standard errors of [`named_params`] from those of `p` (`se`), with the covariance `cov`
+/// where a named constant is not a linear map of `p` ([`effect_params_se`]).
+pub fn named_params_se(
+    data: &Prepared,
+    spec: &Spec,
+    p: &[f64],
+    se: &[f64],
+    cov: Option<&[Vec<f64>]>,
+) -> BTreeMap<String, f64> {
+    let mut m = named_params(data, spec, se);
+    for e in &spec.effects {
+        m.extend(effect_params_se(data, spec, p, se, cov, *e));
+    }
+    m
+}
+
+/// Parameters by name, with SI equivalents. (Every conversion but running-in's rate and time
+/// constant is linear, so the same map of a vector of standard errors gives the standard errors
+/// of the named parameters: [`named_params_se`].)
 pub fn named_params(data: &Prepared, spec: &Spec, p: &[f64]) -> BTreeMap<String, f64> {
     let rig = data.rig;
     let mut m = BTreeMap::new();
@@ -305,10 +346,76 @@ pub fn effect_params(data: &Prepared, spec: &Spec, p: &[f64], e: Effect) -> BTre
             m.insert("force_offset_n".into(), q[0] * rig.load_n);
         }
         Effect::RunningIn => {
-            let span_s = rig.t_of_tau(data.tau.last().copied().unwrap_or(0.0).max(1e-12));
+            // Δ over the motion, its shape c = τ_end / τ_r, the rate at the release
+            // r = Δ h(c) / τ_end and the time constant τ_r = τ_end / c (a settling drift only).
+            let span_s = running_in_span_s(data);
             m.insert("dmu0_over_motion".into(), q[0]);
-            m.insert("dmu0_dt_per_s".into(), q[0] / span_s);
+            m.insert("motion_over_tau".into(), q[1]);
+            m.insert(
+                "dmu0_dt_per_s".into(),
+                q[0] * model::running_in_rate_factor(q[1]).0 / span_s,
+            );
+            if q[1] > 0.0 {
+                m.insert("running_in_tau_s".into(), span_s / q[1]);
+            }
         }
+    }
+    m
+}
+
+/// The compared motion's length (s): running-in's `τ_end`.
+fn running_in_span_s(data: &Prepared) -> f64 {
+    data.rig
+        .t_of_tau(data.tau.last().copied().unwrap_or(0.0).max(1e-12))
+}
+
+/// The standard errors of [`effect_params`] from those of `p` (`se`) and, where a named constant
+/// is not a linear map of `p` (running-in's rate at the release and time constant), its
+/// covariance `cov` by the delta method (the diagonal alone without it).
+pub fn effect_params_se(
+    data: &Prepared,
+    spec: &Spec,
+    p: &[f64],
+    se: &[f64],
+    cov: Option<&[Vec<f64>]>,
+    e: Effect,
+) -> BTreeMap<String, f64> {
+    let mut m = effect_params(data, spec, se, e);
+    if e != Effect::RunningIn {
+        return m;
+    }
+    let (Some(i), Some(q)) = (
+        spec.effects.iter().position(|&x| x == e),
+        spec.effect_params(e, p),
+    ) else {
+        return m;
+    };
+    let o = spec.offset(i);
+    let (sd, sc) = (
+        se.get(o).copied().unwrap_or(f64::NAN),
+        se.get(o + 1).copied().unwrap_or(f64::NAN),
+    );
+    // The correlation of Δ and c from the covariance (the ± themselves are `se`'s, which a
+    // profile may have widened).
+    let rho = cov
+        .and_then(|c| {
+            let (a, b, ab) = (
+                c.get(o)?.get(o)?,
+                c.get(o + 1)?.get(o + 1)?,
+                c.get(o)?.get(o + 1)?,
+            );
+            let r = ab / (a * b).sqrt();
+            r.is_finite().then_some(r.clamp(-1.0, 1.0))
+        })
+        .unwrap_or(0.0);
+    let span_s = running_in_span_s(data);
+    let (h, dh) = model::running_in_rate_factor(q[1]);
+    let (ga, gb) = (h / span_s, q[0] * dh / span_s);
+    let var = (ga * sd).powi(2) + (gb * sc).powi(2) + 2.0 * rho * ga * sd * gb * sc;
+    m.insert("dmu0_dt_per_s".into(), var.max(0.0).sqrt());
+    m.remove("running_in_tau_s");
+    if q[1] > 0.0 {
+        m.insert("running_in_tau_s".into(), span_s * sc / (q[1] * q[1]));
     }
     m
 }
@@ -322,6 +429,9 @@ pub(super) fn starts_for(
 ) -> Vec<Vec<f64>> {
     let mu = cur.spec.mu(&cur.p);
     let mu0 = mu.first().copied().unwrap_or(0.01).abs().max(1e-4);
+    let trend = matches!(e, Effect::RunningIn | Effect::ThermalDrift)
+        .then(|| mu0_trend_of(data, cur))
+        .flatten();
     let with = |extra: &[f64]| {
         let mut p = cur.p.clone();
         p.extend_from_slice(extra);
@@ -356,22 +466,53 @@ pub(super) fn starts_for(
                 vec![with(&[k]), with(&[0.0])]
             }
         }
-        Effect::ThermalDrift => vec![with(&[0.0])],
+        // From no drift, and from the force channel's trend of μ0 against the current model
+        // spread over the temperature's change (the fit's gradient at 0 is a difference of
+        // misfits of a Coulomb level moved by 1e-7 of itself, at the integrator's resolution).
+        Effect::ThermalDrift => {
+            let mut v = vec![with(&[0.0])];
+            let dt = data
+                .temp_smooth
+                .as_deref()
+                .and_then(|t| Some(t.last()? - t.first()?))
+                .filter(|d| d.abs() > 1e-3);
+            if let (Some(tr), Some(dt)) = (trend, dt) {
+                let g = tr.relative_change * mu0 / dt;
+                if g.is_finite() && g != 0.0 {
+                    v.insert(0, with(&[g]));
+                }
+            }
+            v
+        }
         // The force channel's mean misfit of the current model (its zero held at the stated one).
         Effect::DirectionAsymmetry => {
             let n = cur.force_resid.len().max(1) as f64;
             let d = -cur.force_resid.iter().sum::<f64>() / n * data.a0;
             vec![with(&[d]), with(&[0.0])]
         }
-        // A drift of either sign, from a level that stays the average one.
-        Effect::RunningIn => [0.0, 0.1, -0.1]
-            .into_iter()
-            .map(|f| {
-                let mut p = with(&[f * mu0]);
-                p[0] -= 0.5 * f * mu0;
+        // A drift of either sign, from a level that stays the average one: linear (c = 0) and
+        // settling within the motion (c = 3), from the force channel's trend of μ0 against the
+        // current model where there is one, and from no drift.
+        Effect::RunningIn => {
+            let at = |delta: f64, c: f64| {
+                let mut p = with(&[delta, c]);
+                // The mean of S(c, x) over the motion.
+                let mean = if c.abs() < 1e-9 {
+                    0.5
+                } else {
+                    (1.0 - (-(-c).exp_m1()) / c) / (-(-c).exp_m1())
+                };
+                p[0] -= mean * delta;
                 p
-            })
-            .collect(),
+            };
+            let from_trend = trend
+                .map(|t| t.relative_change * mu0)
+                .filter(|d| d.is_finite() && *d != 0.0);
+            match from_trend {
+                Some(d) => vec![at(d, 0.0), at(1.3 * d, 3.0), at(0.0, 0.0)],
+                None => vec![at(0.0, 0.0), at(0.1 * mu0, 0.0), at(-0.1 * mu0, 0.0)],
+            }
+        }
         Effect::SensorLag => {
             let l = d.force_lag_s.unwrap_or(0.0).max(0.0);
             vec![with(&[data.rig.tau_of_t(l).max(0.2 * data.dtau)])]

@@ -77,7 +77,7 @@ use tribo_physics::identify::{
     LmOptions, ADEQUATE_RATIO,
 };
 use tribo_physics::uncertainty::{
-    chi2_upper_quantile, effective_count, hac_covariance_blocks, jacobian, standard_errors,
+    chi2_upper_quantile, effective_count, hac_covariance_blocks, jacobian,
 };
 use tribo_physics::Record;
 
@@ -283,6 +283,12 @@ pub fn explain_with_progress(
     } else {
         (data, base, None)
     };
+    // The force samples at the base model's velocity reversals are not compared (held in every
+    // model, like the release instant): see [`without_reversal_samples`].
+    let (data, base) = match without_reversal_samples(&data, &base) {
+        Some((d, b)) => (d, b),
+        None => (data, base),
+    };
     // The one likelihood's noise model (each channel's residual variance and correlation) is
     // measured on the base model's residuals, and the base law refitted under it: the search
     // starts from the maximiser of the likelihood its first comparisons are made under.
@@ -326,6 +332,13 @@ pub fn explain_with_progress(
         }
     }
     let base = base;
+    // The final model's residuals are over the force samples its last round compared (the
+    // reversal samples are chosen again each round): its ± and diagnostics are over the same.
+    let data = {
+        let mut d = data.clone();
+        d.f_idx = used.f_idx.clone();
+        d
+    };
     let floor = data.noise_floor();
     let excess = |g: f64| (g * g - floor * floor).max(0.0).sqrt();
     let unexplained_fraction = if excess(base.gap) > 0.0 {
@@ -423,7 +436,10 @@ pub fn explain_with_progress(
 /// The force channel's trend of μ0 over the motion against the model `m`'s law (`tribo fit`'s
 /// drift check, on the same samples, through `m`'s low-pass: the fitted one with its order, or
 /// the stated one). `None` without a force channel.
-fn mu0_trend_of(data: &Prepared, m: &FittedModel) -> Option<tribo_physics::identify::Mu0Trend> {
+pub(crate) fn mu0_trend_of(
+    data: &Prepared,
+    m: &FittedModel,
+) -> Option<tribo_physics::identify::Mu0Trend> {
     let f = data.f_meas.as_ref()?;
     let mu = m.spec.mu(&m.p);
     let fitted = m.spec.lowpass_tau(&m.p);
@@ -596,7 +612,8 @@ fn profile_at_absence(
     e: Effect,
     max_iter: usize,
 ) -> Option<(usize, f64, FittedModel)> {
-    if e == Effect::Stribeck || e.n_params() != 1 {
+    // Running-in is absent at Δ = 0 whatever its shape: held with it.
+    if e == Effect::Stribeck || (e.n_params() != 1 && e != Effect::RunningIn) {
         return None;
     }
     let held = if e == Effect::FrictionalLag {
@@ -609,12 +626,15 @@ fn profile_at_absence(
     let mut a = m.p.clone();
     a[o] = held;
     let mut starts = vec![a];
-    if cur.p.len() + 1 == m.p.len() && o == cur.p.len() {
+    let k = e.n_params();
+    if cur.p.len() + k == m.p.len() && o == cur.p.len() {
         let mut b = cur.p.clone();
-        b.push(held);
+        b.extend_from_slice(&m.p[o..o + k]);
+        b[o] = held;
         starts.push(b);
     }
-    fit_spec_held(data, &m.spec, &starts, &[o], max_iter).map(|p| (o, held, p))
+    let idx: Vec<usize> = (o..o + k).collect();
+    fit_spec_held(data, &m.spec, &starts, &idx, max_iter).map(|p| (o, held, p))
 }
 
 /// The fit of a named effect, moved to the bottom of its valley. The force channel's misfit is
@@ -678,6 +698,66 @@ fn reweigh(data: &Prepared, m: &FittedModel, max_iter: usize) -> (Prepared, Fitt
     (d, best)
 }
 
+/// Half-width of the band of force samples about each of the base model's velocity reversals
+/// that is not compared ([`without_reversal_samples`]), in sample intervals.
+pub const REVERSAL_BAND_SAMPLES: f64 = 1.5;
+
+/// `data` with the force samples within [`REVERSAL_BAND_SAMPLES`] of each velocity reversal of
+/// the reference model `base` left out of the comparison (`f_idx`, chosen from every compared
+/// point, `f_idx_all`), and `base` evaluated on the rest; `None` without a force channel or if
+/// nothing is left out. A Coulomb force changes sign at a
+/// reversal, so the force a model gives at a sample instant jumps by `2 μ0` when a change of its
+/// constants moves a reversal across that instant: the misfit is a staircase in the constants at
+/// the scale of a sample interval (grid #99: a thermal drift of 7e-6 per K against 5e-6 moved one
+/// reversal of 300 across one sample, and that sample alone raised `−2 ln L` by 371, so every fit
+/// of the drift stopped at none, with the force channel's trend at 2.9σ). The samples next to the
+/// reversals are chosen once, from the base model (fitted to the record), and held in every model
+/// the search compares, so that every likelihood is of the same samples; they are a sample or
+/// three in each half cycle. They are chosen again from the current model at the start of every
+/// round of the search, with its noise model: a model missing a strong effect reverses at other
+/// instants than the record (a cubic stiffness of 8 % of k moves the reversals by many samples
+/// over 70 cycles), and the samples left out must be at the reversals of the models a round
+/// compares.
+fn without_reversal_samples(
+    data: &Prepared,
+    base: &FittedModel,
+) -> Option<(Prepared, FittedModel)> {
+    if !data.has_force() || data.f_idx_all.is_empty() {
+        return None;
+    }
+    let sim = simulate_spec(data, &base.spec, &base.p).ok()?;
+    let n = data.tau.len();
+    let mut drop = vec![false; n];
+    for &tr in &sim.reversals {
+        // Sample i is at τ_i + release shift on the simulator's clock, τ_i = i dτ.
+        let x = (tr - data.release_shift) / data.dtau;
+        if !x.is_finite() {
+            continue;
+        }
+        let lo = (x - REVERSAL_BAND_SAMPLES).ceil().max(0.0) as usize;
+        let hi = (x + REVERSAL_BAND_SAMPLES).floor();
+        if hi < 0.0 {
+            continue;
+        }
+        for d in drop.iter_mut().take((hi as usize + 1).min(n)).skip(lo) {
+            *d = true;
+        }
+    }
+    let kept: Vec<usize> = data
+        .f_idx_all
+        .iter()
+        .copied()
+        .filter(|&i| !drop[i])
+        .collect();
+    if kept == data.f_idx || kept.len() < data.f_idx_all.len() / 2 {
+        return None;
+    }
+    let mut d = data.clone();
+    d.f_idx = kept;
+    let b = evaluate(&d, &base.spec, &base.p)?;
+    Some((d, b))
+}
+
 /// What [`search`] found.
 struct Searched {
     /// The base model the steps start from (the one given, or a better fit of its law found on
@@ -720,6 +800,11 @@ fn search(
     while round < opts.max_steps {
         round += 1;
         if !fresh {
+            if let Some((d2, c2)) = without_reversal_samples(&d, &cur) {
+                // (The model's ± are its fit's, kept as `reweigh` keeps them.)
+                let params_se = std::mem::take(&mut cur.params_se);
+                (d, cur) = (d2, FittedModel { params_se, ..c2 });
+            }
             (d, cur) = reweigh(&d, &cur, opts.max_iter);
             // The model the last step left, refitted under the new noise model, is that step's
             // outcome: its gap and its effect's constants (their ± are the step's own).
@@ -848,7 +933,11 @@ fn search(
             .unwrap_or(m);
         let m = settle(data, m, e, opts.max_iter);
         let mut ev = Evidence::of(data, &cur, &m, opts);
-        let mut se = standard_errors_of(data, &m);
+        let cov = covariance_of(data, &m);
+        let mut se: Vec<f64> = match &cov {
+            Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
+            None => vec![f64::NAN; m.p.len()],
+        };
         // The profile of the effect's constant at its absence (the rest refitted there, from the
         // effect's own fit): the force misfit jumps with the parameters (a velocity reversal
         // crossing a sample instant), so the Jacobian's ± can be far too small (the grid's clean
@@ -923,7 +1012,7 @@ fn search(
             }
         }
         let mut m = m;
-        m.params_se = named_params(data, &m.spec, &se);
+        m.params_se = named_params_se(data, &m.spec, &m.p, &se, cov.as_deref());
         // The effect's own constant must be told from its absence by its own ±: the randomized
         // grid (issue #32) found clean records named "cubic-stiffness" with evidence 70–870 and a
         // κ 0.4–0.8 σ from zero (the misfit the evidence saw was the base model's, not one the
@@ -933,7 +1022,7 @@ fn search(
             break;
         }
         let mut params = effect_params(data, &m.spec, &m.p, e);
-        let mut params_se = effect_params(data, &m.spec, &se, e);
+        let mut params_se = effect_params_se(data, &m.spec, &m.p, &se, cov.as_deref(), e);
         relative_asymmetry(&m, e, &mut params, Some(&mut params_se));
         steps.push(Step {
             effect: e.name().into(),

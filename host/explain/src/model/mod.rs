@@ -24,6 +24,44 @@ pub use lowpass::{lowpass, lowpass_1pole, lowpass_of_order};
 pub use simulate::*;
 pub use spec::*;
 
+/// Half-width (segments of [`THERMAL_SEGMENT`]) of the local straight line that smooths the
+/// temperature thermal drift follows: 13 segments are 6.5 rad, about one oscillation period.
+pub const TEMP_SMOOTH_SEGMENTS: usize = 13;
+
+/// The temperature a plate's Coulomb level follows, from the segment means of the temperature
+/// channel: at each segment the value of a straight line fitted to the means within
+/// [`TEMP_SMOOTH_SEGMENTS`] of it (fewer at the ends of the record, where the line keeps the
+/// slope a mean over a one-sided window would lose). The plate's temperature changes over its
+/// thermal time constant (0.3 s and more: `shared/docs/real-bench.md`), many oscillation
+/// periods, while the channel's noise is independent from one segment to the next; a Coulomb
+/// level that followed the raw segment means would carry that noise (0.05 K on the grid's
+/// channel is 1e-4 of μ0 at 8e-3/K, at each segment), and the force channel sees it (grid #115:
+/// a 0.3 s cooling ramp, where a running-in of the same time constant fitted the force channel
+/// 154 units of `−2 ln L` better than the thermal drift it stood for).
+pub fn smooth_temperature(seg: &[f64]) -> Vec<f64> {
+    let n = seg.len();
+    (0..n)
+        .map(|k| {
+            let lo = k.saturating_sub(TEMP_SMOOTH_SEGMENTS);
+            let hi = (k + TEMP_SMOOTH_SEGMENTS).min(n - 1);
+            let m = (hi - lo + 1) as f64;
+            if m < 3.0 {
+                return seg[k];
+            }
+            let xs = (lo..=hi).map(|j| j as f64);
+            let mx = xs.clone().sum::<f64>() / m;
+            let my = seg[lo..=hi].iter().sum::<f64>() / m;
+            let sxx: f64 = xs.clone().map(|x| (x - mx) * (x - mx)).sum();
+            let sxy: f64 = xs
+                .zip(&seg[lo..=hi])
+                .map(|(x, y)| (x - mx) * (y - my))
+                .sum();
+            let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+            my + b * (k as f64 - mx)
+        })
+        .collect()
+}
+
 /// A record prepared for the comparison: dimensionless, uniformly sampled, with the compared
 /// envelope and force points.
 #[derive(Debug, Clone)]
@@ -48,10 +86,17 @@ pub struct Prepared {
     pub f_meas: Option<Vec<f64>>,
     /// Indices of the compared force points.
     pub f_idx: Vec<usize>,
+    /// Every force point of the compared motion [`Prepared::f_idx`] is chosen from (it leaves out
+    /// the samples at a reference model's velocity reversals: `crate::without_reversal_samples`).
+    pub f_idx_all: Vec<usize>,
     /// Linear fit of the temperature channel: `T(τ) = t0 + slope · τ` (°C, °C per unit τ).
     pub temp: Option<(f64, f64)>,
     /// Mean temperature of each [`THERMAL_SEGMENT`] of τ (°C), if the record has `temp_c`.
     pub temp_seg: Option<Vec<f64>>,
+    /// The plate's temperature at each segment of [`Prepared::temp_seg`] that thermal drift
+    /// follows: the segment means smoothed by a local straight line over
+    /// [`TEMP_SMOOTH_SEGMENTS`] segments either side ([`smooth_temperature`]).
+    pub temp_smooth: Option<Vec<f64>>,
     /// Initial amplitude (the gap's normaliser).
     pub a0: f64,
     /// Charge-amplifier low-pass applied to simulated force (Hz), if any.
@@ -329,8 +374,10 @@ impl Prepared {
             env_idx,
             a_meas,
             f_meas,
+            f_idx_all: f_idx.clone(),
             f_idx,
             temp,
+            temp_smooth: temp_seg.as_deref().map(smooth_temperature),
             temp_seg,
             a0,
             force_cutoff_hz: if si { stated } else { None },

@@ -19,6 +19,9 @@ pub struct Simulated {
     /// Whether the force channel's gain is a fitted nuisance (a law with a Coulomb level, which
     /// the envelope measures: without one the gain cannot be told from the viscous split).
     pub gain_free: bool,
+    /// The velocity reversals of the simulated motion (τ of the simulator's clock, which runs
+    /// [`Prepared::release_shift`] ahead of the record's).
+    pub reversals: Vec<f64>,
 }
 
 /// Length of the τ segments over which a drifting Coulomb level is held constant (and the
@@ -70,13 +73,16 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
     // over segments of THERMAL_SEGMENT of τ.
     let thermal = match (
         spec.effect_params(Effect::ThermalDrift, p),
-        data.temp_seg.as_deref(),
+        data.temp_smooth.as_deref(),
     ) {
         (Some(g), Some(tseg)) if !tseg.is_empty() => Some((g[0], tseg)),
         _ => None,
     };
-    let running = spec.effect_params(Effect::RunningIn, p).map(|d| d[0]);
+    let running = spec
+        .effect_params(Effect::RunningIn, p)
+        .map(|d| (d[0], d[1]));
     let span_end = span.max(THERMAL_SEGMENT);
+    let mut reversals: Vec<f64> = Vec::new();
     let (y, ydot, f) = match (thermal, running) {
         (None, None) => {
             let model = model_at(0.0);
@@ -95,6 +101,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                 yd.push(s.ydot);
                 f.push(s.f);
             }
+            reversals.extend(sim.reversals().iter().map(|r| r.0));
             (y, yd, f)
         }
         (thermal, running) => {
@@ -102,8 +109,9 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                 let th = thermal.map_or(0.0, |(gamma, tseg)| {
                     gamma * (tseg[k.min(tseg.len() - 1)] - tseg[0])
                 });
-                let run = running.map_or(0.0, |d| {
-                    d * ((k as f64 + 0.5) * THERMAL_SEGMENT).min(span_end) / span_end
+                let run = running.map_or(0.0, |(d, c)| {
+                    let x = ((k as f64 + 0.5) * THERMAL_SEGMENT).min(span_end) / span_end;
+                    d * running_in_shape(c, x)
                 });
                 th + run
             };
@@ -124,6 +132,14 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                 while t > seg_end {
                     let s = sim.step_to(seg_end)?;
                     prior += sim.steps();
+                    // (Its internal step may have run past the segment's end: the next
+                    // simulator finds those reversals again.)
+                    reversals.extend(
+                        sim.reversals()
+                            .iter()
+                            .map(|r| r.0)
+                            .filter(|&r| r <= seg_end),
+                    );
                     seg += 1;
                     let m = model_at(dmu(seg));
                     m.validate()?;
@@ -136,6 +152,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                 yd.push(s.ydot);
                 f.push(s.f);
             }
+            reversals.extend(sim.reversals().iter().map(|r| r.0));
             (y, yd, f)
         }
     };
@@ -156,6 +173,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
             .effect_params(Effect::DirectionAsymmetry, p)
             .map_or(0.0, |d| d[0]),
         gain_free: spec.powers.contains(&0),
+        reversals,
     })
 }
 

@@ -375,11 +375,20 @@ fn add_effect(
                 (format!("linear {:+.2e}/s", total / motion), true)
             } else {
                 let tau = motion / 3.0;
-                c.running_in = Some(RunningIn::FirstOrder {
-                    delta: total / (1.0 - (-3.0f64).exp()),
-                    tau_s: tau,
+                let delta = total / (1.0 - (-3.0f64).exp());
+                c.running_in = Some(RunningIn::FirstOrder { delta, tau_s: tau });
+                // The rate at the release and the time constant of μ0 + Δ (1 − e^{−t/τ}).
+                consts.push(TrueConstant {
+                    effect,
+                    key: "dmu0_dt_per_s",
+                    value: delta / tau,
                 });
-                (format!("first-order τ {tau:.1} s"), false)
+                consts.push(TrueConstant {
+                    effect,
+                    key: "running_in_tau_s",
+                    value: tau,
+                });
+                (format!("first-order τ {tau:.1} s"), true)
             }
         }
         "direction-asymmetry" => {
