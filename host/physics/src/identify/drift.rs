@@ -349,6 +349,10 @@ impl Prepared {
         let runs: Vec<Vec<(usize, usize)>> =
             blocks.iter().map(|(o, _, r)| row_runs(r, *o)).collect();
         let ff: f64 = rows.iter().map(|&i| f[i] * f[i]).sum();
+        let f_sums: Vec<f64> = blocks
+            .iter()
+            .map(|(_, _, r)| r.iter().map(|&i| f[i]).sum::<f64>())
+            .collect();
         let max_shift = self
             .grid
             .last()
@@ -373,9 +377,11 @@ impl Prepared {
                     let d = self.grid[id] / self.dtau;
                     let mut gram = vec![vec![0.0; k]; k];
                     let mut xty = vec![0.0; k];
-                    for (((o, _, r), s), rr) in blocks.iter().zip(&sums).zip(&runs) {
+                    for ((((o, _, r), s), rr), &fs) in
+                        blocks.iter().zip(&sums).zip(&runs).zip(&f_sums)
+                    {
                         s.add_gram(&mut gram, d, rr);
-                        s.add_xty(&mut xty, d, r, *o, f);
+                        s.add_xty(&mut xty, d, r, *o, f, fs);
                     }
                     rss_of_normal_equations(&gram, &xty, ff)
                 })
@@ -665,26 +671,73 @@ impl Sums {
         }
     }
 
-    /// Adds `X'f` of the design delayed by `d` samples at the samples `rows` (block from `start`).
-    fn add_xty(&self, xty: &mut [f64], d: f64, rows: &[usize], start: usize, f: &[f64]) {
+    /// Adds `X'f` of the design delayed by `d` samples at the samples `rows` (block from `start`);
+    /// `f_sum`: `Σ f` over `rows` (the constant's entry, the same at every delay).
+    fn add_xty(
+        &self,
+        xty: &mut [f64],
+        d: f64,
+        rows: &[usize],
+        start: usize,
+        f: &[f64],
+        f_sum: f64,
+    ) {
         let kk = self.cols.len();
-        let (m, phi) = Self::split(d);
-        for (a, c) in self.cols.iter().enumerate() {
-            let mut acc = 0.0;
-            for &i in rows {
-                let li = i - start;
-                let x = if li <= m {
-                    c[0]
-                } else if phi == 0.0 {
-                    c[li - m]
-                } else {
-                    phi * c[li - m - 1] + (1.0 - phi) * c[li - m]
-                };
-                acc += x * f[i];
+        match kk {
+            2 => self.add_xty_k::<2>(xty, d, rows, start, f),
+            3 => self.add_xty_k::<3>(xty, d, rows, start, f),
+            4 => self.add_xty_k::<4>(xty, d, rows, start, f),
+            5 => self.add_xty_k::<5>(xty, d, rows, start, f),
+            6 => self.add_xty_k::<6>(xty, d, rows, start, f),
+            _ => {
+                let (m, phi) = Self::split(d);
+                for (a, c) in self.cols.iter().enumerate() {
+                    let mut acc = 0.0;
+                    for &i in rows {
+                        acc += Self::delayed(c, i - start, m, phi) * f[i];
+                    }
+                    xty[a] += acc;
+                }
             }
-            xty[a] += acc;
         }
-        xty[kk] += rows.iter().map(|&i| f[i]).sum::<f64>();
+        xty[kk] += f_sum;
+    }
+
+    /// Column `c` delayed by `(m, φ)` ([`Sums::split`]) at sample `li` of the block.
+    #[inline(always)]
+    fn delayed(c: &[f64], li: usize, m: usize, phi: f64) -> f64 {
+        if li <= m {
+            c[0]
+        } else if phi == 0.0 {
+            c[li - m]
+        } else {
+            phi * c[li - m - 1] + (1.0 - phi) * c[li - m]
+        }
+    }
+
+    /// [`Sums::add_xty`]'s columns for `K` of them: every column's sum over the rows in the rows'
+    /// order, as the general loop adds them (the same numbers), the columns side by side.
+    fn add_xty_k<const K: usize>(
+        &self,
+        xty: &mut [f64],
+        d: f64,
+        rows: &[usize],
+        start: usize,
+        f: &[f64],
+    ) {
+        let (m, phi) = Self::split(d);
+        let cols: [&[f64]; K] = std::array::from_fn(|a| self.cols[a].as_slice());
+        let mut acc = [0.0; K];
+        for &i in rows {
+            let li = i - start;
+            let fi = f[i];
+            for a in 0..K {
+                acc[a] += Self::delayed(cols[a], li, m, phi) * fi;
+            }
+        }
+        for a in 0..K {
+            xty[a] += acc[a];
+        }
     }
 }
 
@@ -855,25 +908,36 @@ fn cluster_variance(
 /// The trend of μ0 of a record with a force channel, over the motion `fit` compared, for a law
 /// with a Coulomb level (`None` otherwise: nothing to trend, or no channel to read it from).
 pub fn mu0_trend(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
+    mu0_trend_for(rec, fit.law, &fit.mu, fit.span.range())
+}
+
+/// [`mu0_trend`] of a fit of `law` whose constants are `mu` over `range`: of `mu`, only its length
+/// and which of them are zero count.
+pub(crate) fn mu0_trend_for(
+    rec: &Record,
+    law: LawSpec,
+    mu: &[f64],
+    range: std::ops::Range<usize>,
+) -> Option<Mu0Trend> {
     let TrendInputs {
         rig,
         tau,
         ydot,
         f,
         rate,
-    } = TrendInputs::of(rec, fit)?;
+    } = TrendInputs::of(rec, law)?;
     if let Some(fc) = rec.force_cutoff_hz {
         return mu0_trend_of(
             &tau,
             &ydot,
             &f,
-            &fit.mu,
-            fit.span.range(),
+            mu,
+            range,
             Some((fc, rate)),
             1.0 / rig.omega(),
         );
     }
-    mu0_trend_unstated(rec, fit, &tau, &ydot, &f, rate, Search::Fast)
+    mu0_trend_unstated(rec, mu, range, &tau, &ydot, &f, rate, Search::Fast)
 }
 
 /// [`mu0_trend`] with the grid searched exhaustively (every filter, memory and delay on every
@@ -886,7 +950,7 @@ pub fn mu0_trend_exhaustive(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
         ydot,
         f,
         rate,
-    } = TrendInputs::of(rec, fit)?;
+    } = TrendInputs::of(rec, fit.law)?;
     if let Some(fc) = rec.force_cutoff_hz {
         let prep = Prepared::new(&tau, &ydot, &f, &fit.mu, fit.span.range())?;
         let through = butterworth_or_none(Some((fc, rate)));
@@ -896,7 +960,16 @@ pub fn mu0_trend_exhaustive(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
             .trend_at(&through, im, id, &f, &tau, 1.0 / rig.omega())
             .map(|(t, _)| t);
     }
-    mu0_trend_unstated(rec, fit, &tau, &ydot, &f, rate, Search::Exhaustive)
+    mu0_trend_unstated(
+        rec,
+        &fit.mu,
+        fit.span.range(),
+        &tau,
+        &ydot,
+        &f,
+        rate,
+        Search::Exhaustive,
+    )
 }
 
 /// What both searches of [`mu0_trend`] read from a record: the rig, the dimensionless time and
@@ -912,10 +985,9 @@ struct TrendInputs {
 }
 
 impl TrendInputs {
-    fn of(rec: &Record, fit: &FitResult) -> Option<Self> {
+    fn of(rec: &Record, law: LawSpec) -> Option<Self> {
         let ft = rec.ft.as_ref()?;
-        if rec.apparatus || !fit.law.powers().contains(&0) || rec.units != crate::record::Units::Si
-        {
+        if rec.apparatus || !law.powers().contains(&0) || rec.units != crate::record::Units::Si {
             return None;
         }
         let rig = rec.rig().ok()?;
@@ -933,9 +1005,11 @@ impl TrendInputs {
 }
 
 /// The trend through the filter, of those a bench's channel may have, that fits best.
+#[allow(clippy::too_many_arguments)]
 fn mu0_trend_unstated(
     rec: &Record,
-    fit: &FitResult,
+    mu: &[f64],
+    range: std::ops::Range<usize>,
     tau: &[f64],
     ydot: &[f64],
     f: &[f64],
@@ -960,7 +1034,7 @@ fn mu0_trend_unstated(
     .into_iter()
     .filter(|fc| !fc.is_some_and(|c: f64| c >= 0.45 * rate))
     .collect();
-    let prep = Prepared::new(tau, ydot, f, &fit.mu, fit.span.range())?;
+    let prep = Prepared::new(tau, ydot, f, mu, range)?;
     let blocks = prep.blocks(search);
     // Each filter searched on its own thread ([`super::par_map`]); the best kept in the order
     // above (ties to the first).
