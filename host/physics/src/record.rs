@@ -219,42 +219,42 @@ fn plain_rows_serial(text: &str, n: usize, room: usize) -> Option<Vec<Vec<f64>>>
     let cap = room / (sample.len() / lines).max(1) * 9 / 8 + 16;
     let mut cols: Vec<Vec<f64>> = (0..n).map(|_| Vec::with_capacity(cap)).collect();
     let bytes = text.as_bytes();
-    let mut start = 0;
-    while start < bytes.len() {
-        let end = bytes[start..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(bytes.len(), |i| start + i);
-        let mut stop = end;
-        if stop > start && bytes[stop - 1] == b'\r' {
-            stop -= 1;
-        }
-        if stop > start {
-            let mut field = start;
-            let mut k = 0;
-            for i in start..=stop {
-                if i < stop && bytes[i] != b',' {
-                    if !matches!(bytes[i], b'0'..=b'9' | b'.' | b'e' | b'E' | b'+' | b'-') {
-                        return None;
-                    }
-                    continue;
-                }
-                if i == field || k == n {
-                    return None;
-                }
-                let v: f64 = text[field..i].parse().ok()?;
-                if !v.is_finite() {
-                    return None;
-                }
-                cols[k].push(v);
-                k += 1;
-                field = i + 1;
+    // One pass: `field` is where the current field starts, `k` how many of the line's fields are
+    // read; a line ends at `\n` or `\r\n` (or the end of the text).
+    let (mut field, mut k) = (0, 0);
+    let mut i = 0;
+    while i <= bytes.len() {
+        let b = bytes.get(i).copied().unwrap_or(b'\n');
+        match b {
+            b'0'..=b'9' | b'.' | b'e' | b'E' | b'+' | b'-' => {
+                i += 1;
+                continue;
             }
-            if k != n {
+            b',' | b'\n' => {}
+            b'\r' if bytes.get(i + 1).is_none_or(|&c| c == b'\n') => {}
+            _ => return None,
+        }
+        let end_of_line = b != b',';
+        if !(end_of_line && k == 0 && i == field) {
+            // Not an empty line: a field ends here.
+            if i == field || k == n {
                 return None;
             }
+            let v: f64 = text[field..i].parse().ok()?;
+            if !v.is_finite() {
+                return None;
+            }
+            cols[k].push(v);
+            k += 1;
+            if end_of_line {
+                if k != n {
+                    return None;
+                }
+                k = 0;
+            }
         }
-        start = end + 1;
+        i += if b == b'\r' { 2 } else { 1 };
+        field = i;
     }
     Some(cols)
 }

@@ -362,10 +362,7 @@ impl Prepared {
                 .iter()
                 .zip(&runs)
                 .map(|(cols, rr)| {
-                    let relaxed: Vec<Vec<f64>> = cols
-                        .iter()
-                        .map(|c| first_order(c, self.grid[im], self.dtau))
-                        .collect();
+                    let relaxed = first_order_cols(cols, self.grid[im], self.dtau);
                     // The earliest sample a delay of the grid reads (the held ones read only the
                     // first), less one for the sums one sample apart.
                     let first = rr.first().map_or(0, |r| r.0);
@@ -585,7 +582,9 @@ impl Sums {
         let off = off.min(n);
         let tri = kk * (kk + 1) / 2;
         let width = kk + 2 * tri;
-        let mut data = vec![0.0; (n - off + 1) * width];
+        // Row 0 (no sample yet) is zeros; each sample's row is appended (no zeroing first).
+        let mut data = Vec::with_capacity((n - off + 1) * width);
+        data.resize(width, 0.0);
         let mut acc = vec![0.0; width];
         let mut cur = vec![0.0; kk];
         let mut prev = vec![0.0; kk];
@@ -603,7 +602,7 @@ impl Sums {
                     t += 1;
                 }
             }
-            data[(u - off + 1) * width..(u - off + 2) * width].copy_from_slice(&acc);
+            data.extend_from_slice(&acc);
         }
         Sums {
             cols,
@@ -780,6 +779,41 @@ fn first_order(x: &[f64], t: f64, h: f64) -> Vec<f64> {
             y
         })
         .collect()
+}
+
+/// [`first_order`] of every column of `cols`, the columns side by side (each column's numbers
+/// are what [`first_order`] gives it).
+fn first_order_cols(cols: &[Vec<f64>], t: f64, h: f64) -> Vec<Vec<f64>> {
+    let n = cols.first().map_or(0, Vec::len);
+    if t <= 0.0 || n == 0 || cols.iter().any(|c| c.len() != n) {
+        return cols.iter().map(|c| first_order(c, t, h)).collect();
+    }
+    match cols.len() {
+        2 => first_order_k::<2>(cols, t, h),
+        3 => first_order_k::<3>(cols, t, h),
+        4 => first_order_k::<4>(cols, t, h),
+        5 => first_order_k::<5>(cols, t, h),
+        6 => first_order_k::<6>(cols, t, h),
+        _ => cols.iter().map(|c| first_order(c, t, h)).collect(),
+    }
+}
+
+/// [`first_order_cols`] of `K` columns of equal, non-zero length.
+// Sample `u` of every column at once.
+#[allow(clippy::needless_range_loop)]
+fn first_order_k<const K: usize>(cols: &[Vec<f64>], t: f64, h: f64) -> Vec<Vec<f64>> {
+    let n = cols[0].len();
+    let a = 1.0 - (-h / t).exp();
+    let src: [&[f64]; K] = std::array::from_fn(|i| &cols[i][..n]);
+    let mut y: [f64; K] = std::array::from_fn(|i| src[i][0]);
+    let mut out: [Vec<f64>; K] = std::array::from_fn(|_| Vec::with_capacity(n));
+    for u in 0..n {
+        for i in 0..K {
+            y[i] += a * (src[i][u] - y[i]);
+            out[i].push(y[i]);
+        }
+    }
+    out.into_iter().collect()
 }
 
 /// The design matrix (row-major, `k` = columns + the constant) at the samples `rows` of `cols`
@@ -1180,6 +1214,84 @@ mod tests {
             );
             assert!(n > 100, "{n} pairs compared");
             assert!(e < 1e-3 * SUMS_MARGIN, "rss from sums off by {e:e} of f'f");
+        }
+    }
+}
+
+#[cfg(test)]
+mod side_by_side_tests {
+    use super::*;
+
+    /// Columns of pseudo-random numbers (a fixed sequence).
+    fn columns(k: usize, n: usize) -> Vec<Vec<f64>> {
+        let mut z: u64 = 0x2545_f491_4f6c_dd1d;
+        (0..k)
+            .map(|_| {
+                (0..n)
+                    .map(|_| {
+                        z = z
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        (z >> 11) as f64 / (1u64 << 53) as f64 - 0.3
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// `X'f` as one loop a column (the form before the columns were summed side by side).
+    fn xty_by_column(s: &Sums, d: f64, rows: &[usize], start: usize, f: &[f64]) -> Vec<f64> {
+        let kk = s.cols.len();
+        let (m, phi) = Sums::split(d);
+        let mut xty = vec![0.0; kk + 1];
+        for (a, c) in s.cols.iter().enumerate() {
+            let mut acc = 0.0;
+            for &i in rows {
+                let li = i - start;
+                let x = if li <= m {
+                    c[0]
+                } else if phi == 0.0 {
+                    c[li - m]
+                } else {
+                    phi * c[li - m - 1] + (1.0 - phi) * c[li - m]
+                };
+                acc += x * f[i];
+            }
+            xty[a] += acc;
+        }
+        xty[kk] += rows.iter().map(|&i| f[i]).sum::<f64>();
+        xty
+    }
+
+    #[test]
+    fn the_side_by_side_loops_are_the_column_loops_to_the_bit() {
+        let n = 3000;
+        let f = columns(1, n + 40).remove(0);
+        let start = 40;
+        // Rows in runs, as the selected samples are (every third block of 50 left out).
+        let rows: Vec<usize> = (start..start + n).filter(|i| (i / 50) % 3 != 0).collect();
+        let f_sum: f64 = rows.iter().map(|&i| f[i]).sum();
+        for k in 1..=8 {
+            let cols = columns(k, n);
+            for t in [0.0, 0.05, 0.37, 1.0] {
+                let side = first_order_cols(&cols, t, 0.017);
+                for (a, c) in cols.iter().enumerate() {
+                    let one: Vec<u64> = first_order(c, t, 0.017)
+                        .iter()
+                        .map(|v| v.to_bits())
+                        .collect();
+                    let two: Vec<u64> = side[a].iter().map(|v| v.to_bits()).collect();
+                    assert_eq!(one, two, "first_order, {k} columns, t {t}");
+                }
+            }
+            let s = Sums::new(cols, 0);
+            for d in [0.0, 1.0, 2.9411, 17.0, 58.8, 120.5] {
+                let mut xty = vec![0.0; k + 1];
+                s.add_xty(&mut xty, d, &rows, start, &f, f_sum);
+                let want = xty_by_column(&s, d, &rows, start, &f);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+                assert_eq!(bits(&xty), bits(&want), "X'f, {k} columns, delay {d}");
+            }
         }
     }
 }

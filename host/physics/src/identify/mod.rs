@@ -476,8 +476,8 @@ pub fn fit_dimensionless(
 }
 
 /// [`fit_dimensionless`], with `beside` run on the record's motion span on a thread of its own
-/// while the law is fitted (once the record is screened and its envelope taken; `None` when the
-/// fits on this thread keep to one thread, [`set_fit_threads`], or the fit failed before).
+/// while the record is screened and the law fitted (`None` when the fits on this thread keep to
+/// one thread, [`set_fit_threads`]).
 fn fit_dimensionless_beside<B: Send>(
     tau: &[f64],
     y: &[f64],
@@ -491,31 +491,37 @@ fn fit_dimensionless_beside<B: Send>(
     check_finite(tau, y, ydot)?;
     let span = motion_span(tau, y, ydot);
     let r = span.range();
-    // The motion is screened, not the hold before it or the rest after it.
-    let sc = screen_with(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()], true)?;
-    let data = EnvelopeData::over(tau, y, ydot, &span, opts.max_points)?;
-    let p0 = start_of(opts, spec, || {
-        start_point(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()], spec)
-    })?;
+    // The rest of the fit, on this thread: the motion is screened (not the hold before it or the
+    // rest after it), its envelope taken, the law fitted.
+    let fit_span = || -> Result<(FitResult, usize, EnvelopeData), FitError> {
+        let sc = screen_with(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()], true)?;
+        let data = EnvelopeData::over(tau, y, ydot, &span, opts.max_points)?;
+        let p0 = start_of(opts, spec, || {
+            start_point(&tau[r.clone()], &y[r.clone()], &ydot[r.clone()], spec)
+        })?;
+        let res = fit_envelope(&data, spec, p0, opts)?;
+        Ok((res, sc.half_cycles, data))
+    };
     let threads = fit_threads();
-    let (res, b) = if threads > 1 {
+    let (fitted, b) = if threads > 1 {
+        // `beside` starts with the screening (its work is lost when the record is refused).
         std::thread::scope(|s| {
             let h = s.spawn(|| {
                 set_fit_threads(threads);
                 beside(&span)
             });
-            let res = fit_envelope(&data, spec, p0, opts);
+            let fitted = fit_span();
             let b = match h.join() {
                 Ok(b) => b,
                 Err(e) => std::panic::resume_unwind(e),
             };
-            (res, Some(b))
+            (fitted, Some(b))
         })
     } else {
-        (fit_envelope(&data, spec, p0, opts), None)
+        (fit_span(), None)
     };
-    let mut res = res?;
-    res.half_cycles = sc.half_cycles;
+    let (mut res, half_cycles, data) = fitted?;
+    res.half_cycles = half_cycles;
     res.span = MotionSpan {
         spikes: data.spikes,
         clipped: data.clipped,
