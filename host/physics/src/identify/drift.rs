@@ -580,6 +580,27 @@ impl Sums {
         let kk = cols.len();
         let n = cols.first().map_or(0, Vec::len);
         let off = off.min(n);
+        let width = kk + kk * (kk + 1);
+        let data = match kk {
+            2 => Self::table::<2, 8>(&cols, off),
+            3 => Self::table::<3, 15>(&cols, off),
+            4 => Self::table::<4, 24>(&cols, off),
+            5 => Self::table::<5, 35>(&cols, off),
+            6 => Self::table::<6, 48>(&cols, off),
+            _ => Self::table_any(&cols, off),
+        };
+        Sums {
+            cols,
+            off,
+            width,
+            data,
+        }
+    }
+
+    /// The prefix sums' table (`data`) of any number of columns from sample `off`.
+    fn table_any(cols: &[Vec<f64>], off: usize) -> Vec<f64> {
+        let kk = cols.len();
+        let n = cols.first().map_or(0, Vec::len);
         let tri = kk * (kk + 1) / 2;
         let width = kk + 2 * tri;
         // Row 0 (no sample yet) is zeros; each sample's row is appended (no zeroing first).
@@ -604,12 +625,34 @@ impl Sums {
             }
             data.extend_from_slice(&acc);
         }
-        Sums {
-            cols,
-            off,
-            width,
-            data,
+        data
+    }
+
+    /// [`Sums::table_any`] for `K` columns (`W = K + K(K+1)` numbers a row): the same numbers, the
+    /// row's length known to the compiler.
+    fn table<const K: usize, const W: usize>(cols: &[Vec<f64>], off: usize) -> Vec<f64> {
+        debug_assert_eq!(W, K + K * (K + 1));
+        let n = cols[0].len();
+        let tri = K * (K + 1) / 2;
+        let src: [&[f64]; K] = std::array::from_fn(|a| cols[a].as_slice());
+        let mut data = Vec::with_capacity((n - off + 1) * W);
+        data.resize(W, 0.0);
+        let mut acc = [0.0; W];
+        for u in off..n {
+            let cur: [f64; K] = std::array::from_fn(|a| src[a][u]);
+            let prev: [f64; K] = std::array::from_fn(|a| if u == 0 { 0.0 } else { src[a][u - 1] });
+            let mut t = 0;
+            for a in 0..K {
+                acc[a] += cur[a];
+                for b in a..K {
+                    acc[K + t] += cur[a] * cur[b];
+                    acc[K + tri + t] += prev[a] * cur[b] + prev[b] * cur[a];
+                    t += 1;
+                }
+            }
+            data.extend_from_slice(&acc);
         }
+        data
     }
 
     /// Where a delay of `d` samples reads: `(m, φ)`, the value at sample `u` being
@@ -1265,6 +1308,7 @@ mod side_by_side_tests {
 
     #[test]
     fn the_side_by_side_loops_are_the_column_loops_to_the_bit() {
+        // first_order_cols, Sums::new's table and add_xty for 1 to 8 columns.
         let n = 3000;
         let f = columns(1, n + 40).remove(0);
         let start = 40;
@@ -1283,6 +1327,16 @@ mod side_by_side_tests {
                     let two: Vec<u64> = side[a].iter().map(|v| v.to_bits()).collect();
                     assert_eq!(one, two, "first_order, {k} columns, t {t}");
                 }
+            }
+            for off in [0, 1, 37] {
+                let s = Sums::new(cols.clone(), off);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+                let any = Sums::table_any(&cols, off);
+                assert_eq!(
+                    bits(&s.data),
+                    bits(&any),
+                    "prefix sums, {k} columns, from {off}"
+                );
             }
             let s = Sums::new(cols, 0);
             for d in [0.0, 1.0, 2.9411, 17.0, 58.8, 120.5] {
