@@ -161,6 +161,104 @@ fn at<T>(line: usize, col: usize, msg: impl std::fmt::Display) -> Result<T, Reco
     })
 }
 
+/// Byte offset in `text` just past the line `raw` (a line of `text.lines()`) and its line ending.
+fn line_end(text: &str, raw: &str) -> usize {
+    let end = (raw.as_ptr() as usize - text.as_ptr() as usize) + raw.len();
+    text.as_bytes()[end..]
+        .iter()
+        .position(|&b| b == b'\n')
+        .map_or(text.len(), |i| end + i + 1)
+}
+
+/// Rows of at least this many bytes are parsed on two threads.
+const PLAIN_ROWS_SPLIT: usize = 1 << 20;
+
+/// The columns of CSV rows that are all *plain*: `n` non-empty fields of the characters of a
+/// decimal number (`0-9 . e E + -`) parsing to finite values, between commas, lines ended by
+/// `\n` or `\r\n`, empty lines skipped. Each field is parsed as [`Record::from_csv_str`] parses
+/// it (`str::parse::<f64>`, the field having nothing to trim), so the numbers are the same bits.
+/// `None` for anything else (a comment, a space, an empty ECR field, a bad or non-finite number, a
+/// short row): then the general parser reads them and says what is wrong where. A long text is
+/// split at a line ending and its halves parsed on two threads (one when the caller fits on one).
+fn plain_rows(text: &str, n: usize) -> Option<Vec<Vec<f64>>> {
+    let threads = crate::identify::fit_threads();
+    if threads < 2 || text.len() < PLAIN_ROWS_SPLIT {
+        return plain_rows_serial(text, n, text.len()).map(trimmed);
+    }
+    let mid = text.len() / 2;
+    let cut = text.as_bytes()[mid..]
+        .iter()
+        .position(|&b| b == b'\n')
+        .map_or(text.len(), |i| mid + i + 1);
+    let (a, b) = text.split_at(cut);
+    let (first, second) = std::thread::scope(|s| {
+        let h = s.spawn(|| plain_rows_serial(b, n, b.len()));
+        let first = plain_rows_serial(a, n, text.len());
+        (first, h.join().ok().flatten())
+    });
+    let mut cols = first?;
+    for (c, d) in cols.iter_mut().zip(second?) {
+        c.extend_from_slice(&d);
+    }
+    Some(trimmed(cols))
+}
+
+/// Columns without their spare capacity.
+fn trimmed(mut cols: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
+    for c in &mut cols {
+        c.shrink_to_fit();
+    }
+    cols
+}
+
+/// [`plain_rows`] on one thread; `room`: bytes of rows the columns are sized for.
+fn plain_rows_serial(text: &str, n: usize, room: usize) -> Option<Vec<Vec<f64>>> {
+    // Sized from the first lines' length (a little over: the columns are trimmed at the end).
+    let sample = &text.as_bytes()[..text.len().min(4096)];
+    let lines = sample.iter().filter(|&&b| b == b'\n').count().max(1);
+    let cap = room / (sample.len() / lines).max(1) * 9 / 8 + 16;
+    let mut cols: Vec<Vec<f64>> = (0..n).map(|_| Vec::with_capacity(cap)).collect();
+    let bytes = text.as_bytes();
+    // One pass: `field` is where the current field starts, `k` how many of the line's fields are
+    // read; a line ends at `\n` or `\r\n` (or the end of the text).
+    let (mut field, mut k) = (0, 0);
+    let mut i = 0;
+    while i <= bytes.len() {
+        let b = bytes.get(i).copied().unwrap_or(b'\n');
+        match b {
+            b'0'..=b'9' | b'.' | b'e' | b'E' | b'+' | b'-' => {
+                i += 1;
+                continue;
+            }
+            b',' | b'\n' => {}
+            b'\r' if bytes.get(i + 1).is_none_or(|&c| c == b'\n') => {}
+            _ => return None,
+        }
+        let end_of_line = b != b',';
+        if !(end_of_line && k == 0 && i == field) {
+            // Not an empty line: a field ends here.
+            if i == field || k == n {
+                return None;
+            }
+            let v: f64 = text[field..i].parse().ok()?;
+            if !v.is_finite() {
+                return None;
+            }
+            cols[k].push(v);
+            k += 1;
+            if end_of_line {
+                if k != n {
+                    return None;
+                }
+                k = 0;
+            }
+        }
+        i += if b == b'\r' { 2 } else { 1 };
+        field = i;
+    }
+    Some(cols)
+}
+
 /// The header keys a record may give (`# key=value` comment lines).
 pub const HEADER_KEYS: [&str; 5] = [
     "mass_kg",
@@ -432,7 +530,15 @@ impl Record {
                         col += line.split(',').nth(i).map_or(0, |f| f.chars().count()) + 1;
                     }
                     cols = vec![Vec::new(); h.len()];
+                    // The rows after the header, when every one of them is plain (see
+                    // [`plain_rows`]): the same numbers as the loop below gives, line by line.
+                    let after = line_end(text, raw);
+                    let plain = plain_rows(&text[after..], h.len());
                     header = Some((h, line_no));
+                    if let Some(c) = plain {
+                        cols = c;
+                        break;
+                    }
                 }
                 Some((h, _)) => {
                     let fields: Vec<&str> = line.split(',').collect();
@@ -660,5 +766,97 @@ mod force_zero_tests {
         assert!(e.to_string().contains("force_zero_n"), "{e}");
         let e = Record::from_csv_str(&text.replace("-0.0012", "inf")).unwrap_err();
         assert!(e.to_string().contains("force_zero_n"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod plain_rows_tests {
+    use super::*;
+
+    /// A CSV of `rows` rows whose numbers take every form a plain field may have (exponents of
+    /// either case and sign, leading `+`, `.5`, `5.`, 17 digits, negative zero), lines ended by
+    /// `eol`, with empty lines among them.
+    fn csv(rows: usize, eol: &str) -> String {
+        let mut s = format!("# mass_kg=0.04{eol}# stiffness_n_per_m=1150{eol}# load_n=0.3{eol}");
+        s.push_str(&format!("t_s,x_m,v_m_s,ft_n{eol}"));
+        let mut z: u64 = 0x9e37_79b9_7f4a_7c15;
+        for i in 0..rows {
+            z = z
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let u = (z >> 11) as f64 / (1u64 << 53) as f64;
+            let t = i as f64 * 1e-4;
+            let x = 6.67e-4 * (170.0 * t).cos() + 1e-7 * (u - 0.5);
+            let v = -0.11 * (170.0 * t).sin() * (1.0 + 1e-3 * u);
+            let f = match i % 7 {
+                0 => format!("{:E}", -4e-5 * u),
+                1 => format!("+{}", 0.5 * u),
+                2 => ".5".to_string(),
+                3 => "5.".to_string(),
+                4 => "-0".to_string(),
+                5 => format!("{:.16e}", u * 1e-300),
+                _ => format!("{}e+2", u),
+            };
+            s.push_str(&format!("{t:e},{x:e},{v},{f}{eol}"));
+            if i % 5000 == 17 {
+                s.push_str(eol);
+            }
+        }
+        s
+    }
+
+    fn bits(r: &Record) -> Vec<Vec<u64>> {
+        [Some(&r.t), Some(&r.x), Some(&r.v), r.ft.as_ref()]
+            .into_iter()
+            .flatten()
+            .map(|c| c.iter().map(|v| v.to_bits()).collect())
+            .collect()
+    }
+
+    #[test]
+    fn plain_rows_are_the_general_parsers_numbers() {
+        // 60,000 rows (about 3.5 MB): parsed as two halves on two threads.
+        for eol in ["\n", "\r\n"] {
+            let text = csv(60_000, eol);
+            assert!(text.len() > 2 * PLAIN_ROWS_SPLIT);
+            let fast = Record::from_csv_str(&text).unwrap();
+            // A comment after the rows is not plain: the general parser reads every row.
+            let general = Record::from_csv_str(&format!("{text}# end{eol}")).unwrap();
+            assert_eq!(fast.len(), 60_000);
+            assert_eq!(bits(&fast), bits(&general));
+            // Plain rows on one thread: the same numbers.
+            let one = std::thread::spawn(move || {
+                crate::identify::set_fit_threads(1);
+                Record::from_csv_str(&text).unwrap()
+            })
+            .join()
+            .unwrap();
+            assert_eq!(bits(&one), bits(&general));
+        }
+    }
+
+    #[test]
+    fn a_bad_row_in_either_half_is_the_general_parsers_error() {
+        let text = csv(60_000, "\n");
+        let lines: Vec<&str> = text.lines().collect();
+        let spaced = lines[30_000].replacen(',', ", ", 1);
+        for (at, bad, what) in [
+            (10usize, "1e-4,2e-4,inf,0", "non-finite"),
+            (50_000, "1e-4,2e-4,3e-4", "3 fields, the header has 4"),
+            (50_000, "1e-4,2e-4,1.2.3,0", "not a number"),
+            (30_000, spaced.as_str(), "trimmed"),
+        ] {
+            let mut l = lines.clone();
+            l[at] = bad;
+            let e = Record::from_csv_str(&l.join("\n")).map(|r| bits(&r));
+            if what == "trimmed" {
+                // A space is not plain, but the general parser trims it: read, not refused.
+                assert_eq!(e.unwrap(), bits(&Record::from_csv_str(&text).unwrap()));
+                continue;
+            }
+            let e = e.unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+            assert!(e.contains(&format!("line {}", at + 1)), "{e}");
+        }
     }
 }

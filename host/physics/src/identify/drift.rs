@@ -349,6 +349,10 @@ impl Prepared {
         let runs: Vec<Vec<(usize, usize)>> =
             blocks.iter().map(|(o, _, r)| row_runs(r, *o)).collect();
         let ff: f64 = rows.iter().map(|&i| f[i] * f[i]).sum();
+        let f_sums: Vec<f64> = blocks
+            .iter()
+            .map(|(_, _, r)| r.iter().map(|&i| f[i]).sum::<f64>())
+            .collect();
         let max_shift = self
             .grid
             .last()
@@ -358,10 +362,7 @@ impl Prepared {
                 .iter()
                 .zip(&runs)
                 .map(|(cols, rr)| {
-                    let relaxed: Vec<Vec<f64>> = cols
-                        .iter()
-                        .map(|c| first_order(c, self.grid[im], self.dtau))
-                        .collect();
+                    let relaxed = first_order_cols(cols, self.grid[im], self.dtau);
                     // The earliest sample a delay of the grid reads (the held ones read only the
                     // first), less one for the sums one sample apart.
                     let first = rr.first().map_or(0, |r| r.0);
@@ -373,9 +374,11 @@ impl Prepared {
                     let d = self.grid[id] / self.dtau;
                     let mut gram = vec![vec![0.0; k]; k];
                     let mut xty = vec![0.0; k];
-                    for (((o, _, r), s), rr) in blocks.iter().zip(&sums).zip(&runs) {
+                    for ((((o, _, r), s), rr), &fs) in
+                        blocks.iter().zip(&sums).zip(&runs).zip(&f_sums)
+                    {
                         s.add_gram(&mut gram, d, rr);
-                        s.add_xty(&mut xty, d, r, *o, f);
+                        s.add_xty(&mut xty, d, r, *o, f, fs);
                     }
                     rss_of_normal_equations(&gram, &xty, ff)
                 })
@@ -577,9 +580,32 @@ impl Sums {
         let kk = cols.len();
         let n = cols.first().map_or(0, Vec::len);
         let off = off.min(n);
+        let width = kk + kk * (kk + 1);
+        let data = match kk {
+            2 => Self::table::<2, 8>(&cols, off),
+            3 => Self::table::<3, 15>(&cols, off),
+            4 => Self::table::<4, 24>(&cols, off),
+            5 => Self::table::<5, 35>(&cols, off),
+            6 => Self::table::<6, 48>(&cols, off),
+            _ => Self::table_any(&cols, off),
+        };
+        Sums {
+            cols,
+            off,
+            width,
+            data,
+        }
+    }
+
+    /// The prefix sums' table (`data`) of any number of columns from sample `off`.
+    fn table_any(cols: &[Vec<f64>], off: usize) -> Vec<f64> {
+        let kk = cols.len();
+        let n = cols.first().map_or(0, Vec::len);
         let tri = kk * (kk + 1) / 2;
         let width = kk + 2 * tri;
-        let mut data = vec![0.0; (n - off + 1) * width];
+        // Row 0 (no sample yet) is zeros; each sample's row is appended (no zeroing first).
+        let mut data = Vec::with_capacity((n - off + 1) * width);
+        data.resize(width, 0.0);
         let mut acc = vec![0.0; width];
         let mut cur = vec![0.0; kk];
         let mut prev = vec![0.0; kk];
@@ -597,14 +623,36 @@ impl Sums {
                     t += 1;
                 }
             }
-            data[(u - off + 1) * width..(u - off + 2) * width].copy_from_slice(&acc);
+            data.extend_from_slice(&acc);
         }
-        Sums {
-            cols,
-            off,
-            width,
-            data,
+        data
+    }
+
+    /// [`Sums::table_any`] for `K` columns (`W = K + K(K+1)` numbers a row): the same numbers, the
+    /// row's length known to the compiler.
+    fn table<const K: usize, const W: usize>(cols: &[Vec<f64>], off: usize) -> Vec<f64> {
+        debug_assert_eq!(W, K + K * (K + 1));
+        let n = cols[0].len();
+        let tri = K * (K + 1) / 2;
+        let src: [&[f64]; K] = std::array::from_fn(|a| cols[a].as_slice());
+        let mut data = Vec::with_capacity((n - off + 1) * W);
+        data.resize(W, 0.0);
+        let mut acc = [0.0; W];
+        for u in off..n {
+            let cur: [f64; K] = std::array::from_fn(|a| src[a][u]);
+            let prev: [f64; K] = std::array::from_fn(|a| if u == 0 { 0.0 } else { src[a][u - 1] });
+            let mut t = 0;
+            for a in 0..K {
+                acc[a] += cur[a];
+                for b in a..K {
+                    acc[K + t] += cur[a] * cur[b];
+                    acc[K + tri + t] += prev[a] * cur[b] + prev[b] * cur[a];
+                    t += 1;
+                }
+            }
+            data.extend_from_slice(&acc);
         }
+        data
     }
 
     /// Where a delay of `d` samples reads: `(m, φ)`, the value at sample `u` being
@@ -665,26 +713,73 @@ impl Sums {
         }
     }
 
-    /// Adds `X'f` of the design delayed by `d` samples at the samples `rows` (block from `start`).
-    fn add_xty(&self, xty: &mut [f64], d: f64, rows: &[usize], start: usize, f: &[f64]) {
+    /// Adds `X'f` of the design delayed by `d` samples at the samples `rows` (block from `start`);
+    /// `f_sum`: `Σ f` over `rows` (the constant's entry, the same at every delay).
+    fn add_xty(
+        &self,
+        xty: &mut [f64],
+        d: f64,
+        rows: &[usize],
+        start: usize,
+        f: &[f64],
+        f_sum: f64,
+    ) {
         let kk = self.cols.len();
-        let (m, phi) = Self::split(d);
-        for (a, c) in self.cols.iter().enumerate() {
-            let mut acc = 0.0;
-            for &i in rows {
-                let li = i - start;
-                let x = if li <= m {
-                    c[0]
-                } else if phi == 0.0 {
-                    c[li - m]
-                } else {
-                    phi * c[li - m - 1] + (1.0 - phi) * c[li - m]
-                };
-                acc += x * f[i];
+        match kk {
+            2 => self.add_xty_k::<2>(xty, d, rows, start, f),
+            3 => self.add_xty_k::<3>(xty, d, rows, start, f),
+            4 => self.add_xty_k::<4>(xty, d, rows, start, f),
+            5 => self.add_xty_k::<5>(xty, d, rows, start, f),
+            6 => self.add_xty_k::<6>(xty, d, rows, start, f),
+            _ => {
+                let (m, phi) = Self::split(d);
+                for (a, c) in self.cols.iter().enumerate() {
+                    let mut acc = 0.0;
+                    for &i in rows {
+                        acc += Self::delayed(c, i - start, m, phi) * f[i];
+                    }
+                    xty[a] += acc;
+                }
             }
-            xty[a] += acc;
         }
-        xty[kk] += rows.iter().map(|&i| f[i]).sum::<f64>();
+        xty[kk] += f_sum;
+    }
+
+    /// Column `c` delayed by `(m, φ)` ([`Sums::split`]) at sample `li` of the block.
+    #[inline(always)]
+    fn delayed(c: &[f64], li: usize, m: usize, phi: f64) -> f64 {
+        if li <= m {
+            c[0]
+        } else if phi == 0.0 {
+            c[li - m]
+        } else {
+            phi * c[li - m - 1] + (1.0 - phi) * c[li - m]
+        }
+    }
+
+    /// [`Sums::add_xty`]'s columns for `K` of them: every column's sum over the rows in the rows'
+    /// order, as the general loop adds them (the same numbers), the columns side by side.
+    fn add_xty_k<const K: usize>(
+        &self,
+        xty: &mut [f64],
+        d: f64,
+        rows: &[usize],
+        start: usize,
+        f: &[f64],
+    ) {
+        let (m, phi) = Self::split(d);
+        let cols: [&[f64]; K] = std::array::from_fn(|a| self.cols[a].as_slice());
+        let mut acc = [0.0; K];
+        for &i in rows {
+            let li = i - start;
+            let fi = f[i];
+            for a in 0..K {
+                acc[a] += Self::delayed(cols[a], li, m, phi) * fi;
+            }
+        }
+        for a in 0..K {
+            xty[a] += acc[a];
+        }
     }
 }
 
@@ -727,6 +822,41 @@ fn first_order(x: &[f64], t: f64, h: f64) -> Vec<f64> {
             y
         })
         .collect()
+}
+
+/// [`first_order`] of every column of `cols`, the columns side by side (each column's numbers
+/// are what [`first_order`] gives it).
+fn first_order_cols(cols: &[Vec<f64>], t: f64, h: f64) -> Vec<Vec<f64>> {
+    let n = cols.first().map_or(0, Vec::len);
+    if t <= 0.0 || n == 0 || cols.iter().any(|c| c.len() != n) {
+        return cols.iter().map(|c| first_order(c, t, h)).collect();
+    }
+    match cols.len() {
+        2 => first_order_k::<2>(cols, t, h),
+        3 => first_order_k::<3>(cols, t, h),
+        4 => first_order_k::<4>(cols, t, h),
+        5 => first_order_k::<5>(cols, t, h),
+        6 => first_order_k::<6>(cols, t, h),
+        _ => cols.iter().map(|c| first_order(c, t, h)).collect(),
+    }
+}
+
+/// [`first_order_cols`] of `K` columns of equal, non-zero length.
+// Sample `u` of every column at once.
+#[allow(clippy::needless_range_loop)]
+fn first_order_k<const K: usize>(cols: &[Vec<f64>], t: f64, h: f64) -> Vec<Vec<f64>> {
+    let n = cols[0].len();
+    let a = 1.0 - (-h / t).exp();
+    let src: [&[f64]; K] = std::array::from_fn(|i| &cols[i][..n]);
+    let mut y: [f64; K] = std::array::from_fn(|i| src[i][0]);
+    let mut out: [Vec<f64>; K] = std::array::from_fn(|_| Vec::with_capacity(n));
+    for u in 0..n {
+        for i in 0..K {
+            y[i] += a * (src[i][u] - y[i]);
+            out[i].push(y[i]);
+        }
+    }
+    out.into_iter().collect()
 }
 
 /// The design matrix (row-major, `k` = columns + the constant) at the samples `rows` of `cols`
@@ -855,25 +985,36 @@ fn cluster_variance(
 /// The trend of μ0 of a record with a force channel, over the motion `fit` compared, for a law
 /// with a Coulomb level (`None` otherwise: nothing to trend, or no channel to read it from).
 pub fn mu0_trend(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
+    mu0_trend_for(rec, fit.law, &fit.mu, fit.span.range())
+}
+
+/// [`mu0_trend`] of a fit of `law` whose constants are `mu` over `range`: of `mu`, only its length
+/// and which of them are zero count.
+pub(crate) fn mu0_trend_for(
+    rec: &Record,
+    law: LawSpec,
+    mu: &[f64],
+    range: std::ops::Range<usize>,
+) -> Option<Mu0Trend> {
     let TrendInputs {
         rig,
         tau,
         ydot,
         f,
         rate,
-    } = TrendInputs::of(rec, fit)?;
+    } = TrendInputs::of(rec, law)?;
     if let Some(fc) = rec.force_cutoff_hz {
         return mu0_trend_of(
             &tau,
             &ydot,
             &f,
-            &fit.mu,
-            fit.span.range(),
+            mu,
+            range,
             Some((fc, rate)),
             1.0 / rig.omega(),
         );
     }
-    mu0_trend_unstated(rec, fit, &tau, &ydot, &f, rate, Search::Fast)
+    mu0_trend_unstated(rec, mu, range, &tau, &ydot, &f, rate, Search::Fast)
 }
 
 /// [`mu0_trend`] with the grid searched exhaustively (every filter, memory and delay on every
@@ -886,7 +1027,7 @@ pub fn mu0_trend_exhaustive(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
         ydot,
         f,
         rate,
-    } = TrendInputs::of(rec, fit)?;
+    } = TrendInputs::of(rec, fit.law)?;
     if let Some(fc) = rec.force_cutoff_hz {
         let prep = Prepared::new(&tau, &ydot, &f, &fit.mu, fit.span.range())?;
         let through = butterworth_or_none(Some((fc, rate)));
@@ -896,7 +1037,16 @@ pub fn mu0_trend_exhaustive(rec: &Record, fit: &FitResult) -> Option<Mu0Trend> {
             .trend_at(&through, im, id, &f, &tau, 1.0 / rig.omega())
             .map(|(t, _)| t);
     }
-    mu0_trend_unstated(rec, fit, &tau, &ydot, &f, rate, Search::Exhaustive)
+    mu0_trend_unstated(
+        rec,
+        &fit.mu,
+        fit.span.range(),
+        &tau,
+        &ydot,
+        &f,
+        rate,
+        Search::Exhaustive,
+    )
 }
 
 /// What both searches of [`mu0_trend`] read from a record: the rig, the dimensionless time and
@@ -912,10 +1062,9 @@ struct TrendInputs {
 }
 
 impl TrendInputs {
-    fn of(rec: &Record, fit: &FitResult) -> Option<Self> {
+    fn of(rec: &Record, law: LawSpec) -> Option<Self> {
         let ft = rec.ft.as_ref()?;
-        if rec.apparatus || !fit.law.powers().contains(&0) || rec.units != crate::record::Units::Si
-        {
+        if rec.apparatus || !law.powers().contains(&0) || rec.units != crate::record::Units::Si {
             return None;
         }
         let rig = rec.rig().ok()?;
@@ -933,9 +1082,11 @@ impl TrendInputs {
 }
 
 /// The trend through the filter, of those a bench's channel may have, that fits best.
+#[allow(clippy::too_many_arguments)]
 fn mu0_trend_unstated(
     rec: &Record,
-    fit: &FitResult,
+    mu: &[f64],
+    range: std::ops::Range<usize>,
     tau: &[f64],
     ydot: &[f64],
     f: &[f64],
@@ -960,7 +1111,7 @@ fn mu0_trend_unstated(
     .into_iter()
     .filter(|fc| !fc.is_some_and(|c: f64| c >= 0.45 * rate))
     .collect();
-    let prep = Prepared::new(tau, ydot, f, &fit.mu, fit.span.range())?;
+    let prep = Prepared::new(tau, ydot, f, mu, range)?;
     let blocks = prep.blocks(search);
     // Each filter searched on its own thread ([`super::par_map`]); the best kept in the order
     // above (ties to the first).
@@ -1106,6 +1257,95 @@ mod tests {
             );
             assert!(n > 100, "{n} pairs compared");
             assert!(e < 1e-3 * SUMS_MARGIN, "rss from sums off by {e:e} of f'f");
+        }
+    }
+}
+
+#[cfg(test)]
+mod side_by_side_tests {
+    use super::*;
+
+    /// Columns of pseudo-random numbers (a fixed sequence).
+    fn columns(k: usize, n: usize) -> Vec<Vec<f64>> {
+        let mut z: u64 = 0x2545_f491_4f6c_dd1d;
+        (0..k)
+            .map(|_| {
+                (0..n)
+                    .map(|_| {
+                        z = z
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        (z >> 11) as f64 / (1u64 << 53) as f64 - 0.3
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// `X'f` as one loop a column (the form before the columns were summed side by side).
+    fn xty_by_column(s: &Sums, d: f64, rows: &[usize], start: usize, f: &[f64]) -> Vec<f64> {
+        let kk = s.cols.len();
+        let (m, phi) = Sums::split(d);
+        let mut xty = vec![0.0; kk + 1];
+        for (a, c) in s.cols.iter().enumerate() {
+            let mut acc = 0.0;
+            for &i in rows {
+                let li = i - start;
+                let x = if li <= m {
+                    c[0]
+                } else if phi == 0.0 {
+                    c[li - m]
+                } else {
+                    phi * c[li - m - 1] + (1.0 - phi) * c[li - m]
+                };
+                acc += x * f[i];
+            }
+            xty[a] += acc;
+        }
+        xty[kk] += rows.iter().map(|&i| f[i]).sum::<f64>();
+        xty
+    }
+
+    #[test]
+    fn the_side_by_side_loops_are_the_column_loops_to_the_bit() {
+        // first_order_cols, Sums::new's table and add_xty for 1 to 8 columns.
+        let n = 3000;
+        let f = columns(1, n + 40).remove(0);
+        let start = 40;
+        // Rows in runs, as the selected samples are (every third block of 50 left out).
+        let rows: Vec<usize> = (start..start + n).filter(|i| (i / 50) % 3 != 0).collect();
+        let f_sum: f64 = rows.iter().map(|&i| f[i]).sum();
+        for k in 1..=8 {
+            let cols = columns(k, n);
+            for t in [0.0, 0.05, 0.37, 1.0] {
+                let side = first_order_cols(&cols, t, 0.017);
+                for (a, c) in cols.iter().enumerate() {
+                    let one: Vec<u64> = first_order(c, t, 0.017)
+                        .iter()
+                        .map(|v| v.to_bits())
+                        .collect();
+                    let two: Vec<u64> = side[a].iter().map(|v| v.to_bits()).collect();
+                    assert_eq!(one, two, "first_order, {k} columns, t {t}");
+                }
+            }
+            for off in [0, 1, 37] {
+                let s = Sums::new(cols.clone(), off);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+                let any = Sums::table_any(&cols, off);
+                assert_eq!(
+                    bits(&s.data),
+                    bits(&any),
+                    "prefix sums, {k} columns, from {off}"
+                );
+            }
+            let s = Sums::new(cols, 0);
+            for d in [0.0, 1.0, 2.9411, 17.0, 58.8, 120.5] {
+                let mut xty = vec![0.0; k + 1];
+                s.add_xty(&mut xty, d, &rows, start, &f, f_sum);
+                let want = xty_by_column(&s, d, &rows, start, &f);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+                assert_eq!(bits(&xty), bits(&want), "X'f, {k} columns, delay {d}");
+            }
         }
     }
 }

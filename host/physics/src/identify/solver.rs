@@ -252,7 +252,7 @@ pub fn set_fit_threads(n: usize) {
 }
 
 /// Threads [`par_map`] uses on this thread.
-fn fit_threads() -> usize {
+pub(crate) fn fit_threads() -> usize {
     match INNER_THREADS.with(|c| c.get()) {
         0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
         n => n,
@@ -317,29 +317,39 @@ pub fn map_on_every_core<T: Sync, U: Send>(
 }
 
 /// `items.map(f)` in order, spread over up to [`fit_threads`] threads (scoped; the calling thread
-/// takes the first share). Each item is computed exactly as it would be serially.
+/// is one of them): each thread takes the next item as it finishes one, so items of unequal cost
+/// (the drift search's filters) keep every thread busy to the end. Each item is computed exactly
+/// as it would be serially.
 pub(crate) fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec<U> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
     let threads = fit_threads().min(items.len());
     if threads <= 1 {
         return items.iter().map(f).collect();
     }
-    let chunk = items.len().div_ceil(threads);
-    let f = &f;
-    std::thread::scope(|s| {
-        let mut parts = items.chunks(chunk);
-        let first = parts.next().unwrap_or(&[]);
-        let handles: Vec<_> = parts
-            .map(|part| s.spawn(move || part.iter().map(f).collect::<Vec<U>>()))
-            .collect();
-        let mut out: Vec<U> = first.iter().map(f).collect();
+    let next = AtomicUsize::new(0);
+    let work = || {
+        let mut mine: Vec<(usize, U)> = Vec::new();
+        loop {
+            let i = next.fetch_add(1, Ordering::Relaxed);
+            let Some(it) = items.get(i) else {
+                return mine;
+            };
+            mine.push((i, f(it)));
+        }
+    };
+    let mut all: Vec<(usize, U)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (1..threads).map(|_| s.spawn(work)).collect();
+        let mut all = work();
         for h in handles {
             match h.join() {
-                Ok(v) => out.extend(v),
+                Ok(v) => all.extend(v),
                 Err(e) => std::panic::resume_unwind(e),
             }
         }
-        out
-    })
+        all
+    });
+    all.sort_unstable_by_key(|(i, _)| *i);
+    all.into_iter().map(|(_, u)| u).collect()
 }
 
 /// One forward-difference column of a Jacobian at `p` (`res = r(p)`), step `h`; the backward

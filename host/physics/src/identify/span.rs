@@ -116,8 +116,7 @@ fn run_index(n: usize, run: usize, rev: bool, hit: impl Fn(usize) -> bool) -> Op
 /// record in which nothing leaves the noise spans the whole record (the screening refuses it).
 pub fn motion_span(tau: &[f64], y: &[f64], ydot: &[f64]) -> MotionSpan {
     let n = tau.len().min(y.len()).min(ydot.len());
-    let noise_y = noise_sigma(&y[..n]).unwrap_or(0.0);
-    let noise_ydot = noise_sigma(&ydot[..n]).unwrap_or(0.0);
+    let (noise_y, noise_ydot) = noise_of(&y[..n], &ydot[..n]);
     if n < 16 {
         return span_from(tau, y, ydot, 0, (noise_y, noise_ydot));
     }
@@ -153,11 +152,27 @@ pub fn motion_span(tau: &[f64], y: &[f64], ydot: &[f64]) -> MotionSpan {
 /// [`motion_span`] with the release at sample `start` (given, not searched).
 pub fn motion_span_from(tau: &[f64], y: &[f64], ydot: &[f64], start: usize) -> MotionSpan {
     let n = tau.len().min(y.len()).min(ydot.len());
-    let noise = (
-        noise_sigma(&y[..n]).unwrap_or(0.0),
-        noise_sigma(&ydot[..n]).unwrap_or(0.0),
-    );
-    span_from(tau, y, ydot, start, noise)
+    span_from(tau, y, ydot, start, noise_of(&y[..n], &ydot[..n]))
+}
+
+/// Samples from which the noise of y and of y' are read on two threads.
+const NOISE_PAIR_SPLIT: usize = 100_000;
+
+/// [`noise_sigma`] of y and of y' (0 when too short), on two threads for a long record when the
+/// fits on this thread may use more than one ([`super::set_fit_threads`]).
+fn noise_of(y: &[f64], ydot: &[f64]) -> (f64, f64) {
+    let of = |a: &[f64]| noise_sigma(a).unwrap_or(0.0);
+    if y.len() < NOISE_PAIR_SPLIT || super::fit_threads() < 2 {
+        return (of(y), of(ydot));
+    }
+    std::thread::scope(|s| {
+        let h = s.spawn(|| of(ydot));
+        let ny = of(y);
+        match h.join() {
+            Ok(nv) => (ny, nv),
+            Err(e) => std::panic::resume_unwind(e),
+        }
+    })
 }
 
 /// The span from `start` to where the motion sinks into the noise, given the noise of y and y'.

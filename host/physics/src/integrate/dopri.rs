@@ -207,27 +207,45 @@ fn dense_velocity(rc: &[[f64; 3]; 5], th: f64) -> f64 {
 }
 
 /// The first θ in (0, 1] where `dir · v(θ)` turns negative on a dense-output polynomial.
+///
+/// The bracket is the first of 16 sub-intervals whose end has `dir · v < 0`; then up to 60
+/// bisections, until the bracket is narrower than 1e-16. The 16 ends are evaluated together, and
+/// each bisection evaluates beside its midpoint the two the next one may take (the evaluations
+/// are independent, so they overlap in the processor): the decisions, and so the answer, are
+/// those of one evaluation at a time (the unit tests keep that form and compare, bit for bit).
+/// Measured: its share of the 40 s fit's `perf` profile went from 5.6–6.0 % to 4.9 %.
 pub(super) fn find_reversal(rc: &[[f64; 3]; 5], dir: f64) -> f64 {
     let v = |th: f64| dir * dense_velocity(rc, th);
-    // Bracket: first of 16 sub-intervals where the sign turns.
-    let n = 16;
-    let mut lo = 0.0;
-    let mut hi = 1.0;
-    for i in 1..=n {
-        let th = i as f64 / n as f64;
-        if v(th) < 0.0 {
-            hi = th;
-            lo = (i - 1) as f64 / n as f64;
-            break;
-        }
-    }
-    for _ in 0..60 {
+    const N: usize = 16;
+    let ends: [f64; N] = std::array::from_fn(|j| v((j + 1) as f64 / N as f64));
+    let (mut lo, mut hi) = match ends.iter().position(|&e| e < 0.0) {
+        Some(j) => (j as f64 / N as f64, (j + 1) as f64 / N as f64),
+        None => (0.0, 1.0),
+    };
+    let mut left = 60;
+    while left > 0 {
         let mid = 0.5 * (lo + hi);
-        if v(mid) >= 0.0 {
+        // The next midpoint when `mid` becomes `hi`, and when it becomes `lo`.
+        let (next_lo, next_hi) = (0.5 * (lo + mid), 0.5 * (mid + hi));
+        let (vm, v_lo, v_hi) = (v(mid), v(next_lo), v(next_hi));
+        let up = vm >= 0.0;
+        if up {
             lo = mid;
         } else {
             hi = mid;
         }
+        left -= 1;
+        if hi - lo < 1e-16 || left == 0 {
+            break;
+        }
+        // The next bisection: its midpoint `0.5 * (lo + hi)` is `next_hi` or `next_lo`.
+        let (mid, vm) = if up { (next_hi, v_hi) } else { (next_lo, v_lo) };
+        if vm >= 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        left -= 1;
         if hi - lo < 1e-16 {
             break;
         }
@@ -700,6 +718,83 @@ const K_POW: [[(f64, f64); 64]; 5] = [
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`find_reversal`] as it was written first: one evaluation at a time.
+    pub(super) fn find_reversal_one_at_a_time(rc: &[[f64; 3]; 5], dir: f64) -> f64 {
+        let v = |th: f64| dir * dense_velocity(rc, th);
+        let n = 16;
+        let mut lo = 0.0;
+        let mut hi = 1.0;
+        for i in 1..=n {
+            let th = i as f64 / n as f64;
+            if v(th) < 0.0 {
+                hi = th;
+                lo = (i - 1) as f64 / n as f64;
+                break;
+            }
+        }
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if v(mid) >= 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if hi - lo < 1e-16 {
+                break;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
+    /// The overlapped bisection against one evaluation at a time, bit for bit: random
+    /// polynomials (a sign change anywhere, none, several), and velocities falling through zero
+    /// at a chosen θ0 (`c·(θ0 − θ)`), near 0, anywhere, and in [0.5, 1) where the bracket
+    /// cannot narrow below 1e-16 (the doubles there are 1.1e-16 apart) and all 60 bisections
+    /// run; both directions.
+    #[test]
+    fn the_reversal_is_found_as_one_evaluation_at_a_time_finds_it() {
+        let mut u: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut next = || {
+            u ^= u << 13;
+            u ^= u >> 7;
+            u ^= u << 17;
+            (u >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let mut upper_half = 0;
+        for case in 0..200_000 {
+            let mut rc = [[0.0; 3]; 5];
+            for row in rc.iter_mut() {
+                for x in row.iter_mut() {
+                    *x = next() * 10f64.powf(3.0 * next());
+                }
+            }
+            if case % 2 == 0 {
+                let th0 = match case % 6 {
+                    0 => 0.5 * (next() + 1.0),
+                    2 => 0.75 + 0.25 * next(),
+                    _ => 1e-3 * (next() + 1.0),
+                };
+                let c = 10f64.powf(2.0 * next());
+                rc[0][1] = c * th0;
+                rc[1][1] = -c;
+                rc[2][1] = 0.0;
+                rc[3][1] = 0.0;
+                rc[4][1] = 0.0;
+                if th0 >= 0.5 {
+                    upper_half += 1;
+                }
+            }
+            for dir in [1.0, -1.0] {
+                assert_eq!(
+                    find_reversal(&rc, dir).to_bits(),
+                    find_reversal_one_at_a_time(&rc, dir).to_bits(),
+                    "case {case}, dir {dir}: {rc:?}"
+                );
+            }
+        }
+        assert!(upper_half > 40_000, "{upper_half}");
+    }
 
     #[test]
     fn the_velocity_alone_is_dense_evals() {
