@@ -10,30 +10,16 @@
 
 mod support;
 
-use support::lhs::grid;
-use tribo_explain::{explain, Conclusion, ExplainOptions};
+use support::lhs::explained;
+use tribo_explain::Conclusion;
 
 /// Grid #213: linear running-in, μ0 rising +2.55e-4/s (7 % of μ0 over the 2.2 s of motion), a
 /// 31.6 Hz rig at 0.14 N, 14.7 kS/s, no force filter, held 3.4 s, noise ×4.2. Running-in is
 /// named, alone, and its rate is within 3σ of the truth with a ± that is a measurement's.
 #[test]
 fn a_running_in_the_force_channel_shows_is_named_with_its_rate() {
-    let cases = grid(520, 1);
-    let c = cases.iter().find(|c| c.index == 213).expect("grid point");
-    let truth = c
-        .constants
-        .iter()
-        .find(|k| k.key == "dmu0_dt_per_s")
-        .expect("the grid gives the running-in rate")
-        .value;
-    let e = explain(&c.record(), &ExplainOptions::default()).unwrap();
-    println!(
-        "#213 {}: {:?} {:?} (ambiguous {:?})",
-        c.describe(),
-        e.conclusion,
-        e.missing_effects,
-        e.ambiguous
-    );
+    let (c, e) = explained(213);
+    let truth = c.truth("dmu0_dt_per_s");
     assert_eq!(
         e.missing_effects,
         vec!["running-in".to_string()],

@@ -10,39 +10,16 @@
 
 mod support;
 
-use support::lhs::{grid, Case};
-use tribo_explain::{explain, Conclusion, ExplainOptions, Explanation};
-
-fn case(i: usize) -> (Case, Explanation) {
-    let cases = grid(520, 1);
-    let c = cases
-        .iter()
-        .find(|c| c.index == i)
-        .expect("grid point")
-        .clone();
-    let e = explain(&c.record(), &ExplainOptions::default()).unwrap();
-    println!(
-        "#{i} {}: {:?} {:?} (ambiguous {:?})",
-        c.describe(),
-        e.conclusion,
-        e.missing_effects,
-        e.ambiguous
-    );
-    (c, e)
-}
+use support::lhs::explained;
+use tribo_explain::Conclusion;
 
 /// Grid #210: a softening cubic stiffness of 1.2 % (2 kS/s, a 2-pole 340 Hz filter stated). The
 /// cubic is named and k3 is within 3σ of the truth. With the Jacobian's ± alone it was
 /// −3.0168e7 ± 4.9e2 N/m³ against a truth of −3.0182e7: 28σ off.
 #[test]
 fn k3_is_within_its_standard_error_of_the_truth() {
-    let (c, e) = case(210);
-    let truth = c
-        .constants
-        .iter()
-        .find(|k| k.key == "k3_n_per_m3")
-        .expect("the grid gives k3's truth")
-        .value;
+    let (c, e) = explained(210);
+    let truth = c.truth("k3_n_per_m3");
     let step = e
         .steps
         .iter()
@@ -67,7 +44,7 @@ fn k3_is_within_its_standard_error_of_the_truth() {
 /// Profiled at its bound, the lag's memory is not told from it: no lag is named.
 #[test]
 fn a_lag_at_its_bound_is_not_named_beside_a_cubic() {
-    let (_, e) = case(331);
+    let (_, e) = explained(331);
     assert!(
         e.missing_effects.iter().any(|m| m == "cubic-stiffness"),
         "{:?}",
@@ -89,7 +66,7 @@ fn a_lag_at_its_bound_is_not_named_beside_a_cubic() {
 /// significant, and the record is not called explained by the cubic alone.
 #[test]
 fn the_search_goes_on_at_the_floor_when_the_force_level_drifts() {
-    let (_, e) = case(415);
+    let (_, e) = explained(415);
     assert!(
         e.missing_effects.iter().any(|m| m == "cubic-stiffness"),
         "{:?}",

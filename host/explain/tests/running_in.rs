@@ -7,23 +7,8 @@
 
 mod support;
 
-use support::lhs::{grid, Case};
-use tribo_explain::{explain, Conclusion, ExplainOptions, Explanation};
-
-fn case(index: usize) -> Case {
-    grid(520, 1)
-        .into_iter()
-        .find(|c| c.index == index)
-        .expect("grid point")
-}
-
-fn truth(c: &Case, key: &str) -> f64 {
-    c.constants
-        .iter()
-        .find(|k| k.key == key)
-        .unwrap_or_else(|| panic!("the grid gives {key}"))
-        .value
-}
+use support::lhs::explained;
+use tribo_explain::{Conclusion, Explanation};
 
 fn named_alone(e: &Explanation, effect: &str) {
     assert_eq!(
@@ -58,18 +43,10 @@ fn within_3_sigma(e: &Explanation, key: &str, truth: f64) -> (f64, f64) {
 /// (under a fifth of the value).
 #[test]
 fn a_running_in_that_settles_is_named_with_its_rate_and_time_constant() {
-    let c = case(237);
-    let e = explain(&c.record(), &ExplainOptions::default()).unwrap();
-    println!(
-        "{}: {:?} {:?} (ambiguous {:?})",
-        c.describe(),
-        e.conclusion,
-        e.missing_effects,
-        e.ambiguous
-    );
+    let (c, e) = explained(237);
     named_alone(&e, "running-in");
     for key in ["dmu0_dt_per_s", "running_in_tau_s"] {
-        let (v, se) = within_3_sigma(&e, key, truth(&c, key));
+        let (v, se) = within_3_sigma(&e, key, c.truth(key));
         assert!(se < 0.2 * v.abs(), "{key}: ± {se:.1e} against {v:.4e}");
     }
 }
@@ -82,15 +59,7 @@ fn a_running_in_that_settles_is_named_with_its_rate_and_time_constant() {
 /// alone, with dμ0/dT within 3σ of the truth.
 #[test]
 fn a_thermal_ramp_is_thermal_drift_alone() {
-    let c = case(115);
-    let e = explain(&c.record(), &ExplainOptions::default()).unwrap();
-    println!(
-        "{}: {:?} {:?} (ambiguous {:?})",
-        c.describe(),
-        e.conclusion,
-        e.missing_effects,
-        e.ambiguous
-    );
+    let (c, e) = explained(115);
     named_alone(&e, "thermal-drift");
-    within_3_sigma(&e, "dmu0_dT_per_c", truth(&c, "dmu0_dT_per_c"));
+    within_3_sigma(&e, "dmu0_dT_per_c", c.truth("dmu0_dT_per_c"));
 }

@@ -72,6 +72,15 @@ pub struct Case {
 }
 
 impl Case {
+    /// The truth of the effect constant `key` this record was made with.
+    pub fn truth(&self, key: &str) -> f64 {
+        self.constants
+            .iter()
+            .find(|k| k.key == key)
+            .unwrap_or_else(|| panic!("the grid gives {key}'s truth"))
+            .value
+    }
+
     pub fn record(&self) -> Record {
         generate(&self.friction, &self.bench).0
     }
@@ -431,6 +440,25 @@ fn add_effect(
 /// (every effect alone and every pair at least once each), from `seed`.
 pub fn grid(records: usize, seed: u64) -> Vec<Case> {
     grid_with(records, seed, 25.0)
+}
+
+/// Point `index` of `grid(520, 1)` (the grid the explain tests and the README quote), explained
+/// with the default options, its answer printed.
+pub fn explained(index: usize) -> (Case, tribo_explain::Explanation) {
+    let c = grid(520, 1)
+        .into_iter()
+        .find(|c| c.index == index)
+        .expect("grid point");
+    let e = tribo_explain::explain(&c.record(), &tribo_explain::ExplainOptions::default())
+        .expect("explain runs on a grid record");
+    println!(
+        "#{index} {}: {:?} {:?} (ambiguous {:?})",
+        c.describe(),
+        e.conclusion,
+        e.missing_effects,
+        e.ambiguous
+    );
+    (c, e)
 }
 
 /// [`grid`] with records of at most `max_s` (the hold and the rest at most a fifth of it each).

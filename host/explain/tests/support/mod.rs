@@ -8,7 +8,7 @@
 //! velocity unit of the dimensionless law) either at once or with a memory time T
 //! (`T dF/dt = F_ss − F`); μ0 may depend on the plane temperature `T(t) = T0 + ΔT (1 − e^{−t/τ_h})`
 //! and may differ between the two sliding directions, and may drift in time (running-in,
-//! `μ0 + r t`).
+//! `μ0 + r t`, or settling first order towards a new level).
 #![allow(dead_code)]
 
 pub mod bench;
