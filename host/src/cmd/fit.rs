@@ -137,7 +137,6 @@ pub fn run(a: Args) -> Result<()> {
 /// soon as all before them are done. Every record is fitted whatever happens to the others; the
 /// command ends with the first failure's status (in the order given), after a count on stderr.
 fn run_many(a: &Args) -> Result<()> {
-    use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
     if a.plot.is_some() {
         anyhow::bail!(
@@ -150,9 +149,6 @@ fn run_many(a: &Args) -> Result<()> {
         );
     }
     let n = a.record.len();
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |c| c.get())
-        .min(n);
     let bar = indicatif::ProgressBar::new(n as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -160,63 +156,57 @@ fn run_many(a: &Args) -> Result<()> {
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let next = AtomicUsize::new(0);
     // Outputs waiting for those before them, and the first not yet printed.
     let done: Mutex<(Vec<Option<Fitted1>>, usize)> =
         Mutex::new(((0..n).map(|_| None).collect(), 0));
     let failures: Mutex<Vec<(usize, anyhow::Error)>> = Mutex::new(Vec::new());
     let print_error: Mutex<Option<std::io::Error>> = Mutex::new(None);
-    std::thread::scope(|s| {
-        for _ in 0..workers {
-            s.spawn(|| {
-                tribo_physics::identify::set_fit_threads(1);
-                loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    if i >= n {
-                        break;
-                    }
-                    let path = &a.record[i];
-                    let mut buf = String::new();
-                    let r = run_inner(a, path, &mut buf).err();
-                    if a.json && buf.is_empty() {
-                        if let Some(e) = &r {
-                            buf = super::exit::error_json(path, e).to_string();
-                        }
-                    }
-                    if !buf.is_empty() && !buf.ends_with('\n') {
-                        buf.push('\n');
-                    }
-                    bar.inc(1);
-                    let mut d = done.lock().unwrap_or_else(|p| p.into_inner());
-                    d.0[i] = Some((buf, r));
-                    // Print every output whose predecessors are all printed.
-                    while d.1 < n {
-                        let k = d.1;
-                        let Some((text, err)) = d.0[k].take() else {
-                            break;
-                        };
-                        d.1 += 1;
-                        let sep = if !a.json && k > 0 { "\n" } else { "" };
-                        if let Err(e) = bar.suspend(|| crate::out::text(&format!("{sep}{text}"))) {
-                            let mut pe = print_error.lock().unwrap_or_else(|p| p.into_inner());
-                            if pe.is_none() {
-                                *pe = e.downcast::<std::io::Error>().ok();
-                            }
-                        }
-                        if let Some(e) = err {
-                            if !a.json {
-                                bar.suspend(|| crate::errln!("{}: {e:#}", a.record[k].display()));
-                            }
-                            failures
-                                .lock()
-                                .unwrap_or_else(|p| p.into_inner())
-                                .push((k, e));
-                        }
+    let order: Vec<usize> = (0..n).collect();
+    // Each record is fitted on one worker (one per core, each taking the next record as it
+    // finishes one); its output is printed as soon as every record before it is printed.
+    tribo_physics::identify::map_on_every_core(
+        &order,
+        |&i| {
+            let path = &a.record[i];
+            let mut buf = String::new();
+            let r = run_inner(a, path, &mut buf).err();
+            if a.json && buf.is_empty() {
+                if let Some(e) = &r {
+                    buf = super::exit::error_json(path, e).to_string();
+                }
+            }
+            if !buf.is_empty() && !buf.ends_with('\n') {
+                buf.push('\n');
+            }
+            let mut d = done.lock().unwrap_or_else(|p| p.into_inner());
+            d.0[i] = Some((buf, r));
+            // Print every output whose predecessors are all printed.
+            while d.1 < n {
+                let k = d.1;
+                let Some((text, err)) = d.0[k].take() else {
+                    break;
+                };
+                d.1 += 1;
+                let sep = if !a.json && k > 0 { "\n" } else { "" };
+                if let Err(e) = bar.suspend(|| crate::out::text(&format!("{sep}{text}"))) {
+                    let mut pe = print_error.lock().unwrap_or_else(|p| p.into_inner());
+                    if pe.is_none() {
+                        *pe = e.downcast::<std::io::Error>().ok();
                     }
                 }
-            });
-        }
-    });
+                if let Some(e) = err {
+                    if !a.json {
+                        bar.suspend(|| crate::errln!("{}: {e:#}", a.record[k].display()));
+                    }
+                    failures
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .push((k, e));
+                }
+            }
+        },
+        || bar.inc(1),
+    );
     bar.finish_and_clear();
     if let Some(e) = print_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
         return Err(anyhow::Error::new(e).context("cannot write to standard output"));

@@ -260,69 +260,58 @@ pub(crate) fn fit_threads() -> usize {
 }
 
 /// `items.map(f)` on every core, for many independent fits (records, stored runs): workers take
-/// the next item as they finish one, each fitting on its own thread ([`set_fit_threads`]`(1)`);
-/// the results in input order. `done` is called (on the worker) after each item, e.g. to move a
-/// progress bar. Each result is what `f` gives serially.
+/// the next item as they finish one, each fitting on its own thread ([`set_fit_threads`]`(1)`
+/// while it runs `f`); the results in input order. `done` is called (on the worker) after each
+/// item, e.g. to move a progress bar. Each result is what `f` gives serially.
 pub fn map_on_every_core<T: Sync, U: Send>(
     items: &[T],
     f: impl Fn(&T) -> U + Sync,
     done: impl Fn() + Sync,
 ) -> Vec<U> {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    use std::sync::Mutex;
-    let n = items.len();
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |c| c.get())
-        .min(n);
-    if workers <= 1 {
-        return items
-            .iter()
-            .map(|it| {
-                let u = f(it);
-                done();
-                u
-            })
-            .collect();
-    }
-    let next = AtomicUsize::new(0);
-    let out: Mutex<Vec<Option<U>>> = Mutex::new((0..n).map(|_| None).collect());
-    std::thread::scope(|s| {
-        let handles: Vec<_> = (0..workers)
-            .map(|_| {
-                s.spawn(|| {
-                    set_fit_threads(1);
-                    loop {
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= n {
-                            break;
-                        }
-                        let u = f(&items[i]);
-                        out.lock().unwrap_or_else(|p| p.into_inner())[i] = Some(u);
-                        done();
-                    }
-                })
-            })
-            .collect();
-        for h in handles {
-            if let Err(e) = h.join() {
-                std::panic::resume_unwind(e);
-            }
-        }
-    });
-    out.into_inner()
-        .unwrap_or_else(|p| p.into_inner())
-        .into_iter()
-        .flatten()
-        .collect()
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    take_in_turn(items, cores, |it| {
+        let u = {
+            let _one = OneFitThread::new();
+            f(it)
+        };
+        done();
+        u
+    })
 }
 
-/// `items.map(f)` in order, spread over up to [`fit_threads`] threads (scoped; the calling thread
-/// is one of them): each thread takes the next item as it finishes one, so items of unequal cost
-/// (the drift search's filters) keep every thread busy to the end. Each item is computed exactly
-/// as it would be serially.
+/// [`set_fit_threads`]`(1)` on this thread while it lives; the setting before it back when it
+/// drops (also when `f` panics, so a caller that catches the panic keeps its own setting).
+struct OneFitThread(usize);
+
+impl OneFitThread {
+    fn new() -> Self {
+        OneFitThread(INNER_THREADS.with(|c| c.replace(1)))
+    }
+}
+
+impl Drop for OneFitThread {
+    fn drop(&mut self) {
+        INNER_THREADS.with(|c| c.set(self.0));
+    }
+}
+
+/// `items.map(f)` in order, spread over up to [`fit_threads`] threads: items of unequal cost (the
+/// drift search's filters, the Jacobian's columns) keep every thread busy to the end. Each item
+/// is computed exactly as it would be serially.
 pub(crate) fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec<U> {
+    take_in_turn(items, fit_threads(), f)
+}
+
+/// The one runner behind [`map_on_every_core`] and [`par_map`]: `items.map(f)` in input order on
+/// up to `threads` scoped threads, the calling thread one of them, each taking the next item as it
+/// finishes one. A panic in `f` is passed on to the caller.
+fn take_in_turn<T: Sync, U: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> U + Sync,
+) -> Vec<U> {
     use std::sync::atomic::{AtomicUsize, Ordering};
-    let threads = fit_threads().min(items.len());
+    let threads = threads.min(items.len());
     if threads <= 1 {
         return items.iter().map(f).collect();
     }
