@@ -435,7 +435,9 @@ pub fn explain_with_progress(
 
 /// The force channel's trend of μ0 over the motion against the model `m`'s law (`tribo fit`'s
 /// drift check, on the same samples, through `m`'s low-pass: the fitted one with its order, or
-/// the stated one). `None` without a force channel.
+/// the stated one). A drift already in `m` (thermal drift, running-in: [`model::Mu0Drift`]) is
+/// taken out of the force channel first, through the same low-pass, so the trend is the one that
+/// remains beside it. `None` without a force channel.
 pub(crate) fn mu0_trend_of(
     data: &Prepared,
     m: &FittedModel,
@@ -449,10 +451,23 @@ pub(crate) fn mu0_trend_of(
         (None, Some(fc)) => tribo_physics::sensor::butterworth2(c, fc, data.rate_hz),
         (None, None) => c.to_vec(),
     };
+    // The model's drift as the force channel reads it (the contact's force is μ sgn y').
+    let remaining = model::Mu0Drift::of(data, &m.spec, &m.p).map(|drift| {
+        let level: Vec<f64> = drift
+            .at_samples(data)
+            .iter()
+            .zip(&data.ydot)
+            .map(|(d, v)| d * v.signum())
+            .collect();
+        f.iter()
+            .zip(through(&level))
+            .map(|(f, d)| f - d)
+            .collect::<Vec<f64>>()
+    });
     tribo_physics::identify::mu0_trend_through(
         &data.tau,
         &data.ydot,
-        f,
+        remaining.as_ref().unwrap_or(f),
         &mu,
         0..data.tau.len(),
         &through,

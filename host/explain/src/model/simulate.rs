@@ -28,6 +28,66 @@ pub struct Simulated {
 /// temperature averaged).
 pub const THERMAL_SEGMENT: f64 = 0.5;
 
+/// The Coulomb level's drift of a model in time (thermal drift, running-in), held constant over
+/// segments of [`THERMAL_SEGMENT`] of τ on the simulator's clock: what [`simulate_spec`] adds to
+/// μ0, and what the force channel's trend of μ0 leaves out of the level it tests for a drift
+/// (`crate::mu0_trend_of`, the trend that remains beside the model's).
+#[derive(Debug, Clone, Copy)]
+pub struct Mu0Drift<'a> {
+    /// dμ0/dT and the smoothed temperature of each segment ([`Prepared::temp_smooth`]).
+    thermal: Option<(f64, &'a [f64])>,
+    /// Running-in's Δ and shape `c` ([`running_in_shape`]).
+    running: Option<(f64, f64)>,
+    /// The end of the motion (τ) running-in's shape is scaled to.
+    span_end: f64,
+}
+
+impl<'a> Mu0Drift<'a> {
+    /// The drift of `spec`/`p` on `data`; `None` if the model has none.
+    pub fn of(data: &'a Prepared, spec: &Spec, p: &[f64]) -> Option<Mu0Drift<'a>> {
+        let thermal = match (
+            spec.effect_params(Effect::ThermalDrift, p),
+            data.temp_smooth.as_deref(),
+        ) {
+            (Some(g), Some(tseg)) if !tseg.is_empty() => Some((g[0], tseg)),
+            _ => None,
+        };
+        let running = spec
+            .effect_params(Effect::RunningIn, p)
+            .map(|d| (d[0], d[1]));
+        let span = data.tau.last().copied().unwrap_or(0.0);
+        (thermal.is_some() || running.is_some()).then_some(Mu0Drift {
+            thermal,
+            running,
+            span_end: span.max(THERMAL_SEGMENT),
+        })
+    }
+
+    /// The change of μ0 from the release over segment `k` (τ in `(k, k + 1] × THERMAL_SEGMENT`).
+    pub fn at_segment(&self, k: usize) -> f64 {
+        let th = self.thermal.map_or(0.0, |(gamma, tseg)| {
+            gamma * (tseg[k.min(tseg.len() - 1)] - tseg[0])
+        });
+        let run = self.running.map_or(0.0, |(d, c)| {
+            let x = ((k as f64 + 0.5) * THERMAL_SEGMENT).min(self.span_end) / self.span_end;
+            d * running_in_shape(c, x)
+        });
+        th + run
+    }
+
+    /// The change of μ0 from the release at every sample of `data` (sample `i` is at
+    /// `τ_i + release_shift` on the simulator's clock, in the segment [`simulate_spec`] holds it).
+    pub fn at_samples(&self, data: &Prepared) -> Vec<f64> {
+        data.tau
+            .iter()
+            .map(|&t| {
+                let t = (t + data.release_shift).max(0.0) / THERMAL_SEGMENT;
+                self.at_segment((t.ceil() as usize).saturating_sub(1))
+            })
+            .collect()
+    }
+}
+
 /// Integration steps allowed per radian of τ at amplitudes up to 2.5 (proportionally more above;
 /// a well-behaved law needs about ten at rtol 1e-8);
 /// beyond, the candidate is rejected as too stiff.
@@ -71,20 +131,10 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
     );
     // A Coulomb level that moves during the motion (thermal drift, running-in) is held constant
     // over segments of THERMAL_SEGMENT of τ.
-    let thermal = match (
-        spec.effect_params(Effect::ThermalDrift, p),
-        data.temp_smooth.as_deref(),
-    ) {
-        (Some(g), Some(tseg)) if !tseg.is_empty() => Some((g[0], tseg)),
-        _ => None,
-    };
-    let running = spec
-        .effect_params(Effect::RunningIn, p)
-        .map(|d| (d[0], d[1]));
-    let span_end = span.max(THERMAL_SEGMENT);
+    let drift = Mu0Drift::of(data, spec, p);
     let mut reversals: Vec<f64> = Vec::new();
-    let (y, ydot, f) = match (thermal, running) {
-        (None, None) => {
+    let (y, ydot, f) = match drift {
+        None => {
             let model = model_at(0.0);
             model.validate()?;
             let mut sim = Simulator::new(model, y0, v0, data.method);
@@ -104,17 +154,8 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
             reversals.extend(sim.reversals().iter().map(|r| r.0));
             (y, yd, f)
         }
-        (thermal, running) => {
-            let dmu = |k: usize| {
-                let th = thermal.map_or(0.0, |(gamma, tseg)| {
-                    gamma * (tseg[k.min(tseg.len() - 1)] - tseg[0])
-                });
-                let run = running.map_or(0.0, |(d, c)| {
-                    let x = ((k as f64 + 0.5) * THERMAL_SEGMENT).min(span_end) / span_end;
-                    d * running_in_shape(c, x)
-                });
-                th + run
-            };
+        Some(drift) => {
+            let dmu = |k: usize| drift.at_segment(k);
             let model = model_at(dmu(0));
             model.validate()?;
             let mut sim = Simulator::new(model, y0, v0, data.method);
