@@ -541,7 +541,9 @@ impl Explanation {
                     "{named}unresolved: the force channel stands {:.2e} N off in both sliding \
                      directions: a direction asymmetry of μ0 ((forward − backward) / μ0 = \
                      {:+.1} %) or a zero offset of the force channel; the record does not state \
-                     the channel's zero (`# force_zero_n=…`), so neither is named",
+                     the channel's zero (`# force_zero_n=…`) and has no hold to measure it over \
+                     (the rest after the stop does not tell them apart), so neither is named: \
+                     state the zero, or record a hold before the release",
                     c.and_then(|c| c.force_zero_n).unwrap_or(f64::NAN),
                     100.0
                         * c.and_then(|c| c.force_zero_as_asymmetry)

@@ -20,7 +20,10 @@
 //!   together are *exactly* a direction asymmetry for every law of the vocabulary: `(c, z) =
 //!   (zero_x − δ, zero_f + g δ)`. With the force zero stated by the record (the rig zeroes the
 //!   channel unloaded) the asymmetry is measured; without it, a constant force offset is reported
-//!   as "a force zero offset or a direction asymmetry", never named as either.
+//!   as "a force zero offset or a direction asymmetry", never named as either. The rest after the
+//!   final stop adds no equation: there the force channel reads the spring, whose `F + y` is
+//!   `zero_f + zero_x` = `c + z` again (`tests/asymmetry_zero.rs`: a grid record with an
+//!   asymmetry and no hold is its symmetric twin with the two offsets, to one quantisation step).
 //!
 //! All three enter the residuals linearly or nearly so, and are fitted in closed form (the force)
 //! and by three Gauss–Newton steps (the centre) for every evaluation of a model: no simulation is
