@@ -494,6 +494,24 @@ fn report(cases: &[Case], results: &[(Outcome, Score)], vocab: &[&str], wall: f6
         let cells: Vec<String> = by.iter().map(|(k, v)| format!("{k}: {v}")).collect();
         println!("  {e} alone ({}): {}", rs.len(), cells.join(", "));
     }
+    // Effects the record cannot identify (a direction asymmetry without a hold).
+    let unident: Vec<&(Outcome, Score)> = results
+        .iter()
+        .filter(|(_, s)| !s.unidentifiable.is_empty())
+        .collect();
+    let flagged = unident
+        .iter()
+        .filter(|(o, s)| {
+            o.force_offset_flagged && !o.named.iter().any(|n| s.unidentifiable.contains(n))
+        })
+        .count();
+    println!(
+        "records with an effect the record cannot identify (direction asymmetry without a hold: \
+         its symmetric twin with two zero offsets, tests/asymmetry_zero.rs): {}; of them, the \
+         offset flagged and the effect not named: {}",
+        unident.len(),
+        pct(flagged, unident.len())
+    );
     let errors: Vec<&str> = results
         .iter()
         .filter(|(_, s)| s.error)

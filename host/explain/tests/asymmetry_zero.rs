@@ -218,3 +218,37 @@ fn an_asymmetry_is_tried_where_the_force_level_drifts_at_the_floor() {
         (v - truth).abs() / se
     );
 }
+
+/// The grid's scoring of an asymmetry the record cannot identify (`support::lhs::unidentifiable`):
+/// on a no-hold record (#126) the right answer names nothing for the asymmetry and flags the
+/// offset; naming it is a false name, and saying nothing about the offset is wrong. On a held
+/// record (#439) the asymmetry stays an expected name.
+#[test]
+fn the_grid_scores_a_no_hold_asymmetry_as_the_offset_flagged() {
+    use support::lhs::{score, unidentifiable, vocabulary, Outcome};
+    let vocab = vocabulary();
+    let answer = |named: &[&str], flagged: bool| Outcome {
+        named: named.iter().map(|s| s.to_string()).collect(),
+        conclusion: "ambiguous".into(),
+        estimates: vec![],
+        force_offset_flagged: flagged,
+        seconds: 0.0,
+    };
+    let c = case(126);
+    assert!(c.bench.hold_s <= 0.0 && unidentifiable(&c, "direction-asymmetry"));
+    let s = score(&c, &answer(&[], true), &vocab);
+    assert!(s.right && s.expected.is_empty(), "{s:?}");
+    assert_eq!(s.unidentifiable, vec!["direction-asymmetry".to_string()]);
+    assert!(!score(&c, &answer(&[], false), &vocab).right);
+    let guessed = score(&c, &answer(&["direction-asymmetry"], true), &vocab);
+    assert!(!guessed.right && guessed.false_names == vec!["direction-asymmetry".to_string()]);
+    // The real answer on #126 is scored right.
+    let real = support::lhs::run(&c);
+    assert!(real.force_offset_flagged, "{real:?}");
+    assert!(score(&c, &real, &vocab).right, "{real:?}");
+
+    let h = case(439);
+    assert!(h.bench.hold_s > 0.0 && !unidentifiable(&h, "direction-asymmetry"));
+    let s = score(&h, &answer(&["sensor-lag"], true), &vocab);
+    assert!(!s.right && s.expected.contains(&"direction-asymmetry".to_string()));
+}
