@@ -435,8 +435,9 @@ pub fn explain_with_progress(
 
 /// The force channel's trend of μ0 over the motion against the model `m`'s law (`tribo fit`'s
 /// drift check, on the same samples, through `m`'s low-pass: the fitted one with its order, or
-/// the stated one). A drift already in `m` (thermal drift, running-in: [`model::Mu0Drift`]) is
-/// taken out of the force channel first, through the same low-pass, so the trend is the one that
+/// the stated one; a fitted one is profiled beside none and the bench's 2-pole cut-offs, as `tribo
+/// fit` does for a record that does not state it). A drift already in `m` (thermal drift,
+/// running-in: [`model::Mu0Drift`]) is taken out of the force channel first, through the same low-pass, so the trend is the one that
 /// remains beside it. `None` without a force channel.
 pub(crate) fn mu0_trend_of(
     data: &Prepared,
@@ -464,13 +465,28 @@ pub(crate) fn mu0_trend_of(
             .map(|(f, d)| f - d)
             .collect::<Vec<f64>>()
     });
-    tribo_physics::identify::mu0_trend_through(
+    let f = remaining.as_ref().unwrap_or(f);
+    if data.force_cutoff_known {
+        return tribo_physics::identify::mu0_trend_through(
+            &data.tau,
+            &data.ydot,
+            f,
+            &mu,
+            0..data.tau.len(),
+            &through,
+            1.0 / data.rig.omega(),
+        );
+    }
+    // A low-pass the record does not state is, for the trend, one candidate beside none and the
+    // bench's: the one `tribo fit`'s drift check profiles, so the two read the same trend.
+    tribo_physics::identify::mu0_trend_profiled(
         &data.tau,
         &data.ydot,
-        remaining.as_ref().unwrap_or(f),
+        f,
         &mu,
         0..data.tau.len(),
-        &through,
+        data.rate_hz,
+        fitted.is_some().then_some(&through),
         1.0 / data.rig.omega(),
     )
 }

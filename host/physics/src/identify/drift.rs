@@ -1094,43 +1094,90 @@ fn mu0_trend_unstated(
     search: Search,
 ) -> Option<Mu0Trend> {
     let rig = rec.rig().ok()?;
-    // A filter the record does not state is profiled, never guessed: none, or a 2-pole low-pass
-    // anywhere in the range a bench's charge amplifier has (the delay and first-order memory
-    // grids inside already stand for a 1-pole one). Without it, a `tribo sim` record with its
-    // 300 Hz line removed read as a −4.4 % drift at 9.5σ.
-    let cutoffs: Vec<Option<f64>> = [
-        None,
-        Some(100.0),
-        Some(150.0),
-        Some(200.0),
-        Some(300.0),
-        Some(450.0),
-        Some(700.0),
-        Some(1000.0),
-    ]
-    .into_iter()
-    .filter(|fc| !fc.is_some_and(|c: f64| c >= 0.45 * rate))
-    .collect();
     let prep = Prepared::new(tau, ydot, f, mu, range)?;
-    let blocks = prep.blocks(search);
-    // Each filter searched on its own thread ([`super::par_map`]); the best kept in the order
-    // above (ties to the first).
-    let found = super::par_map(&cutoffs, |fc| {
-        let through = butterworth_or_none(fc.map(|fc| (fc, rate)));
-        prep.search(&through, &blocks, f, search)
-    });
-    let mut best: Option<(f64, usize, usize, Option<f64>)> = None;
-    for (fc, r) in cutoffs.iter().zip(found) {
-        if let Some((rss, im, id)) = r {
-            if best.is_none_or(|b| rss < b.0) {
-                best = Some((rss, im, id, *fc));
+    prep.trend_unstated(f, tau, rate, None, search, 1.0 / rig.omega())
+}
+
+/// A force channel's low-pass as a function of a regressor (every sample of the span).
+pub type LowPass<'a> = dyn Fn(&[f64]) -> Vec<f64> + Sync + 'a;
+
+/// [`mu0_trend_of`] for a force channel whose low-pass the record does not state: the trend
+/// through whichever fits the force best (the smallest residual sum of squares of the
+/// regression) of none, a bench's 2-pole low-pass at 100–1000 Hz (below 0.45 of `rate_hz`) and
+/// `fitted`, a low-pass estimated elsewhere (e.g. `tribo explain`'s, fitted with its model).
+/// A filter fitted on a model is a candidate, not the answer: on a viscous-dominated record
+/// without a filter (grid #433 of `explain_lhs`, μ0 0.0016, μ1 0.0039) explain's model fitted
+/// 577 Hz, and the regressors through it read μ0 falling by 108 ± 6.6 % (16σ) where the
+/// record's own regression, through none, reads −13 ± 12 %.
+#[allow(clippy::too_many_arguments)]
+pub fn mu0_trend_profiled(
+    tau: &[f64],
+    ydot: &[f64],
+    f: &[f64],
+    mu: &[f64],
+    range: std::ops::Range<usize>,
+    rate_hz: f64,
+    fitted: Option<&LowPass<'_>>,
+    time_per_tau: f64,
+) -> Option<Mu0Trend> {
+    let prep = Prepared::new(tau, ydot, f, mu, range)?;
+    prep.trend_unstated(f, tau, rate_hz, fitted, Search::Fast, time_per_tau)
+}
+
+impl Prepared {
+    /// The trend through the best-fitting filter of none, the bench's 2-pole cut-offs and
+    /// `fitted` (ties to the first in that order).
+    fn trend_unstated(
+        &self,
+        f: &[f64],
+        tau: &[f64],
+        rate: f64,
+        fitted: Option<&LowPass<'_>>,
+        search: Search,
+        time_per_tau: f64,
+    ) -> Option<Mu0Trend> {
+        // A filter the record does not state is profiled, never guessed: none, or a 2-pole
+        // low-pass anywhere in the range a bench's charge amplifier has (the delay and
+        // first-order memory grids inside already stand for a 1-pole one). Without it, a `tribo
+        // sim` record with its 300 Hz line removed read as a −4.4 % drift at 9.5σ.
+        let cutoffs: Vec<Option<f64>> = [
+            None,
+            Some(100.0),
+            Some(150.0),
+            Some(200.0),
+            Some(300.0),
+            Some(450.0),
+            Some(700.0),
+            Some(1000.0),
+        ]
+        .into_iter()
+        .filter(|fc| !fc.is_some_and(|c: f64| c >= 0.45 * rate))
+        .collect();
+        let mut candidates: Vec<Box<LowPass<'_>>> = cutoffs
+            .iter()
+            .map(|fc| Box::new(butterworth_or_none(fc.map(|fc| (fc, rate)))) as Box<LowPass<'_>>)
+            .collect();
+        if let Some(fit) = fitted {
+            candidates.push(Box::new(fit));
+        }
+        let blocks = self.blocks(search);
+        // Each filter searched on its own thread ([`super::par_map`]); the best kept in the order
+        // above (ties to the first).
+        let found = super::par_map(&candidates, |through| {
+            self.search(through.as_ref(), &blocks, f, search)
+        });
+        let mut best: Option<(f64, usize, usize, usize)> = None;
+        for (c, r) in found.into_iter().enumerate() {
+            if let Some((rss, im, id)) = r {
+                if best.is_none_or(|b| rss < b.0) {
+                    best = Some((rss, im, id, c));
+                }
             }
         }
+        let (_, im, id, c) = best?;
+        self.trend_at(candidates[c].as_ref(), im, id, f, tau, time_per_tau)
+            .map(|(t, _)| t)
     }
-    let (_, im, id, fc) = best?;
-    let through = butterworth_or_none(fc.map(|fc| (fc, rate)));
-    prep.trend_at(&through, im, id, f, tau, 1.0 / rig.omega())
-        .map(|(t, _)| t)
 }
 
 /// Inverse of a small symmetric positive definite matrix (Gauss–Jordan with partial pivoting).
@@ -1258,6 +1305,92 @@ mod tests {
             assert!(n > 100, "{n} pairs compared");
             assert!(e < 1e-3 * SUMS_MARGIN, "rss from sums off by {e:e} of f'f");
         }
+    }
+}
+
+#[cfg(test)]
+mod fitted_filter_tests {
+    use super::*;
+    use crate::integrate::Method;
+    use crate::sensor::{generate, RecordSpec, SensorModel};
+    use crate::{FrictionLaw, Model, Rig};
+
+    /// At the edge of the contacts a bench shows, a light viscous-dominated one (μ0 0.0016 beside
+    /// μ1 0.0039, 0.053 N, grid #433's) whose force channel has no filter: its regressors through
+    /// a 2-pole low-pass fitted elsewhere (577 Hz, what `tribo explain` fitted on #433) read μ0
+    /// falling by most of itself at many σ, which no drift did. The profiled trend keeps the
+    /// filter that fits the force best (none), reads no drift, and is `tribo fit`'s own.
+    #[test]
+    fn a_fitted_filter_the_channel_does_not_have_is_no_drift() {
+        let rig = Rig {
+            mass_kg: 0.0325,
+            stiffness_n_per_m: 1404.0,
+            load_n: 0.053,
+        };
+        let rate = 7_700.0;
+        let spec = RecordSpec {
+            rig,
+            x0_m: 772e-6,
+            v0_m_s: 0.0,
+            duration_s: 6.0,
+            rate_hz: rate,
+        };
+        let law = FrictionLaw::quadratic(0.0016, 0.0039, 0.0);
+        let sensor = SensorModel {
+            force_cutoff_hz: None,
+            seed: 433,
+            ..SensorModel::default()
+        };
+        let rec = generate(&spec, &Model::new(law), Method::default(), Some(&sensor)).unwrap();
+        assert_eq!(rec.force_cutoff_hz, None);
+        let r = crate::identify::fit(&rec, LawSpec::CoulombViscous, &Default::default()).unwrap();
+        let (tau, _, ydot) = rec.dimensionless().unwrap();
+        let f: Vec<f64> = rec
+            .ft
+            .as_ref()
+            .unwrap()
+            .iter()
+            .map(|v| v / rig.load_n)
+            .collect();
+        let fitted = |c: &[f64]| crate::sensor::butterworth2(c, 577.0, rate);
+        let pct = |t: &Mu0Trend| {
+            format!(
+                "{:+.1} ± {:.1} % ({:.1}σ)",
+                100.0 * t.relative_change,
+                100.0 * t.relative_change_se,
+                t.z
+            )
+        };
+        let per_tau = 1.0 / rig.omega();
+        let forced =
+            mu0_trend_through(&tau, &ydot, &f, &r.mu, r.span.range(), &fitted, per_tau).unwrap();
+        let profiled = mu0_trend_profiled(
+            &tau,
+            &ydot,
+            &f,
+            &r.mu,
+            r.span.range(),
+            rate,
+            Some(&fitted),
+            per_tau,
+        )
+        .unwrap();
+        let own = r.mu0_trend.clone().unwrap();
+        eprintln!(
+            "mu {:?}: through 577 Hz {}, profiled {}, tribo fit's {}",
+            r.mu,
+            pct(&forced),
+            pct(&profiled),
+            pct(&own)
+        );
+        // The edge: the filter the channel does not have reads as a drift.
+        assert!(forced.significant, "through 577 Hz: {}", pct(&forced));
+        assert!(
+            !profiled.significant && profiled.z < DRIFT_Z,
+            "profiled: {}",
+            pct(&profiled)
+        );
+        assert_eq!(profiled, own, "the profiled trend is tribo fit's");
     }
 }
 
