@@ -437,8 +437,8 @@ pub fn explain_with_progress(
 /// drift check, on the same samples, through `m`'s low-pass: the fitted one with its order, or
 /// the stated one; a fitted one is profiled beside none and the bench's 2-pole cut-offs, as `tribo
 /// fit` does for a record that does not state it). A drift already in `m` (thermal drift,
-/// running-in: [`model::Mu0Drift`]) is taken out of the force channel first, through the same low-pass, so the trend is the one that
-/// remains beside it. `None` without a force channel.
+/// running-in: [`model::Mu0Drift`]) is taken out of the force channel first, through the same
+/// low-pass, so the trend is the one that remains beside it. `None` without a force channel.
 pub(crate) fn mu0_trend_of(
     data: &Prepared,
     m: &FittedModel,

@@ -23,7 +23,7 @@
 mod support;
 
 use support::bench::{generate, Filter};
-use support::lhs::{explained, grid, Case};
+use support::lhs::{assert_within_3_sigma, explained, grid, Case};
 use tribo_explain::{explain, Conclusion, ExplainOptions, FORCE_ZERO_OFFSET};
 use tribo_physics::record::Record;
 
@@ -160,13 +160,8 @@ fn asymmetry_named_beside(index: usize, other: &str) -> tribo_explain::Explanati
         .find(|s| s.effect == "direction-asymmetry")
         .expect("the asymmetry's step");
     let (v, se) = (step.params[key], step.params_se[key]);
-    println!("{key} = {v:.4e} ± {se:.1e} (truth {truth:.4e})");
-    assert!(se.is_finite() && se > 0.0 && se < 0.5 * v.abs(), "± {se}");
-    assert!(
-        (v - truth).abs() <= 3.0 * se,
-        "{:.1}σ",
-        (v - truth).abs() / se
-    );
+    assert_within_3_sigma(key, v, se, truth);
+    assert!(se < 0.5 * v.abs(), "± {se} against {v:.4e}");
     e
 }
 

@@ -7,7 +7,7 @@
 
 mod support;
 
-use support::lhs::explained;
+use support::lhs::{assert_within_3_sigma, explained};
 use tribo_explain::{Conclusion, Explanation};
 
 fn named_alone(e: &Explanation, effect: &str) {
@@ -25,13 +25,7 @@ fn named_alone(e: &Explanation, effect: &str) {
 fn within_3_sigma(e: &Explanation, key: &str, truth: f64) -> (f64, f64) {
     let step = &e.steps[0];
     let (v, se) = (step.params[key], step.params_se[key]);
-    println!("{key} = {v:.4e} ± {se:.1e} (truth {truth:.4e})");
-    assert!(se.is_finite() && se > 0.0, "{key}: ± {se}");
-    assert!(
-        (v - truth).abs() <= 3.0 * se,
-        "{key} = {v:.4e} ± {se:.1e} is {:.1}σ from the truth {truth:.4e}",
-        (v - truth).abs() / se
-    );
+    assert_within_3_sigma(key, v, se, truth);
     (v, se)
 }
 

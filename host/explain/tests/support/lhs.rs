@@ -442,6 +442,18 @@ pub fn grid(records: usize, seed: u64) -> Vec<Case> {
     grid_with(records, seed, 25.0)
 }
 
+/// Asserts that a fitted constant `key` = `v` ± `se` has a finite, positive ± and holds `truth`
+/// within 3σ (printing it either way).
+pub fn assert_within_3_sigma(key: &str, v: f64, se: f64, truth: f64) {
+    println!("{key} = {v:.4e} ± {se:.1e} (truth {truth:.4e})");
+    assert!(se.is_finite() && se > 0.0, "{key}: ± {se}");
+    assert!(
+        (v - truth).abs() <= 3.0 * se,
+        "{key} = {v:.4e} ± {se:.1e} is {:.1}σ from the truth {truth:.4e}",
+        (v - truth).abs() / se
+    );
+}
+
 /// Point `index` of `grid(520, 1)` (the grid the explain tests and the README quote), explained
 /// with the default options, its answer printed.
 pub fn explained(index: usize) -> (Case, tribo_explain::Explanation) {
