@@ -339,13 +339,6 @@ pub fn explain_with_progress(
         d.f_idx = used.f_idx.clone();
         d
     };
-    let floor = data.noise_floor();
-    let excess = |g: f64| (g * g - floor * floor).max(0.0).sqrt();
-    let unexplained_fraction = if excess(base.gap) > 0.0 {
-        (excess(cur.gap) / excess(base.gap)).min(1.0)
-    } else {
-        0.0
-    };
     let chain = MeasurementChain::of(&data, &cur, zero_source, opts);
     if ambiguous.is_empty() && chain.as_ref().is_some_and(|c| c.force_zero_significant) {
         ambiguous = vec![
@@ -368,6 +361,15 @@ pub fn explain_with_progress(
         ambiguous.clear();
         cur = base.clone();
     }
+    // What remains of the base law's excess over the floor, of the model kept (the base law when
+    // what the search fitted is not named).
+    let floor = data.noise_floor();
+    let excess = |g: f64| (g * g - floor * floor).max(0.0).sqrt();
+    let unexplained_fraction = if excess(base.gap) > 0.0 {
+        (excess(cur.gap) / excess(base.gap)).min(1.0)
+    } else {
+        0.0
+    };
     let conclusion = if !ambiguous.is_empty() {
         Conclusion::Ambiguous
     } else if cur.adequate(&data)
