@@ -691,7 +691,7 @@ fn settle(data: &Prepared, m: FittedModel, e: Effect, max_iter: usize) -> Fitted
         for d in [-3.0, 3.0] {
             let mut p = m.p.clone();
             p[j] += d * s;
-            if m.spec.in_range(&p) {
+            if m.spec.in_range(&p, data.a0) {
                 starts.push(p);
             }
         }

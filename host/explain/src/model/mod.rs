@@ -576,4 +576,20 @@ mod tests {
     fn gap_combines_the_channels() {
         assert_eq!(gap_of(&[3.0, 3.0], &[4.0]), 5.0);
     }
+
+    /// A cubic spring is explored up to a stiffness change of a quarter of k at the release
+    /// amplitude, whatever the record's `a0 = k x0 / N`: grid #421's −7.9 % softening at a0 0.79
+    /// (κ = −0.128) and a 20 % hardening at a0 1 are in the range (`|κ| ≤ 0.05` cut both off);
+    /// κ = 0.05 at a0 10 (five times k) and κ = −0.5 at a0 0.79 are not.
+    #[test]
+    fn cubic_range_is_the_stiffness_change_at_the_release_amplitude() {
+        let spec = Spec::base(vec![0, 1]).with(Effect::CubicStiffness);
+        // μ0, μ1, start correction, κ
+        let p = |kappa: f64| vec![0.0034, 0.001, 0.0, kappa];
+        assert!(spec.in_range(&p(-0.128), 0.79));
+        assert!(spec.in_range(&p(0.2), 1.0));
+        assert!(spec.in_range(&p(4.6e-5), 15.2));
+        assert!(!spec.in_range(&p(0.05), 10.0));
+        assert!(!spec.in_range(&p(-0.5), 0.79));
+    }
 }

@@ -109,7 +109,7 @@ pub(super) fn steps_used_check(
 
 /// Simulates the model `spec`/`p` on the prepared record's grid.
 pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulated, ExplainError> {
-    if !spec.in_range(p) {
+    if !spec.in_range(p, data.a0) {
         return Err(ExplainError::Candidate("parameters out of range".into()));
     }
     let span = data.tau.last().copied().unwrap_or(0.0);
