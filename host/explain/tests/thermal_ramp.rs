@@ -49,3 +49,42 @@ fn a_ramp_that_settles_early_is_thermal_drift() {
         assert_within_3_sigma(key, step.params[key], step.params_se[key], gamma);
     }
 }
+
+/// The grid's second yardstick of a drift of μ0 ([`support::lhs::drift_within`], printed by
+/// `explain_lhs` beside the grid's strength): over the generator's whole ramp (thermal drift) or
+/// its Coulomb estimate of the motion's length (running-in) it is the grid's strength, on every
+/// thermal-drift and running-in record alone of `grid(520, 1)`; inside the compared motion it is
+/// less. On #67 (a 3.3 s ramp, μ1 0.018 ending the motion at 1.29 s) the compared motion holds a
+/// third of the grid's 4.8 %.
+#[test]
+fn the_drift_inside_the_compared_motion_is_the_grids_strength_cut_to_it() {
+    use support::lhs::{compared_motion_s, drift_within, grid, Group};
+    let cases = grid(520, 1);
+    let mut n = 0;
+    for c in cases.iter().filter(|c| c.group == Group::Alone) {
+        let p = &c.present[0];
+        let whole = match p.effect {
+            "thermal-drift" => 1e9,
+            "running-in" => c.bench.motion_estimate_s(c.friction.mu0).max(0.2),
+            _ => continue,
+        };
+        let d = drift_within(c, p.effect, whole).expect("a drift");
+        assert!(
+            (d - p.strength).abs() <= 1e-9 * p.strength,
+            "#{}: {d} against {}",
+            c.index,
+            p.strength
+        );
+        n += 1;
+    }
+    assert_eq!(n, 59, "thermal-drift and running-in records alone");
+    let c = cases.iter().find(|c| c.index == 67).expect("#67");
+    let span = compared_motion_s(c).expect("prepared");
+    let d = drift_within(c, "thermal-drift", span).expect("a drift");
+    println!(
+        "#67: {span:.2} s compared, {d:.4} of the grid's {:.4}",
+        c.present[0].strength
+    );
+    assert!((1.2..1.4).contains(&span), "compared {span} s");
+    assert!(d < 0.4 * c.present[0].strength);
+}
