@@ -24,7 +24,8 @@ use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use support::lhs::{
-    grid, run, score, strength_unit, vocabulary, Case, Group, Outcome, Score, EFFECTS, OUTSIDE,
+    compared_motion_s, drift_within, grid, run, score, strength_unit, vocabulary, Case, Group,
+    Outcome, Score, EFFECTS, OUTSIDE,
 };
 
 const NOISE_BANDS: [(f64, f64, &str); 4] = [
@@ -363,6 +364,67 @@ fn report(cases: &[Case], results: &[(Outcome, Score)], vocab: &[&str], wall: f6
             );
         }
         println!();
+    }
+
+    // The drifts of μ0 on a second yardstick beside the grid's: what the compared motion holds.
+    // The grid states thermal drift over the generator's whole ramp and running-in over its
+    // Coulomb estimate of the motion's length; a ramp of 0.3–5 s from the release, or a motion
+    // that a viscous term shortens, leaves part of that drift outside the compared motion.
+    // (Scoring unchanged: the limits above, and the right names above them, use the grid's.)
+    for e in ["thermal-drift", "running-in"] {
+        let pts: Vec<(f64, bool, &Case)> = cases
+            .iter()
+            .zip(results)
+            .filter(|(c, _)| c.group == Group::Alone && c.present[0].effect == e)
+            .filter_map(|(c, (_, s))| {
+                let d = drift_within(c, e, compared_motion_s(c)?)?;
+                Some((d, s.right, c))
+            })
+            .collect();
+        if pts.is_empty() {
+            continue;
+        }
+        let band = |f: &dyn Fn(&Case) -> bool| -> Vec<(f64, bool)> {
+            pts.iter()
+                .filter(|(_, _, c)| f(c))
+                .map(|(d, r, _)| (*d, *r))
+                .collect()
+        };
+        print!(
+            "{:<20} {:<26} {:<22}",
+            e,
+            "|Δμ0|/μ0 in compared motion",
+            fmt_limit(band(&|_| true))
+        );
+        for (lo, hi, _) in NOISE_BANDS {
+            print!(
+                " {:<22}",
+                fmt_limit(band(&|c| c.noise >= lo && c.noise < hi))
+            );
+        }
+        for (lo, hi, _) in RIG_BANDS {
+            print!(
+                " {:<22}",
+                fmt_limit(band(&|c| c.freq_hz() >= lo && c.freq_hz() < hi))
+            );
+        }
+        println!();
+        let each: Vec<String> = pts
+            .iter()
+            .map(|(d, r, c)| {
+                format!(
+                    "#{} {:.3}→{:.3}{}",
+                    c.index,
+                    c.present[0].strength,
+                    d,
+                    if *r { "" } else { " missed" }
+                )
+            })
+            .collect();
+        println!(
+            "  {e} (grid's strength → in the compared motion): {}",
+            each.join(", ")
+        );
     }
 
     // Right names above the limits.

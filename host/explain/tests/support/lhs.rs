@@ -161,6 +161,44 @@ pub fn strength_unit(effect: &str) -> &'static str {
     }
 }
 
+/// The compared motion of a case's record (s from the release): the part of the record explain
+/// compares ([`tribo_explain::Prepared`], the motion down to its cut), `None` if it cannot be
+/// prepared.
+pub fn compared_motion_s(case: &Case) -> Option<f64> {
+    let o = tribo_explain::ExplainOptions::default();
+    let d = tribo_explain::Prepared::new(
+        &case.record(),
+        o.max_env_points,
+        o.max_force_points,
+        o.force_cutoff_hz,
+    )
+    .ok()?;
+    Some(d.rig.t_of_tau(*d.tau.last()?))
+}
+
+/// What a drift of μ0 (thermal drift, running-in) of a case changes μ0 by within the first
+/// `span_s` s from the release, relative to μ0, from the generator's own constants: thermal
+/// drift `|γ ΔT (1 − e^{−t/τ_h})| / μ0`, running-in `|r t| / μ0` (linear) or
+/// `|Δ (1 − e^{−t/τ_r})| / μ0` (first order). The grid's strengths ([`strength_unit`]) are over
+/// the generator's whole ramp and over its Coulomb estimate of the motion's length; this is the
+/// drift inside the compared motion ([`compared_motion_s`]). `None` for another effect.
+pub fn drift_within(case: &Case, effect: &str, span_s: f64) -> Option<f64> {
+    let c = &case.friction;
+    let t = span_s.max(0.0);
+    let d = match effect {
+        "thermal-drift" => {
+            let (gamma, dt, tau) = c.thermal?;
+            gamma * dt * -(-t / tau).exp_m1()
+        }
+        "running-in" => match c.running_in? {
+            RunningIn::Linear { per_s } => per_s * t,
+            RunningIn::FirstOrder { delta, tau_s } => delta * -(-t / tau_s).exp_m1(),
+        },
+        _ => return None,
+    };
+    Some((d / c.mu0).abs())
+}
+
 /// Weakest and strongest strength generated for an effect (log-uniform between).
 pub fn strength_range(effect: &str) -> (f64, f64) {
     match effect {
