@@ -14,8 +14,10 @@
 //!
 //! `cargo run --release -p tribo-explain --example explain_lhs -- --records 520 --seed 1
 //! [--jobs 2] [--out records.tsv] [--only EFFECT] [--groups clean,alone,pair,outside] [--every K]
-//! [--case INDEX] [--verbose]` (`--only`, `--groups`, `--every`: a part of the same grid — `--every
-//! K` keeps every K-th record of each group; `--case`: one record in detail)
+//! [--case INDEX] [--max-s S] [--verbose]` (`--only`, `--groups`, `--every`: a part of the same
+//! grid — `--every K` keeps every K-th record of each group; `--case`: one record in detail;
+//! `--max-s`: records of at most S s, default 25 — `--records 240 --seed 3 --max-s 6` is the grid
+//! `tests/lhs_grid.rs` runs in CI)
 
 #[path = "../tests/support/mod.rs"]
 mod support;
@@ -24,7 +26,7 @@ use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use support::lhs::{
-    compared_motion_s, drift_within, grid, run, score, strength_unit, vocabulary, Case, Group,
+    compared_motion_s, drift_within, grid_with, run, score, strength_unit, vocabulary, Case, Group,
     Outcome, Score, EFFECTS, OUTSIDE,
 };
 
@@ -69,8 +71,9 @@ fn main() {
     let mut case: Option<usize> = None;
     let mut groups: Option<String> = None;
     let mut every = 1usize;
+    let mut max_s = 25.0f64;
     let mut args = std::env::args().skip(1);
-    let usage = "usage: explain_lhs [--records N] [--seed S] [--jobs J] [--out FILE] [--only EFFECT] [--case INDEX] [--groups clean,alone,pair,outside] [--every K] [--verbose]";
+    let usage = "usage: explain_lhs [--records N] [--seed S] [--jobs J] [--out FILE] [--only EFFECT] [--case INDEX] [--groups clean,alone,pair,outside] [--every K] [--max-s S] [--verbose]";
     while let Some(a) = args.next() {
         let mut val = |name: &str| {
             args.next().unwrap_or_else(|| {
@@ -88,6 +91,7 @@ fn main() {
             "--case" => case = val("--case").parse().ok(),
             "--groups" => groups = Some(val("--groups")),
             "--every" => every = val("--every").parse::<usize>().unwrap_or(1).max(1),
+            "--max-s" => max_s = val("--max-s").parse::<f64>().unwrap_or(max_s).max(1.0),
             other => {
                 eprintln!("unknown argument {other}\n{usage}");
                 std::process::exit(2)
@@ -95,7 +99,7 @@ fn main() {
         }
     }
     let vocab = vocabulary();
-    let mut cases = grid(records, seed);
+    let mut cases = grid_with(records, seed, max_s);
     if let Some(o) = &only {
         cases.retain(|c| {
             c.label().split('+').any(|e| e == o) || (o == "none" && c.present.is_empty())
