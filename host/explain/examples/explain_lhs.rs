@@ -61,6 +61,28 @@ fn fmt_limit(v: Vec<(f64, bool)>) -> String {
     }
 }
 
+/// A selection of the grid's cases.
+type Select<'a> = &'a dyn Fn(&Case) -> bool;
+
+/// One row of the detection-limit table: the limit over every record `pts` selects (strength,
+/// named rightly), then per noise band and per rig band.
+fn limit_row(label: &str, unit: &str, pts: &dyn Fn(Select) -> Vec<(f64, bool)>) {
+    print!("{label:<20} {unit:<26} {:<22}", fmt_limit(pts(&|_| true)));
+    for (lo, hi, _) in NOISE_BANDS {
+        print!(
+            " {:<22}",
+            fmt_limit(pts(&|c| c.noise >= lo && c.noise < hi))
+        );
+    }
+    for (lo, hi, _) in RIG_BANDS {
+        print!(
+            " {:<22}",
+            fmt_limit(pts(&|c| c.freq_hz() >= lo && c.freq_hz() < hi))
+        );
+    }
+    println!();
+}
+
 fn main() {
     let mut records = 520usize;
     let mut seed = 1u64;
@@ -345,29 +367,11 @@ fn report(cases: &[Case], results: &[(Outcome, Score)], vocab: &[&str], wall: f6
                 .collect()
         };
         let all = pts(&|_| true);
-        if let Some((s, _, _)) = detection_limit(all.clone()) {
+        if let Some((s, _, _)) = detection_limit(all) {
             limit_of.insert(e, s);
         }
         let tag = if in_vocab(e) { "" } else { " (outside)" };
-        print!(
-            "{:<20} {:<26} {:<22}",
-            format!("{e}{tag}"),
-            strength_unit(e),
-            fmt_limit(all)
-        );
-        for (lo, hi, _) in NOISE_BANDS {
-            print!(
-                " {:<22}",
-                fmt_limit(pts(&|c| c.noise >= lo && c.noise < hi))
-            );
-        }
-        for (lo, hi, _) in RIG_BANDS {
-            print!(
-                " {:<22}",
-                fmt_limit(pts(&|c| c.freq_hz() >= lo && c.freq_hz() < hi))
-            );
-        }
-        println!();
+        limit_row(&format!("{e}{tag}"), strength_unit(e), &pts);
     }
 
     // The drifts of μ0 on a second yardstick beside the grid's: what the compared motion holds.
@@ -394,25 +398,7 @@ fn report(cases: &[Case], results: &[(Outcome, Score)], vocab: &[&str], wall: f6
                 .map(|(d, r, _)| (*d, *r))
                 .collect()
         };
-        print!(
-            "{:<20} {:<26} {:<22}",
-            e,
-            "|Δμ0|/μ0 in compared motion",
-            fmt_limit(band(&|_| true))
-        );
-        for (lo, hi, _) in NOISE_BANDS {
-            print!(
-                " {:<22}",
-                fmt_limit(band(&|c| c.noise >= lo && c.noise < hi))
-            );
-        }
-        for (lo, hi, _) in RIG_BANDS {
-            print!(
-                " {:<22}",
-                fmt_limit(band(&|c| c.freq_hz() >= lo && c.freq_hz() < hi))
-            );
-        }
-        println!();
+        limit_row(e, "|Δμ0|/μ0 in compared motion", &band);
         let each: Vec<String> = pts
             .iter()
             .map(|(d, r, c)| {

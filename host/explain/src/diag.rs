@@ -441,9 +441,7 @@ pub struct AcrossTrack {
 impl PositionDependence {
     /// One sentence a person can act on.
     pub fn text(&self) -> String {
-        let mirror_significant = self.max_z > 5.0
-            || (self.pairs > 0
-                && self.chi2 > tribo_physics::uncertainty::chi2_upper_quantile(self.pairs, 1e-3));
+        let mirror_significant = mirror_significant(self.max_z, self.pairs, self.chi2);
         match self.across.as_ref().filter(|a| a.significant) {
             Some(a) if !mirror_significant => format!(
                 "the friction level depends on the distance from the centre of the track, alike \
@@ -465,6 +463,13 @@ impl PositionDependence {
             ),
         }
     }
+}
+
+/// Whether the mirror pairs of [`PositionDependence`] show a level that depends on the side: the
+/// largest |z| above 5, or Σ z² above χ²'s 10⁻³ upper quantile for that many pairs.
+fn mirror_significant(max_z: f64, pairs: usize, chi2: f64) -> bool {
+    max_z > 5.0
+        || (pairs > 0 && chi2 > tribo_physics::uncertainty::chi2_upper_quantile(pairs, 1e-3))
 }
 
 /// [`PositionDependence`] of the fitted model `m`'s force residuals; `None` without a force
@@ -550,9 +555,7 @@ pub fn position_dependence(data: &Prepared, m: &FittedModel) -> Option<PositionD
         max_z,
         at_m: data.rig.x_of_y(at * data.a0),
         change_relative: d * data.a0 / mu0,
-        significant: max_z > 5.0
-            || (pairs > 0 && chi2 > tribo_physics::uncertainty::chi2_upper_quantile(pairs, 1e-3))
-            || across_significant,
+        significant: mirror_significant(max_z, pairs, chi2) || across_significant,
         across,
     })
 }

@@ -10,7 +10,8 @@ mod support;
 
 use support::bench::{generate, Bench, Filter, Friction};
 use support::lhs::explained;
-use tribo_explain::{explain, Conclusion, ExplainOptions};
+use tribo_explain::diag::PositionDependence;
+use tribo_explain::{explain, Conclusion, ExplainOptions, Explanation};
 
 /// The real rig, 2-pole 300 Hz stated, default noise, 1.6 s.
 fn bench(seed: u64) -> Bench {
@@ -24,6 +25,19 @@ fn bench(seed: u64) -> Bench {
     }
 }
 
+/// Explain on the contact μ0 0.02, μ1 0.002 with a stripe centred at `centre` × x0, ±0.15 x0 wide,
+/// of relative change `s`: the explanation and its position check.
+fn explain_stripe(b: &Bench, centre: f64, s: f64) -> (Explanation, PositionDependence) {
+    let c = Friction {
+        stripe: Some((centre * b.x0_m, 0.15 * b.x0_m, s)),
+        ..Friction::coulomb_viscous(0.02, 0.002)
+    };
+    let (rec, _) = generate(&c, b);
+    let e = explain(&rec, &ExplainOptions::default()).unwrap();
+    let p = e.position_dependence.clone().expect("a force channel");
+    (e, p)
+}
+
 /// A stripe 30 % more slippery or stickier than the rest, centred at +0.35 x0, ±0.15 x0 wide:
 /// no effect named, *unexplained*, and the check puts the stripe on its side of the track. The
 /// same contact without the stripe: the check does not fire and the record is base-adequate.
@@ -32,13 +46,7 @@ fn a_worn_stripe_is_not_named_and_is_located() {
     let b = bench(5);
     let mut failures = Vec::new();
     for s in [0.3, -0.3] {
-        let c = Friction {
-            stripe: Some((0.35 * b.x0_m, 0.15 * b.x0_m, s)),
-            ..Friction::coulomb_viscous(0.02, 0.002)
-        };
-        let (rec, _) = generate(&c, &b);
-        let e = explain(&rec, &ExplainOptions::default()).unwrap();
-        let p = e.position_dependence.clone().expect("a force channel");
+        let (e, p) = explain_stripe(&b, 0.35, s);
         println!(
             "stripe {s:+}: {:?} {:?}; {}",
             e.conclusion,
@@ -96,13 +104,7 @@ fn a_stripe_across_the_centre_is_not_named() {
     }
     let b = bench(7);
     for s in [0.3, -0.3] {
-        let c = Friction {
-            stripe: Some((0.0, 0.15 * b.x0_m, s)),
-            ..Friction::coulomb_viscous(0.02, 0.002)
-        };
-        let (rec, _) = generate(&c, &b);
-        let e = explain(&rec, &ExplainOptions::default()).unwrap();
-        let p = e.position_dependence.clone().expect("a force channel");
+        let (e, p) = explain_stripe(&b, 0.0, s);
         println!(
             "stripe {s:+} across the centre: {:?} {:?}; {:?}; mirror max z {:.1}",
             e.conclusion, e.missing_effects, p.across, p.max_z
