@@ -110,7 +110,10 @@ impl Evidence {
                 evidence,
             });
         }
-        let value: f64 = channels.iter().map(|c| c.evidence).sum();
+        // The release instant's prior (a record held before its release): its `−2 ln L` term.
+        let value: f64 = channels.iter().map(|c| c.evidence).sum::<f64>()
+            + data.release_chi2(&before.spec, &before.p)
+            - data.release_chi2(&after.spec, &after.p);
         let excess_removed = if excess > 0.0 { value / excess } else { 1.0 };
         Evidence {
             value,

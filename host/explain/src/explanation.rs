@@ -158,7 +158,8 @@ pub struct Explanation {
     /// ([`crate::diag::PositionDependence`]); when significant the record is *unexplained*.
     pub position_dependence: Option<crate::diag::PositionDependence>,
     /// On a record held before its release: where the release falls before the first compared
-    /// sample (s; negative: after it), fitted with the base law and held in every model. `null`
+    /// sample (s; negative: after it), measured from the displacement and velocity about it
+    /// ([`crate::release::release_from_motion`]) and held in every model. `null`
     /// for a record that starts in motion.
     pub release_offset_s: Option<f64>,
     /// Its standard error (s).
@@ -602,7 +603,7 @@ impl Explanation {
         if let Some(r) = self.release_offset_s {
             let _ = writeln!(
                 s,
-                "    release instant = {} µs before the first moving sample (fitted with the base law, held in every model)",
+                "    release instant = {} µs before the first compared sample (measured from the displacement and velocity about it, held in every model)",
                 pm(r * 1e6, self.release_offset_s_se.unwrap_or(f64::NAN) * 1e6)
             );
         }

@@ -60,6 +60,7 @@
 
 pub mod diag;
 pub mod model;
+pub mod release;
 pub mod report;
 
 pub use model::{Effect, ExplainError, Prepared, Spec};
@@ -67,7 +68,7 @@ pub use model::{Effect, ExplainError, Prepared, Spec};
 pub use serde_json;
 
 use model::{
-    gap_of, lowpass_of_order, residuals, rms, simulate_spec, weighted, LOWPASS_TAU_MAX,
+    gap_of, lowpass_of_order, objective, residuals, rms, simulate_spec, LOWPASS_TAU_MAX,
     MEMORY_TAU_MIN, RIG_FORCE_CUTOFF_HZ,
 };
 use serde::Serialize;
@@ -199,9 +200,28 @@ pub fn explain_with_progress(
     } else {
         "fitted"
     };
+    // A record held before its release: where the release falls between two samples is measured
+    // from the motion channels about it ([`release::release_from_motion`]; not from the force
+    // channel, where it is the same thing as a sensor lag, nor from a law's phase, which any
+    // effect missing from the law moves), and is a parameter of every model under that
+    // measurement as a prior ([`Spec::release`], [`Prepared::release_prior`]): the force channel
+    // resolves a hundredth of a sample, the motion a tenth, and a fit moves the instant only as far
+    // as the channels pay for. A record too coarse or too short for the motion's fit has its
+    // release at the first compared sample to within half a sample (uniform).
+    if data.held {
+        progress("measuring the release instant", 0, 1);
+        let (tau_all, y_all, ydot_all) = &data.record;
+        let (shift, se) = match release::release_from_motion(tau_all, y_all, ydot_all, data.start) {
+            Some(r) => (tau_all[data.start] - r.tau, r.se),
+            None => (0.0, data.dtau / 12f64.sqrt()),
+        };
+        data.release_shift = shift;
+        data.release_se = se;
+    }
     let data = data;
     let mut spec = Spec::base(powers.clone());
     spec.apparatus = data.has_force();
+    spec.release = data.held;
     // The force channel's low-pass, when neither the record nor the caller states it, is a
     // parameter of every model of the search, fitted with the law and the effects it can be
     // mistaken for (frictional lag, sensor lag): never a guess held fixed.
@@ -261,28 +281,6 @@ pub fn explain_with_progress(
     let base = base.ok_or_else(|| {
         ExplainError::BaseLaw("the base law could not be fitted to the record".into())
     })?;
-    // A record held before its release: where the release falls between two samples is fitted
-    // with the base law (a profile over a few samples' width) and held in every model of the
-    // search, like the filter's order.
-    let (data, base, release_shift_se) = if data.held {
-        progress("fitting the release instant", 0, 1);
-        let (shift, _) = fit_release_shift(&data, &base);
-        let mut d = data.clone();
-        d.release_shift = shift;
-        let refit = fit_spec(&d, &base.spec, std::slice::from_ref(&base.p), opts.max_iter)
-            .into_iter()
-            .chain(fit_base_on(&d, &base.spec))
-            .min_by(|a, b| a.chi2.total_cmp(&b.chi2));
-        match refit {
-            Some(b) => {
-                let se = release_shift_se(&d, &b);
-                (d, b, Some(se))
-            }
-            None => (data, base, None),
-        }
-    } else {
-        (data, base, None)
-    };
     // The force samples at the base model's velocity reversals are not compared (held in every
     // model, like the release instant): see [`without_reversal_samples`].
     let (data, base) = match without_reversal_samples(&data, &base) {
@@ -388,6 +386,16 @@ pub fn explain_with_progress(
     };
     progress("done", 1, 1);
     let lowpass = ForceLowpass::of(&data, &cur, source, order_evidence);
+    // The release instant of the final model (the motion's measurement plus the offset fitted
+    // with it) and its ± from the same sandwich as every constant's (the prior in it).
+    let release = cur.spec.release_index().map(|i| {
+        let se = standard_errors_of(&used, &cur).get(i).copied();
+        let w = data.rig.omega();
+        (
+            (used.release_shift + cur.p[i]) / w,
+            se.unwrap_or(f64::NAN) / w,
+        )
+    });
     let ex = Explanation {
         conclusion,
         base: opts.base,
@@ -424,8 +432,8 @@ pub fn explain_with_progress(
         force_cutoff_source: source.into(),
         force_lowpass: lowpass,
         measurement_chain: chain,
-        release_offset_s: release_shift_se.map(|_| data.release_shift / data.rig.omega()),
-        release_offset_s_se: release_shift_se.map(|se| se / data.rig.omega()),
+        release_offset_s: release.map(|(v, _)| v),
+        release_offset_s_se: release.map(|(_, se)| se),
         rounds,
         base_fit,
         base_model: base,
@@ -491,123 +499,6 @@ pub(crate) fn mu0_trend_of(
         fitted.is_some().then_some(&through),
         1.0 / data.rig.omega(),
     )
-}
-
-/// Where the release of a held record falls relative to its first compared sample (τ units,
-/// positive before it) and its standard error: the base model `m`'s misfit profiled over ±3
-/// samples (a grid of half samples, then a golden-section search about its best point), with the
-/// law held. The misfit is χ² with each channel in units of its noise and its residuals'
-/// correlation taken into account (as [`Evidence`]); the ± is from its curvature at the optimum
-/// (NaN where it is not convex there).
-fn fit_release_shift(data: &Prepared, m: &FittedModel) -> (f64, f64) {
-    let mut d = data.clone();
-    let mut scale: Option<(f64, f64)> = None;
-    let mut chi2 = |shift: f64| -> f64 {
-        d.release_shift = shift;
-        let Some(e) = evaluate(&d, &m.spec, &m.p) else {
-            return f64::INFINITY;
-        };
-        let ss = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
-        // Each channel's noise variance × n/n_eff, from the first evaluation (held fixed).
-        let (se, sf) = *scale.get_or_insert_with(|| {
-            let unit = |r: &[f64], floor: f64| {
-                if r.is_empty() {
-                    return f64::INFINITY;
-                }
-                let n = r.len() as f64;
-                let var = (ss(r) / n).max(floor * floor);
-                var * n / tribo_physics::uncertainty::effective_count(r).max(1.0)
-            };
-            (
-                unit(&e.env_resid, data.env_floor()),
-                unit(&e.force_resid, data.force_floor()),
-            )
-        });
-        ss(&e.env_resid) / se
-            + if sf.is_finite() {
-                ss(&e.force_resid) / sf
-            } else {
-                0.0
-            }
-    };
-    let h = data.dtau;
-    let mut best = (0.0, chi2(0.0));
-    for k in -6..=6 {
-        let x = 0.5 * h * k as f64;
-        let v = chi2(x);
-        if v < best.1 {
-            best = (x, v);
-        }
-    }
-    // Golden section on [best − h/2, best + h/2].
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut a, mut b) = (best.0 - 0.5 * h, best.0 + 0.5 * h);
-    let (mut c, mut e) = (b - g * (b - a), a + g * (b - a));
-    let (mut fc, mut fe) = (chi2(c), chi2(e));
-    for _ in 0..12 {
-        if fc < fe {
-            b = e;
-            e = c;
-            fe = fc;
-            c = b - g * (b - a);
-            fc = chi2(c);
-        } else {
-            a = c;
-            c = e;
-            fc = fe;
-            e = a + g * (b - a);
-            fe = chi2(e);
-        }
-    }
-    let (x, fx) = if fc < fe { (c, fc) } else { (e, fe) };
-    let (x, fx) = if fx < best.1 { (x, fx) } else { best };
-    let dh = 0.25 * h;
-    let curv = (chi2(x + dh) + chi2(x - dh) - 2.0 * fx) / (dh * dh);
-    let se = if curv > 0.0 {
-        (2.0 / curv).sqrt()
-    } else {
-        f64::NAN
-    };
-    (x, se)
-}
-
-/// The standard error of the release instant (τ units) of the base model `m` fitted with it: the
-/// same Jacobian and HAC sandwich as every other constant's ([`standard_errors_of`]), with the
-/// instant a parameter beside the model's, so that what the filter's time constant and the start
-/// correction take up of a timing error is in its ±. NaN where it cannot be determined.
-fn release_shift_se(data: &Prepared, m: &FittedModel) -> f64 {
-    let r = weighted(data, &m.env_resid, &m.force_resid);
-    let ne = m.env_resid.len();
-    let blocks = [0..ne, ne..r.len()];
-    let held = lowpass_at_bound(data, &m.spec, &m.p)
-        .then(|| m.spec.lowpass_index())
-        .flatten();
-    let free: Vec<usize> = (0..m.p.len()).filter(|&i| Some(i) != held).collect();
-    let mut q0: Vec<f64> = free.iter().map(|&i| m.p[i]).collect();
-    q0.push(data.release_shift);
-    let all_scales = m.spec.scales();
-    let mut scales: Vec<f64> = free.iter().map(|&i| all_scales[i]).collect();
-    scales.push(data.dtau);
-    let mut d = data.clone();
-    let se = tribo_physics::uncertainty::jacobian(
-        |q| {
-            let mut p = m.p.clone();
-            for (&i, &v) in free.iter().zip(q) {
-                p[i] = v;
-            }
-            d.release_shift = q[q.len() - 1];
-            let s = simulate_spec(&d, &m.spec, &p).ok()?;
-            let (e, f) = residuals(&d, &s);
-            Some(weighted(&d, &e, &f))
-        },
-        &q0,
-        &r,
-        1e-3,
-        &scales,
-    )
-    .and_then(|j| tribo_physics::uncertainty::hac_covariance_blocks(&j, &r, &blocks))
-    .map(|c| tribo_physics::uncertainty::standard_errors(&c));
-    se.and_then(|v| v.last().copied()).unwrap_or(f64::NAN)
 }
 
 /// Whether the effect `e` of the fitted model `m` is more than 2σ (its own standard error) from
@@ -720,7 +611,7 @@ fn reweigh(data: &Prepared, m: &FittedModel, max_iter: usize) -> (Prepared, Fitt
             // Not evaluable under the new weights (cannot happen for a model that was): its
             // likelihood there is that of its own residuals.
             let mut c = m.clone();
-            c.chi2 = d.chi2(&m.env_resid, &m.force_resid);
+            c.chi2 = d.chi2(&m.env_resid, &m.force_resid) + d.release_chi2(&m.spec, &m.p);
             c
         }
     };
@@ -763,7 +654,7 @@ fn without_reversal_samples(
     let mut drop = vec![false; n];
     for &tr in &sim.reversals {
         // Sample i is at τ_i + release shift on the simulator's clock, τ_i = i dτ.
-        let x = (tr - data.release_shift) / data.dtau;
+        let x = (tr - data.release_shift - base.spec.release_delta(&base.p)) / data.dtau;
         if !x.is_finite() {
             continue;
         }

@@ -217,14 +217,19 @@ pub fn nuisance_standard_errors(
         };
         let zero = if zero_free { q[k] } else { cf.zero };
         let (e, f) = apply(data, sim, q[np], gain, zero);
-        Some(weighted(data, &e, &f))
+        Some(objective(data, spec, &pp, &e, &f))
     };
     let Some(r0) = residual(&q0) else {
         return [f64::NAN; 3];
     };
-    let blocks = [0..cf.env.len(), cf.env.len()..r0.len()];
+    // The release instant's prior, when there is one, is the last residual (its meat is its
+    // expected square: [`crate::covariance_of`]).
+    let nc = cf.env.len() + cf.force.len();
+    let blocks = [0..cf.env.len(), cf.env.len()..nc, nc..r0.len()];
+    let mut r_meat = r0.clone();
+    r_meat[nc..].iter_mut().for_each(|v| *v = 1.0);
     let se = jacobian(residual, &q0, &r0, 1e-3, &scales)
-        .and_then(|j| hac_covariance_blocks(&j, &r0, &blocks))
+        .and_then(|j| hac_covariance_blocks(&j, &r_meat, &blocks))
         .map(|c| standard_errors(&c))
         .unwrap_or_else(|| vec![f64::NAN; q0.len()]);
     let mut k = np + 1;

@@ -141,6 +141,13 @@ pub struct Prepared {
     /// fitted nuisance ([`crate::explain_prepared`]): the simulation starts at rest at the release
     /// and sample `k` is compared with it at `τ_k + shift`. 0 for a record that starts in motion.
     pub release_shift: f64,
+    /// Index in [`Prepared::record`] of the first compared sample (the motion's first, as
+    /// [`tribo_physics::identify::motion_span`] finds it; 0 for a record that starts in motion).
+    pub start: usize,
+    /// The standard error of [`Prepared::release_shift`] as the motion measures it (τ units;
+    /// infinite for a record that starts in motion): the prior of the release instant's offset in
+    /// every model ([`Spec::release`], [`Prepared::release_prior`]).
+    pub release_se: f64,
     /// Integrator.
     pub method: Method,
     /// The whole record, dimensionless (τ, y, y'), as `tribo fit` takes it: the base law is
@@ -394,6 +401,8 @@ impl Prepared {
             noise_samples,
             held: s0 > 0,
             release_shift: 0.0,
+            start: s0,
+            release_se: f64::INFINITY,
             method: Method::dopri(1e-8),
             record: (tau_all, y_all, ydot_all),
         })
@@ -446,6 +455,22 @@ impl Prepared {
         (self.y[0], if v.abs() < 0.01 * self.a0 { 0.0 } else { v })
     }
 
+    /// The release instant's prior as one residual: the model's offset of the instant from the one
+    /// measured from the motion in units of that measurement's ± (`None` when the instant is not a
+    /// parameter of `spec`). Its square is a term of every `−2 ln L` ([`Prepared::chi2`] of the
+    /// channels plus it), so a fit moves the instant from the motion's measurement only as far as
+    /// the channels it compares pay for: not by a sensor lag's worth, which the force channel
+    /// cannot tell from it.
+    pub fn release_prior(&self, spec: &Spec, p: &[f64]) -> Option<f64> {
+        (spec.release && self.release_se > 0.0 && self.release_se.is_finite())
+            .then(|| spec.release_delta(p) / self.release_se)
+    }
+
+    /// The square of [`Prepared::release_prior`] (0 without one).
+    pub fn release_chi2(&self, spec: &Spec, p: &[f64]) -> f64 {
+        self.release_prior(spec, p).map_or(0.0, |r| r * r)
+    }
+
     /// True if a force channel is compared.
     pub fn has_force(&self) -> bool {
         self.f_meas.is_some()
@@ -474,6 +499,60 @@ mod tests {
             rate_hz: 10_000.0,
         };
         generate(&sp, model, Method::dopri(1e-10), None).unwrap()
+    }
+
+    /// A held record's release instant is a lead parameter after the chain's nuisances: its
+    /// offset from the motion's measurement, started at 0, in range within RELEASE_DELTA_MAX,
+    /// and in the simulation's clock (a later release delays the whole motion).
+    #[test]
+    fn the_release_instant_is_a_nuisance_of_every_model() {
+        let mut s = Spec::base(vec![0, 1]);
+        s.apparatus = true;
+        s.lowpass = true;
+        s.release = true;
+        let s = s.with(Effect::SensorLag);
+        assert_eq!(
+            s.param_names(),
+            [
+                "mu0",
+                "mu1",
+                "start_scale",
+                "apparatus_mu1",
+                "force_lowpass_tau",
+                "release_shift_delta",
+                "delay_tau"
+            ]
+        );
+        let p = s.start_with(&[0.02, 0.001], 0.05);
+        assert_eq!(p.len(), 6);
+        assert_eq!(s.release_index(), Some(5));
+        assert_eq!(s.release_delta(&p), 0.0);
+        let mut q = p.clone();
+        q.push(0.1);
+        assert!(s.in_range(&q, 1.0));
+        q[5] = 1.5 * RELEASE_DELTA_MAX;
+        assert!(!s.in_range(&q, 1.0));
+        // The simulation's clock: a release δ later is the same motion δ later.
+        let rec = spec_rec(&Model::new(FrictionLaw::coulomb_viscous(0.02, 0.001)), 0.3);
+        let mut data = Prepared::new(&rec, 400, 4000, None).unwrap();
+        data.held = true;
+        data.release_se = data.dtau;
+        let b = Spec {
+            release: true,
+            ..Spec::base(vec![0, 1])
+        };
+        let at = |d: f64| simulate_spec(&data, &b, &[0.02, 0.001, 0.0, d]).unwrap();
+        let (a0, a1) = (at(0.0), at(-3.0 * data.dtau));
+        assert!(
+            (a1.y[10] - a0.y[7]).abs() < 1e-6,
+            "{} {}",
+            a1.y[10],
+            a0.y[7]
+        );
+        assert_eq!(
+            data.release_prior(&b, &[0.02, 0.001, 0.0, -3.0 * data.dtau]),
+            Some(-3.0)
+        );
     }
 
     #[test]

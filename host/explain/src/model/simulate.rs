@@ -40,6 +40,8 @@ pub struct Mu0Drift<'a> {
     running: Option<(f64, f64)>,
     /// The end of the motion (τ) running-in's shape is scaled to.
     span_end: f64,
+    /// Where the release falls before the first compared sample (τ; [`simulate_spec`]).
+    shift: f64,
 }
 
 impl<'a> Mu0Drift<'a> {
@@ -60,6 +62,7 @@ impl<'a> Mu0Drift<'a> {
             thermal,
             running,
             span_end: span.max(THERMAL_SEGMENT),
+            shift: data.release_shift + spec.release_delta(p),
         })
     }
 
@@ -81,7 +84,7 @@ impl<'a> Mu0Drift<'a> {
         data.tau
             .iter()
             .map(|&t| {
-                let t = (t + data.release_shift).max(0.0) / THERMAL_SEGMENT;
+                let t = (t + self.shift).max(0.0) / THERMAL_SEGMENT;
                 self.at_segment((t.ceil() as usize).saturating_sub(1))
             })
             .collect()
@@ -124,6 +127,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
             .with_cubic(kappa)
             .with_apparatus_damping(mu_a)
     };
+    let shift = data.release_shift + spec.release_delta(p);
     let (y0, v0) = data.initial_state();
     let (y0, v0) = (
         y0 * (1.0 + spec.start_scale(p)),
@@ -145,7 +149,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                 Vec::with_capacity(n),
             );
             for &t in &data.tau {
-                let s = sim.step_to((t + data.release_shift).max(0.0))?;
+                let s = sim.step_to((t + shift).max(0.0))?;
                 steps_used_check(&sim, sim.steps(), budget)?;
                 y.push(s.y);
                 yd.push(s.ydot);
@@ -169,7 +173,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
                 Vec::with_capacity(n),
             );
             for &t in &data.tau {
-                let t = (t + data.release_shift).max(0.0);
+                let t = (t + shift).max(0.0);
                 while t > seg_end {
                     let s = sim.step_to(seg_end)?;
                     prior += sim.steps();
@@ -359,6 +363,15 @@ impl Prepared {
         let ss = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
         we * ss(env) + wf * ss(force)
     }
+}
+
+/// The residual vector the fits minimise for the model `spec`/`p`: [`weighted`], then the release
+/// instant's prior ([`Prepared::release_prior`]) when the instant is a parameter, so that `Σ` of
+/// the squares is `−2 ln L` with the prior.
+pub fn objective(data: &Prepared, spec: &Spec, p: &[f64], env: &[f64], force: &[f64]) -> Vec<f64> {
+    let mut r = weighted(data, env, force);
+    r.extend(data.release_prior(spec, p));
+    r
 }
 
 /// Weighted residual vector minimised by the fits: each channel's residuals times `√w_c`, the

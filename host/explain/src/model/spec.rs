@@ -111,6 +111,11 @@ pub const MEMORY_TAU_MIN: f64 = 0.01;
 /// (`κ a0² > −1`) and above the strongest cubic the bench's table lists (10 %).
 pub const CUBIC_STIFFNESS_MAX: f64 = 0.25;
 
+/// Largest offset of the release instant from the one measured from the motion the fits explore
+/// (τ units; [`Spec::release`]): half a radian, tens of samples at any rate, hundreds of the
+/// measurement's ±.
+pub const RELEASE_DELTA_MAX: f64 = 0.5;
+
 /// Range of running-in's shape `c = τ_end / τ_r` ([`Effect::RunningIn`]): a time constant down
 /// to a twentieth of the compared motion (a level that has settled after its first twentieth is a
 /// step, not a drift the motion resolves), and a drift that speeds up by at most `e^5` over it.
@@ -158,6 +163,11 @@ pub struct Spec {
     /// Butterworth). Chosen from the record ([`crate::explain_prepared`]) and held the same in
     /// every model a comparison sets side by side.
     pub lowpass_poles: u8,
+    /// Whether the release instant is a parameter (a record held before its release): its offset
+    /// `δ` (τ units) from the instant measured from the motion ([`crate::Prepared::release_shift`],
+    /// [`crate::release::release_from_motion`]), fitted with everything else in every model of
+    /// the search under that measurement as a prior ([`crate::Prepared::release_prior`]).
+    pub release: bool,
 }
 
 impl Spec {
@@ -169,13 +179,34 @@ impl Spec {
             apparatus: false,
             lowpass: false,
             lowpass_poles: 2,
+            release: false,
         }
     }
 
     /// Parameters before the effects': the law's constants, the start correction and the
     /// nuisances of the measurement chain (apparatus damping, force low-pass).
     pub fn n_lead(&self) -> usize {
-        self.powers.len() + 1 + usize::from(self.apparatus) + usize::from(self.lowpass)
+        self.powers.len()
+            + 1
+            + usize::from(self.apparatus)
+            + usize::from(self.lowpass)
+            + usize::from(self.release)
+    }
+
+    /// Index of the release instant's offset `δ` in `p`, when it is a parameter.
+    pub fn release_index(&self) -> Option<usize> {
+        self.release.then(|| {
+            self.powers.len() + 1 + usize::from(self.apparatus) + usize::from(self.lowpass)
+        })
+    }
+
+    /// The release instant's offset `δ` (τ units) from the measured one in `p` (0 when it is not a
+    /// parameter).
+    pub fn release_delta(&self, p: &[f64]) -> f64 {
+        self.release_index()
+            .and_then(|i| p.get(i))
+            .copied()
+            .unwrap_or(0.0)
     }
 
     /// Index of the force low-pass time constant in `p`, when it is a parameter.
@@ -289,6 +320,7 @@ impl Spec {
             && self.start_scale(p).abs() < 0.1
             && (-0.01..=0.1).contains(&self.apparatus_mu1(p))
             && self.lowpass_tau(p).is_none_or(|t| t <= LOWPASS_TAU_MAX)
+            && self.release_delta(p).abs() <= RELEASE_DELTA_MAX
     }
 
     /// The initial amplitude's relative correction `s` in `p`.
@@ -321,6 +353,9 @@ impl Spec {
         if self.lowpass {
             p.push(tau_f);
         }
+        if self.release {
+            p.push(0.0);
+        }
         p
     }
 
@@ -328,6 +363,9 @@ impl Spec {
     pub fn scales(&self) -> Vec<f64> {
         let mut s = vec![1e-3; self.powers.len() + 1 + usize::from(self.apparatus)];
         if self.lowpass {
+            s.push(0.01);
+        }
+        if self.release {
             s.push(0.01);
         }
         for e in &self.effects {
@@ -354,6 +392,9 @@ impl Spec {
         }
         if self.lowpass {
             names.push("force_lowpass_tau".into());
+        }
+        if self.release {
+            names.push("release_shift_delta".into());
         }
         let mut next = self.powers.iter().copied().max().unwrap_or(0);
         for e in &self.effects {
