@@ -201,6 +201,10 @@ pub struct ForceLowpass {
     /// for). Stated: 2 (a stated cut-off is the charge amplifier's 2-pole filter); `null` when
     /// none is stated.
     pub poles: Option<u8>,
+    /// Whether the 2-pole filter is the digital one, the bilinear Butterworth a DAQ (and the rig's
+    /// own records) apply to the sampled force, rather than the analog filter discretised exactly:
+    /// fitted, chosen from the record with the order; stated, a stated cut-off is that filter.
+    pub digital: bool,
     /// When fitted: the evidence for the chosen order over the other one, the final model
     /// refitted with the other filter (the same χ² measure as an effect's evidence; negative
     /// would mean the other order fits better). `null` when stated or when the refit failed.
@@ -244,6 +248,7 @@ impl ForceLowpass {
                     time_constant_s_se: se,
                     cutoff_at_least_hz: at_least,
                     poles: Some(m.spec.lowpass_poles),
+                    digital: m.spec.lowpass_digital && m.spec.lowpass_poles == 2,
                     order_evidence,
                 })
             }
@@ -255,6 +260,7 @@ impl ForceLowpass {
                 time_constant_s_se: None,
                 cutoff_at_least_hz: None,
                 poles: data.force_cutoff_hz.map(|_| 2),
+                digital: data.force_cutoff_hz.is_some(),
                 order_evidence: None,
             }),
         }
@@ -264,12 +270,13 @@ impl ForceLowpass {
     fn order_text(&self) -> String {
         let p = self.poles.unwrap_or(2);
         let q = if p == 1 { 2 } else { 1 };
+        let kind = self.kind();
         match self.order_evidence {
             Some(ev) if ev >= 0.0 => {
-                format!("{p}-pole over {q}-pole by evidence {ev:.1}")
+                format!("{kind} over {q}-pole by evidence {ev:.1}")
             }
             Some(ev) => format!(
-                "{p}-pole held from the search; the {q}-pole refit is better by evidence {:.1}, \
+                "{kind} held from the search; the {q}-pole refit is better by evidence {:.1}, \
                  below what a change needs",
                 -ev
             ),
@@ -277,14 +284,23 @@ impl ForceLowpass {
         }
     }
 
+    /// The filter's order and kind in words: `1-pole`, `2-pole`, `2-pole digital (bilinear)`.
+    fn kind(&self) -> String {
+        match (self.poles.unwrap_or(2), self.digital) {
+            (1, _) => "1-pole".into(),
+            (p, true) => format!("{p}-pole digital (bilinear)"),
+            (p, false) => format!("{p}-pole"),
+        }
+    }
+
     /// One line of text.
     pub fn text(&self) -> String {
         match (self.source.as_str(), self.cutoff_hz) {
             ("fitted", Some(fc)) => format!(
-                "{fc:.0} ± {:.0} Hz, {}-pole (fitted: the record does not state it; time constant \
+                "{fc:.0} ± {:.0} Hz, {} (fitted: the record does not state it; time constant \
                  {:.3} ± {:.3} ms; {})",
                 self.cutoff_hz_se.unwrap_or(f64::NAN),
-                self.poles.unwrap_or(2),
+                self.kind(),
                 1e3 * self.time_constant_s,
                 1e3 * self.time_constant_s_se.unwrap_or(f64::NAN),
                 self.order_text()

@@ -162,7 +162,7 @@ pub fn covariance_of(data: &Prepared, m: &FittedModel) -> Option<Vec<Vec<f64>>> 
         p
     };
     let q0: Vec<f64> = free.iter().map(|&i| m.p[i]).collect();
-    let all_scales = m.spec.scales();
+    let all_scales = m.spec.se_scales(data.dtau);
     let scales: Vec<f64> = free.iter().map(|&i| all_scales[i]).collect();
     let c = jacobian(
         |q| {
@@ -207,7 +207,7 @@ pub fn lowpass_bound(data: &Prepared, m: &FittedModel) -> Option<f64> {
     }
     let has_delay = m.spec.has(Effect::SensorLag);
     let rss = |tau_f: f64, d: f64| -> f64 {
-        let mut f = lowpass_of_order(&sim.f_true, tau_f, data.dtau, m.spec.lowpass_poles);
+        let mut f = m.spec.filter_force(&sim.f_true, tau_f, data.dtau);
         if d > 0.0 {
             f = tribo_physics::sensor::delay(&f, d / data.dtau);
         }

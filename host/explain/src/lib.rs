@@ -68,8 +68,8 @@ pub use model::{Effect, ExplainError, Prepared, Spec};
 pub use serde_json;
 
 use model::{
-    gap_of, lowpass_of_order, objective, residuals, rms, simulate_spec, LOWPASS_TAU_MAX,
-    MEMORY_TAU_MIN, RIG_FORCE_CUTOFF_HZ,
+    gap_of, objective, residuals, rms, simulate_spec, LOWPASS_TAU_MAX, MEMORY_TAU_MIN,
+    RIG_FORCE_CUTOFF_HZ,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -205,8 +205,9 @@ pub fn explain_with_progress(
     // channel, where it is the same thing as a sensor lag, nor from a law's phase, which any
     // effect missing from the law moves), and is a parameter of every model under that
     // measurement as a prior ([`Spec::release`], [`Prepared::release_prior`]): the force channel
-    // resolves a hundredth of a sample, the motion a tenth, and a fit moves the instant only as far
-    // as the channels pay for. A record too coarse or too short for the motion's fit has its
+    // is far more sensitive to it than the motion's ± (CI-grid #9, clean: held at the motion's
+    // measurement, 0.10 ± 0.21 sample off, a cubic stiffness got evidence 77), and a fit moves
+    // the instant only as far as the channels pay for. A record too coarse or too short for the motion's fit has its
     // release at the first compared sample to within half a sample (uniform).
     if data.held {
         progress("measuring the release instant", 0, 1);
@@ -264,17 +265,17 @@ pub fn explain_with_progress(
     let fit_base = |spec: &Spec| fit_base_on(&data, spec);
     // A fitted low-pass's order (1 or 2 poles, `shared/docs/real-bench.md`) is chosen from the
     // record: the base law is fitted with each, and the one with the smaller misfit (the same
-    // number of parameters) is held in every model of the search. The final model is checked
-    // against the other order below.
+    // number of parameters) is held in every model of the search (and, for 2 poles, its kind,
+    // below). The final model is checked against the other order below.
     let base = if spec.lowpass {
         let one = Spec {
             lowpass_poles: 1,
             ..spec.clone()
         };
-        match (fit_base(&spec), fit_base(&one)) {
-            (Some(a), Some(b)) => Some(if b.chi2 < a.chi2 { b } else { a }),
-            (a, b) => a.or(b),
-        }
+        [fit_base(&spec), fit_base(&one)]
+            .into_iter()
+            .flatten()
+            .min_by(|a, b| a.chi2.total_cmp(&b.chi2))
     } else {
         fit_base(&spec)
     };
@@ -286,6 +287,46 @@ pub fn explain_with_progress(
     let (data, base) = match without_reversal_samples(&data, &base) {
         Some((d, b)) => (d, b),
         None => (data, base),
+    };
+    // A fitted 2-pole filter's kind, analog (discretised exactly) or digital (bilinear), is chosen
+    // on the samples the search compares, from the analog one's fit: the two part only near the
+    // sampling rate, where the samples next to the reversals (left out now) would decide it.
+    // Only where the analog one found a filter, and a digital one below the bilinear filter's
+    // clamp (0.49 of the rate, where it is not the identity: CI-grid #136, no filter, took a
+    // digital one at the clamp and a false sensor lag beside it).
+    let below_clamp = |m: &FittedModel| {
+        m.spec
+            .lowpass_tau(&m.p)
+            .is_some_and(|t| data.dtau / (2.0 * std::f64::consts::PI * t) < 0.45)
+    };
+    let base = if base.spec.lowpass
+        && base.spec.lowpass_poles == 2
+        && !lowpass_at_bound(&data, &base.spec, &base.p)
+    {
+        let digital = Spec {
+            lowpass_digital: true,
+            ..base.spec.clone()
+        };
+        // Its misfit is rough in the cut-off near the sampling rate (the bilinear filter's
+        // response to a step between samples): a scan of ±15 % about the analog one's in 1 %
+        // steps, the rest held, and the fit from the best three.
+        let i = digital.lowpass_index().expect("a fitted low-pass");
+        let mut scan: Vec<(f64, Vec<f64>)> = (-15..=15)
+            .filter_map(|k| {
+                let mut p = base.p.clone();
+                p[i] *= 1.0 + 0.01 * f64::from(k);
+                evaluate(&data, &digital, &p).map(|m| (m.chi2, p))
+            })
+            .collect();
+        scan.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let starts: Vec<Vec<f64>> = scan.into_iter().take(3).map(|(_, p)| p).collect();
+        let dd = fit_spec(&data, &digital, &starts, opts.max_iter);
+        match dd {
+            Some(d) if d.chi2 < base.chi2 && below_clamp(&d) => d,
+            _ => base,
+        }
+    } else {
+        base
     };
     // The one likelihood's noise model (each channel's residual variance and correlation) is
     // measured on the base model's residuals, and the base law refitted under it: the search
@@ -315,6 +356,7 @@ pub fn explain_with_progress(
             if ev.value >= ev.threshold {
                 let spec2 = Spec {
                     lowpass_poles: o.spec.lowpass_poles,
+                    lowpass_digital: o.spec.lowpass_digital,
                     ..base.spec.clone()
                 };
                 if let Some(b2) = fit_base(&spec2) {
@@ -387,14 +429,23 @@ pub fn explain_with_progress(
     progress("done", 1, 1);
     let lowpass = ForceLowpass::of(&data, &cur, source, order_evidence);
     // The release instant of the final model (the motion's measurement plus the offset fitted
-    // with it) and its ± from the same sandwich as every constant's (the prior in it).
+    // with it) and its ± from the same sandwich as every constant's (the prior in it), with the
+    // resolution of a staircase beside it: the force at a sample jumps when a reversal crosses
+    // it, so the misfit is flat in the instant between two such crossings, n reversals making
+    // about n of them per sample, and its minimum is known to one of them (uniform: a width over
+    // √12). The sandwich alone on grid #6 (`grid(520, 1)`, 18.7 kS/s, ×8 noise): ± 0.11 µs for
+    // an error of 0.43.
     let release = cur.spec.release_index().map(|i| {
-        let se = standard_errors_of(&used, &cur).get(i).copied();
+        let se = standard_errors_of(&used, &cur)
+            .get(i)
+            .copied()
+            .unwrap_or(f64::NAN);
+        let crossings = simulate_spec(&used, &cur.spec, &cur.p)
+            .map_or(0, |s| s.reversals.len())
+            .max(1) as f64;
+        let step = used.dtau / (crossings * 12f64.sqrt());
         let w = data.rig.omega();
-        (
-            (used.release_shift + cur.p[i]) / w,
-            se.unwrap_or(f64::NAN) / w,
-        )
+        ((used.release_shift + cur.p[i]) / w, se.hypot(step) / w)
     });
     let ex = Explanation {
         conclusion,
@@ -456,9 +507,8 @@ pub(crate) fn mu0_trend_of(
     let f = data.f_meas.as_ref()?;
     let mu = m.spec.mu(&m.p);
     let fitted = m.spec.lowpass_tau(&m.p);
-    let poles = m.spec.lowpass_poles;
     let through = |c: &[f64]| match (fitted, data.force_cutoff_hz) {
-        (Some(t), _) => lowpass_of_order(c, t, data.dtau, poles),
+        (Some(t), _) => m.spec.filter_force(c, t, data.dtau),
         (None, Some(fc)) => tribo_physics::sensor::butterworth2(c, fc, data.rate_hz),
         (None, None) => c.to_vec(),
     };
@@ -1028,8 +1078,10 @@ fn relative_asymmetry(
 fn other_order(data: &Prepared, m: &FittedModel, max_iter: usize) -> Option<FittedModel> {
     let i = m.spec.lowpass_index()?;
     let poles = if m.spec.lowpass_poles == 1 { 2 } else { 1 };
+    // The other order is the other exact filter (a digital 2-pole's is the 1-pole).
     let spec = Spec {
         lowpass_poles: poles,
+        lowpass_digital: false,
         ..m.spec.clone()
     };
     let t = m.p[i].abs();

@@ -8,6 +8,7 @@
 mod support;
 
 use support::bench::{generate, Bench, Filter, Friction};
+use support::lhs::{grid, grid_with, run};
 use tribo_explain::{explain, Conclusion, ExplainOptions, Explanation};
 
 /// The rig with a 1-pole filter at `fc` that the header does not state, a sensor delay `lag_s`,
@@ -148,4 +149,62 @@ fn a_2pole_filter_is_found_as_2pole_and_a_stated_one_used_as_stated() {
         ("record", Some(300.0), Some(2), None)
     );
     assert!(!e.final_model.params.contains_key("force_lowpass_tau"));
+}
+
+/// A 2-pole filter near the sampling rate, unstated, is fitted as the digital one the records are
+/// made with (`butterworth2`, bilinear), chosen from the record against the analog filter
+/// discretised exactly (`Spec::lowpass_digital`); the two part where a force step between samples
+/// meets a cut-off near the rate. Grid `grid(520, 1)` #204: a 0.21 ms sensor lag behind a 2-pole
+/// 320 Hz filter at 2.4 kS/s (×13 noise), held; with the analog filter fitted at 263 Hz the half
+/// sample of delay went into the filter and the record was called *base-adequate*. The CI grid's
+/// clean #10 (`grid_with(240, 3, 6.0)`: 837 Hz at 6.9 kS/s, ×19) was named Stribeck, evidence
+/// 1549, from the samples after the reversals; it must not be named anything.
+#[test]
+fn a_digital_2pole_filter_near_the_rate_is_fitted_as_one() {
+    let cases = grid(520, 1);
+    let c = cases.iter().find(|c| c.index == 204).expect("grid point");
+    let o = run(c);
+    let got = o
+        .estimates
+        .iter()
+        .find(|(tc, _)| tc.key == "delay_s")
+        .and_then(|(tc, got)| got.map(|(v, se)| (tc.value, v, se)));
+    eprintln!(
+        "{} → {:?} [{}] {got:?}",
+        c.describe(),
+        o.named,
+        o.conclusion
+    );
+    assert_eq!(o.named, ["sensor-lag"], "{}", o.conclusion);
+    let (truth, v, se) = got.expect("the delay is printed");
+    assert!(
+        ((v - truth) / se).abs() <= 2.0,
+        "{v:.4e} ± {se:.1e} for {truth:.4e}"
+    );
+    let e = explain(&c.record(), &ExplainOptions::default()).unwrap();
+    let l = e.force_lowpass.as_ref().unwrap();
+    assert_eq!((l.poles, l.digital), (Some(2), true), "{}", e.to_text());
+    let fc = l.cutoff_hz.unwrap();
+    assert!(
+        (fc - 320.0).abs() <= 3.0 * l.cutoff_hz_se.unwrap(),
+        "{fc} ± {:?} Hz for 320",
+        l.cutoff_hz_se
+    );
+    assert!(
+        e.to_text().contains("2-pole digital (bilinear)"),
+        "{}",
+        e.to_text()
+    );
+
+    let ci = grid_with(240, 3, 6.0);
+    let c = ci.iter().find(|c| c.index == 10).expect("grid point");
+    assert!(c.present.is_empty());
+    let e = explain(&c.record(), &ExplainOptions::default()).unwrap();
+    eprintln!(
+        "{} → {:?} {:?}",
+        c.describe(),
+        e.conclusion,
+        e.missing_effects
+    );
+    assert!(e.missing_effects.is_empty(), "{}", e.to_text());
 }

@@ -69,7 +69,9 @@ unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_be
 `unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source` (`record`, `option`,
 `fitted`, `none`), `force_lowpass` (`source`, `cutoff_hz` and `cutoff_hz_se`, `time_constant_s` and
 `time_constant_s_se`, `cutoff_at_least_hz`, `poles`: the filter's order, 1 or 2, fitted from the
-record when it states no filter, `order_evidence`: the evidence for that order over the other),
+record when it states no filter, `digital`: a 2-pole filter applied digitally to the sampled force
+(bilinear, as the rig's records are filtered) rather than the analog one, chosen from the record,
+`order_evidence`: the evidence for that order over the other),
 `disagreement` (where the final model still misses,
 in sentences: each channel above its floor, the time third and amplitude band where it misses
 most, a force misfit common to both sliding directions), `base_fit` (the base law's

@@ -181,7 +181,7 @@ pub fn nuisance_standard_errors(
     let zero_free = data.force_zero.is_none() && data.has_force();
     let mut q0: Vec<f64> = free.iter().map(|&i| p[i]).collect();
     let mut scales: Vec<f64> = {
-        let s = spec.scales();
+        let s = spec.se_scales(data.dtau);
         free.iter().map(|&i| s[i]).collect()
     };
     let np = q0.len();

@@ -202,7 +202,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
         }
     };
     let mut fm = match (spec.lowpass_tau(p), data.force_cutoff_hz) {
-        (Some(tau_f), _) => lowpass_of_order(&f, tau_f, data.dtau, spec.lowpass_poles),
+        (Some(tau_f), _) => spec.filter_force(&f, tau_f, data.dtau),
         (None, Some(fc)) => butterworth2(&f, fc, data.rate_hz),
         (None, None) => f.clone(),
     };

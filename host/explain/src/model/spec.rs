@@ -163,6 +163,14 @@ pub struct Spec {
     /// Butterworth). Chosen from the record ([`crate::explain_prepared`]) and held the same in
     /// every model a comparison sets side by side.
     pub lowpass_poles: u8,
+    /// Whether the fitted 2-pole low-pass is a digital one: the bilinear Butterworth
+    /// ([`tribo_physics::sensor::butterworth2`], the filter the rig's own records and a DAQ's
+    /// digital filter apply to the sampled force, and the one a stated cut-off is) rather than
+    /// the analog filter discretised exactly ([`super::lowpass`]). The two part where the cut-off
+    /// nears the sampling rate (a force step at a reversal, 837 Hz at 6.9 kS/s: the exact one
+    /// left a misfit in the samples after the reversals that a Stribeck rise was named for).
+    /// Chosen from the record with the order and held in every model of the search.
+    pub lowpass_digital: bool,
     /// Whether the release instant is a parameter (a record held before its release): its offset
     /// `δ` (τ units) from the instant measured from the motion ([`crate::Prepared::release_shift`],
     /// [`crate::release::release_from_motion`]), fitted with everything else in every model of
@@ -179,6 +187,7 @@ impl Spec {
             apparatus: false,
             lowpass: false,
             lowpass_poles: 2,
+            lowpass_digital: false,
             release: false,
         }
     }
@@ -218,6 +227,17 @@ impl Spec {
     /// The force low-pass time constant `τ_f ≥ 0` (τ units) in `p`, when it is a parameter.
     pub fn lowpass_tau(&self, p: &[f64]) -> Option<f64> {
         self.lowpass_index().and_then(|i| p.get(i)).map(|v| v.abs())
+    }
+
+    /// The force `u` (sampled every `h`, τ units) through the fitted low-pass of time constant
+    /// `tau_f` of this spec's order and kind ([`Spec::lowpass_poles`], [`Spec::lowpass_digital`]).
+    pub fn filter_force(&self, u: &[f64], tau_f: f64, h: f64) -> Vec<f64> {
+        if self.lowpass_digital && self.lowpass_poles == 2 && tau_f.abs() > 0.0 && h > 0.0 {
+            // The bilinear filter takes the cut-off against the rate: `f_c / f_s = h / (2π τ_f)`.
+            butterworth2(u, 1.0 / (2.0 * std::f64::consts::PI * tau_f.abs()), 1.0 / h)
+        } else {
+            lowpass_of_order(u, tau_f, h, self.lowpass_poles)
+        }
     }
 
     /// Number of parameters.
@@ -359,14 +379,31 @@ impl Spec {
         p
     }
 
-    /// Typical magnitude of every parameter (finite-difference steps near 0).
+    /// Typical magnitude of every parameter (finite-difference steps near 0: a thousandth of it)
+    /// for the fits. The release instant's offset is 0.01 rad (its step 1e-5 rad, 4e-4 of a sample
+    /// at 6.9 kS/s): what the subsets were measured with; its standard error takes a step of a
+    /// tenth of a sample ([`Spec::se_scales`]).
     pub fn scales(&self) -> Vec<f64> {
+        self.scales_with(0.01)
+    }
+
+    /// [`Spec::scales`] for the standard errors, on a record sampled every `dtau` (τ units): the
+    /// release instant's offset a hundred samples, its step a tenth of a sample. The force a model
+    /// gives at a sample instant jumps when a reversal crosses it, so the misfit is a staircase in
+    /// the instant at the scale of a sample, and a step of 1e-5 rad saw none of those jumps or one:
+    /// its ± was a lottery (CI-grid #4: ± 0.001 sample for an error of 0.04, where the motion's
+    /// own measurement says ± 0.05; #10 ± 5e-4 µs).
+    pub fn se_scales(&self, dtau: f64) -> Vec<f64> {
+        self.scales_with(100.0 * dtau)
+    }
+
+    fn scales_with(&self, release: f64) -> Vec<f64> {
         let mut s = vec![1e-3; self.powers.len() + 1 + usize::from(self.apparatus)];
         if self.lowpass {
             s.push(0.01);
         }
         if self.release {
-            s.push(0.01);
+            s.push(release);
         }
         for e in &self.effects {
             s.extend_from_slice(match e {
