@@ -207,8 +207,9 @@ pub fn explain_with_progress(
     // measurement as a prior ([`Spec::release`], [`Prepared::release_prior`]): the force channel
     // is far more sensitive to it than the motion's ± (CI-grid #9, clean: held at the motion's
     // measurement, 0.10 ± 0.21 sample off, a cubic stiffness got evidence 77), and a fit moves
-    // the instant only as far as the channels pay for. A record too coarse or too short for the motion's fit has its
-    // release at the first compared sample to within half a sample (uniform).
+    // the instant only as far as the channels pay for. A record too coarse or too short for the
+    // motion's fit has its release at the first compared sample to within half a sample
+    // (uniform).
     if data.held {
         progress("measuring the release instant", 0, 1);
         let (tau_all, y_all, ydot_all) = &data.record;

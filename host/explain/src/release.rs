@@ -17,7 +17,8 @@
 //! release carry the instant itself; the model then holds it, like the filter's order, and prints
 //! it with this ±.
 
-use tribo_physics::uncertainty::noise_sigma;
+use tribo_physics::identify::solve;
+use tribo_physics::uncertainty::{invert, noise_sigma};
 
 /// Phase of the motion (rad from the release) up to which the free motion is fitted: short enough
 /// that a friction law's change with speed and a cubic stiffness's distortion stay in the noise,
@@ -86,31 +87,36 @@ fn line(g: &[f64], z: &[f64]) -> Option<(f64, f64)> {
 /// amplitude, the velocity's zero and its amplitude.
 type Constants = [f64; NONLINEAR + 4];
 
-/// The linear constants at their least-squares values for `q`.
-fn with_linear(w: &Window, q: &[f64; NONLINEAR]) -> Option<Constants> {
-    let (gy, gv) = shapes(&w.tau, q);
-    let (yh, a) = line(&gy, &w.y)?;
-    let (vh, b) = line(&gv, &w.v)?;
+/// The linear constants at their least-squares values for `q`, given `q`'s shape columns.
+fn with_linear(w: &Window, q: &[f64; NONLINEAR], gy: &[f64], gv: &[f64]) -> Option<Constants> {
+    let (yh, a) = line(gy, &w.y)?;
+    let (vh, b) = line(gv, &w.v)?;
     Some([q[0], q[1], q[2], yh, a, vh, b])
 }
 
 /// The window's residuals in units of each channel's noise.
 fn residuals(w: &Window, p: &Constants) -> Vec<f64> {
     let (gy, gv) = shapes(&w.tau, &[p[0], p[1], p[2]]);
+    residuals_with(w, p, &gy, &gv)
+}
+
+/// [`residuals`] with the shape columns of `p`'s nonlinear constants given.
+fn residuals_with(w: &Window, p: &Constants, gy: &[f64], gv: &[f64]) -> Vec<f64> {
     let ry =
         w.y.iter()
-            .zip(&gy)
+            .zip(gy)
             .map(|(y, g)| (y - p[3] - p[4] * g) / w.sy);
     let rv =
         w.v.iter()
-            .zip(&gv)
+            .zip(gv)
             .map(|(v, g)| (v - p[5] - p[6] * g) / w.sv);
     ry.chain(rv).collect()
 }
 
 /// The residuals with the linear constants projected out.
 fn projected(w: &Window, q: &[f64; NONLINEAR]) -> Option<Vec<f64>> {
-    Some(residuals(w, &with_linear(w, q)?))
+    let (gy, gv) = shapes(&w.tau, q);
+    Some(residuals_with(w, &with_linear(w, q, &gy, &gv)?, &gy, &gv))
 }
 
 fn chi2(w: &Window, q: &[f64; NONLINEAR]) -> f64 {
@@ -230,7 +236,7 @@ pub fn release_from_motion_over(
             for (i, row) in m.iter_mut().enumerate() {
                 row[i] *= 1.0 + lambda;
             }
-            let Some(d) = solve_spd(&m, &g) else {
+            let Some(d) = solve(m, g.clone()) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -254,7 +260,8 @@ pub fn release_from_motion_over(
         return None;
     }
     // The ± from the full Jacobian (the nonlinear and the linear constants).
-    let p = with_linear(&w, &q)?;
+    let (gy, gv) = shapes(&w.tau, &q);
+    let p = with_linear(&w, &q, &gy, &gv)?;
     let ps = [
         dtau,
         1e-3,
@@ -269,9 +276,7 @@ pub fn release_from_motion_over(
         .iter()
         .map(|ci| cols.iter().map(|cj| dot(ci, cj)).collect())
         .collect();
-    let mut e0 = vec![0.0; jtj.len()];
-    e0[0] = 1.0;
-    let var = solve_spd(&jtj, &e0)?[0];
+    let var = invert(&jtj)?[0][0];
     let dof = (2 * w.tau.len()).saturating_sub(p.len()).max(1) as f64;
     let chi2_dof = f / dof;
     let se = (var * chi2_dof.max(1.0)).sqrt();
@@ -282,34 +287,6 @@ pub fn release_from_motion_over(
         omega: q[1],
         samples: w.tau.len(),
     })
-}
-
-/// The solution of `m x = b` for a symmetric positive-definite `m` (Cholesky), `None` if it is not.
-fn solve_spd(m: &[Vec<f64>], b: &[f64]) -> Option<Vec<f64>> {
-    let n = m.len();
-    let mut l = vec![vec![0.0; n]; n];
-    for i in 0..n {
-        for j in 0..=i {
-            let s: f64 = m[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
-            if i == j {
-                if s.is_nan() || s <= 0.0 {
-                    return None;
-                }
-                l[i][i] = s.sqrt();
-            } else {
-                l[i][j] = s / l[j][j];
-            }
-        }
-    }
-    let mut z = vec![0.0; n];
-    for i in 0..n {
-        z[i] = (b[i] - (0..i).map(|k| l[i][k] * z[k]).sum::<f64>()) / l[i][i];
-    }
-    let mut x = vec![0.0; n];
-    for i in (0..n).rev() {
-        x[i] = (z[i] - (i + 1..n).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
-    }
-    Some(x)
 }
 
 #[cfg(test)]
