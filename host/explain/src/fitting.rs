@@ -143,13 +143,7 @@ pub fn variance_se(v: f64) -> f64 {
 /// columns of a held parameter `NaN`); `None` where it cannot be determined.
 pub fn covariance_of(data: &Prepared, m: &FittedModel) -> Option<Vec<Vec<f64>>> {
     let r = objective(data, &m.spec, &m.p, &m.env_resid, &m.force_resid);
-    let ne = m.env_resid.len();
-    let nc = ne + m.force_resid.len();
-    let blocks = [0..ne, ne..nc, nc..r.len()];
-    // The release instant's prior is one residual whose variance is 1 by construction: its part
-    // of the sandwich's meat is its expected, not its realised, square.
-    let mut r_meat = r.clone();
-    r_meat[nc..].iter_mut().for_each(|v| *v = 1.0);
+    let (blocks, r_meat) = sandwich_blocks(&r, m.env_resid.len(), m.force_resid.len());
     let held = lowpass_at_bound(data, &m.spec, &m.p)
         .then(|| m.spec.lowpass_index())
         .flatten();

@@ -68,8 +68,8 @@ pub use model::{Effect, ExplainError, Prepared, Spec};
 pub use serde_json;
 
 use model::{
-    gap_of, objective, residuals, rms, simulate_spec, LOWPASS_TAU_MAX, MEMORY_TAU_MIN,
-    RIG_FORCE_CUTOFF_HZ,
+    gap_of, objective, residuals, rms, sandwich_blocks, simulate_spec, LOWPASS_TAU_MAX,
+    MEMORY_TAU_MIN, RIG_FORCE_CUTOFF_HZ,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -446,7 +446,10 @@ pub fn explain_with_progress(
             .max(1) as f64;
         let step = used.dtau / (crossings * 12f64.sqrt());
         let w = data.rig.omega();
-        ((used.release_shift + cur.p[i]) / w, se.hypot(step) / w)
+        (
+            used.release_shift_of(&cur.spec, &cur.p) / w,
+            se.hypot(step) / w,
+        )
     });
     let ex = Explanation {
         conclusion,
@@ -705,7 +708,7 @@ fn without_reversal_samples(
     let mut drop = vec![false; n];
     for &tr in &sim.reversals {
         // Sample i is at τ_i + release shift on the simulator's clock, τ_i = i dτ.
-        let x = (tr - data.release_shift - base.spec.release_delta(&base.p)) / data.dtau;
+        let x = (tr - data.release_shift_of(&base.spec, &base.p)) / data.dtau;
         if !x.is_finite() {
             continue;
         }

@@ -222,12 +222,7 @@ pub fn nuisance_standard_errors(
     let Some(r0) = residual(&q0) else {
         return [f64::NAN; 3];
     };
-    // The release instant's prior, when there is one, is the last residual (its meat is its
-    // expected square: [`crate::covariance_of`]).
-    let nc = cf.env.len() + cf.force.len();
-    let blocks = [0..cf.env.len(), cf.env.len()..nc, nc..r0.len()];
-    let mut r_meat = r0.clone();
-    r_meat[nc..].iter_mut().for_each(|v| *v = 1.0);
+    let (blocks, r_meat) = sandwich_blocks(&r0, cf.env.len(), cf.force.len());
     let se = jacobian(residual, &q0, &r0, 1e-3, &scales)
         .and_then(|j| hac_covariance_blocks(&j, &r_meat, &blocks))
         .map(|c| standard_errors(&c))

@@ -466,6 +466,13 @@ impl Prepared {
             .then(|| spec.release_delta(p) / self.release_se)
     }
 
+    /// Where the release falls before the first compared sample in the model `spec`/`p` (τ units):
+    /// the motion's measurement plus the model's offset from it. Sample `k` is at `τ_k` plus this
+    /// on the simulator's clock.
+    pub fn release_shift_of(&self, spec: &Spec, p: &[f64]) -> f64 {
+        self.release_shift + spec.release_delta(p)
+    }
+
     /// The square of [`Prepared::release_prior`] (0 without one).
     pub fn release_chi2(&self, spec: &Spec, p: &[f64]) -> f64 {
         self.release_prior(spec, p).map_or(0.0, |r| r * r)

@@ -62,7 +62,7 @@ impl<'a> Mu0Drift<'a> {
             thermal,
             running,
             span_end: span.max(THERMAL_SEGMENT),
-            shift: data.release_shift + spec.release_delta(p),
+            shift: data.release_shift_of(spec, p),
         })
     }
 
@@ -127,7 +127,7 @@ pub fn simulate_spec(data: &Prepared, spec: &Spec, p: &[f64]) -> Result<Simulate
             .with_cubic(kappa)
             .with_apparatus_damping(mu_a)
     };
-    let shift = data.release_shift + spec.release_delta(p);
+    let shift = data.release_shift_of(spec, p);
     let (y0, v0) = data.initial_state();
     let (y0, v0) = (
         y0 * (1.0 + spec.start_scale(p)),
@@ -372,6 +372,21 @@ pub fn objective(data: &Prepared, spec: &Spec, p: &[f64], env: &[f64], force: &[
     let mut r = weighted(data, env, force);
     r.extend(data.release_prior(spec, p));
     r
+}
+
+/// The blocks of an [`objective`] residual vector `r` with `n_env` envelope and `n_force` force
+/// residuals for the HAC sandwich (envelope, force, the release instant's prior), and the residuals
+/// its meat is built from: the prior is one residual whose variance is 1 by construction, so its
+/// part of the meat is its expected square, 1, not its realised one.
+pub fn sandwich_blocks(
+    r: &[f64],
+    n_env: usize,
+    n_force: usize,
+) -> ([std::ops::Range<usize>; 3], Vec<f64>) {
+    let nc = n_env + n_force;
+    let mut meat = r.to_vec();
+    meat[nc..].iter_mut().for_each(|v| *v = 1.0);
+    ([0..n_env, n_env..nc, nc..r.len()], meat)
 }
 
 /// Weighted residual vector minimised by the fits: each channel's residuals times `√w_c`, the
