@@ -427,6 +427,13 @@ pub fn explain_with_progress(
     } else {
         Conclusion::PartlyExplained
     };
+    // Every named effect's constants are the final model's, the model the record is explained
+    // by, with their ± from its sandwich: a step's were those of the model that step left, before
+    // the effects named after it were fitted beside them (a Stribeck rise's speed 4 % off, 8σ,
+    // once a quadratic term was named after it). A step's own ± (which the profile at the
+    // effect's absence may have widened, and a zero measured over the hold widens for an
+    // asymmetry) is kept where it is the wider.
+    let final_se = final_constants(&used, &cur, &mut steps);
     progress("done", 1, 1);
     let lowpass = ForceLowpass::of(&data, &cur, source, order_evidence);
     // The release instant of the final model (the motion's measurement plus the offset fitted
@@ -437,10 +444,7 @@ pub fn explain_with_progress(
     // √12). The sandwich alone on grid #6 (`grid(520, 1)`, 18.7 kS/s, ×8 noise): ± 0.11 µs for
     // an error of 0.43.
     let release = cur.spec.release_index().map(|i| {
-        let se = standard_errors_of(&used, &cur)
-            .get(i)
-            .copied()
-            .unwrap_or(f64::NAN);
+        let se = final_se.get(i).copied().unwrap_or(f64::NAN);
         let crossings = simulate_spec(&used, &cur.spec, &cur.p)
             .map_or(0, |s| s.reversals.len())
             .max(1) as f64;
@@ -674,6 +678,35 @@ fn reweigh(data: &Prepared, m: &FittedModel, max_iter: usize) -> (Prepared, Fitt
         ..best
     };
     (d, best)
+}
+
+/// Sets every step's constants to those of the final model `cur` (fitted on `data`), their ± to
+/// the wider of the final model's and the step's own; returns the final model's standard errors
+/// (every parameter, `NaN` where one cannot be determined).
+fn final_constants(data: &Prepared, cur: &FittedModel, steps: &mut [Step]) -> Vec<f64> {
+    let cov = covariance_of(data, cur);
+    let se: Vec<f64> = match &cov {
+        Some(c) => (0..cur.p.len()).map(|i| variance_se(c[i][i])).collect(),
+        None => vec![f64::NAN; cur.p.len()],
+    };
+    for st in steps.iter_mut() {
+        let Some(e) = Effect::from_name(&st.effect).filter(|&e| cur.spec.has(e)) else {
+            continue;
+        };
+        let mut params = effect_params(data, &cur.spec, &cur.p, e);
+        let mut params_se = effect_params_se(data, &cur.spec, &cur.p, &se, cov.as_deref(), e);
+        relative_asymmetry(cur, e, &mut params, Some(&mut params_se));
+        for (k, v) in params_se.iter_mut() {
+            if let Some(&own) = st.params_se.get(k) {
+                if own.is_finite() && (v.is_nan() || *v < own) {
+                    *v = own;
+                }
+            }
+        }
+        st.params = params;
+        st.params_se = params_se;
+    }
+    se
 }
 
 /// Half-width of the band of force samples about each of the base model's velocity reversals
