@@ -22,9 +22,9 @@ pub struct VirtualArgs {
     /// The contact's law is a `[law]` table with its kind and constants, e.g.
     /// `kind = "coulomb_viscous"`, `mu0 = 0.02`, `mu1 = 0.004`. Kinds: coulomb (mu0), viscous
     /// (mu1), coulomb_viscous (mu0, mu1), quadratic (mu0, mu1, mu2), polynomial (mu = [μ0, μ1,
-    /// …]), stribeck (mu_c, mu_s, v_s, delta, mu_v), stribeck_power, hess_soom, dahl, lugre,
-    /// modified_lugre, lagged (steady = { kind = …, … }, memory). A constant out of its range is
-    /// refused with the rule it breaks.
+    /// …]), stribeck (mu_c, mu_s, v_s, delta, mu_v, and optionally mu2), stribeck_power,
+    /// hess_soom, dahl, lugre, modified_lugre, lagged (steady = { kind = …, … }, memory). A
+    /// constant out of its range is refused with the rule it breaks.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Normal load on the simulated knob, N.

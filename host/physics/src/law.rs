@@ -31,7 +31,9 @@ pub enum FrictionLaw {
         mu: Vec<f64>,
     },
     /// Exponential Stribeck curve (Armstrong-Hélouvry / Olsson form, the `g(v)` of LuGre eq. 17):
-    /// `f = sgn(y') [μ_c + (μ_s − μ_c) exp(−(|y'|/v_s)^δ)] + μ_v y'`.
+    /// `f = sgn(y') [μ_c + (μ_s − μ_c) exp(−(|y'|/v_s)^δ)] + μ_v y' + μ2 y'² sgn(y')`, with the
+    /// pseudo-polynomial law's quadratic term `μ2` (eq. 12–13; 0 for the plain curve) for a
+    /// contact whose friction rises at low speed and also follows the speed's square above it.
     ///
     /// This is *not* the thesis's ch. 1 eq. 9 (a rational blend of two power laws: see
     /// [`FrictionLaw::StribeckPower`]). The two share the limits (`f(0+)` = static/boundary
@@ -48,6 +50,8 @@ pub enum FrictionLaw {
         delta: f64,
         /// Viscous coefficient.
         mu_v: f64,
+        /// Quadratic coefficient (`μ2 y'² sgn(y')`, the pseudo-polynomial law's second term).
+        mu2: f64,
     },
     /// The thesis's Stribeck law, ch. 1 eq. 7–9, with `y'` standing for `η ẋ` (η, K, h, B lumped
     /// into the dimensionless constants):
@@ -236,16 +240,19 @@ impl fmt::Display for FrictionLaw {
                 v_s,
                 delta,
                 mu_v,
-            } => named(
-                f,
-                &[
+                mu2,
+            } => {
+                let kv = [
                     ("mu_c", *mu_c),
                     ("mu_s", *mu_s),
                     ("v_s", *v_s),
                     ("delta", *delta),
                     ("mu_v", *mu_v),
-                ],
-            ),
+                    ("mu2", *mu2),
+                ];
+                // The quadratic term only where there is one: the plain curve reads as before.
+                named(f, &kv[..if *mu2 != 0.0 { 6 } else { 5 }])
+            }
             FrictionLaw::StribeckPower {
                 k_ehl,
                 n_ehl,
@@ -455,9 +462,11 @@ impl FrictionLaw {
                 v_s,
                 delta,
                 mu_v,
+                mu2,
             } => {
                 let s = sgn_on(v, dir);
-                s * (mu_c + (mu_s - mu_c) * (-(v.abs() / v_s).powf(*delta)).exp()) + mu_v * v
+                s * (mu_c + (mu_s - mu_c) * (-(v.abs() / v_s).powf(*delta)).exp() + mu2 * v * v)
+                    + mu_v * v
             }
             FrictionLaw::StribeckPower {
                 k_ehl,
@@ -544,8 +553,10 @@ impl FrictionLaw {
                 v_s,
                 delta,
                 mu_v,
+                mu2,
             } => {
-                if !fin(&[*mu_c, *mu_s, *v_s, *delta, *mu_v]) || *v_s <= 0.0 || *delta <= 0.0 {
+                if !fin(&[*mu_c, *mu_s, *v_s, *delta, *mu_v, *mu2]) || *v_s <= 0.0 || *delta <= 0.0
+                {
                     return bad("need finite constants, v_s > 0 and delta > 0");
                 }
             }

@@ -281,6 +281,7 @@ fn stribeck_limits_exponential_and_thesis_eq9() {
         v_s,
         delta: 2.0,
         mu_v,
+        mu2: 0.0,
     };
     assert!((ex.force(1e-9, 0.0, 0.0) - mu_s).abs() < 1e-10);
     assert_eq!(ex.static_level(), Some(mu_s));
@@ -290,6 +291,20 @@ fn stribeck_limits_exponential_and_thesis_eq9() {
     assert!(
         (ex.force(v_s, 0.0, 0.0) - (mu_c + (mu_s - mu_c) / 1f64.exp() + mu_v * v_s)).abs() < 1e-12
     );
+    // The quadratic term adds μ2 y'² in the direction of sliding, on either side.
+    let mu2 = -2e-4;
+    let q = FrictionLaw::Stribeck {
+        mu_c,
+        mu_s,
+        v_s,
+        delta: 2.0,
+        mu_v,
+        mu2,
+    };
+    for v in [-20.0, -0.3, 0.3, 20.0] {
+        let want = ex.force(v, 0.0, 0.0) + mu2 * v * f64::abs(v);
+        assert!((q.force(v, 0.0, 0.0) - want).abs() < 1e-12, "{v}");
+    }
 
     // Eq. 7–9: μ_EHL = K v^n, μ_BL = h v^p, blend weight 1/(1 + (v/B)^M).
     let (k, n, h, b, m) = (0.01, 0.6, 0.12, 0.8, 3.0);
@@ -414,6 +429,7 @@ fn energy_lost_equals_friction_work_for_every_law() {
                 v_s: 0.5,
                 delta: 2.0,
                 mu_v: 0.01,
+                mu2: 0.0,
             })
             .with_cubic(2e-3),
             Method::Rk4 { h: 0.01 },
@@ -459,6 +475,7 @@ fn stribeck_rk4_stops_where_dormand_prince_does_inside_the_static_band() {
         v_s: 0.5,
         delta: 2.0,
         mu_v: 0.01,
+        mu2: 0.0,
     })
     .with_cubic(2e-3);
     let taus = grid(10001, 0.02);

@@ -580,8 +580,27 @@ mod tests {
             s.effect_params(Effect::CubicStiffness, &p),
             Some(&[1e-3][..])
         );
-        // A polynomial term excludes Stribeck, which needs a Coulomb–viscous law.
-        assert!(!s.can_add(Effect::Stribeck, true, true));
+        // Stribeck takes a law up to the quadratic term, and the quadratic term beside it, not
+        // a cubic one.
+        assert!(s.can_add(Effect::Stribeck, true, true));
+        assert!(!s
+            .with(Effect::QuadraticVelocity)
+            .can_add(Effect::Stribeck, true, true));
+        let sq = Spec::base(vec![0, 1]).with(Effect::Stribeck);
+        assert!(sq.can_add(Effect::QuadraticVelocity, true, true));
+        let sq = sq.with(Effect::QuadraticVelocity);
+        assert!(!sq.can_add(Effect::QuadraticVelocity, true, true));
+        assert_eq!(
+            sq.law(&[0.02, 0.002, 0.0, 0.03, 0.3, 4e-4], 0.0),
+            FrictionLaw::Stribeck {
+                mu_c: 0.02,
+                mu_s: 0.03,
+                v_s: 0.3,
+                delta: 2.0,
+                mu_v: 0.002,
+                mu2: 4e-4
+            }
+        );
         assert!(s.can_add(Effect::FrictionalLag, true, true));
         assert!(!s.can_add(Effect::SensorLag, true, true));
         let b = Spec::base(vec![0, 1]);
@@ -600,7 +619,8 @@ mod tests {
                         mu_s: 0.031,
                         v_s: 0.3,
                         delta: 2.0,
-                        mu_v: 0.002
+                        mu_v: 0.002,
+                        mu2: 0.0
                     }
                 );
             }

@@ -260,13 +260,16 @@ impl Spec {
     }
 
     /// Whether `e` can be added (each effect once, except further polynomial terms up to order
-    /// 4; Stribeck needs a law of order ≤ 1 with a Coulomb term and a polynomial term cannot be
-    /// added on top of it; sensor lag needs a force channel, thermal drift a temperature).
+    /// 4; Stribeck needs a law with a Coulomb term of order ≤ 2, and beside it the polynomial
+    /// goes up to the quadratic term, [`FrictionLaw::Stribeck`]'s `μ2`; sensor lag needs a force
+    /// channel, thermal drift a temperature).
     pub fn can_add(&self, e: Effect, has_force: bool, has_temp: bool) -> bool {
         let coulomb = self.powers.contains(&0);
         match e {
-            Effect::QuadraticVelocity => self.order() < 4 && !self.has(Effect::Stribeck),
-            Effect::Stribeck => !self.has(e) && self.order() <= 1 && coulomb,
+            Effect::QuadraticVelocity => {
+                self.order() < if self.has(Effect::Stribeck) { 2 } else { 4 }
+            }
+            Effect::Stribeck => !self.has(e) && self.order() <= 2 && coulomb,
             Effect::FrictionalLag => !self.has(e),
             Effect::CubicStiffness => !self.has(e),
             Effect::ThermalDrift => !self.has(e) && has_temp && coulomb,
@@ -460,6 +463,7 @@ impl Spec {
                 v_s: s[1],
                 delta: 2.0,
                 mu_v: mu1,
+                mu2: mu.get(2).copied().unwrap_or(0.0),
             },
             None => FrictionLaw::Polynomial { mu },
         };

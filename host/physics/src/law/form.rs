@@ -17,6 +17,10 @@ use super::{FrictionLaw, LuGre, ModifiedLuGre};
 use crate::invalid::InvalidParameter;
 use serde::{Deserialize, Serialize};
 
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
 #[derive(Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub(super) enum Form {
@@ -45,6 +49,9 @@ pub(super) enum Form {
         v_s: f64,
         delta: f64,
         mu_v: f64,
+        /// Optional (0 when absent, not written when 0): the quadratic term.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        mu2: f64,
     },
     #[serde(alias = "stribeck-power")]
     StribeckPower {
@@ -91,12 +98,14 @@ impl TryFrom<Form> for FrictionLaw {
                 v_s,
                 delta,
                 mu_v,
+                mu2,
             } => FrictionLaw::Stribeck {
                 mu_c,
                 mu_s,
                 v_s,
                 delta,
                 mu_v,
+                mu2,
             },
             Form::StribeckPower {
                 k_ehl,
@@ -140,12 +149,14 @@ impl From<FrictionLaw> for Form {
                 v_s,
                 delta,
                 mu_v,
+                mu2,
             } => Form::Stribeck {
                 mu_c,
                 mu_s,
                 v_s,
                 delta,
                 mu_v,
+                mu2,
             },
             FrictionLaw::StribeckPower {
                 k_ehl,
@@ -197,6 +208,7 @@ mod tests {
                 v_s: 0.5,
                 delta: 2.0,
                 mu_v: 0.004,
+                mu2: 0.0,
             },
             FrictionLaw::StribeckPower {
                 k_ehl: 0.01,
@@ -256,6 +268,28 @@ mod tests {
             kinds[..4],
             ["coulomb", "viscous", "coulomb_viscous", "quadratic"]
         );
+    }
+
+    #[test]
+    fn a_stribeck_curve_with_a_quadratic_term_is_written_with_it_and_without_it_when_zero() {
+        let plain =
+            r#"{"kind":"stribeck","mu_c":0.02,"mu_s":0.03,"v_s":0.5,"delta":2.0,"mu_v":0.004}"#;
+        let law: FrictionLaw = serde_json::from_str(plain).unwrap();
+        assert!(matches!(law, FrictionLaw::Stribeck { mu2, .. } if mu2 == 0.0));
+        assert_eq!(serde_json::to_string(&law).unwrap(), plain);
+        let with = FrictionLaw::Stribeck {
+            mu_c: 0.02,
+            mu_s: 0.03,
+            v_s: 0.5,
+            delta: 1.0,
+            mu_v: -0.004,
+            mu2: 1e-4,
+        };
+        let text = serde_json::to_string(&with).unwrap();
+        assert!(text.contains(r#""mu2":0.0001"#), "{text}");
+        assert_eq!(serde_json::from_str::<FrictionLaw>(&text).unwrap(), with);
+        assert!(with.to_string().contains("mu2 = 0.0001"), "{with}");
+        assert!(!law.to_string().contains("mu2"), "{law}");
     }
 
     #[test]
