@@ -643,6 +643,14 @@ impl Explanation {
                 100.0 * st.evidence.excess_removed.min(1.0)
             );
             for (k, v) in &st.params {
+                if st.effect == "stribeck" && k == "delta" {
+                    // Chosen, not fitted (`Spec::stribeck_delta`): no ±.
+                    let _ = writeln!(
+                        s,
+                        "    {k} = {v} (the curve's exponent: the better fit of 1 and 2)"
+                    );
+                    continue;
+                }
                 let se = st.params_se.get(k).copied().unwrap_or(f64::NAN);
                 let _ = writeln!(s, "    {k} = {}", pm(*v, se));
             }

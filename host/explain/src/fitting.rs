@@ -321,6 +321,8 @@ pub fn effect_params(data: &Prepared, spec: &Spec, p: &[f64], e: Effect) -> BTre
             m.insert("mu_s".into(), q[0]);
             m.insert("v_s".into(), q[1]);
             m.insert("v_s_m_s".into(), rig.v_of_ydot(q[1]));
+            // The exponent is chosen, not fitted: its ± is NaN ([`effect_params_se`]).
+            m.insert("delta".into(), spec.stribeck_delta);
         }
         Effect::FrictionalLag => {
             m.insert("memory_tau".into(), q[0]);
@@ -382,6 +384,10 @@ pub fn effect_params_se(
     e: Effect,
 ) -> BTreeMap<String, f64> {
     let mut m = effect_params(data, spec, se, e);
+    if let Some(d) = m.get_mut("delta") {
+        // A chosen exponent: no ± (`null` in JSON).
+        *d = f64::NAN;
+    }
     if e != Effect::RunningIn {
         return m;
     }

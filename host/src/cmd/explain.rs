@@ -65,7 +65,9 @@ never a guess.
 
 `--json` prints one object: `conclusion` (base-adequate, explained, partly-explained,
 unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_before`,
-`gap_after`, `evidence`, `params` and `params_se`), `gap_initial`, `gap_final`, `noise_floor`,
+`gap_after`, `evidence`, `params` and `params_se`: the final model's constants, a Stribeck rise's
+with its exponent `delta`, 1 or 2, chosen as the better fit and so with a `null` ±),
+`gap_initial`, `gap_final`, `noise_floor`,
 `unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source` (`record`, `option`,
 `fitted`, `none`), `force_lowpass` (`source`, `cutoff_hz` and `cutoff_hz_se`, `time_constant_s` and
 `time_constant_s_se`, `cutoff_at_least_hz`, `poles`: the filter's order, 1 or 2, fitted from the

@@ -343,19 +343,17 @@ fn add_effect(
             let delta = if f < 0.5 { 2.0 } else { 1.0 };
             let vs = log_between(1e-3, 1e-2, g);
             c.stribeck = Some((c.mu0 * (1.0 + st), vs, delta));
-            if delta == 2.0 {
-                consts.push(TrueConstant {
-                    effect,
-                    key: "mu_s",
-                    value: c.mu0 * (1.0 + st),
-                });
-                consts.push(TrueConstant {
-                    effect,
-                    key: "v_s_m_s",
-                    value: vs,
-                });
-            }
-            (format!("δ {delta}, vs {:.1} mm/s", 1e3 * vs), delta == 2.0)
+            consts.push(TrueConstant {
+                effect,
+                key: "mu_s",
+                value: c.mu0 * (1.0 + st),
+            });
+            consts.push(TrueConstant {
+                effect,
+                key: "v_s_m_s",
+                value: vs,
+            });
+            (format!("δ {delta}, vs {:.1} mm/s", 1e3 * vs), true)
         }
         "frictional-lag" => {
             c.memory_s = st * 1e-3;
