@@ -681,8 +681,8 @@ fn reweigh(data: &Prepared, m: &FittedModel, max_iter: usize) -> (Prepared, Fitt
 }
 
 /// `m` (a model that has just taken a Stribeck rise) or the same model with the curve's other
-/// exponent ([`model::STRIBECK_DELTAS`]), fitted from `m`'s constants and from the rise's own
-/// `starts`, whichever fits better.
+/// exponent ([`model::STRIBECK_DELTAS`]), fitted from `m`'s constants, from the rise's own
+/// `starts` and from taller, narrower rises than `m`'s, whichever fits better.
 fn stribeck_exponent(
     data: &Prepared,
     m: FittedModel,

@@ -601,6 +601,15 @@ mod tests {
                 mu2: 4e-4
             }
         );
+        // The exponent chosen is the law's.
+        let sq1 = Spec {
+            stribeck_delta: 1.0,
+            ..sq.clone()
+        };
+        assert!(matches!(
+            sq1.law(&[0.02, 0.002, 0.0, 0.03, 0.3, 4e-4], 0.0),
+            FrictionLaw::Stribeck { delta, .. } if delta == 1.0
+        ));
         assert!(s.can_add(Effect::FrictionalLag, true, true));
         assert!(!s.can_add(Effect::SensorLag, true, true));
         let b = Spec::base(vec![0, 1]);
