@@ -123,10 +123,21 @@ pub fn evaluate(data: &Prepared, spec: &Spec, p: &[f64]) -> Option<FittedModel> 
 /// at a bound would spread that confusion onto the lag's ±. Its own bound comes from
 /// [`lowpass_bound`]. Its standard error is `NaN`.
 pub fn standard_errors_of(data: &Prepared, m: &FittedModel) -> Vec<f64> {
-    match covariance_of(data, m) {
+    covariance_and_errors(data, m).1
+}
+
+/// [`covariance_of`] and the standard errors from its diagonal ([`standard_errors_of`]; all `NaN`
+/// where the covariance cannot be determined).
+pub fn covariance_and_errors(
+    data: &Prepared,
+    m: &FittedModel,
+) -> (Option<Vec<Vec<f64>>>, Vec<f64>) {
+    let cov = covariance_of(data, m);
+    let se = match &cov {
         Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
         None => vec![f64::NAN; m.p.len()],
-    }
+    };
+    (cov, se)
 }
 
 /// The standard error of a variance from a covariance's diagonal: `NaN` for a held parameter
@@ -251,11 +262,7 @@ pub fn lowpass_bound(data: &Prepared, m: &FittedModel) -> Option<f64> {
 
 /// Fills `params_se` of a fitted model.
 pub fn with_standard_errors(data: &Prepared, mut m: FittedModel) -> FittedModel {
-    let cov = covariance_of(data, &m);
-    let se: Vec<f64> = match &cov {
-        Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
-        None => vec![f64::NAN; m.p.len()],
-    };
+    let (cov, se) = covariance_and_errors(data, &m);
     m.params_se = named_params_se(data, &m.spec, &m.p, &se, cov.as_deref());
     m
 }

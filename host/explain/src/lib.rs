@@ -730,11 +730,7 @@ fn stribeck_exponent(
 /// the wider of the final model's and the step's own; returns the final model's standard errors
 /// (every parameter, `NaN` where one cannot be determined).
 fn final_constants(data: &Prepared, cur: &FittedModel, steps: &mut [Step]) -> Vec<f64> {
-    let cov = covariance_of(data, cur);
-    let se: Vec<f64> = match &cov {
-        Some(c) => (0..cur.p.len()).map(|i| variance_se(c[i][i])).collect(),
-        None => vec![f64::NAN; cur.p.len()],
-    };
+    let (cov, se) = covariance_and_errors(data, cur);
     for st in steps.iter_mut() {
         let Some(e) = Effect::from_name(&st.effect).filter(|&e| cur.spec.has(e)) else {
             continue;
@@ -1027,11 +1023,7 @@ fn search(
         };
         let m = settle(data, m, e, opts.max_iter);
         let mut ev = Evidence::of(data, &cur, &m, opts);
-        let cov = covariance_of(data, &m);
-        let mut se: Vec<f64> = match &cov {
-            Some(c) => (0..m.p.len()).map(|i| variance_se(c[i][i])).collect(),
-            None => vec![f64::NAN; m.p.len()],
-        };
+        let (cov, mut se) = covariance_and_errors(data, &m);
         // The profile of the effect's constant at its absence (the rest refitted there, from the
         // effect's own fit): the force misfit jumps with the parameters (a velocity reversal
         // crossing a sample instant), so the Jacobian's ± can be far too small (the grid's clean
