@@ -560,6 +560,160 @@ pub fn position_dependence(data: &Prepared, m: &FittedModel) -> Option<PositionD
     })
 }
 
+/// A drift of μ0 in time (running-in) against a stripe of the track, on the force channel
+/// ([`drift_or_stripe`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct DriftOrStripe {
+    /// The drift's evidence: the drop of the force channel's misfit, as a friction level, when
+    /// the drift's own shape (the model with it less the model without) is fitted to the model
+    /// without it, over the residuals' variance (their correlation accounted for).
+    pub drift: f64,
+    /// The same for the best stripe: a level that differs over one stretch of the track.
+    pub stripe: f64,
+    /// Where that stripe lies along the track (m from the centre, or the record's unit of
+    /// displacement; from, to).
+    pub stripe_from_to_m: (f64, f64),
+    /// What the stripe must beat the drift by to take the name from it: the penalty of its own
+    /// freedom (where it lies, 3 constants against the drift's) as the evidence thresholds
+    /// count it, set by the caller.
+    pub freedom: f64,
+    /// Whether the stripe, less its freedom, is within the margin a candidate needs over its
+    /// runner-up of the drift ([`crate::ExplainOptions::min_margin`]), set by the caller: a
+    /// drift named so carries the stripe as a caveat.
+    pub close: bool,
+}
+
+/// A drift of μ0 in time, fitted as `with` beside the model `without` it, against a stripe of
+/// the track (worn, contaminated: a friction level that differs over one stretch of it), on the
+/// force channel's friction level (measured − model, the sliding direction's sign taken off) of
+/// `without`: each fitted beside a constant and a level that differs between the outward and the
+/// inward half of a swing, the drift as its own shape (`with`'s level less `without`'s), the
+/// stripe over every stretch of whole bins a tenth of the release amplitude wide. A stripe near
+/// the centre makes the mean friction level rise as the amplitude decays, its share of each
+/// swing growing: a drift in time takes it, but within a swing the level stays where the stripe
+/// is; a drift changes the level everywhere from cycle to cycle. On the grid (`explain_lhs
+/// --records 520 --seed 1`): #499, a +30 % stripe across the centre at ×24 noise, named
+/// running-in at evidence 134, has the stripe at 179 and the drift at 146; records with
+/// running-in strong in the compared motion (8–30 %) have the drift ahead by 36–500, weak ones
+/// (2–7 %) within a few units of the stripe, as #483 (a −11 % stripe, 102 against 103). The
+/// samples are those sliding at more than 0.3 of the swing's speed amplitude (reversals left
+/// out), at every amplitude. `None` without a force channel, with too few sliding samples or a
+/// singular fit.
+pub fn drift_or_stripe(
+    data: &Prepared,
+    without: &FittedModel,
+    with: &FittedModel,
+) -> Option<DriftOrStripe> {
+    let (r0, r1, idx) = (&without.force_resid, &with.force_resid, &data.f_idx);
+    if r0.is_empty() || r0.len() != idx.len() || r1.len() != idx.len() {
+        return None;
+    }
+    const BINS: usize = 20;
+    // Per bin: Σ1, Σw, Σw², Σy, Σwy (y the level, w = y/a0 sgn y').
+    let mut per = [[0.0f64; 5]; BINS];
+    // Over all: the same, Σy², and Σd, Σwd, Σd², Σdy (d the drift's level).
+    let mut all = [0.0f64; 10];
+    let mut levels = Vec::new();
+    for ((&a, &b), &i) in r0.iter().zip(r1).zip(idx) {
+        let (v, y) = (data.ydot[i], data.y[i]);
+        if v.abs() <= 0.3 * y.hypot(v) {
+            continue;
+        }
+        let pos = y / data.a0;
+        let bin = (((pos + 1.0) * 0.5 * BINS as f64).floor() as isize).clamp(0, BINS as isize - 1);
+        let w = pos * v.signum();
+        // Residuals are measured − model: the drift's level is `with`'s model less `without`'s.
+        let (u, d) = (-a * v.signum(), (b - a) * v.signum());
+        let row = [1.0, w, w * w, u, w * u];
+        for (s, x) in per[bin as usize].iter_mut().zip(row) {
+            *s += x;
+        }
+        for (s, x) in all
+            .iter_mut()
+            .zip([1.0, w, w * w, u, w * u, u * u, d, w * d, d * d, d * u])
+        {
+            *s += x;
+        }
+        levels.push(u);
+    }
+    let n = levels.len();
+    if n < 100 {
+        return None;
+    }
+    let [s1, sw, sww, sy, swy, syy, sd, swd, sdd, sdy] = all;
+    // The misfit left by [1, w, x] given Σx, Σwx, Σx², Σxy.
+    let rss3 = |sx: f64, swx: f64, sxx: f64, sxy: f64| -> Option<f64> {
+        let a = [[s1, sw, sx], [sw, sww, swx], [sx, swx, sxx]];
+        let rhs = [sy, swy, sxy];
+        let beta = solve3(a, rhs)?;
+        Some(syy - beta.iter().zip(rhs).map(|(b, r)| b * r).sum::<f64>())
+    };
+    // [1, w] alone (the stretch empty).
+    let rss0 = rss3(0.0, 0.0, 1.0, 0.0)?;
+    let rss_drift = rss3(sd, swd, sdd, sdy)?;
+    let mut stripe: Option<(f64, usize, usize)> = None;
+    for from in 0..BINS {
+        let mut acc = [0.0f64; 5];
+        for (to, bin) in per.iter().enumerate().skip(from) {
+            for (s, x) in acc.iter_mut().zip(bin) {
+                *s += x;
+            }
+            // A stretch of fewer than 20 samples, or of all of them, is no stripe.
+            if acc[0] < 20.0 || s1 - acc[0] < 20.0 {
+                continue;
+            }
+            // The indicator's sums: Σ1 = Σx = Σx², Σwx, Σxy over the stretch.
+            if let Some(r) = rss3(acc[0], acc[1], acc[0], acc[3]) {
+                if stripe.is_none_or(|(b, ..)| r < b) {
+                    stripe = Some((r, from, to));
+                }
+            }
+        }
+    }
+    let (rss_stripe, from, to) = stripe?;
+    let inflate = n as f64 / effective_count(&levels).max(1.0);
+    let s2 = inflate * rss_drift.min(rss_stripe) / (n - 4) as f64;
+    let edge = |b: usize| {
+        data.rig
+            .x_of_y((b as f64 / BINS as f64 * 2.0 - 1.0) * data.a0)
+    };
+    (s2.is_finite() && s2 > 0.0).then(|| DriftOrStripe {
+        drift: (rss0 - rss_drift).max(0.0) / s2,
+        stripe: (rss0 - rss_stripe).max(0.0) / s2,
+        stripe_from_to_m: (edge(from), edge(to + 1)),
+        freedom: 0.0,
+        close: false,
+    })
+}
+
+/// The solution of the 3 × 3 system `a x = b` (Cramer's rule); `None` if singular.
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(a);
+    let scale = a
+        .iter()
+        .flatten()
+        .map(|x| x.abs())
+        .fold(0.0, f64::max)
+        .powi(3);
+    if !(d.is_finite() && d.abs() > 1e-12 * scale) {
+        return None;
+    }
+    let mut x = [0.0; 3];
+    for (k, xk) in x.iter_mut().enumerate() {
+        let mut m = a;
+        for (row, &bi) in m.iter_mut().zip(&b) {
+            row[k] = bi;
+        }
+        *xk = det(m) / d;
+    }
+    Some(x)
+}
+
 /// The level's profile across the track ([`AcrossTrack`]) from the sliding samples `(|y| / a0,
 /// |y'| / vmax, τ, level, y sgn y' / a0)`, in `bins` bins of |y| / a0 over [0, 1], their variance
 /// inflated by `inflate` (n / n_eff): `(bins compared, χ²)`. `None` with fewer than two bins of 20

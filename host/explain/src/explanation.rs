@@ -157,6 +157,12 @@ pub struct Explanation {
     /// The force channel's friction level on the two sides of the track
     /// ([`crate::diag::PositionDependence`]); when significant the record is *unexplained*.
     pub position_dependence: Option<crate::diag::PositionDependence>,
+    /// Running-in against a stripe of the track, where running-in passed every other test
+    /// ([`crate::diag::drift_or_stripe`]): both evidences, where the stripe lies and what its
+    /// freedom of where it lies is charged. Running-in is named where it is the better fit (a
+    /// stripe within [`ExplainOptions::min_margin`] of it is printed as a caveat); otherwise
+    /// the conclusion is `ambiguous`, running-in and [`POSITION_LEVEL`].
+    pub drift_or_stripe: Option<crate::diag::DriftOrStripe>,
     /// On a record held before its release: where the release falls before the first compared
     /// sample (s; negative: after it), measured from the displacement and velocity about it
     /// ([`crate::release::release_from_motion`]) and held in every model. `null`
@@ -336,6 +342,11 @@ impl ForceLowpass {
         }
     }
 }
+
+/// The name, in [`Explanation::ambiguous`], of a friction level that depends on where the pin
+/// slides (a worn or contaminated stripe), which a drift of μ0 in time is not told apart from
+/// ([`crate::diag::drift_beyond_position`]).
+pub const POSITION_LEVEL: &str = "position-dependent-friction";
 
 /// The name, in [`Explanation::ambiguous`], of a constant offset of the force channel that the
 /// record cannot tell from a direction asymmetry (its zero is not stated).
@@ -567,6 +578,35 @@ impl Explanation {
                             .unwrap_or(f64::NAN)
                 )
             }
+            Conclusion::Ambiguous if self.ambiguous.iter().any(|a| a == POSITION_LEVEL) => {
+                let named = if self.missing_effects.is_empty() {
+                    String::new()
+                } else {
+                    format!("missing: {}; ", self.missing_effects.join(" + "))
+                };
+                let drift = self.ambiguous.first().map_or("a drift", |s| s.as_str());
+                match self.drift_or_stripe.as_ref() {
+                    Some(c) => format!(
+                        "{named}unresolved: the force channel's friction level changes over the \
+                         motion as {drift} would make it (evidence {:.1}), but a stripe of the \
+                         track from {:.0} to {:.0} µm with a friction level of its own explains \
+                         it better (evidence {:.1}, {:.1} of which its freedom of where it \
+                         lies accounts for): a stripe takes a larger share of each \
+                         swing as the amplitude decays. Neither is named: a release from \
+                         another amplitude tells them apart (a stripe stays where it is on the \
+                         track, a drift follows the time)",
+                        c.drift,
+                        1e6 * c.stripe_from_to_m.0,
+                        1e6 * c.stripe_from_to_m.1,
+                        c.stripe,
+                        c.freedom
+                    ),
+                    None => format!(
+                        "{named}unresolved: {drift} or a friction level that depends on where \
+                         the pin slides; neither is named"
+                    ),
+                }
+            }
             Conclusion::Ambiguous => format!(
                 "unresolved: {} explain the remainder about equally well; neither is named",
                 self.ambiguous.join(" and ")
@@ -657,6 +697,29 @@ impl Explanation {
         }
         let _ = writeln!(s, "final gap {:.3e}", self.gap_final);
         let _ = writeln!(s, "{}", self.answer());
+        if let Some(c) = self
+            .drift_or_stripe
+            .as_ref()
+            .filter(|_| self.missing_effects.iter().any(|m| m == "running-in"))
+        {
+            let _ = writeln!(
+                s,
+                "running-in against a stripe of the track: evidence {:.1} on the force channel, \
+                 the best stripe ({:.0} to {:.0} µm) {:.1}, less {:.1} for where it lies{}",
+                c.drift,
+                1e6 * c.stripe_from_to_m.0,
+                1e6 * c.stripe_from_to_m.1,
+                c.stripe,
+                c.freedom,
+                if c.close {
+                    " — too close to rule the stripe out: a release from another amplitude \
+                     tells them apart (a stripe stays where it is on the track, a drift follows \
+                     the time)"
+                } else {
+                    ""
+                }
+            );
+        }
         if !self.disagreement.is_empty() {
             let _ = writeln!(s, "where the model still disagrees:");
             for d in &self.disagreement {
