@@ -643,9 +643,9 @@ pub fn drift_or_stripe(
     let [s1, sw, sww, sy, swy, syy, sd, swd, sdd, sdy] = all;
     // The misfit left by [1, w, x] given Σx, Σwx, Σx², Σxy.
     let rss3 = |sx: f64, swx: f64, sxx: f64, sxy: f64| -> Option<f64> {
-        let a = [[s1, sw, sx], [sw, sww, swx], [sx, swx, sxx]];
+        let a = vec![vec![s1, sw, sx], vec![sw, sww, swx], vec![sx, swx, sxx]];
         let rhs = [sy, swy, sxy];
-        let beta = solve3(a, rhs)?;
+        let beta = tribo_physics::identify::solve(a, rhs.to_vec())?;
         Some(syy - beta.iter().zip(rhs).map(|(b, r)| b * r).sum::<f64>())
     };
     // [1, w] alone (the stretch empty).
@@ -684,34 +684,6 @@ pub fn drift_or_stripe(
         freedom: 0.0,
         close: false,
     })
-}
-
-/// The solution of the 3 × 3 system `a x = b` (Cramer's rule); `None` if singular.
-fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(a);
-    let scale = a
-        .iter()
-        .flatten()
-        .map(|x| x.abs())
-        .fold(0.0, f64::max)
-        .powi(3);
-    if !(d.is_finite() && d.abs() > 1e-12 * scale) {
-        return None;
-    }
-    let mut x = [0.0; 3];
-    for (k, xk) in x.iter_mut().enumerate() {
-        let mut m = a;
-        for (row, &bi) in m.iter_mut().zip(&b) {
-            row[k] = bi;
-        }
-        *xk = det(m) / d;
-    }
-    Some(x)
 }
 
 /// The level's profile across the track ([`AcrossTrack`]) from the sliding samples `(|y| / a0,
