@@ -592,8 +592,9 @@ pub struct DriftOrStripe {
 /// the centre makes the mean friction level rise as the amplitude decays, its share of each
 /// swing growing: a drift in time takes it, but within a swing the level stays where the stripe
 /// is; a drift changes the level everywhere from cycle to cycle. On the randomized grid (520
-/// records, seed 1, as the example `explain_lhs` runs it): #499, a +30 % stripe across the centre at ×24 noise, named
-/// running-in at evidence 134, has the stripe at 179 and the drift at 146; records with
+/// records, seed 1, as the example `explain_lhs` runs it): #499, a +30 % stripe across the
+/// centre at ×24 noise, named running-in at evidence 134, has the stripe at 179 and the drift at
+/// 146; records with
 /// running-in strong in the compared motion (8–30 %) have the drift ahead by 36–500, weak ones
 /// (2–7 %) within a few units of the stripe, as #483 (a −11 % stripe, 102 against 103). The
 /// samples are those sliding at more than 0.3 of the swing's speed amplitude (reversals left

@@ -345,7 +345,7 @@ impl ForceLowpass {
 
 /// The name, in [`Explanation::ambiguous`], of a friction level that depends on where the pin
 /// slides (a worn or contaminated stripe), which a drift of μ0 in time is not told apart from
-/// ([`crate::diag::drift_beyond_position`]).
+/// ([`crate::diag::drift_or_stripe`]).
 pub const POSITION_LEVEL: &str = "position-dependent-friction";
 
 /// The name, in [`Explanation::ambiguous`], of a constant offset of the force channel that the

@@ -365,26 +365,16 @@ pub fn explain_with_progress(
                 if let Some(b2) = fit_base(&spec2) {
                     let (d2, b2) = reweigh(&data, &b2, opts.max_iter);
                     let b2 = with_standard_errors(&d2, b2);
-                    let r = search(&d2, opts, &diagnostics, &b2, progress);
-                    (
-                        base,
+                    Searched {
+                        start: base,
                         cur,
                         steps,
                         rounds,
                         ambiguous,
                         stripe,
                         drift_model,
-                        used,
-                    ) = (
-                        r.start,
-                        r.cur,
-                        r.steps,
-                        r.rounds,
-                        r.ambiguous,
-                        r.stripe,
-                        r.drift_model,
-                        r.data,
-                    );
+                        data: used,
+                    } = search(&d2, opts, &diagnostics, &b2, progress);
                     order_evidence = other_order(&used, &cur, opts.max_iter)
                         .map(|o| -Evidence::of(&used, &cur, &o, opts).value);
                 }
