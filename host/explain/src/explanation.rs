@@ -18,6 +18,23 @@ pub struct Step {
     pub params: BTreeMap<String, f64>,
     /// Their standard errors (`NaN`/null if the fit cannot determine them).
     pub params_se: BTreeMap<String, f64>,
+    /// Set when this effect alone removed too small a share of the excess misfit and was named
+    /// as the stronger member of a pair that removes enough of it, each member needed beside the
+    /// other (the other must then qualify on its own in the next round).
+    pub paired_with: Option<PairedWith>,
+}
+
+/// The pair an effect was named with ([`Step::paired_with`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct PairedWith {
+    /// The other member.
+    pub effect: String,
+    /// The pair's evidence against the model before the step.
+    pub evidence: f64,
+    /// What that evidence must exceed (the threshold for both members' constants).
+    pub threshold: f64,
+    /// The share of the excess misfit the pair removes.
+    pub excess_removed: f64,
 }
 
 /// How a candidate scored in a round.
@@ -682,6 +699,17 @@ impl Explanation {
                 st.evidence.threshold,
                 100.0 * st.evidence.excess_removed.min(1.0)
             );
+            if let Some(p) = &st.paired_with {
+                let _ = writeln!(
+                    s,
+                    "    named as one of a pair with {}: alone each removes too little of the excess; \
+                     the two remove {:.0} % of it (evidence {:.0} > {:.1}), each needed beside the other",
+                    p.effect,
+                    100.0 * p.excess_removed.min(1.0),
+                    p.evidence,
+                    p.threshold
+                );
+            }
             for (k, v) in &st.params {
                 if st.effect == "stribeck" && k == "delta" {
                     // Chosen, not fitted (`Spec::stribeck_delta`): no ±.

@@ -59,14 +59,20 @@ a constant force while sliding be named direction-asymmetry (without, it is as m
 of the channel, and the answer is ambiguous). An effect is named only if adding it shrinks the misfit by more than chance would,
 judged with a noise model of the residuals that includes their correlation (an effective sample
 count per channel), and removes a material part of the misfit above the noise floor. The best one
-is added, the model refitted, and the search repeats. If a misfit well above the noise floor
-remains, the answer is \"unexplained: N % of the gap remains; not one of the known effects\" —
+is added, the model refitted, and the search repeats. Where no single effect removes enough of
+the misfit but a pair of the strongest does, each needed beside the other, the stronger is added
+(its step says so) and the other must qualify on its own; two effects that explain the record
+about equally well are both named where the pair needs each, otherwise the record is ambiguous.
+If a misfit well above the noise floor remains, the answer is \"unexplained: N % of the gap remains; not one of the known effects\" —
 never a guess.
 
 `--json` prints one object: `conclusion` (base-adequate, explained, partly-explained,
 unexplained, ambiguous), `missing_effects`, `steps` (each with `effect`, `gap_before`,
 `gap_after`, `evidence`, `params` and `params_se`: the final model's constants, a Stribeck rise's
-with its exponent `delta`, 1 or 2, chosen as the better fit and so with a `null` ±),
+with its exponent `delta`, 1 or 2, chosen as the better fit and so with a `null` ±, and
+`paired_with`: `null`, or, for an effect that alone removed too little of the excess and was named
+as the stronger of a pair that removes enough, the other's `effect` and the pair's `evidence`,
+`threshold` and `excess_removed`),
 `gap_initial`, `gap_final`, `noise_floor`,
 `unexplained_fraction`, `force_cutoff_hz` and `force_cutoff_source` (`record`, `option`,
 `fitted`, `none`), `force_lowpass` (`source`, `cutoff_hz` and `cutoff_hz_se`, `time_constant_s` and
