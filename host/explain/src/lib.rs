@@ -1008,8 +1008,8 @@ fn search(
             .cloned()
             .collect();
         // Two effects at once, each of which alone removes too small a share of the excess (a
-        // frictional lag and a sensor lag of 2–5 ms: each took 17–27 % of it, grid #316, #428,
-        // #456, and the record was called unexplained). Where no candidate qualifies, the
+        // frictional lag and a sensor delay of 4–5 ms: each took 3–22 % of it, grid #316 and
+        // #344, and the record was called unexplained). Where no candidate qualifies, the
         // pairs of the (up to three) candidates whose evidence passes its threshold are fitted;
         // a pair that removes the share an effect needs, with each member needed beside the
         // other (its evidence against the pair without it), lets its stronger member be named
