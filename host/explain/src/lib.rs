@@ -889,6 +889,8 @@ fn search(
     let mut d = data.clone();
     let mut fresh = true;
     let mut start = base.clone();
+    // The data and model before the last step, and the ± its effect was named with.
+    let mut before_last: Option<(Prepared, FittedModel, Vec<f64>)> = None;
     while round < opts.max_steps {
         round += 1;
         if !fresh {
@@ -911,6 +913,19 @@ fn search(
                     let mut params = effect_params(&d, &cur.spec, &cur.p, e);
                     relative_asymmetry(&cur, e, &mut params, None);
                     last.params = params;
+                    // A constant the refit moved to within 2σ (the ± it was named with) of its
+                    // absence, or a memory to the edge of its range, was not what the record
+                    // showed: the step is withdrawn and the search ends on the model before it
+                    // (grid #379, thermal drift with a 0.73 ms sensor delay: a frictional lag
+                    // named at 0.046 ± 0.003 rad slid to 0.0100, the shortest memory, and
+                    // held the wrong filter order in place).
+                    if let Some((d0, c0, se0)) = before_last.take() {
+                        if !distinct_from_absence(&cur, &se0, e) {
+                            steps.pop();
+                            (d, cur) = (d0, c0);
+                            break;
+                        }
+                    }
                 }
             }
         }
@@ -1292,7 +1307,7 @@ fn search(
                     excess_removed: pe.excess_removed,
                 }),
         });
-        cur = m;
+        before_last = Some((d.clone(), std::mem::replace(&mut cur, m), se));
     }
     Searched {
         start,
