@@ -18,18 +18,13 @@
 
 mod support;
 
-use support::lhs::{assert_within_3_sigma, explained};
+use support::lhs::{assert_within_3_sigma, explained, step_constant as constant};
 use tribo_explain::{Conclusion, Explanation};
 
 fn named(e: &Explanation) -> Vec<String> {
     let mut n = e.missing_effects.clone();
     n.sort();
     n
-}
-
-fn constant(e: &Explanation, effect: &str, key: &str) -> (f64, f64) {
-    let s = e.steps.iter().find(|s| s.effect == effect).expect("named");
-    (s.params[key], s.params_se[key])
 }
 
 /// Grid #161 (22.1 Hz, ×5.9 noise, no filter, a 3.2 s hold): a frictional lag of 0.13 ms alone.

@@ -12,7 +12,7 @@
 
 mod support;
 
-use support::lhs::{assert_within_3_sigma, explained};
+use support::lhs::{assert_within_3_sigma, explained, step_constant as constant};
 use tribo_explain::{Conclusion, Explanation};
 
 fn assert_named_both(e: &Explanation, a: &str, b: &str) {
@@ -37,11 +37,6 @@ fn assert_named_both(e: &Explanation, a: &str, b: &str) {
     assert!(p.excess_removed >= 0.3 && p.evidence >= p.threshold);
     assert!(e.steps[1].paired_with.is_none());
     assert!(e.to_text().contains("named as one of a pair with"));
-}
-
-fn constant(e: &Explanation, effect: &str, key: &str) -> (f64, f64) {
-    let s = e.steps.iter().find(|s| s.effect == effect).expect("named");
-    (s.params[key], s.params_se[key])
 }
 
 /// Grid #316 (24.6 Hz, ×3.6 noise, a 1-pole 319 Hz filter the record does not state): a frictional

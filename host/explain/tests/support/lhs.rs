@@ -490,6 +490,17 @@ pub fn assert_within_3_sigma(key: &str, v: f64, se: f64, truth: f64) {
     );
 }
 
+/// A named effect's constant `key` and its ± in the explanation `e` (panics if `effect` was not
+/// named).
+pub fn step_constant(e: &tribo_explain::Explanation, effect: &str, key: &str) -> (f64, f64) {
+    let s = e
+        .steps
+        .iter()
+        .find(|s| s.effect == effect)
+        .unwrap_or_else(|| panic!("{effect} is not named"));
+    (s.params[key], s.params_se[key])
+}
+
 /// Point `index` of `grid(520, 1)` (the grid the explain tests and the README quote), explained
 /// with the default options, its answer printed.
 pub fn explained(index: usize) -> (Case, tribo_explain::Explanation) {
