@@ -38,9 +38,13 @@
 //! the other order at the final model (`ForceLowpass::poles`, `ForceLowpass::order_evidence`). A
 //! stated cut-off is the 2-pole filter.
 //!
-//! The best candidate is added and the search repeats. Once the model is at the noise floor, only
-//! an effect another channel points to is still tried: thermal drift, when the temperature column
-//! moves over the motion ([`diag::Diagnostics::temperature_moves`]). (The first round tries every
+//! The best candidate is added and the search repeats. Once the model is at the noise floor (1.5 ×
+//! it in every channel), only the effects whose misfit that rule weighs poorly are still tried:
+//! those that change the motion (cubic stiffness, frictional lag, which must then be seen in the
+//! envelope), the quadratic term, a direction asymmetry where the force channel's zero is known,
+//! thermal drift when the temperature column moves over the motion
+//! ([`diag::Diagnostics::temperature_moves`]), and the drifts and velocity terms where the force
+//! channel's level drifts against the model; never a sensor lag. (The first round tries every
 //! candidate, at the floor or not.) When nothing more qualifies
 //! and the misfit is still above 1.5 × the noise floor in some channel, the answer is
 //! "unexplained: N % of the gap remains; not one of the known effects" — never a name the
@@ -989,7 +993,7 @@ fn search(
                     || (e == Effect::ThermalDrift && diagnostics.temperature_moves())
                     || e == Effect::DirectionAsymmetry
                     || (e == Effect::QuadraticVelocity && cur.spec.order() < 2)
-                    || matches!(e, Effect::CubicStiffness | Effect::FrictionalLag)
+                    || changes_the_motion(e)
                     || (drift_points
                         && matches!(
                             e,
@@ -1237,7 +1241,7 @@ fn search(
         // envelope 0.2 and force 49; the lag after #314's cubic had 25 and 744, the cubic after
         // #342's lag 17 and 365).
         if at_floor
-            && matches!(e, Effect::CubicStiffness | Effect::FrictionalLag)
+            && changes_the_motion(e)
             && ev
                 .channels
                 .iter()
@@ -1371,6 +1375,13 @@ fn fit_pair(
         e.value >= e.threshold
     };
     (ev.significant(opts) && needed(&a.1) && needed(&b.1)).then_some(ev)
+}
+
+/// The effects that change the motion itself (the frequency with the amplitude, the energy each
+/// cycle loses): tried once the model is at its floor, and named there only where the envelope
+/// sees them (`search`).
+fn changes_the_motion(e: Effect) -> bool {
+    matches!(e, Effect::CubicStiffness | Effect::FrictionalLag)
 }
 
 /// What a model `m` of the current model's family is judged against: the current model `cur`,
