@@ -44,7 +44,8 @@
 //! envelope), the quadratic term, a direction asymmetry where the force channel's zero is known,
 //! thermal drift when the temperature column moves over the motion
 //! ([`diag::Diagnostics::temperature_moves`]), and the drifts and velocity terms where the force
-//! channel's level drifts against the model; never a sensor lag. (The first round tries every
+//! channel's level drifts against the model, and a sensor lag where its level differs across the
+//! track against the model ([`diag::position_dependence`]). (The first round tries every
 //! candidate, at the floor or not.) When nothing more qualifies
 //! and the misfit is still above 1.5 × the noise floor in some channel, the answer is
 //! "unexplained: N % of the gap remains; not one of the known effects" — never a name the
