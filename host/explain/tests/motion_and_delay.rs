@@ -31,17 +31,45 @@ fn named(e: &Explanation) -> Vec<String> {
     n
 }
 
+/// Explains grid record `n`, asserts it names `want` (sorted) and nothing else, and each of
+/// `constants` (effect, key) within 3σ of the truth.
+fn names_and_constants(n: usize, want: &[&str], constants: &[(&str, &str)]) -> Explanation {
+    let (c, e) = explained(n);
+    assert_eq!(
+        named(&e),
+        want,
+        "#{n}: {:?} (ambiguous {:?}; {:?})",
+        e.conclusion,
+        e.ambiguous,
+        e.disagreement
+    );
+    for (effect, key) in constants {
+        let (v, se) = constant(&e, effect, key);
+        assert_within_3_sigma(key, v, se, c.truth(key));
+    }
+    e
+}
+
+/// The force filter the record does not state is fitted 1-pole, its cut-off within 3σ of `hz`.
+fn assert_fitted_1_pole(e: &Explanation, hz: f64) {
+    let l = e.force_lowpass.as_ref().expect("a fitted filter");
+    assert_eq!(l.poles, Some(1));
+    assert_within_3_sigma(
+        "cutoff_hz",
+        l.cutoff_hz.expect("a filter found"),
+        l.cutoff_hz_se.expect("fitted"),
+        hz,
+    );
+}
+
 /// Grid #161 (22.1 Hz, ×5.9 noise, no filter, a 3.2 s hold): a frictional lag of 0.13 ms alone.
 /// Its evidence against the Coulomb–viscous law is 91 (threshold 14.7); held at 72 µs, the
 /// shortest memory simulated, the rest refitted 78 units of χ² under the law, and the record was
 /// called base-adequate. The lag is named, its memory within 3σ.
 #[test]
 fn a_short_frictional_lag_is_told_from_no_lag_not_from_the_shortest_one() {
-    let (c, e) = explained(161);
-    assert_eq!(named(&e), ["frictional-lag"], "{:?}", e.conclusion);
+    let e = names_and_constants(161, &["frictional-lag"], &[("frictional-lag", "memory_s")]);
     assert_eq!(e.conclusion, Conclusion::Explained);
-    let (v, se) = constant(&e, "frictional-lag", "memory_s");
-    assert_within_3_sigma("memory_s", v, se, c.truth("memory_s"));
 }
 
 /// Grid #314 (23.3 Hz, ×3.3, a 2-pole 516 Hz filter not stated): a frictional lag of 0.83 ms with
@@ -50,22 +78,15 @@ fn a_short_frictional_lag_is_told_from_no_lag_not_from_the_shortest_one() {
 /// 3σ.
 #[test]
 fn a_frictional_lag_beside_a_cubic_stiffness_is_tried_at_the_floor() {
-    let (c, e) = explained(314);
-    assert_eq!(
-        named(&e),
-        ["cubic-stiffness", "frictional-lag"],
-        "{:?} (ambiguous {:?})",
-        e.conclusion,
-        e.ambiguous
+    let e = names_and_constants(
+        314,
+        &["cubic-stiffness", "frictional-lag"],
+        &[
+            ("cubic-stiffness", "k3_n_per_m3"),
+            ("frictional-lag", "memory_s"),
+        ],
     );
     assert_eq!(e.conclusion, Conclusion::Explained);
-    for (effect, key) in [
-        ("cubic-stiffness", "k3_n_per_m3"),
-        ("frictional-lag", "memory_s"),
-    ] {
-        let (v, se) = constant(&e, effect, key);
-        assert_within_3_sigma(key, v, se, c.truth(key));
-    }
     // The lag was named where the model was already under 1.5 × its floor.
     let lag = e
         .steps
@@ -81,18 +102,8 @@ fn a_frictional_lag_beside_a_cubic_stiffness_is_tried_at_the_floor() {
 /// order, the delay is named and measured, and the filter comes out 1-pole at its cut-off.
 #[test]
 fn a_sensor_delay_is_fitted_with_either_order_of_the_filter() {
-    let (c, e) = explained(124);
-    assert_eq!(named(&e), ["sensor-lag"], "{:?}", e.conclusion);
-    let (v, se) = constant(&e, "sensor-lag", "delay_s");
-    assert_within_3_sigma("delay_s", v, se, c.truth("delay_s"));
-    let l = e.force_lowpass.as_ref().expect("a fitted filter");
-    assert_eq!(l.poles, Some(1));
-    assert_within_3_sigma(
-        "cutoff_hz",
-        l.cutoff_hz.expect("a filter found"),
-        l.cutoff_hz_se.expect("fitted"),
-        315.0,
-    );
+    let e = names_and_constants(124, &["sensor-lag"], &[("sensor-lag", "delay_s")]);
+    assert_fitted_1_pole(&e, 315.0);
 }
 
 /// Grid #379 (27.5 Hz, ×22 noise, 2.7 kS/s, no filter): a thermal drift of 14 % over a 3 K ramp
@@ -103,21 +114,14 @@ fn a_sensor_delay_is_fitted_with_either_order_of_the_filter() {
 /// their constants within 3σ.
 #[test]
 fn a_step_whose_constant_slides_to_its_edge_is_withdrawn() {
-    let (c, e) = explained(379);
-    assert_eq!(
-        named(&e),
-        ["sensor-lag", "thermal-drift"],
-        "{:?} (ambiguous {:?})",
-        e.conclusion,
-        e.ambiguous
+    names_and_constants(
+        379,
+        &["sensor-lag", "thermal-drift"],
+        &[
+            ("sensor-lag", "delay_s"),
+            ("thermal-drift", "dmu0_dT_per_c"),
+        ],
     );
-    for (effect, key) in [
-        ("sensor-lag", "delay_s"),
-        ("thermal-drift", "dmu0_dT_per_c"),
-    ] {
-        let (v, se) = constant(&e, effect, key);
-        assert_within_3_sigma(key, v, se, c.truth(key));
-    }
 }
 
 /// Grid #320 (21.5 Hz, ×4.5 noise, 16 kS/s, a 1-pole 551 Hz filter not stated): a softening cubic
@@ -128,23 +132,15 @@ fn a_step_whose_constant_slides_to_its_edge_is_withdrawn() {
 /// are named, their constants within 3σ.
 #[test]
 fn a_sensor_delay_is_tried_at_the_floor_where_the_level_differs_across_the_track() {
-    let (c, e) = explained(320);
-    assert_eq!(
-        named(&e),
-        ["cubic-stiffness", "sensor-lag"],
-        "{:?} (ambiguous {:?}; {:?})",
-        e.conclusion,
-        e.ambiguous,
-        e.disagreement
+    let e = names_and_constants(
+        320,
+        &["cubic-stiffness", "sensor-lag"],
+        &[
+            ("cubic-stiffness", "k3_n_per_m3"),
+            ("sensor-lag", "delay_s"),
+        ],
     );
     assert_eq!(e.conclusion, Conclusion::Explained);
-    for (effect, key) in [
-        ("cubic-stiffness", "k3_n_per_m3"),
-        ("sensor-lag", "delay_s"),
-    ] {
-        let (v, se) = constant(&e, effect, key);
-        assert_within_3_sigma(key, v, se, c.truth(key));
-    }
 }
 
 /// Grid #428 (26.8 Hz, ×11 noise, a 4.6 s hold, a 1-pole 404 Hz filter not stated): a frictional
@@ -153,25 +149,10 @@ fn a_sensor_delay_is_tried_at_the_floor_where_the_level_differs_across_the_track
 /// the filter's cut-off within 3σ, the filter 1-pole.
 #[test]
 fn a_sensor_delay_beside_a_frictional_lag_is_tried_at_the_floor() {
-    let (c, e) = explained(428);
-    assert_eq!(
-        named(&e),
-        ["frictional-lag", "sensor-lag"],
-        "{:?} (ambiguous {:?}; {:?})",
-        e.conclusion,
-        e.ambiguous,
-        e.disagreement
+    let e = names_and_constants(
+        428,
+        &["frictional-lag", "sensor-lag"],
+        &[("frictional-lag", "memory_s"), ("sensor-lag", "delay_s")],
     );
-    for (effect, key) in [("frictional-lag", "memory_s"), ("sensor-lag", "delay_s")] {
-        let (v, se) = constant(&e, effect, key);
-        assert_within_3_sigma(key, v, se, c.truth(key));
-    }
-    let l = e.force_lowpass.as_ref().expect("a fitted filter");
-    assert_eq!(l.poles, Some(1));
-    assert_within_3_sigma(
-        "cutoff_hz",
-        l.cutoff_hz.expect("a filter found"),
-        l.cutoff_hz_se.expect("fitted"),
-        404.0,
-    );
+    assert_fitted_1_pole(&e, 404.0);
 }
