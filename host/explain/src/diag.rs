@@ -570,6 +570,11 @@ pub struct DriftOrStripe {
     pub drift: f64,
     /// The same for the best stripe: a level that differs over one stretch of the track.
     pub stripe: f64,
+    /// The best stripe's evidence beside the drift: the drop of the misfit when a stripe is
+    /// fitted as well as the drift, over the variance left by both.
+    pub stripe_beside_drift: f64,
+    /// The drift's evidence beside the best stripe alone, the same way.
+    pub drift_beside_stripe: f64,
     /// Where that stripe lies along the track (m from the centre, or the record's unit of
     /// displacement; from, to).
     pub stripe_from_to_m: (f64, f64),
@@ -610,8 +615,8 @@ pub fn drift_or_stripe(
         return None;
     }
     const BINS: usize = 20;
-    // Per bin: Σ1, Σw, Σw², Σy, Σwy (y the level, w = y/a0 sgn y').
-    let mut per = [[0.0f64; 5]; BINS];
+    // Per bin: Σ1, Σw, Σw², Σy, Σwy, Σd (y the level, w = y/a0 sgn y', d the drift's level).
+    let mut per = [[0.0f64; 6]; BINS];
     // Over all: the same, Σy², and Σd, Σwd, Σd², Σdy (d the drift's level).
     let mut all = [0.0f64; 10];
     let mut levels = Vec::new();
@@ -625,7 +630,7 @@ pub fn drift_or_stripe(
         let w = pos * v.signum();
         // Residuals are measured − model: the drift's level is `with`'s model less `without`'s.
         let (u, d) = (-a * v.signum(), (b - a) * v.signum());
-        let row = [1.0, w, w * w, u, w * u];
+        let row = [1.0, w, w * w, u, w * u, d];
         for (s, x) in per[bin as usize].iter_mut().zip(row) {
             *s += x;
         }
@@ -652,9 +657,25 @@ pub fn drift_or_stripe(
     // [1, w] alone (the stretch empty).
     let rss0 = rss3(0.0, 0.0, 1.0, 0.0)?;
     let rss_drift = rss3(sd, swd, sdd, sdy)?;
-    let mut stripe: Option<(f64, usize, usize)> = None;
+    // The misfit left by [1, w, d, x] (the drift and a stripe together) given the stripe's Σx,
+    // Σwx, Σdx, Σxy (x an indicator: Σx² = Σx).
+    let rss_both = |sx: f64, swx: f64, sdx: f64, sxy: f64| -> Option<f64> {
+        let a = vec![
+            vec![s1, sw, sd, sx],
+            vec![sw, sww, swd, swx],
+            vec![sd, swd, sdd, sdx],
+            vec![sx, swx, sdx, sx],
+        ];
+        let rhs = [sy, swy, sdy, sxy];
+        let beta = tribo_physics::identify::solve(a, rhs.to_vec())?;
+        Some(syy - beta.iter().zip(rhs).map(|(b, r)| b * r).sum::<f64>())
+    };
+    // The best stripe alone (its misfit, from, to, and the misfit beside the drift), and the
+    // least misfit of a stripe beside the drift.
+    let mut stripe: Option<(f64, usize, usize, f64)> = None;
+    let mut both_min = f64::INFINITY;
     for from in 0..BINS {
-        let mut acc = [0.0f64; 5];
+        let mut acc = [0.0f64; 6];
         for (to, bin) in per.iter().enumerate().skip(from) {
             for (s, x) in acc.iter_mut().zip(bin) {
                 *s += x;
@@ -664,16 +685,29 @@ pub fn drift_or_stripe(
                 continue;
             }
             // The indicator's sums: Σ1 = Σx = Σx², Σwx, Σxy over the stretch.
+            let both = rss_both(acc[0], acc[1], acc[5], acc[3]).unwrap_or(f64::NAN);
+            if both < both_min {
+                both_min = both;
+            }
             if let Some(r) = rss3(acc[0], acc[1], acc[0], acc[3]) {
                 if stripe.is_none_or(|(b, ..)| r < b) {
-                    stripe = Some((r, from, to));
+                    stripe = Some((r, from, to, both));
                 }
             }
         }
     }
-    let (rss_stripe, from, to) = stripe?;
+    let (rss_stripe, from, to, rss_beside) = stripe?;
     let inflate = n as f64 / effective_count(&levels).max(1.0);
     let s2 = inflate * rss_drift.min(rss_stripe) / (n - 4) as f64;
+    let s2_both = inflate * both_min / (n - 5) as f64;
+    let beyond = |r: f64, r_both: f64| {
+        let e = (r - r_both).max(0.0) / s2_both;
+        if e.is_finite() {
+            e
+        } else {
+            0.0
+        }
+    };
     let edge = |b: usize| {
         data.rig
             .x_of_y((b as f64 / BINS as f64 * 2.0 - 1.0) * data.a0)
@@ -681,6 +715,8 @@ pub fn drift_or_stripe(
     (s2.is_finite() && s2 > 0.0).then(|| DriftOrStripe {
         drift: (rss0 - rss_drift).max(0.0) / s2,
         stripe: (rss0 - rss_stripe).max(0.0) / s2,
+        stripe_beside_drift: beyond(rss_drift, both_min),
+        drift_beside_stripe: beyond(rss_stripe, rss_beside),
         stripe_from_to_m: (edge(from), edge(to + 1)),
         freedom: 0.0,
         close: false,

@@ -175,10 +175,13 @@ pub struct Explanation {
     /// ([`crate::diag::PositionDependence`]); when significant the record is *unexplained*.
     pub position_dependence: Option<crate::diag::PositionDependence>,
     /// Running-in against a stripe of the track, where running-in passed every other test
-    /// ([`crate::diag::drift_or_stripe`]): both evidences, where the stripe lies and what its
-    /// freedom of where it lies is charged. Running-in is named where it is the better fit (a
-    /// stripe within [`ExplainOptions::min_margin`] of it is printed as a caveat); otherwise
-    /// the conclusion is `ambiguous`, running-in and [`POSITION_LEVEL`].
+    /// ([`crate::diag::drift_or_stripe`]): both evidences, each beside the other, where the
+    /// stripe lies and what its freedom of where it lies is charged. Running-in is named where
+    /// it is the better fit and no stripe is there beside it (a stripe within
+    /// [`ExplainOptions::min_margin`] of it is printed as a caveat); otherwise the conclusion is
+    /// `ambiguous`, running-in and [`POSITION_LEVEL`]. The same for a cubic stiffness the
+    /// motion does not show (its shape in the drift's place), ambiguous where the stripe is the
+    /// better fit.
     pub drift_or_stripe: Option<crate::diag::DriftOrStripe>,
     /// On a record held before its release: where the release falls before the first compared
     /// sample (s; negative: after it), measured from the displacement and velocity about it
@@ -603,6 +606,37 @@ impl Explanation {
                 };
                 let drift = self.ambiguous.first().map_or("a drift", |s| s.as_str());
                 match self.drift_or_stripe.as_ref() {
+                    Some(c) if drift == "cubic-stiffness" => format!(
+                        "{named}unresolved: the force channel's friction level depends on where \
+                         the pin slides, as a cubic stiffness would make it (its shape, evidence \
+                         {:.1}), but a stripe of the track from {:.0} to {:.0} µm with a \
+                         friction level of its own explains it better (evidence {:.1}, {:.1} of \
+                         which its freedom of where it lies accounts for), and the motion does \
+                         not show the stiffness (the envelope channel's evidence under 4). \
+                         Neither is named: a release from a larger amplitude tells them apart (a \
+                         cubic stiffness moves the frequency with the amplitude, a stripe does \
+                         not)",
+                        c.drift,
+                        1e6 * c.stripe_from_to_m.0,
+                        1e6 * c.stripe_from_to_m.1,
+                        c.stripe,
+                        c.freedom
+                    ),
+                    Some(c) if c.stripe - c.freedom <= c.drift => format!(
+                        "{named}unresolved: the force channel's friction level changes over the \
+                         motion as {drift} would make it (evidence {:.1}), and a stripe of the \
+                         track from {:.0} to {:.0} µm with a friction level of its own is there \
+                         beside it (evidence {:.1} beside the drift, {:.1} alone): a stripe \
+                         takes a larger share of each swing as the amplitude decays, which a \
+                         drift takes most of. Neither is named: a release from another \
+                         amplitude tells them apart (a stripe stays where it is on the track, a \
+                         drift follows the time)",
+                        c.drift,
+                        1e6 * c.stripe_from_to_m.0,
+                        1e6 * c.stripe_from_to_m.1,
+                        c.stripe_beside_drift,
+                        c.stripe
+                    ),
                     Some(c) => format!(
                         "{named}unresolved: the force channel's friction level changes over the \
                          motion as {drift} would make it (evidence {:.1}), but a stripe of the \
@@ -733,12 +767,15 @@ impl Explanation {
             let _ = writeln!(
                 s,
                 "running-in against a stripe of the track: evidence {:.1} on the force channel, \
-                 the best stripe ({:.0} to {:.0} µm) {:.1}, less {:.1} for where it lies{}",
+                 the best stripe ({:.0} to {:.0} µm) {:.1}, less {:.1} for where it lies; \
+                 beside each other, a stripe {:.1} and the drift {:.1}{}",
                 c.drift,
                 1e6 * c.stripe_from_to_m.0,
                 1e6 * c.stripe_from_to_m.1,
                 c.stripe,
                 c.freedom,
+                c.stripe_beside_drift,
+                c.drift_beside_stripe,
                 if c.close {
                     " — too close to rule the stripe out: a release from another amplitude \
                      tells them apart (a stripe stays where it is on the track, a drift follows \

@@ -126,23 +126,31 @@ fn a_stripe_across_the_centre_is_not_named() {
 /// named only where it explains the force channel at least as well as the best stripe of the
 /// track, given the stripe's freedom of where it lies ([`tribo_explain::diag::drift_or_stripe`]):
 /// #499 is *ambiguous*, running-in or a level of the track's own, nothing named, the stripe put
-/// where it is. Where the two are within the margin a candidate needs over its runner-up, the
-/// name carries the stripe as a caveat: #483 (a −11 % stripe, ×4.5 the noise: the drift 103,
-/// the stripe 102) is still named running-in, and says it cannot rule the stripe out. Records
-/// with running-in and no stripe keep the name: #189 (10 % in the compared motion, first-order)
-/// and #237 (30 %), alone, without the caveat, and #349 beside a cubic stiffness.
+/// where it is. Nor where a stripe is there beside the drift (its evidence beside it past the
+/// false-alarm rate of one round for 3 constants, 16.3): #483 (a −11 % stripe, ×4.5 the noise:
+/// the drift 103 alone, the stripe 102, and beside the drift 17) was named running-in with a
+/// caveat; it is *ambiguous*, and says the stripe is there beside the drift. Records with
+/// running-in and no stripe keep the name: #189 (10 % in the compared motion, first-order),
+/// #237 (30 %) and #213 (linear, 7 % in the compared motion: the stripe beside the drift 7.4),
+/// alone, and #349 beside a cubic stiffness; all but #213 without the caveat.
 #[test]
 fn a_stripe_is_not_named_running_in() {
     use tribo_explain::POSITION_LEVEL;
     let mut failures = Vec::new();
     let (_, e) = explained(483);
-    let close = e.drift_or_stripe.as_ref().is_some_and(|c| c.close);
     println!(
-        "#483: {:?} {:?}; {:?}",
-        e.conclusion, e.missing_effects, e.drift_or_stripe
+        "#483: {:?} {:?} {:?}; {:?}",
+        e.conclusion, e.missing_effects, e.ambiguous, e.drift_or_stripe
     );
-    if !close || !e.to_text().contains("too close to rule the stripe out") {
-        failures.push(format!("#483: no caveat: {:?}", e.drift_or_stripe));
+    if !e.missing_effects.is_empty()
+        || e.conclusion != Conclusion::Ambiguous
+        || !e.ambiguous.iter().any(|a| a == POSITION_LEVEL)
+        || !e.to_text().contains("is there beside it")
+    {
+        failures.push(format!(
+            "#483: {:?} {:?} {:?}",
+            e.conclusion, e.missing_effects, e.ambiguous
+        ));
     }
     let (_, e) = explained(499);
     let c = e.drift_or_stripe.clone();
@@ -170,6 +178,7 @@ fn a_stripe_is_not_named_running_in() {
     for (n, expect) in [
         (189, &["running-in"][..]),
         (237, &["running-in"][..]),
+        (213, &["running-in"][..]),
         (349, &["cubic-stiffness", "running-in"][..]),
     ] {
         let (_, e) = explained(n);
@@ -182,8 +191,62 @@ fn a_stripe_is_not_named_running_in() {
         if named != expect {
             failures.push(format!("#{n}: {:?} {named:?}", e.conclusion));
         }
-        if e.drift_or_stripe.as_ref().is_none_or(|c| c.close) {
+        if e.drift_or_stripe
+            .as_ref()
+            .is_none_or(|c| (c.close && n != 213) || c.stripe_beside_drift > 10.0)
+        {
             failures.push(format!("#{n}: {:?}", e.drift_or_stripe));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// A cubic stiffness the motion does not show is a force that depends on where the pin slides,
+/// all its evidence in the force channel, where a stripe of the track is its rival: grid #503 (a
+/// +19 % stripe at −73 µm, ±72 µm wide, ×34 the noise, no hold) was named a cubic stiffness of
+/// evidence 343, the envelope channel's −0.1. Such a cubic is named only where its own shape
+/// explains the force channel's friction level at least as well as the best stripe, given the
+/// stripe's freedom of where it lies: #503 is *ambiguous*, a cubic stiffness or a level of the
+/// track's own, nothing named, the stripe put on the side where it is. Cubic stiffnesses the
+/// envelope does not see keep their name: #170 (0.06 % of k, ×6 noise: its shape 24 against the
+/// stripe's 4, the least margin of the grid's), and #321, a cubic of 1.3 % with a running-in of
+/// 23 % (in the search with the filter order it later leaves, a stripe across the centre that
+/// the running-in takes: no rival).
+#[test]
+fn a_stripe_is_not_named_cubic_stiffness() {
+    use tribo_explain::POSITION_LEVEL;
+    let mut failures = Vec::new();
+    let (_, e) = explained(503);
+    let c = e.drift_or_stripe.clone();
+    println!(
+        "#503: {:?} {:?} {:?}; {c:?}",
+        e.conclusion, e.missing_effects, e.ambiguous
+    );
+    if !e.missing_effects.is_empty()
+        || e.conclusion != Conclusion::Ambiguous
+        || e.ambiguous != ["cubic-stiffness".to_string(), POSITION_LEVEL.to_string()]
+        || !e.to_text().contains("as a cubic stiffness would make it")
+    {
+        failures.push(format!(
+            "#503: {:?} {:?} {:?}",
+            e.conclusion, e.missing_effects, e.ambiguous
+        ));
+    }
+    // The truth: −73 µm ± 72 µm, from −145 to −1 µm; the stripe found must be on that side.
+    match &c {
+        Some(c) if c.stripe_from_to_m.0 < -60e-6 && c.stripe_from_to_m.1 < 30e-6 => {}
+        _ => failures.push(format!("#503: the stripe is not where it is: {c:?}")),
+    }
+    for (n, expect) in [
+        (170, &["cubic-stiffness"][..]),
+        (321, &["cubic-stiffness", "running-in"][..]),
+    ] {
+        let (_, e) = explained(n);
+        let mut named = e.missing_effects.clone();
+        named.sort();
+        println!("#{n}: {:?} {named:?} {:?}", e.conclusion, e.ambiguous);
+        if named != expect {
+            failures.push(format!("#{n}: {:?} {named:?}", e.conclusion));
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
