@@ -601,7 +601,10 @@ pub struct DriftOrStripe {
 /// centre at ×24 noise, named running-in at evidence 134, has the stripe at 179 and the drift at
 /// 146; records with
 /// running-in strong in the compared motion (8–30 %) have the drift ahead by 36–500, weak ones
-/// (2–7 %) within a few units of the stripe, as #483 (a −11 % stripe, 102 against 103). The
+/// (2–7 %) within a few units of the stripe, as #483 (a −11 % stripe, 102 against 103). Each
+/// is also fitted beside the other: a stripe the drift takes most of still leaves a share
+/// beside it (#483, 17.3), where a drift leaves a stripe little (running-in on the grid, at
+/// most 10.1). The same comparison serves a cubic stiffness, its shape in the drift's place. The
 /// samples are those sliding at more than 0.3 of the swing's speed amplitude (reversals left
 /// out), at every amplitude. `None` without a force channel, with too few sliding samples or a
 /// singular fit.

@@ -46,7 +46,9 @@
 //! ([`diag::Diagnostics::temperature_moves`]), and the drifts and velocity terms where the force
 //! channel's level drifts against the model, and a sensor lag where its level differs across the
 //! track against the model ([`diag::position_dependence`]). (The first round tries every
-//! candidate, at the floor or not.) When nothing more qualifies
+//! candidate, at the floor or not.) Running-in, and a cubic stiffness the envelope does not see,
+//! are named only where a stripe of the track does not fit the force channel's level better, nor
+//! (running-in) stand beside it ([`diag::drift_or_stripe`]). When nothing more qualifies
 //! and the misfit is still above 1.5 × the noise floor in some channel, the answer is
 //! "unexplained: N % of the gap remains; not one of the known effects" — never a name the
 //! evidence does not support.
