@@ -1281,25 +1281,9 @@ fn search(
         // little else to fit (grid #248, a Stribeck rise alone: beside it a cubic of 0.01 % of k,
         // envelope 0.2 and force 49; the lag after #314's cubic had 25 and 744, the cubic after
         // #342's lag 17 and 365).
-        if at_floor
-            && changes_the_motion(e)
-            && ev
-                .channels
-                .iter()
-                .find(|c| c.channel == "envelope")
-                .is_none_or(|c| c.evidence < 4.0)
-        {
+        if at_floor && changes_the_motion(e) && unseen_in_the_motion(&ev) {
             break;
         }
-        // Running-in is a rival of a stripe of the track: a stripe near the centre takes a
-        // larger share of each swing as the amplitude decays, which the force and the envelope
-        // read as a drift in time, and no effect of the vocabulary is one (grid #499, #507,
-        // named running-in). Running-in is named only where it explains the force channel at
-        // least as well as the best stripe, given the stripe's freedom of where it lies;
-        // otherwise the record is ambiguous between them ([`diag::drift_or_stripe`]). The
-        // comparison is kept and shown either way (a stripe within the margin a candidate needs
-        // over its runner-up is a caveat of the name). Not thermal drift: it follows the
-        // measured temperature, not a shape of its own in time.
         // A cubic stiffness the motion does not show (the envelope channel's evidence under 4)
         // is a force that depends on where the pin slides, all its evidence in the force
         // channel: a stripe of the track is its rival there. It is named only where its own
@@ -1308,29 +1292,23 @@ fn search(
         // cubic's shape in place of the drift's); otherwise the record is ambiguous between
         // them (grid #503, a +19 % stripe at −73 µm, ×34 the noise, was named a cubic of
         // evidence 343, the envelope −0.1: the cubic's shape 2.8 on the friction level, the
-        // stripe 83; cubic stiffnesses the envelope does not see, from 0.1 % of k, have their
-        // shape ahead by 18 or more).
-        if e == Effect::CubicStiffness
-            && ev
-                .channels
-                .iter()
-                .find(|c| c.channel == "envelope")
-                .is_none_or(|c| c.evidence < 4.0)
-        {
+        // stripe 83; cubic stiffnesses the envelope does not see, from 0.06 % of k, have their
+        // shape ahead by 19 or more).
+        if e == Effect::CubicStiffness && unseen_in_the_motion(&ev) {
             if let Some(c) = diag::drift_or_stripe(data, &cur, &m) {
                 let freedom = (opts.threshold(3) - opts.threshold(ev.k)).max(0.0);
                 // Unless that stripe is a drift in time: the round's running-in leaves no stripe
                 // beside it (grid #321, a cubic of 1.3 % with a running-in of 23 %: in the
                 // search with the filter order it later left, the cubic's shape 0.1, a stripe
                 // across the centre 152, which the running-in took).
-                let a_drift = fitted
-                    .iter()
-                    .find(|f| f.0 == Effect::RunningIn)
-                    .and_then(|r| diag::drift_or_stripe(data, &cur, &r.1))
-                    .is_some_and(|r| {
-                        r.stripe_beside_drift <= chi2_upper_quantile(3, opts.false_alarm)
-                    });
-                if c.stripe - freedom > c.drift && !a_drift {
+                let a_drift = || {
+                    fitted
+                        .iter()
+                        .find(|f| f.0 == Effect::RunningIn)
+                        .and_then(|r| diag::drift_or_stripe(data, &cur, &r.1))
+                        .is_some_and(|r| r.stripe_beside_drift <= stripe_beside_limit(opts))
+                };
+                if c.stripe - freedom > c.drift && !a_drift() {
                     stripe = Some(diag::DriftOrStripe {
                         freedom,
                         close: true,
@@ -1342,6 +1320,15 @@ fn search(
                 }
             }
         }
+        // Running-in is a rival of a stripe of the track: a stripe near the centre takes a
+        // larger share of each swing as the amplitude decays, which the force and the envelope
+        // read as a drift in time, and no effect of the vocabulary is one (grid #499, #507,
+        // named running-in). Running-in is named only where it explains the force channel at
+        // least as well as the best stripe, given the stripe's freedom of where it lies;
+        // otherwise the record is ambiguous between them ([`diag::drift_or_stripe`]). The
+        // comparison is kept and shown either way (a stripe within the margin a candidate needs
+        // over its runner-up is a caveat of the name). Not thermal drift: it follows the
+        // measured temperature, not a shape of its own in time.
         if e == Effect::RunningIn {
             if let Some(c) = diag::drift_or_stripe(data, &cur, &m) {
                 let freedom = (opts.threshold(3) - opts.threshold(ev.k)).max(0.0);
@@ -1354,10 +1341,10 @@ fn search(
                 // passes the false-alarm rate of one round for its 3 constants (where it begins
                 // and ends, its level). A stripe that a drift takes most of leaves such a share
                 // (grid #483, a −11 % stripe: the drift 102.9 alone, the stripe 102.2, beside
-                // the drift 17.3); a drift leaves a stripe little beside it (running-in alone
-                // on the grid: at most 9.4, #269).
+                // the drift 17.3); a drift leaves a stripe little beside it (the grid's records
+                // named running-in, alone and in pairs: at most 10.1).
                 let stripe_wins = c.stripe - freedom > c.drift
-                    || c.stripe_beside_drift > chi2_upper_quantile(3, opts.false_alarm);
+                    || c.stripe_beside_drift > stripe_beside_limit(opts);
                 stripe = Some(c);
                 if stripe_wins {
                     ambiguous = vec![e.name().to_string(), POSITION_LEVEL.to_string()];
@@ -1413,6 +1400,23 @@ fn search(
         drift_model,
         data: d,
     }
+}
+
+/// Whether the motion does not show an effect: the envelope channel's evidence under 4, or no
+/// envelope channel (an effect that changes the motion, tried at the floor, must be seen there;
+/// a cubic stiffness that is not is a force that depends on where the pin slides).
+fn unseen_in_the_motion(ev: &Evidence) -> bool {
+    ev.channels
+        .iter()
+        .find(|c| c.channel == "envelope")
+        .is_none_or(|c| c.evidence < 4.0)
+}
+
+/// The evidence past which a stripe of the track is there beside a drift
+/// ([`diag::DriftOrStripe::stripe_beside_drift`]): the false-alarm rate of one round for the
+/// stripe's 3 constants (where it begins and ends, its level).
+fn stripe_beside_limit(opts: &ExplainOptions) -> f64 {
+    chi2_upper_quantile(3, opts.false_alarm)
 }
 
 /// The current model with the two effects of `a` and `b` (each fitted alone beside it), from each
