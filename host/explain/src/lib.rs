@@ -33,10 +33,14 @@
 //! every model (its time constant, [`model::lowpass`]), fitted with the law and the effect being
 //! tried, never a guess; the result prints it with its ± ([`ForceLowpass`]). Its order (1-pole,
 //! [`model::lowpass_1pole`], or the 2-pole Butterworth) is chosen from the record at the base law,
-//! held in the models the search compares but for a sensor lag (a pure delay, fitted with either
-//! order: beside a 1-pole filter it is what a 2-pole's extra phase mimics), and checked against
-//! the other order at the final model (`ForceLowpass::poles`, `ForceLowpass::order_evidence`). A
-//! stated cut-off is the 2-pole filter.
+//! chosen again with the model each step leaves (where the other order fits it better by the
+//! evidence a change needs: a base law that misses a strong effect can choose it wrongly, and a
+//! later effect is then named to make up the order's shape), held in the models each round
+//! compares but for a sensor lag (a pure delay, fitted with either order: beside a 1-pole filter
+//! it is what a 2-pole's extra phase mimics, and it is tried again at the floor after a change
+//! from 1 pole to 2), and checked against the other order at the final model
+//! (`ForceLowpass::poles`, `ForceLowpass::order_evidence`). A stated cut-off is the 2-pole
+//! filter.
 //!
 //! The best candidate is added and the search repeats. Once the model is at the noise floor (1.5 ×
 //! it in every channel), only the effects whose misfit that rule weighs poorly are still tried:
@@ -898,6 +902,7 @@ fn search(
     let mut start = base.clone();
     // The data and model before the last step, and the ± its effect was named with.
     let mut before_last: Option<(Prepared, FittedModel, Vec<f64>)> = None;
+    let mut to_2pole = false;
     while round < opts.max_steps {
         round += 1;
         if !fresh {
@@ -907,6 +912,28 @@ fn search(
                 (d, cur) = (d2, FittedModel { params_se, ..c2 });
             }
             (d, cur) = reweigh(&d, &cur, opts.max_iter);
+            // A fitted low-pass's order was chosen with the base law, and an effect the base
+            // law missed can have chosen it (grid #347, a hardening cubic of 7.4 % with a thermal
+            // drift behind a 1-pole filter at 232 Hz: the base law, 11 × its floor, took 2
+            // poles, and beside the cubic and the drift a Stribeck rise of evidence 238 made up
+            // the 1-pole's shape; after the cubic the 1-pole fits better by evidence 1 826). It
+            // is chosen again with the model each step leaves, where the other order fits that
+            // model better by the evidence a change needs (a better fit by 5.8 took #448's
+            // 1-pole, a Stribeck rise with a frictional lag, to 2 poles and lost the rise). A
+            // 2-pole's extra phase is what a pure delay beside a 1-pole mimics: after a change
+            // from 1 pole to 2 the sensor lag is tried again at the floor (#400, a lag with a
+            // 0.91 ms delay and no filter: after the lag the 2-pole, better by evidence 1 040,
+            // took the model to its floor, and the delay went untried). Not after a change from
+            // 2 poles to 1, which takes no delay's place (tried there, delays of 40 ± 16 and
+            // 85 ± 39 µs were named beside #154's and #274's cubic stiffness alone).
+            to_2pole = false;
+            if let Some(o) = filter_order_again(&d, &cur, opts) {
+                to_2pole = o.spec.lowpass_poles == 2 && cur.spec.lowpass_poles == 1;
+                cur = FittedModel {
+                    params_se: std::mem::take(&mut cur.params_se),
+                    ..o
+                };
+            }
             // The model the last step left, refitted under the new noise model, is that step's
             // outcome: its gap and its effect's constants (their ± are the step's own).
             if steps.is_empty() {
@@ -1034,7 +1061,7 @@ fn search(
                     || e == Effect::DirectionAsymmetry
                     || (e == Effect::QuadraticVelocity && cur.spec.order() < 2)
                     || changes_the_motion(e)
-                    || (position_points && e == Effect::SensorLag)
+                    || ((position_points || to_2pole) && e == Effect::SensorLag)
                     || (drift_points
                         && matches!(
                             e,
@@ -1400,6 +1427,63 @@ fn search(
         drift_model,
         data: d,
     }
+}
+
+/// The current model with its fitted low-pass's order chosen again, where the better of its
+/// fits with each order fits better than `cur` by the evidence a change needs. Each order is
+/// fitted from `cur`'s constants with the chain's nuisances started afresh (the release
+/// amplitude's correction and the blades' damping at 0: a model fitted under the wrong order can
+/// have dragged them along), the filter at the time constant of the same delay; the other order
+/// also from `cur`'s constants as they are.
+fn filter_order_again(
+    data: &Prepared,
+    cur: &FittedModel,
+    opts: &ExplainOptions,
+) -> Option<FittedModel> {
+    let max_iter = opts.max_iter;
+    let i = cur.spec.lowpass_index()?;
+    let fresh = |p: &[f64], tau: f64| {
+        let mut p = p.to_vec();
+        let n = cur.spec.powers.len();
+        p[n] = 0.0;
+        if cur.spec.apparatus {
+            p[n + 1] = 0.0;
+        }
+        p[i] = tau;
+        p
+    };
+    let t = cur.p[i].abs();
+    let r2 = std::f64::consts::SQRT_2;
+    let mut best: Option<FittedModel> = None;
+    for poles in [1u8, 2] {
+        let spec = Spec {
+            lowpass_poles: poles,
+            lowpass_digital: poles == cur.spec.lowpass_poles && cur.spec.lowpass_digital,
+            ..cur.spec.clone()
+        };
+        let other_t = if poles == cur.spec.lowpass_poles {
+            t
+        } else if poles == 1 {
+            r2 * t
+        } else {
+            t / r2
+        };
+        let mut starts = vec![fresh(&cur.p, other_t)];
+        if poles != cur.spec.lowpass_poles {
+            let mut a = cur.p.clone();
+            a[i] = other_t;
+            starts.push(a);
+        }
+        if let Some(m) = fit_spec(data, &spec, &starts, max_iter) {
+            if m.chi2 < best.as_ref().map_or(cur.chi2, |b| b.chi2) {
+                best = Some(m);
+            }
+        }
+    }
+    best.filter(|b| {
+        let ev = Evidence::of(data, cur, b, opts);
+        ev.value >= ev.threshold
+    })
 }
 
 /// Whether the motion does not show an effect: the envelope channel's evidence under 4, or no
