@@ -1453,7 +1453,6 @@ fn filter_order_again(
         p
     };
     let t = cur.p[i].abs();
-    let r2 = std::f64::consts::SQRT_2;
     let mut best: Option<FittedModel> = None;
     for poles in [1u8, 2] {
         let spec = Spec {
@@ -1463,10 +1462,8 @@ fn filter_order_again(
         };
         let other_t = if poles == cur.spec.lowpass_poles {
             t
-        } else if poles == 1 {
-            r2 * t
         } else {
-            t / r2
+            same_delay_tau(t, poles)
         };
         let mut starts = vec![fresh(&cur.p, other_t)];
         if poles != cur.spec.lowpass_poles {
@@ -1606,6 +1603,17 @@ fn relative_asymmetry(
     }
 }
 
+/// The time constant of a low-pass of `poles` whose delay is that of the other order's at time
+/// constant `t` (a 2-pole Butterworth delays a slow signal by √2 τ_f, a 1-pole by τ_f).
+fn same_delay_tau(t: f64, poles: u8) -> f64 {
+    let r2 = std::f64::consts::SQRT_2;
+    if poles == 1 {
+        r2 * t
+    } else {
+        t / r2
+    }
+}
+
 /// The final model `m` refitted with the other order of its fitted low-pass (1 ↔ 2 poles), from
 /// its own constants with the time constant of the same delay (a 1-pole filter delays a slow
 /// signal by `τ_f`, the 2-pole Butterworth by `√2 τ_f`). `None` if `m` fits no low-pass or the
@@ -1620,9 +1628,8 @@ fn other_order(data: &Prepared, m: &FittedModel, max_iter: usize) -> Option<Fitt
         ..m.spec.clone()
     };
     let t = m.p[i].abs();
-    let r2 = std::f64::consts::SQRT_2;
     let mut a = m.p.clone();
-    a[i] = if poles == 1 { r2 * t } else { t / r2 };
+    a[i] = same_delay_tau(t, poles);
     let mut b = m.p.clone();
     b[i] = t;
     fit_spec(data, &spec, &[a, b], max_iter)
